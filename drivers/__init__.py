@@ -1,0 +1,1 @@
+"""Hardware interfaces: projector, camera, serial trigger box, DLP LightCrafter over USB."""

@@ -1,0 +1,228 @@
+"""Fringe synthesiser: what a camera sees of a height-map scene under projected patterns.
+
+The rig follows the thesis' reference-plane geometry (ch. 1): camera and projector pupils at
+``l0`` above the plane, signed baseline ``d0`` along x, fringes of ``f0`` cycles/mm on the plane
+for the ``f0_frequency`` pattern. The camera looks straight down with ``pixel_mm`` per pixel on
+the plane; the projector covers a wider footprint than the camera's view (``margin``) so that
+temporal unwrapping stays unique, unless a test asks for the edge case.
+
+Two steps, so simulated hardware can reuse the first one:
+1. :func:`projector_coordinates` maps every camera pixel to the projector pixel lighting it
+   (eq. 1.15 inverted) and marks projector shadows;
+2. :func:`render_frame` / :func:`render_stack` turn a pattern (analytic, or a projector image
+   sampled at those coordinates) into camera intensities with reflectivity, ambient light,
+   projector gamma, noise at a given SNR and quantisation.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from processing.height import height_to_phase
+from processing.patterns import pattern_intensity
+
+
+@dataclass(frozen=True)
+class RigGeometry:
+    """Reference-plane rig geometry and resolutions (lengths in mm, sizes in pixels)."""
+
+    l0_mm: float = 1000.0
+    d0_mm: float = 250.0
+    f0_per_mm: float = 0.015625  # 8 fringes over 512 mm: the projector footprint is 1.25x the view
+    f0_frequency: float = 8.0
+    pixel_mm: float = 0.4
+    camera_width: int = 1024
+    camera_height: int = 768
+    projector_width: int = 912
+    projector_height: int = 1140
+    view_offset_px: float | None = None  # projector u of the camera's left edge on the plane
+
+    def __post_init__(self) -> None:
+        for name in ("l0_mm", "f0_per_mm", "f0_frequency", "pixel_mm"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name}: expected > 0, found {getattr(self, name)}")
+        if self.d0_mm == 0:
+            raise ValueError("d0_mm: expected a non-zero baseline")
+
+    @property
+    def projector_px_per_mm(self) -> float:
+        """Projector pixels per mm along x on the reference plane."""
+        return self.projector_width * self.f0_per_mm / self.f0_frequency
+
+    @property
+    def camera_shape(self) -> tuple[int, int]:
+        return (self.camera_height, self.camera_width)
+
+    @property
+    def projector_size(self) -> tuple[int, int]:
+        return (self.projector_width, self.projector_height)
+
+    def per_mm(self, frequency: float) -> float:
+        """Fringe frequency on the plane (cycles/mm) of a sinusoid with ``frequency`` fringes."""
+        return self.f0_per_mm * float(frequency) / self.f0_frequency
+
+    def with_camera(self, width: int, height: int) -> "RigGeometry":
+        return replace(self, camera_width=width, camera_height=height)
+
+
+@dataclass(frozen=True)
+class Appearance:
+    """Photometric model of the scene and the camera (intensities in camera digital numbers)."""
+
+    reflectivity: float | np.ndarray = 1.0
+    ambient: float = 0.0           # light not from the projector, in projector-intensity units
+    gamma: float = 1.0             # projector response: out = in ** gamma
+    gain: float = 200.0            # DN for projector intensity 1 on reflectivity 1
+    snr_db: float | None = None    # additive white Gaussian noise, signal power = mean(I^2)
+    bit_depth: int | None = 8      # None: keep float
+    shadow_level: float = 0.0      # intensity seen in projector shadow (besides ambient)
+
+
+@dataclass
+class ProjectorMap:
+    """Where each camera pixel looks in projector coordinates."""
+
+    u: np.ndarray            # (H, W) projector column (continuous, pixel centres at k + 0.5)
+    v: np.ndarray            # (H, W) projector row
+    lit: np.ndarray          # (H, W) bool: the projector reaches the pixel
+    height_mm: np.ndarray = field(repr=False, default=None)  # the scene
+
+
+def projector_coordinates(height_mm: np.ndarray, geometry: RigGeometry, clip_to_projector: bool = True) -> ProjectorMap:
+    """Projector pixel lighting each camera pixel of a scene, and the projector shadows.
+
+    Parameters
+    ----------
+    height_mm : (H, W) array
+        Scene heights above the reference plane; (H, W) must match the geometry's camera.
+    geometry : RigGeometry
+    clip_to_projector : bool
+        Mark pixels whose projector coordinate falls outside 0 .. width as unlit (a real
+        projector has no light there). False keeps the periodic extension (the edge case).
+    """
+    h = np.asarray(height_mm, dtype=np.float64)
+    if h.shape != geometry.camera_shape:
+        raise ValueError(f"height_mm: shape {h.shape} does not match the camera {geometry.camera_shape}")
+    if not np.all(np.isfinite(h)):
+        raise ValueError("height_mm: contains NaN or infinity")
+    g = geometry
+    px_per_mm = g.projector_px_per_mm
+    view_mm = g.camera_width * g.pixel_mm
+    offset = g.view_offset_px
+    if offset is None:  # centre the camera's view in the projector's footprint
+        offset = (g.projector_width - view_mm * px_per_mm) / 2.0
+    x_mm = (np.arange(g.camera_width) + 0.5) * g.pixel_mm
+    u_reference = offset + x_mm * px_per_mm
+    delta_phase = height_to_phase(h, g.l0_mm, g.d0_mm, g.f0_per_mm)
+    u = u_reference[None, :] + delta_phase * g.projector_width / (2.0 * np.pi * g.f0_frequency)
+    view_h_mm = g.camera_height * g.pixel_mm
+    y_mm = (np.arange(g.camera_height) + 0.5) * g.pixel_mm
+    v_row = (g.projector_height - view_h_mm * px_per_mm) / 2.0 + y_mm * px_per_mm
+    v = np.broadcast_to(v_row[:, None], h.shape).copy()
+    lit = ~projector_shadow(u, g.d0_mm)
+    if clip_to_projector:
+        lit &= (u >= 0) & (u < g.projector_width) & (v >= 0) & (v < g.projector_height)
+    return ProjectorMap(u=u, v=v, lit=lit, height_mm=h)
+
+
+def projector_shadow(u: np.ndarray, d0_mm: float) -> np.ndarray:
+    """Pixels the projector cannot reach, from the projector coordinates along each row.
+
+    Rays from the projector hit the surface nearest to it first: walking a row away from the
+    projector (towards -x when d0 > 0), a visible pixel must have a smaller coordinate than every
+    pixel before it. A pixel that does not is behind a ridge.
+    """
+    if d0_mm > 0:
+        ahead = np.minimum.accumulate(u[:, ::-1], axis=1)[:, ::-1]
+        nearer = np.concatenate([ahead[:, 1:], np.full((u.shape[0], 1), np.inf)], axis=1)
+        return u > nearer
+    ahead = np.maximum.accumulate(u, axis=1)
+    nearer = np.concatenate([np.full((u.shape[0], 1), -np.inf), ahead[:, :-1]], axis=1)
+    return u < nearer
+
+
+def awgn(image: np.ndarray, snr_db: float, rng: np.random.Generator) -> np.ndarray:
+    """Add white Gaussian noise at ``snr_db`` with signal power mean(I^2) (MATLAB awgn 'measured')."""
+    image = np.asarray(image, dtype=np.float64)
+    power = float(np.mean(image * image))
+    sigma = np.sqrt(power / (10.0 ** (snr_db / 10.0)))
+    return image + rng.normal(0.0, sigma, size=image.shape)
+
+
+def sample_projector_image(image: np.ndarray, mapping: ProjectorMap) -> np.ndarray:
+    """Bilinear sample of a rendered projector frame (rows x cols) at the mapped coordinates."""
+    img = np.asarray(image, dtype=np.float64)
+    rows, cols = img.shape
+    x = np.clip(mapping.u - 0.5, 0.0, cols - 1.0)
+    y = np.clip(mapping.v - 0.5, 0.0, rows - 1.0)
+    x0 = np.minimum(np.floor(x).astype(np.intp), cols - 2) if cols > 1 else np.zeros_like(x, dtype=np.intp)
+    y0 = np.minimum(np.floor(y).astype(np.intp), rows - 2) if rows > 1 else np.zeros_like(y, dtype=np.intp)
+    fx, fy = x - x0, y - y0
+    x1, y1 = np.minimum(x0 + 1, cols - 1), np.minimum(y0 + 1, rows - 1)
+    top = img[y0, x0] * (1 - fx) + img[y0, x1] * fx
+    bottom = img[y1, x0] * (1 - fx) + img[y1, x1] * fx
+    return top * (1 - fy) + bottom * fy
+
+
+def expose(projected: np.ndarray, mapping: ProjectorMap, appearance: Appearance, rng: np.random.Generator) -> np.ndarray:
+    """Camera image from the projector intensity reaching each pixel (before gamma).
+
+    I = gain * reflectivity * (ambient + gamma(projected) on lit pixels, shadow_level elsewhere),
+    then noise at ``snr_db`` and quantisation to ``bit_depth``.
+    """
+    light = np.clip(np.asarray(projected, dtype=np.float64), 0.0, 1.0) ** appearance.gamma
+    light = np.where(mapping.lit, light, appearance.shadow_level)
+    image = appearance.gain * np.asarray(appearance.reflectivity) * (appearance.ambient + light)
+    if appearance.snr_db is not None:
+        image = awgn(image, appearance.snr_db, rng)
+    if appearance.bit_depth is None:
+        return image.astype(np.float32)
+    top = (1 << appearance.bit_depth) - 1
+    dtype = np.uint8 if appearance.bit_depth <= 8 else np.uint16
+    return np.clip(np.rint(image), 0, top).astype(dtype)
+
+
+def render_frame(
+    pattern: Mapping[str, Any],
+    mapping: ProjectorMap,
+    geometry: RigGeometry,
+    appearance: Appearance = Appearance(),
+    rng: np.random.Generator | None = None,
+) -> np.ndarray:
+    """Camera image of one analytic pattern (capture-format pattern dict) on the scene."""
+    rng = np.random.default_rng() if rng is None else rng
+    projected = pattern_intensity(pattern, mapping.u, mapping.v, geometry.projector_size)
+    return expose(projected, mapping, appearance, rng)
+
+
+def render_stack(
+    patterns: Sequence[Mapping[str, Any]],
+    mapping: ProjectorMap,
+    geometry: RigGeometry,
+    appearance: Appearance = Appearance(),
+    rng: np.random.Generator | None = None,
+) -> np.ndarray:
+    """Camera images (N, H, W) of a pattern sequence on the scene; noise drawn from ``rng``."""
+    rng = np.random.default_rng() if rng is None else rng
+    return np.stack([render_frame(p, mapping, geometry, appearance, rng) for p in patterns])
+
+
+def sinusoid_patterns(frequencies: Sequence[float], steps: int, axis: str = "x") -> list[dict[str, Any]]:
+    """Pattern entries for ``steps``-step phase shifting at each frequency, in capture order."""
+    if steps < 3:
+        raise ValueError(f"steps: expected >= 3, found {steps}")
+    return [
+        {"kind": "sinusoid", "axis": axis, "frequency": f, "steps": steps, "step": j}
+        for f in frequencies
+        for j in range(steps)
+    ]
+
+
+def true_absolute_phase(mapping: ProjectorMap, geometry: RigGeometry, frequency: float) -> np.ndarray:
+    """Ground truth absolute phase 2 pi f u / W of a sinusoid of ``frequency`` (NaN where unlit)."""
+    phase = 2.0 * np.pi * frequency * mapping.u / geometry.projector_width
+    return np.where(mapping.lit, phase, np.nan)

@@ -1,0 +1,92 @@
+"""Phase to height (thesis eq. 1.15) and back, error metrics, and point clouds."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def phase_to_height(delta_phase: np.ndarray, l0_mm: float, d0_mm: float, f0_per_mm: float) -> np.ndarray:
+    """Height from the phase difference object - reference (thesis eq. 1.15).
+
+    h = l0 dPhi / (dPhi - 2 pi f0 d0). ``d0`` is signed so that heights towards the camera are
+    positive: with d0 > 0 a raised point has a negative phase difference.
+
+    Parameters
+    ----------
+    delta_phase : array
+        Phi_object - Phi_reference in radians, at the frequency whose plane frequency is f0.
+    l0_mm, d0_mm, f0_per_mm : float
+        Pupil height above the plane, signed baseline, fringe frequency on the plane.
+    """
+    _check_geometry(l0_mm, d0_mm, f0_per_mm)
+    dphi = np.asarray(delta_phase, dtype=np.float64)
+    return l0_mm * dphi / (dphi - 2.0 * np.pi * f0_per_mm * d0_mm)
+
+
+def height_to_phase(height_mm: np.ndarray, l0_mm: float, d0_mm: float, f0_per_mm: float) -> np.ndarray:
+    """Inverse of :func:`phase_to_height`: dPhi = -2 pi f0 d0 h / (l0 - h)."""
+    _check_geometry(l0_mm, d0_mm, f0_per_mm)
+    h = np.asarray(height_mm, dtype=np.float64)
+    if np.any(h >= l0_mm):
+        raise ValueError(f"height_mm: every height must be below l0_mm = {l0_mm}")
+    return -2.0 * np.pi * f0_per_mm * d0_mm * h / (l0_mm - h)
+
+
+def _check_geometry(l0_mm: float, d0_mm: float, f0_per_mm: float) -> None:
+    if not l0_mm > 0:
+        raise ValueError(f"l0_mm: expected > 0, found {l0_mm}")
+    if d0_mm == 0 or not np.isfinite(d0_mm):
+        raise ValueError(f"d0_mm: expected a finite non-zero baseline, found {d0_mm}")
+    if not f0_per_mm > 0:
+        raise ValueError(f"f0_per_mm: expected > 0, found {f0_per_mm}")
+
+
+def _masked_pair(estimate: np.ndarray, truth: np.ndarray, mask: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    estimate = np.asarray(estimate, dtype=np.float64)
+    truth = np.asarray(truth, dtype=np.float64)
+    if estimate.shape != truth.shape:
+        raise ValueError(f"estimate: shape {estimate.shape} differs from truth {truth.shape}")
+    keep = np.isfinite(estimate) & np.isfinite(truth)
+    if mask is not None:
+        keep &= np.asarray(mask, dtype=bool)
+    if not keep.any():
+        raise ValueError("mask: no valid pixel to compare")
+    return estimate[keep], truth[keep]
+
+
+def nmse(estimate: np.ndarray, truth: np.ndarray, mask: np.ndarray | None = None) -> float:
+    """Normalised mean squared error (thesis eq. 2.18): sum (x_hat - x)^2 / sum x^2 over valid pixels."""
+    est, ref = _masked_pair(estimate, truth, mask)
+    denominator = float(np.sum(ref * ref))
+    if denominator == 0.0:
+        raise ValueError("truth: all zero, NMSE undefined")
+    return float(np.sum((est - ref) ** 2) / denominator)
+
+
+def phase_mse(estimate: np.ndarray, truth: np.ndarray, mask: np.ndarray | None = None) -> float:
+    """Mean squared phase error (thesis eq. 3.5) over valid pixels, in rad^2."""
+    est, ref = _masked_pair(estimate, truth, mask)
+    return float(np.mean((est - ref) ** 2))
+
+
+def point_cloud(
+    height_mm: np.ndarray,
+    pixel_mm: float,
+    l0_mm: float,
+    mask: np.ndarray | None = None,
+    center: tuple[float, float] | None = None,
+) -> np.ndarray:
+    """Points (N, 3) in mm of the valid pixels: X = (x - cx) pixel_mm (l0 - h) / l0, same for Y, Z = h.
+
+    ``center`` is (cx, cy) in pixels, default the image centre. Rows are in C order of the
+    valid pixels, so a point's index maps back to its pixel through ``np.nonzero(mask)``.
+    """
+    h = np.asarray(height_mm, dtype=np.float64)
+    if h.ndim != 2:
+        raise ValueError(f"height_mm: expected a 2-D map, found shape {h.shape}")
+    valid = np.isfinite(h) if mask is None else (np.asarray(mask, dtype=bool) & np.isfinite(h))
+    rows, cols = np.nonzero(valid)
+    cx, cy = ((h.shape[1] - 1) / 2.0, (h.shape[0] - 1) / 2.0) if center is None else center
+    z = h[rows, cols]
+    scale = pixel_mm * (l0_mm - z) / l0_mm
+    return np.column_stack(((cols - cx) * scale, (rows - cy) * scale, z))
