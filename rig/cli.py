@@ -8,9 +8,8 @@ import logging
 import sys
 from collections.abc import Sequence
 
-from drivers.errors import DeviceError
 from rig import __version__
-from rig.errors import RigError
+from rig.errors import USER_ERRORS
 
 # Subcommand modules under rig/commands, in the order `rig --help` lists them.
 COMMAND_MODULES: tuple[str, ...] = ()
@@ -44,7 +43,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_USER_ERROR
     try:
         return int(args.func(args) or 0)
-    except (RigError, DeviceError) as exc:
+    except USER_ERRORS as exc:
         print(f"rig {args.command}: error: {exc}", file=sys.stderr)
         return EXIT_USER_ERROR
     except KeyboardInterrupt:

@@ -1,8 +1,11 @@
 """Errors a user can cause: the CLI prints them as one line and exits non-zero.
 
-Device errors live in :mod:`drivers.errors` (drivers must not import ``rig``);
-the CLI treats both families alike.
+Device errors live in :mod:`drivers.errors` and calibration errors in :mod:`calibration.errors`
+(those packages must not import ``rig``); the CLI treats all of ``USER_ERRORS`` alike.
 """
+
+from calibration.errors import CalibrationError
+from drivers.errors import DeviceError
 
 
 class RigError(Exception):
@@ -13,13 +16,13 @@ class CaptureError(RigError):
     """A capture directory is missing, malformed, incomplete or corrupt."""
 
 
-class CalibrationError(RigError):
-    """A calibration is missing, malformed, or does not fit the capture or the data."""
-
-
 class ConfigError(RigError):
     """A rig configuration file or a command-line value is wrong."""
 
 
 class ProcessingError(RigError):
     """The data cannot be processed (for example every pixel is in shadow)."""
+
+
+# What the CLI reports as one line and a non-zero exit, never as a traceback.
+USER_ERRORS: tuple[type[Exception], ...] = (RigError, DeviceError, CalibrationError)
