@@ -1,0 +1,370 @@
+"""The rig configuration file: which backends drive the rig, their parameters, and the scan.
+
+A TOML file with the sections ``[projector]``, ``[camera]``, ``[trigger]``, ``[scan]`` and
+``[simulation]``; every key is optional and defaults to the built-in simulated rig (moderngl
+off-screen projector, simulated camera, simulated trigger box on a real pseudo-terminal). Every
+wrong value raises :class:`~rig.errors.ConfigError` with one line naming the file, the key, what
+was expected and what was found. See ``examples/rig.toml`` for a commented example.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from rig.errors import ConfigError
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - exercised on Python 3.10 only
+    import tomli as tomllib
+
+PROJECTOR_BACKENDS = ("gl-offscreen", "window", "dlp4500")
+CAMERA_BACKENDS = ("simulated", "opencv", "pylon")
+TRIGGER_BACKENDS = ("software", "serial", "simulated-serial")
+IMAGE_FORMATS = ("png", "tiff")
+PATTERN_AXES = ("x", "y")
+
+# The simulated rig's field of view on the reference plane, kept whatever the camera resolution.
+SIMULATED_VIEW_WIDTH_MM = 409.6
+
+
+@dataclass(frozen=True)
+class ProjectorConfig:
+    backend: str = "gl-offscreen"
+    width: int = 912
+    height: int = 1140
+    monitor: int = 0
+    gamma_lut: Path | None = None
+
+    @property
+    def size(self) -> tuple[int, int]:
+        return (self.width, self.height)
+
+
+@dataclass(frozen=True)
+class CameraConfig:
+    backend: str = "simulated"
+    exposure_us: float = 10000.0
+    gain: float = 0.0
+    index: int = 0
+    serial: str | None = None
+    width: int = 1024
+    height: int = 768
+    pixel_format: str = "Mono8"
+
+
+@dataclass(frozen=True)
+class TriggerConfig:
+    backend: str = "simulated-serial"
+    port: str | None = None
+    baudrate: int = 115200
+    timeout_s: float = 1.0
+
+
+@dataclass(frozen=True)
+class ScanConfig:
+    frequencies: tuple[float, ...] = (5.0, 8.0)
+    steps: int = 6
+    axis: str = "x"
+    gray_bits: int = 0
+    show_timeout_s: float = 1.0
+    fetch_timeout_s: float = 2.0
+    retries: int = 2
+    image_format: str = "png"
+    png_compression: int = 1
+
+    def patterns(self) -> list[dict[str, Any]]:
+        """The capture-format pattern entries of one scan, in projection order.
+
+        Sinusoids of every frequency (``steps`` shifts each), then, if ``gray_bits`` > 0, the Gray
+        code bit planes with their inverses (for per-pixel thresholding).
+        """
+        out: list[dict[str, Any]] = [
+            {"kind": "sinusoid", "axis": self.axis, "frequency": _plain_number(f), "steps": self.steps, "step": j}
+            for f in self.frequencies
+            for j in range(self.steps)
+        ]
+        for bit in range(self.gray_bits):
+            for inverted in (False, True):
+                out.append({"kind": "gray", "axis": self.axis, "bit": bit, "bits": self.gray_bits, "inverted": inverted})
+        return out
+
+
+@dataclass(frozen=True)
+class SimulationConfig:
+    scene: str = "hemisphere"
+    snr_db: float | None = 30.0
+    seed: int = 0
+    l0_mm: float = 1000.0
+    d0_mm: float = 250.0
+    f0_per_mm: float = 0.015625
+    f0_frequency: float = 8.0
+    pixel_mm: float | None = None  # default: SIMULATED_VIEW_WIDTH_MM / camera width
+    gamma: float = 1.0
+    ambient: float = 0.05
+    camera_gain: float = 200.0
+
+
+@dataclass(frozen=True)
+class RigConfig:
+    projector: ProjectorConfig = field(default_factory=ProjectorConfig)
+    camera: CameraConfig = field(default_factory=CameraConfig)
+    trigger: TriggerConfig = field(default_factory=TriggerConfig)
+    scan: ScanConfig = field(default_factory=ScanConfig)
+    simulation: SimulationConfig = field(default_factory=SimulationConfig)
+    source: Path | None = None  # the file it came from; None for the built-in simulated rig
+
+    @property
+    def simulated(self) -> bool:
+        """True when the camera is simulated: the rig needs the simulation's scene and geometry."""
+        return self.camera.backend == "simulated"
+
+    def pixel_mm(self) -> float:
+        """Camera pixel size on the reference plane for the simulated geometry."""
+        if self.simulation.pixel_mm is not None:
+            return self.simulation.pixel_mm
+        return SIMULATED_VIEW_WIDTH_MM / self.camera.width
+
+
+# --- field checkers: each returns the normalised value or raises _Bad("expected ...") ------------
+
+
+class _Bad(Exception):
+    """A value does not fit; the message says what was expected."""
+
+
+def _plain_number(value: float) -> int | float:
+    return int(value) if float(value).is_integer() else float(value)
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _positive_number(value: Any) -> float:
+    if not _is_number(value) or value <= 0:
+        raise _Bad("a positive number")
+    return float(value)
+
+
+def _non_negative_number(value: Any) -> float:
+    if not _is_number(value) or value < 0:
+        raise _Bad("a number >= 0")
+    return float(value)
+
+
+def _number(value: Any) -> float:
+    if not _is_number(value):
+        raise _Bad("a number")
+    return float(value)
+
+
+def _non_zero_number(value: Any) -> float:
+    if not _is_number(value) or value == 0:
+        raise _Bad("a non-zero number")
+    return float(value)
+
+
+def _int_range(low: int, high: int | None = None) -> Callable[[Any], int]:
+    def check(value: Any) -> int:
+        if not isinstance(value, int) or isinstance(value, bool) or value < low or (high is not None and value > high):
+            raise _Bad(f"an integer {low}..{high}" if high is not None else f"an integer >= {low}")
+        return value
+
+    return check
+
+
+def _choice(options: tuple[str, ...]) -> Callable[[Any], str]:
+    def check(value: Any) -> str:
+        if value not in options:
+            raise _Bad("one of " + ", ".join(repr(o) for o in options))
+        return value
+
+    return check
+
+
+def _string(value: Any) -> str:
+    if not isinstance(value, str) or not value:
+        raise _Bad("a non-empty string")
+    return value
+
+
+def _string_or_int(value: Any) -> str:
+    if isinstance(value, int) and not isinstance(value, bool):
+        return str(value)
+    return _string(value)
+
+
+def _frequencies(value: Any) -> tuple[float, ...]:
+    if not isinstance(value, list) or not value or not all(_is_number(v) and v > 0 for v in value):
+        raise _Bad("a non-empty list of positive numbers")
+    if len(set(value)) != len(value):
+        raise _Bad("distinct frequencies")
+    return tuple(float(v) for v in value)
+
+
+def _size(value: Any) -> tuple[int, int]:
+    if (
+        not isinstance(value, list)
+        or len(value) != 2
+        or not all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in value)
+    ):
+        raise _Bad("[width, height] in pixels, two positive integers")
+    return (value[0], value[1])
+
+
+def _snr(value: Any) -> float | None:
+    if value == "none":
+        return None
+    if not _is_number(value):
+        raise _Bad("a number in dB or \"none\"")
+    return float(value)
+
+
+# Section -> key -> checker. Keys absent from the file keep the dataclass defaults.
+_SCHEMA: dict[str, dict[str, Callable[[Any], Any]]] = {
+    "projector": {
+        "backend": _choice(PROJECTOR_BACKENDS),
+        "size": _size,
+        "monitor": _int_range(0),
+        "gamma_lut": _string,
+    },
+    "camera": {
+        "backend": _choice(CAMERA_BACKENDS),
+        "exposure_us": _positive_number,
+        "gain": _non_negative_number,
+        "index": _int_range(0),
+        "serial": _string_or_int,
+        "size": _size,
+        "pixel_format": _choice(("Mono8", "Mono12", "Mono16")),
+    },
+    "trigger": {
+        "backend": _choice(TRIGGER_BACKENDS),
+        "port": _string,
+        "baudrate": _int_range(1),
+        "timeout_s": _positive_number,
+    },
+    "scan": {
+        "frequencies": _frequencies,
+        "steps": _int_range(3, 64),
+        "axis": _choice(PATTERN_AXES),
+        "gray_bits": _int_range(0, 12),
+        "show_timeout_s": _positive_number,
+        "fetch_timeout_s": _positive_number,
+        "retries": _int_range(0, 20),
+        "image_format": _choice(IMAGE_FORMATS),
+        "png_compression": _int_range(0, 9),
+    },
+    "simulation": {
+        "scene": _string,
+        "snr_db": _snr,
+        "seed": _int_range(0),
+        "l0_mm": _positive_number,
+        "d0_mm": _non_zero_number,
+        "f0_per_mm": _positive_number,
+        "f0_frequency": _positive_number,
+        "pixel_mm": _positive_number,
+        "gamma": _positive_number,
+        "ambient": _non_negative_number,
+        "camera_gain": _positive_number,
+    },
+}
+
+
+def _found(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _section(data: Mapping[str, Any], name: str, where: str) -> dict[str, Any]:
+    """Checked values of one section, keyed like the dataclass fields."""
+    raw = data.get(name, {})
+    if not isinstance(raw, dict):
+        raise ConfigError(f"{where}: [{name}]: expected a table, found {_found(raw)}")
+    schema = _SCHEMA[name]
+    values: dict[str, Any] = {}
+    for key, value in raw.items():
+        if key not in schema:
+            raise ConfigError(
+                f"{where}: [{name}] {key}: unknown key; expected one of {', '.join(schema)}"
+            )
+        try:
+            values[key] = schema[key](value)
+        except _Bad as bad:
+            raise ConfigError(f"{where}: [{name}] {key}: expected {bad}, found {_found(value)}") from None
+    if "size" in values:
+        values["width"], values["height"] = values.pop("size")
+    return values
+
+
+def parse_config(data: Mapping[str, Any], source: Path | None = None) -> RigConfig:
+    """Validated :class:`RigConfig` from parsed TOML; relative paths resolve against ``source``'s folder."""
+    where = str(source) if source is not None else "rig config"
+    unknown = sorted(set(data) - set(_SCHEMA))
+    if unknown:
+        raise ConfigError(f"{where}: [{unknown[0]}]: unknown section; expected one of {', '.join(_SCHEMA)}")
+    projector = _section(data, "projector", where)
+    if "gamma_lut" in projector:
+        lut = Path(projector["gamma_lut"]).expanduser()
+        if not lut.is_absolute() and source is not None:
+            lut = source.parent / lut
+        if not lut.is_file():
+            raise ConfigError(f"{where}: [projector] gamma_lut: expected an existing file, found {str(lut)!r}")
+        projector["gamma_lut"] = lut
+    camera = _section(data, "camera", where)
+    trigger = _section(data, "trigger", where)
+    if trigger.get("backend") == "serial" and "port" not in trigger:
+        raise ConfigError(f"{where}: [trigger] port: expected a serial port or pyserial URL for backend 'serial', found nothing")
+    scan = _section(data, "scan", where)
+    simulation = _section(data, "simulation", where)
+    config = RigConfig(
+        projector=ProjectorConfig(**projector),
+        camera=CameraConfig(**camera),
+        trigger=TriggerConfig(**trigger),
+        scan=ScanConfig(**scan),
+        simulation=SimulationConfig(**simulation),
+        source=source,
+    )
+    _check_consistency(config, where)
+    return config
+
+
+def _check_consistency(config: RigConfig, where: str) -> None:
+    """Rules that tie several keys together."""
+    if config.simulated:
+        from mock_devices.scenes import SCENES
+
+        if config.simulation.scene not in SCENES:
+            raise ConfigError(
+                f"{where}: [simulation] scene: expected one of {', '.join(SCENES)}, found {config.simulation.scene!r}"
+            )
+        if config.camera.pixel_format != "Mono8":
+            raise ConfigError(
+                f"{where}: [camera] pixel_format: expected 'Mono8' for the simulated camera, found {config.camera.pixel_format!r}"
+            )
+    if config.scan.image_format == "tiff" and config.scan.png_compression != ScanConfig.png_compression:
+        raise ConfigError(f"{where}: [scan] png_compression: expected no png_compression with image_format 'tiff'")
+
+
+def load_config(path: str | Path | None) -> RigConfig:
+    """Read and validate a rig config file; ``None`` gives the built-in simulated rig."""
+    if path is None:
+        return RigConfig()
+    path = Path(path)
+    try:
+        with path.open("rb") as handle:
+            data = tomllib.load(handle)
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: rig config file not found") from None
+    except IsADirectoryError:
+        raise ConfigError(f"{path}: expected a rig config file, found a directory") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read the rig config: {exc.strerror}") from None
+    return parse_config(data, source=path)
