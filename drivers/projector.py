@@ -1,0 +1,226 @@
+"""Abstract projector: shows capture-format pattern dicts (processing/patterns.py defines them).
+
+The base class owns the rules (open/closed state, argument checks, logging, the gamma LUT's
+meaning); a backend fills in the hooks ``_open``, ``_show``, ``_wait``, ``_close`` and, if it can
+hand back what it rendered, ``_last_frame``.
+
+Gamma pre-correction: a 1-D LUT of N >= 2 entries maps the desired intensity x in [0, 1] to a
+drive level. Entry i is the drive level for x = i / (N - 1); values in between are linearly
+interpolated (:func:`apply_gamma_lut` is the numpy definition, shaders must agree with it).
+"""
+
+from __future__ import annotations
+
+import abc
+import logging
+import math
+from collections.abc import Mapping
+from types import TracebackType
+from typing import Any
+
+import numpy as np
+
+from drivers.errors import IncompatibleStateError, WaitTimeoutError
+from processing.patterns import PATTERN_KINDS, pattern_intensity
+
+log = logging.getLogger(__name__)
+
+
+def validate_gamma_lut(lut: np.ndarray | None) -> np.ndarray | None:
+    """Check a gamma LUT and return it as float32 (N,) in [0, 1]; ``None`` means identity."""
+    if lut is None:
+        return None
+    arr = np.asarray(lut, dtype=np.float64)
+    if arr.ndim != 1 or arr.size < 2:
+        raise ValueError(f"lut: expected a 1-D array of at least 2 entries, found shape {arr.shape}")
+    if not np.all(np.isfinite(arr)) or arr.min() < 0.0 or arr.max() > 1.0:
+        raise ValueError(f"lut: expected finite drive levels in [0, 1], found range [{arr.min()}, {arr.max()}]")
+    return arr.astype(np.float32)
+
+
+def apply_gamma_lut(image: np.ndarray, lut: np.ndarray | None) -> np.ndarray:
+    """Drive levels for desired intensities ``image`` (any shape, clipped to [0, 1]) through ``lut``.
+
+    Entry i of the LUT is the drive level for intensity i / (N - 1), linear in between;
+    ``lut=None`` is the identity. Returns float32 like ``image``.
+    """
+    x = np.clip(np.asarray(image, dtype=np.float64), 0.0, 1.0)
+    if lut is None:
+        return x.astype(np.float32)
+    lut = np.asarray(lut, dtype=np.float64)
+    positions = np.arange(lut.size, dtype=np.float64)
+    return np.interp(x * (lut.size - 1), positions, lut).astype(np.float32)
+
+
+def validate_pattern(pattern: Mapping[str, Any], size: tuple[int, int]) -> None:
+    """Raise ``ValueError`` naming the problem if ``pattern`` is not a showable pattern dict."""
+    if not isinstance(pattern, Mapping):
+        raise ValueError(f"pattern: expected a mapping (a capture.json pattern entry), found {type(pattern).__name__}")
+    kind = pattern.get("kind")
+    if kind not in PATTERN_KINDS:
+        raise ValueError(f"pattern kind: expected one of {', '.join(PATTERN_KINDS)}, found {kind!r}")
+    probe = np.array([0.5])
+    try:  # evaluating one pixel checks every key the kind needs
+        pattern_intensity(pattern, probe, probe, size)
+    except KeyError as exc:
+        raise ValueError(f"pattern {kind!r}: missing key {exc.args[0]!r}") from exc
+    except (TypeError, ZeroDivisionError) as exc:
+        raise ValueError(f"pattern {kind!r}: invalid value ({exc})") from exc
+
+
+class Projector(abc.ABC):
+    """A projector that shows one pattern at a time.
+
+    Parameters
+    ----------
+    size : (width, height)
+        Resolution in pixels.
+    name : str, optional
+        Used in log lines and error messages.
+    """
+
+    def __init__(self, size: tuple[int, int], name: str | None = None) -> None:
+        width, height = (int(s) for s in size)
+        if width < 1 or height < 1:
+            raise ValueError(f"size: expected (width, height) >= 1, found {tuple(size)}")
+        self.size: tuple[int, int] = (width, height)
+        self.name = name or type(self).__name__
+        self._is_open = False
+        self._gamma_lut: np.ndarray | None = None
+        self._pattern: Mapping[str, Any] | None = None
+        self._shown_count = 0
+
+    # -- public API: state checks and logging, then the hook -------------------------------------
+    @property
+    def is_open(self) -> bool:
+        return self._is_open
+
+    @property
+    def width(self) -> int:
+        return self.size[0]
+
+    @property
+    def height(self) -> int:
+        return self.size[1]
+
+    @property
+    def pattern(self) -> Mapping[str, Any] | None:
+        """The pattern last passed to :meth:`show` (None before the first)."""
+        return self._pattern
+
+    @property
+    def shown_count(self) -> int:
+        """How many patterns were shown since :meth:`open`."""
+        return self._shown_count
+
+    @property
+    def gamma_lut(self) -> np.ndarray | None:
+        return None if self._gamma_lut is None else self._gamma_lut.copy()
+
+    def open(self) -> None:
+        """Acquire the output (context, window, device). Opening an open projector does nothing."""
+        if self._is_open:
+            return
+        log.debug("%s: opening at %dx%d", self.name, *self.size)
+        self._open()
+        self._is_open = True
+        self._pattern = None
+        self._shown_count = 0
+        if self._gamma_lut is not None:
+            self._set_gamma_lut(self._gamma_lut)
+
+    def close(self) -> None:
+        """Release the output. Closing a closed projector does nothing."""
+        if not self._is_open:
+            return
+        log.debug("%s: closing", self.name)
+        try:
+            self._close()
+        finally:
+            self._is_open = False
+
+    def __enter__(self) -> "Projector":
+        self.open()
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+    def show(self, pattern: Mapping[str, Any]) -> None:
+        """Start showing ``pattern`` (a capture-format pattern dict); see :meth:`wait_shown`."""
+        self._require_open("show a pattern")
+        validate_pattern(pattern, self.size)
+        log.debug("%s: show %s", self.name, dict(pattern))
+        self._show(pattern)
+        self._pattern = dict(pattern)
+        self._shown_count += 1
+
+    def wait_shown(self, timeout_s: float = 1.0) -> None:
+        """Block until the last shown pattern is on screen (vsync / GPU fence).
+
+        Raises ``WaitTimeoutError`` when ``timeout_s`` runs out first; a backend raises
+        ``DeviceTimeoutError`` if the device's own deadline passed.
+        """
+        self._require_open("wait for a pattern")
+        if self._pattern is None:
+            raise IncompatibleStateError(f"{self.name}: wait_shown() before any show()")
+        timeout_s = _check_timeout(timeout_s)
+        if not self._wait(timeout_s):
+            raise WaitTimeoutError(f"{self.name}: pattern not on screen within {timeout_s:g} s")
+
+    def last_frame(self) -> np.ndarray | None:
+        """The frame last rendered, (H, W) float32 drive levels in [0, 1] after gamma pre-correction.
+
+        None before the first :meth:`show` or if the backend cannot read back what it shows.
+        """
+        if not self._is_open or self._pattern is None:
+            return None
+        return self._last_frame()
+
+    def set_gamma_lut(self, lut: np.ndarray | None) -> None:
+        """Set the gamma pre-correction (see the module docstring); ``None`` restores the identity.
+
+        Applies to patterns shown from now on.
+        """
+        lut = validate_gamma_lut(lut)
+        self._gamma_lut = lut
+        log.debug("%s: gamma LUT %s", self.name, "identity" if lut is None else f"{lut.size} entries")
+        if self._is_open:
+            self._set_gamma_lut(lut)
+
+    def _require_open(self, action: str) -> None:
+        if not self._is_open:
+            raise IncompatibleStateError(f"{self.name}: cannot {action}: projector is not open")
+
+    # -- hooks ------------------------------------------------------------------------------------
+    @abc.abstractmethod
+    def _open(self) -> None:
+        """Acquire the resources; raise DeviceNotFoundError (from the library's error) if absent."""
+
+    @abc.abstractmethod
+    def _show(self, pattern: Mapping[str, Any]) -> None:
+        """Render / load ``pattern`` (already validated) with the current gamma LUT."""
+
+    @abc.abstractmethod
+    def _wait(self, timeout_s: float) -> bool:
+        """Wait until the pattern is on screen; False if ``timeout_s`` ran out."""
+
+    @abc.abstractmethod
+    def _close(self) -> None:
+        """Release the resources."""
+
+    def _last_frame(self) -> np.ndarray | None:
+        """The rendered drive levels (H, W) float32, or None if the backend cannot read them back."""
+        return None
+
+    def _set_gamma_lut(self, lut: np.ndarray | None) -> None:
+        """Upload a validated LUT (float32 (N,)) or None; default: nothing to upload."""
+
+
+def _check_timeout(timeout_s: float) -> float:
+    timeout_s = float(timeout_s)
+    if not (math.isfinite(timeout_s) and timeout_s > 0):
+        raise ValueError(f"timeout_s: expected a finite number of seconds > 0, found {timeout_s}")
+    return timeout_s
