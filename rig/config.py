@@ -68,8 +68,8 @@ class TriggerConfig:
 
 @dataclass(frozen=True)
 class ScanConfig:
-    frequencies: tuple[float, ...] = (5.0, 8.0)
-    steps: int = 6
+    frequencies: tuple[float, ...] = (1.0, 8.0, 64.0)
+    steps: int = 4
     axis: str = "x"
     gray_bits: int = 0
     show_timeout_s: float = 1.0
@@ -98,7 +98,7 @@ class ScanConfig:
 @dataclass(frozen=True)
 class SimulationConfig:
     scene: str = "hemisphere"
-    snr_db: float | None = 30.0
+    snr_db: float | None = 35.0
     seed: int = 0
     l0_mm: float = 1000.0
     d0_mm: float = 250.0
@@ -106,7 +106,7 @@ class SimulationConfig:
     f0_frequency: float = 8.0
     pixel_mm: float | None = None  # default: SIMULATED_VIEW_WIDTH_MM / camera width
     gamma: float = 1.0
-    ambient: float = 0.05
+    ambient: float = 0.1
     camera_gain: float = 200.0
 
 
