@@ -1,0 +1,186 @@
+"""calibration.json: read, validate and write rig calibrations (capture-format.md v1).
+
+A calibration lives in a directory holding ``calibration.json``. The ``model`` names how heights
+are computed: ``"reference-plane"`` (thesis eq. 1.15 with l0, d0, f0 and a reference-plane
+capture) is checked here; other models (``"polynomial"``, ``"stereo"``, ...) are carried as they
+are, their own keys validated by the code that implements them. Unknown keys are always kept,
+so rewriting a file never loses what another tool recorded.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+from calibration.errors import CalibrationError
+
+FORMAT = "fpp-calibration"
+VERSION = 1
+FILENAME = "calibration.json"
+REFERENCE_PLANE = "reference-plane"
+
+# Keys the reference-plane model needs, with the check each must pass.
+_REFERENCE_PLANE_NUMBERS = {
+    "l0_mm": "positive",
+    "d0_mm": "non-zero",
+    "f0_per_mm": "positive",
+    "f0_frequency": "positive",
+    "pixel_mm": "positive",
+}
+_KNOWN = ("format", "version", "model", *_REFERENCE_PLANE_NUMBERS, "reference", "created_utc")
+
+
+@dataclass
+class Calibration:
+    """A rig calibration. ``extra`` holds every key of calibration.json not named by a field.
+
+    ``path`` is the calibration directory once read or written (relative ``reference`` paths
+    are resolved against it).
+    """
+
+    model: str = REFERENCE_PLANE
+    l0_mm: float | None = None
+    d0_mm: float | None = None
+    f0_per_mm: float | None = None
+    f0_frequency: float | None = None
+    pixel_mm: float | None = None
+    reference: str | None = None
+    created_utc: str | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+    path: Path | None = None
+
+    def per_mm(self, frequency: float) -> float:
+        """Fringe frequency on the reference plane (cycles/mm) of a sinusoid with ``frequency`` fringes."""
+        if self.f0_per_mm is None or self.f0_frequency is None:
+            raise CalibrationError(f"{self.where}: f0_per_mm / f0_frequency: missing for model {self.model!r}")
+        return self.f0_per_mm * float(frequency) / self.f0_frequency
+
+    @property
+    def where(self) -> str:
+        return str(self.path / FILENAME) if self.path is not None else FILENAME
+
+    @property
+    def reference_path(self) -> Path | None:
+        """The reference-plane capture, resolved against the calibration directory."""
+        if self.reference is None:
+            return None
+        ref = Path(self.reference)
+        return ref if ref.is_absolute() or self.path is None else self.path / ref
+
+    def to_dict(self) -> dict[str, Any]:
+        """calibration.json content: the known fields (those set) followed by the extra keys."""
+        out: dict[str, Any] = {"format": FORMAT, "version": VERSION, "model": self.model}
+        for key in ("l0_mm", "d0_mm", "f0_per_mm", "f0_frequency", "pixel_mm", "reference", "created_utc"):
+            value = getattr(self, key)
+            if value is not None:
+                out[key] = value
+        for key, value in self.extra.items():
+            out.setdefault(key, value)
+        return out
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any], path: Path | None = None) -> "Calibration":
+        """Validate a parsed calibration.json (see :func:`validate`) and build the dataclass."""
+        where = str(path / FILENAME) if path is not None else FILENAME
+        validate(data, where)
+        known = {key: data.get(key) for key in ("l0_mm", "d0_mm", "f0_per_mm", "f0_frequency", "pixel_mm")}
+        return cls(
+            model=data["model"],
+            **{key: (float(value) if value is not None else None) for key, value in known.items()},
+            reference=data.get("reference"),
+            created_utc=data.get("created_utc"),
+            extra={key: value for key, value in data.items() if key not in _KNOWN},
+            path=path,
+        )
+
+
+def _number(where: str, data: Mapping[str, Any], key: str, rule: str) -> None:
+    value = data.get(key)
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    if ok and rule == "positive":
+        ok = value > 0
+    elif ok and rule == "non-zero":
+        ok = value != 0
+    if not ok:
+        raise CalibrationError(f"{where}: {key}: expected a {rule} finite number, found {value!r}")
+
+
+def validate(data: Any, where: str = FILENAME) -> None:
+    """Check a parsed calibration.json; raise CalibrationError naming the field on the first problem."""
+    if not isinstance(data, Mapping):
+        raise CalibrationError(f"{where}: top level: expected a JSON object, found {type(data).__name__}")
+    if data.get("format") != FORMAT:
+        raise CalibrationError(f"{where}: format: expected {FORMAT!r}, found {data.get('format')!r}")
+    if data.get("version") != VERSION:
+        raise CalibrationError(
+            f"{where}: version: expected {VERSION} (the version this program reads), found {data.get('version')!r}"
+        )
+    model = data.get("model")
+    if not isinstance(model, str) or not model:
+        raise CalibrationError(f"{where}: model: expected a model name such as {REFERENCE_PLANE!r}, found {model!r}")
+    if model == REFERENCE_PLANE:
+        for key, rule in _REFERENCE_PLANE_NUMBERS.items():
+            _number(where, data, key, rule)
+        reference = data.get("reference")
+        if not isinstance(reference, str) or not reference:
+            raise CalibrationError(f"{where}: reference: expected the path of the reference-plane capture, found {reference!r}")
+    else:  # other models validate their own keys; the shared numbers must still be sane if present
+        for key, rule in _REFERENCE_PLANE_NUMBERS.items():
+            if key in data:
+                _number(where, data, key, rule)
+
+
+def read_calibration(path: str | os.PathLike[str]) -> Calibration:
+    """Read a calibration directory (or its calibration.json) and validate it."""
+    path = Path(path)
+    if path.is_file() or path.suffix == ".json":
+        directory, file = path.parent, path
+    else:
+        directory, file = path, path / FILENAME
+    try:
+        text = file.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise CalibrationError(f"{file}: missing (not a calibration directory?)") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CalibrationError(f"{file}: cannot read: {exc}") from None
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise CalibrationError(f"{file}: not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}") from None
+    return Calibration.from_dict(data, path=directory)
+
+
+def write_calibration(path: str | os.PathLike[str], calibration: Calibration) -> Path:
+    """Write ``calibration`` as ``path/calibration.json`` (directory created), atomically.
+
+    ``created_utc`` is filled in when unset. Returns the file written.
+    """
+    directory = Path(path)
+    if directory.name == FILENAME:
+        directory = directory.parent
+    if calibration.created_utc is None:
+        calibration.created_utc = datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+    data = calibration.to_dict()
+    validate(data, str(directory / FILENAME))
+    directory.mkdir(parents=True, exist_ok=True)
+    target = directory / FILENAME
+    fd, tmp = tempfile.mkstemp(prefix=f".{FILENAME}.", suffix=".tmp", dir=directory)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as handle:
+            json.dump(data, handle, indent=2, ensure_ascii=False)
+            handle.write("\n")
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(tmp, target)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    calibration.path = directory
+    return target

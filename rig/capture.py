@@ -1,0 +1,614 @@
+"""The capture store: read, verify and atomically write capture directories (capture-format.md v1).
+
+A capture is a directory holding ``capture.json`` and frame images. Reading validates the
+manifest, checks every frame's sha256 and, when frames are loaded, their size and bit depth;
+every problem is a :class:`rig.errors.CaptureError` whose one-line message names the file, the
+field, what was expected and what was found.
+
+Writing goes through :class:`CaptureWriter`: frames and a manifest with ``complete: false`` are
+written into a temporary sibling directory ``<name>.incomplete-<random>``; the manifest is
+rewritten after every frame, so an interruption (exception, Ctrl-C, power loss) leaves a
+directory that is visibly incomplete and that ``read_capture(..., salvage=True)`` can still read.
+That directory is deliberately *left for salvage*, never removed: frames from a long scan are
+worth more than the disk space. Only when every pattern has its frame are the files fsynced,
+``complete`` set to true and the directory renamed to its final path. An existing capture is
+never overwritten unless the caller asks for it.
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import json
+import logging
+import os
+import shutil
+import tempfile
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path, PurePosixPath
+from typing import Any
+
+import cv2
+import numpy as np
+
+from processing.patterns import PATTERN_KINDS
+from rig.errors import CaptureError
+
+log = logging.getLogger(__name__)
+
+FORMAT = "fpp-capture"
+VERSION = 1
+MANIFEST = "capture.json"
+INCOMPLETE_MARK = ".incomplete-"
+
+# Keys of a pattern entry that change what is projected: two captures are comparable only if
+# these agree pattern by pattern (provenance and other extra keys may differ).
+PROJECTION_KEYS = (
+    "kind", "axis", "frequency", "steps", "step", "offset", "amplitude", "phase_rad", "shift_rad",
+    "bit", "bits", "inverted", "level", "seed", "dot_px", "speckle_gain",
+)
+
+
+def utc_now() -> str:
+    """Current UTC time in the manifest's ISO 8601 form (seconds, trailing Z)."""
+    return datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+
+
+def dtype_for_bit_depth(bit_depth: int) -> np.dtype:
+    """Image dtype that stores ``bit_depth``: uint8 up to 8, uint16 up to 16, float32 for 32."""
+    if 1 <= bit_depth <= 8:
+        return np.dtype(np.uint8)
+    if 9 <= bit_depth <= 16:
+        return np.dtype(np.uint16)
+    if bit_depth == 32:
+        return np.dtype(np.float32)
+    raise ValueError(f"bit_depth: expected 1..16 or 32, found {bit_depth}")
+
+
+def bit_depth_of(dtype: np.dtype) -> int:
+    """Nominal bit depth of an image dtype (uint8 -> 8, uint16 -> 16, float32 -> 32)."""
+    table = {np.dtype(np.uint8): 8, np.dtype(np.uint16): 16, np.dtype(np.float32): 32}
+    try:
+        return table[np.dtype(dtype)]
+    except KeyError:
+        raise ValueError(f"image dtype: expected uint8, uint16 or float32, found {np.dtype(dtype)}") from None
+
+
+# --------------------------------------------------------------------------- manifest validation
+
+
+def _fail(where: str, field: str, expected: str, found: Any) -> CaptureError:
+    return CaptureError(f"{where}: {field}: expected {expected}, found {found!r}")
+
+
+def _int(where: str, obj: Mapping[str, Any], key: str, field: str, minimum: int | None = None) -> int:
+    if key not in obj:
+        raise CaptureError(f"{where}: {field}: missing")
+    value = obj[key]
+    if isinstance(value, bool) or not isinstance(value, int) or (minimum is not None and value < minimum):
+        raise _fail(where, field, "an integer" + (f" >= {minimum}" if minimum is not None else ""), value)
+    return value
+
+
+def _number(where: str, obj: Mapping[str, Any], key: str, field: str, positive: bool = False) -> float:
+    if key not in obj:
+        raise CaptureError(f"{where}: {field}: missing")
+    value = obj[key]
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+        raise _fail(where, field, "a finite number", value)
+    if positive and value <= 0:
+        raise _fail(where, field, "a positive number", value)
+    return float(value)
+
+
+def _mapping(where: str, obj: Mapping[str, Any], key: str) -> Mapping[str, Any]:
+    if key not in obj:
+        raise CaptureError(f"{where}: {key}: missing")
+    if not isinstance(obj[key], Mapping):
+        raise _fail(where, key, "an object", obj[key])
+    return obj[key]
+
+
+def validate_pattern(where: str, index: int, pattern: Any) -> None:
+    """Check one ``patterns[index]`` entry: a known kind with its required keys."""
+    field = f"patterns[{index}]"
+    if not isinstance(pattern, Mapping):
+        raise _fail(where, field, "an object", pattern)
+    kind = pattern.get("kind")
+    if kind not in PATTERN_KINDS:
+        raise _fail(where, f"{field}.kind", f"one of {', '.join(PATTERN_KINDS)}", kind)
+    if kind in ("sinusoid", "speckle-sinusoid", "gray"):
+        axis = pattern.get("axis", "x")
+        if axis not in ("x", "y"):
+            raise _fail(where, f"{field}.axis", "'x' or 'y'", axis)
+    if kind in ("sinusoid", "speckle-sinusoid"):
+        _number(where, pattern, "frequency", f"{field}.frequency", positive=True)
+        steps = _int(where, pattern, "steps", f"{field}.steps", minimum=1)
+        step = _int(where, pattern, "step", f"{field}.step", minimum=0)
+        if step >= steps:
+            raise _fail(where, f"{field}.step", f"0 .. {steps - 1} (steps = {steps})", step)
+        for key in ("offset", "amplitude", "phase_rad", "shift_rad"):
+            if key in pattern:
+                _number(where, pattern, key, f"{field}.{key}")
+    elif kind == "gray":
+        bits = _int(where, pattern, "bits", f"{field}.bits", minimum=1)
+        bit = _int(where, pattern, "bit", f"{field}.bit", minimum=0)
+        if bit >= bits:
+            raise _fail(where, f"{field}.bit", f"0 .. {bits - 1} (bits = {bits})", bit)
+        if not isinstance(pattern.get("inverted", False), bool):
+            raise _fail(where, f"{field}.inverted", "true or false", pattern.get("inverted"))
+    elif kind == "flat":
+        _number(where, pattern, "level", f"{field}.level")
+
+
+def check_relative_path(where: str, field: str, file: Any) -> PurePosixPath:
+    """A frame path must be relative and stay inside the capture directory (no absolute, no ``..``)."""
+    if not isinstance(file, str) or not file:
+        raise _fail(where, field, "a relative file path", file)
+    posix = PurePosixPath(file.replace("\\", "/"))
+    if posix.is_absolute() or file.startswith(("/", "\\")) or (len(file) > 1 and file[1] == ":"):
+        raise _fail(where, field, "a path relative to the capture directory", file)
+    if ".." in posix.parts:
+        raise _fail(where, field, "a path inside the capture directory (no '..')", file)
+    return posix
+
+
+def validate_manifest(manifest: Any, where: str) -> None:
+    """Check a parsed capture.json against capture-format.md v1; raise CaptureError on the first problem.
+
+    Every pattern must have exactly one frame and every frame must name an existing pattern.
+    """
+    if not isinstance(manifest, Mapping):
+        raise _fail(where, "top level", "a JSON object", type(manifest).__name__)
+    if manifest.get("format") != FORMAT:
+        raise _fail(where, "format", repr(FORMAT), manifest.get("format"))
+    if manifest.get("version") != VERSION:
+        raise _fail(where, "version", f"{VERSION} (the version this program reads)", manifest.get("version"))
+    if not isinstance(manifest.get("scene"), str):
+        raise _fail(where, "scene", "a string such as 'object' or 'reference'", manifest.get("scene"))
+    if not isinstance(manifest.get("complete"), bool):
+        raise _fail(where, "complete", "true or false", manifest.get("complete"))
+    camera = _mapping(where, manifest, "camera")
+    _int(where, camera, "width", "camera.width", minimum=1)
+    _int(where, camera, "height", "camera.height", minimum=1)
+    depth = _int(where, camera, "bit_depth", "camera.bit_depth", minimum=1)
+    if not (depth <= 16 or depth == 32):
+        raise _fail(where, "camera.bit_depth", "1..16 or 32", depth)
+    projector = _mapping(where, manifest, "projector")
+    _int(where, projector, "width", "projector.width", minimum=1)
+    _int(where, projector, "height", "projector.height", minimum=1)
+    patterns = manifest.get("patterns")
+    if not isinstance(patterns, list) or not patterns:
+        raise _fail(where, "patterns", "a non-empty list", patterns)
+    for i, pattern in enumerate(patterns):
+        validate_pattern(where, i, pattern)
+    frames = manifest.get("frames")
+    if not isinstance(frames, list):
+        raise _fail(where, "frames", "a list", frames)
+    owner: dict[int, int] = {}
+    files: dict[str, int] = {}
+    for i, frame in enumerate(frames):
+        field = f"frames[{i}]"
+        if not isinstance(frame, Mapping):
+            raise _fail(where, field, "an object", frame)
+        pattern = _int(where, frame, "pattern", f"{field}.pattern", minimum=0)
+        if pattern >= len(patterns):
+            raise _fail(where, f"{field}.pattern", f"an index 0 .. {len(patterns) - 1} into patterns", pattern)
+        if pattern in owner:
+            raise CaptureError(
+                f"{where}: {field}: extra frame for pattern {pattern} (frames[{owner[pattern]}] already has it); "
+                "expected exactly one frame per pattern"
+            )
+        owner[pattern] = i
+        file = str(check_relative_path(where, f"{field}.file", frame.get("file")))
+        if file in files:
+            raise CaptureError(f"{where}: {field}.file: {file!r} is also frames[{files[file]}].file")
+        files[file] = i
+        digest = frame.get("sha256")
+        if not isinstance(digest, str) or len(digest) != 64 or any(c not in "0123456789abcdef" for c in digest.lower()):
+            raise _fail(where, f"{field}.sha256", "a 64-digit hex sha256 digest", digest)
+    if manifest["complete"]:
+        missing = [i for i in range(len(patterns)) if i not in owner]
+        if missing:
+            listed = ", ".join(str(i) for i in missing[:8]) + (" ..." if len(missing) > 8 else "")
+            raise CaptureError(
+                f"{where}: frames: expected one frame for each of {len(patterns)} patterns, "
+                f"found {len(frames)}; no frame for pattern(s) {listed}"
+            )
+
+
+# --------------------------------------------------------------------------- reading
+
+
+def decode_image(data: bytes, where: str) -> np.ndarray:
+    """Decode PNG/TIFF bytes unchanged (8/16-bit integer or 32-bit float); CaptureError if corrupt."""
+    image = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED) if data else None
+    if image is None:
+        raise CaptureError(f"{where}: corrupt or unreadable image ({len(data)} bytes)")
+    return image
+
+
+@dataclass
+class Capture:
+    """A capture directory read from disk. ``manifest`` is the whole capture.json, extra keys included."""
+
+    path: Path
+    manifest: dict[str, Any]
+
+    @property
+    def manifest_path(self) -> Path:
+        return self.path / MANIFEST
+
+    @property
+    def scene(self) -> str:
+        return self.manifest["scene"]
+
+    @property
+    def complete(self) -> bool:
+        return bool(self.manifest["complete"])
+
+    @property
+    def width(self) -> int:
+        return int(self.manifest["camera"]["width"])
+
+    @property
+    def height(self) -> int:
+        return int(self.manifest["camera"]["height"])
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """Camera image shape (height, width)."""
+        return (self.height, self.width)
+
+    @property
+    def bit_depth(self) -> int:
+        return int(self.manifest["camera"]["bit_depth"])
+
+    @property
+    def projector_size(self) -> tuple[int, int]:
+        projector = self.manifest["projector"]
+        return (int(projector["width"]), int(projector["height"]))
+
+    @property
+    def patterns(self) -> list[dict[str, Any]]:
+        return self.manifest["patterns"]
+
+    @property
+    def frames(self) -> list[dict[str, Any]]:
+        return self.manifest["frames"]
+
+    def frame_index(self) -> dict[int, dict[str, Any]]:
+        """Frame entry of each pattern index that has one."""
+        return {int(frame["pattern"]): frame for frame in self.frames}
+
+    def frame_path(self, frame: Mapping[str, Any]) -> Path:
+        return self.path / PurePosixPath(str(frame["file"]).replace("\\", "/"))
+
+    def read_frame_bytes(self, frame: Mapping[str, Any]) -> bytes:
+        """The file of one frame, its sha256 checked."""
+        path = self.frame_path(frame)
+        try:
+            data = path.read_bytes()
+        except FileNotFoundError:
+            raise CaptureError(f"{path}: frame file missing (pattern {frame['pattern']})") from None
+        except OSError as exc:
+            raise CaptureError(f"{path}: cannot read frame: {exc.strerror or exc}") from None
+        digest = hashlib.sha256(data).hexdigest()
+        if digest != str(frame["sha256"]).lower():
+            raise CaptureError(
+                f"{path}: checksum mismatch: expected sha256 {frame['sha256']}, found {digest}"
+            )
+        return data
+
+    def verify_checksums(self) -> None:
+        """Read every frame file and check its sha256; CaptureError names the first bad file."""
+        for frame in self.frames:
+            self.read_frame_bytes(frame)
+
+    def load_frame(self, pattern: int) -> np.ndarray:
+        """Image of one pattern, checked for checksum, size, channels and bit depth: (H, W)."""
+        frame = self.frame_index().get(pattern)
+        if frame is None:
+            raise CaptureError(f"{self.manifest_path}: frames: no frame for pattern {pattern}")
+        where = str(self.frame_path(frame))
+        image = decode_image(self.read_frame_bytes(frame), where)
+        if image.ndim != 2:
+            channels = image.shape[2] if image.ndim == 3 else image.ndim
+            raise CaptureError(f"{where}: expected a single-channel image, found {channels} channels")
+        if image.shape != self.shape:
+            raise CaptureError(
+                f"{where}: image size: expected {self.width}x{self.height} (camera.width x camera.height), "
+                f"found {image.shape[1]}x{image.shape[0]}"
+            )
+        expected = dtype_for_bit_depth(self.bit_depth)
+        if image.dtype != expected:
+            raise CaptureError(
+                f"{where}: bit depth: expected {expected} for camera.bit_depth {self.bit_depth}, found {image.dtype}"
+            )
+        return image
+
+    def load_frames(self, patterns: Iterable[int] | None = None) -> np.ndarray:
+        """Frames of the given pattern indices (default all, in pattern order) as an (N, H, W) array."""
+        indices = range(len(self.patterns)) if patterns is None else list(patterns)
+        return np.stack([self.load_frame(i) for i in indices])
+
+    def write_manifest(self) -> None:
+        """Rewrite capture.json from ``manifest`` (extra keys kept), atomically."""
+        write_json_atomic(self.manifest_path, self.manifest)
+
+
+def read_capture(path: str | os.PathLike[str], salvage: bool = False, verify: bool = True) -> Capture:
+    """Open a capture directory (or its capture.json) and validate it.
+
+    Parameters
+    ----------
+    path : path
+        The capture directory, or its ``capture.json``.
+    salvage : bool
+        Accept a capture whose ``complete`` is false (frames that exist are still checked).
+    verify : bool
+        Check every frame's sha256 now (images are decoded and size-checked when loaded).
+    """
+    path = Path(path)
+    if path.name == MANIFEST and path.is_file():
+        path = path.parent
+    manifest_path = path / MANIFEST
+    if not path.exists():
+        raise CaptureError(f"{path}: capture directory not found")
+    if not path.is_dir():
+        raise CaptureError(f"{path}: expected a capture directory, found a file")
+    try:
+        text = manifest_path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise CaptureError(f"{manifest_path}: missing (not a capture directory?)") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CaptureError(f"{manifest_path}: cannot read: {exc}") from None
+    try:
+        manifest = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise CaptureError(f"{manifest_path}: not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}") from None
+    validate_manifest(manifest, str(manifest_path))
+    capture = Capture(path=path, manifest=manifest)
+    if not capture.complete and not salvage:
+        raise CaptureError(
+            f"{manifest_path}: complete: expected true, found false (interrupted or still being written; "
+            "salvage it explicitly to read what is there)"
+        )
+    if verify:
+        capture.verify_checksums()
+    return capture
+
+
+def pattern_signature(pattern: Mapping[str, Any]) -> dict[str, Any]:
+    """The keys of a pattern that determine what is projected."""
+    return {key: pattern[key] for key in PROJECTION_KEYS if key in pattern}
+
+
+def check_same_patterns(reference: Capture, capture: Capture) -> None:
+    """A reference capture must use the patterns and camera size of the capture it serves."""
+    if reference.shape != capture.shape:
+        raise CaptureError(
+            f"{reference.manifest_path}: camera size: expected {capture.width}x{capture.height} "
+            f"like {capture.manifest_path}, found {reference.width}x{reference.height}"
+        )
+    if reference.projector_size[0] != capture.projector_size[0] or reference.projector_size[1] != capture.projector_size[1]:
+        raise CaptureError(
+            f"{reference.manifest_path}: projector: expected {capture.projector_size} like "
+            f"{capture.manifest_path}, found {reference.projector_size}"
+        )
+    if len(reference.patterns) != len(capture.patterns):
+        raise CaptureError(
+            f"{reference.manifest_path}: patterns: expected the {len(capture.patterns)} patterns of "
+            f"{capture.manifest_path}, found {len(reference.patterns)}"
+        )
+    for i, (ref, obj) in enumerate(zip(reference.patterns, capture.patterns)):
+        if pattern_signature(ref) != pattern_signature(obj):
+            raise CaptureError(
+                f"{reference.manifest_path}: patterns[{i}]: expected {pattern_signature(obj)} like "
+                f"{capture.manifest_path}, found {pattern_signature(ref)}"
+            )
+
+
+# --------------------------------------------------------------------------- writing
+
+
+def _fsync_path(path: Path, directory: bool = False) -> None:
+    flags = os.O_RDONLY | (getattr(os, "O_DIRECTORY", 0) if directory else 0)
+    try:
+        fd = os.open(path, flags)
+    except OSError:  # some platforms cannot open directories; the data files are synced anyway
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def write_bytes_durable(path: Path, data: bytes) -> None:
+    """Write a file and fsync it."""
+    with open(path, "wb") as handle:
+        handle.write(data)
+        handle.flush()
+        os.fsync(handle.fileno())
+
+
+def write_json_atomic(path: Path, obj: Any) -> None:
+    """Write JSON through a temporary file in the same directory and rename it into place."""
+    path = Path(path)
+    text = json.dumps(obj, indent=2, ensure_ascii=False) + "\n"
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as handle:
+            handle.write(text)
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def encode_image(image: np.ndarray, bit_depth: int) -> tuple[bytes, str]:
+    """Encode a frame losslessly: PNG for 8/16-bit integers, TIFF for float32. Returns (bytes, suffix)."""
+    expected = dtype_for_bit_depth(bit_depth)
+    if image.dtype != expected:
+        raise ValueError(f"image: expected dtype {expected} for bit_depth {bit_depth}, found {image.dtype}")
+    suffix = ".tiff" if expected == np.float32 else ".png"
+    ok, buffer = cv2.imencode(suffix, np.ascontiguousarray(image))
+    if not ok:
+        raise CaptureError(f"cannot encode a {image.dtype} frame as {suffix}")
+    return buffer.tobytes(), suffix
+
+
+class CaptureWriter:
+    """Write a capture atomically; use as a context manager.
+
+    >>> with CaptureWriter(path, camera={...}, projector={...}, patterns=[...]) as writer:
+    ...     for i, image in enumerate(images):
+    ...         writer.add_frame(i, image)
+
+    On a clean exit with every pattern captured, the capture appears at ``path`` with
+    ``complete: true``. On an exception (or missing frames), the temporary directory
+    ``<path>.incomplete-XXXX`` stays, with ``complete: false`` and an ``interrupted`` note, for
+    salvage (``read_capture(dir, salvage=True)``); it is never renamed to ``path``.
+    """
+
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        camera: Mapping[str, Any],
+        projector: Mapping[str, Any],
+        patterns: Sequence[Mapping[str, Any]],
+        scene: str = "object",
+        extra: Mapping[str, Any] | None = None,
+        overwrite: bool = False,
+    ) -> None:
+        self.path = Path(path)
+        self.overwrite = overwrite
+        manifest: dict[str, Any] = {
+            "format": FORMAT,
+            "version": VERSION,
+            "scene": scene,
+            "created_utc": utc_now(),
+            "complete": False,
+            "camera": dict(camera),
+            "projector": dict(projector),
+            "patterns": [dict(p) for p in patterns],
+            "frames": [],
+        }
+        for key, value in (extra or {}).items():
+            manifest.setdefault(key, copy.deepcopy(value))
+        validate_manifest(manifest, f"{self.path}/{MANIFEST} (being written)")
+        self.manifest = manifest
+        self.bit_depth = int(manifest["camera"]["bit_depth"])
+        self.shape = (int(manifest["camera"]["height"]), int(manifest["camera"]["width"]))
+        self.temp_path: Path | None = None
+        self._done: set[int] = set()
+
+    def __enter__(self) -> "CaptureWriter":
+        if self.path.exists() and not self.overwrite:
+            raise CaptureError(f"{self.path}: already exists; refusing to overwrite (choose another path or remove it)")
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.temp_path = Path(tempfile.mkdtemp(prefix=self.path.name + INCOMPLETE_MARK, dir=self.path.parent))
+        (self.temp_path / "frames").mkdir()
+        self._write_manifest()
+        return self
+
+    def _write_manifest(self) -> None:
+        assert self.temp_path is not None
+        write_json_atomic(self.temp_path / MANIFEST, self.manifest)
+
+    def add_frame(self, pattern: int, image: np.ndarray, **metadata: Any) -> Path:
+        """Store the frame of pattern index ``pattern`` (metadata: timestamp_s, exposure_us, ...)."""
+        if self.temp_path is None:
+            raise RuntimeError("CaptureWriter.add_frame called outside its 'with' block")
+        if not 0 <= pattern < len(self.manifest["patterns"]):
+            raise ValueError(f"pattern: expected 0 .. {len(self.manifest['patterns']) - 1}, found {pattern}")
+        if pattern in self._done:
+            raise ValueError(f"pattern: frame {pattern} was already written")
+        image = np.asarray(image)
+        if image.shape != self.shape:
+            raise ValueError(f"image: expected shape {self.shape} (camera), found {image.shape}")
+        data, suffix = encode_image(image, self.bit_depth)
+        relative = f"frames/{pattern:03d}{suffix}"
+        write_bytes_durable(self.temp_path / relative, data)
+        entry = {"pattern": pattern, "file": relative, "sha256": hashlib.sha256(data).hexdigest()}
+        entry.update(metadata)
+        self.manifest["frames"].append(entry)
+        self._done.add(pattern)
+        self._write_manifest()
+        return self.temp_path / relative
+
+    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> bool:
+        if self.temp_path is None:
+            return False
+        if exc_type is not None:
+            self._leave_incomplete(f"{exc_type.__name__}: {exc}" if str(exc) else exc_type.__name__)
+            return False
+        missing = len(self.manifest["patterns"]) - len(self._done)
+        if missing:
+            self._leave_incomplete(f"{missing} pattern(s) without a frame")
+            raise CaptureError(
+                f"{self.path}: {missing} of {len(self.manifest['patterns'])} patterns have no frame; "
+                f"partial capture left at {self.temp_path}"
+            )
+        self._commit()
+        return False
+
+    def _leave_incomplete(self, reason: str) -> None:
+        assert self.temp_path is not None
+        self.manifest["interrupted"] = reason
+        try:
+            self._write_manifest()
+        except OSError:  # the frames stay; the last manifest written still says complete: false
+            pass
+        log.warning("capture %s not completed (%s); partial data left at %s", self.path, reason, self.temp_path)
+
+    def _commit(self) -> None:
+        assert self.temp_path is not None
+        if self.path.exists() and not self.overwrite:  # appeared while we were writing
+            self._leave_incomplete(f"{self.path} appeared while writing")
+            raise CaptureError(f"{self.path}: appeared while writing; refusing to overwrite, new capture left at {self.temp_path}")
+        self.manifest["frames"].sort(key=lambda frame: frame["pattern"])
+        self.manifest["complete"] = True
+        self._write_manifest()
+        _fsync_path(self.temp_path / "frames", directory=True)
+        _fsync_path(self.temp_path, directory=True)
+        if self.path.exists():  # overwrite requested: move the old one aside, then drop it
+            replaced = Path(tempfile.mkdtemp(prefix=self.path.name + ".replaced-", dir=self.path.parent))
+            os.replace(self.path, replaced / self.path.name)
+            os.replace(self.temp_path, self.path)
+            shutil.rmtree(replaced, ignore_errors=True)
+        else:
+            os.replace(self.temp_path, self.path)
+        _fsync_path(self.path.parent, directory=True)
+        self.temp_path = None
+
+
+def write_capture(
+    path: str | os.PathLike[str],
+    frames: np.ndarray | Sequence[np.ndarray],
+    patterns: Sequence[Mapping[str, Any]],
+    projector: Mapping[str, Any],
+    scene: str = "object",
+    bit_depth: int | None = None,
+    extra: Mapping[str, Any] | None = None,
+    overwrite: bool = False,
+) -> Capture:
+    """Write a whole capture at once: frame ``i`` belongs to ``patterns[i]``. Returns it, re-read."""
+    frames = [np.asarray(f) for f in frames]
+    if len(frames) != len(patterns):
+        raise ValueError(f"frames: expected one per pattern ({len(patterns)}), found {len(frames)}")
+    if not frames:
+        raise ValueError("frames: expected at least one")
+    height, width = frames[0].shape[:2]
+    depth = bit_depth if bit_depth is not None else bit_depth_of(frames[0].dtype)
+    camera = {"width": int(width), "height": int(height), "bit_depth": depth}
+    with CaptureWriter(path, camera, projector, patterns, scene=scene, extra=extra, overwrite=overwrite) as writer:
+        for i, image in enumerate(frames):
+            writer.add_frame(i, image)
+    return read_capture(path)

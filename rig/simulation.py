@@ -1,0 +1,171 @@
+"""Offline synthesis of a scan: object capture, reference-plane capture and their calibration.
+
+Builds on :mod:`mock_devices.synth` (rig geometry, camera-to-projector map, rendering) and
+:mod:`mock_devices.scenes` (height maps). The result is exactly what a real rig would leave on
+disk after ``rig calibrate`` and ``rig scan``, plus the true height map, so that ``rig demo``,
+the tests and ``rig simulate`` can check processed heights against the truth.
+
+On disk (:func:`write_simulated_scan`)::
+
+    OUT/object/capture.json ...            the scan of the scene
+    OUT/calibration/calibration.json       reference-plane model with the true l0, d0, f0, pixel_mm
+    OUT/calibration/reference/...          the flat reference plane, same patterns
+    OUT/truth-height.npy                   the scene's heights (mm), float32
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from calibration.store import Calibration, write_calibration
+from mock_devices import scenes, synth
+from rig.capture import write_capture
+
+DEFAULT_FREQUENCIES = (1, 8, 64)
+DEFAULT_STEPS = 4
+
+
+def demo_geometry(width: int = 640, height: int = 480) -> synth.RigGeometry:
+    """The synthesiser's default rig with a ``width`` x ``height`` camera and the same field of view."""
+    base = synth.RigGeometry()
+    pixel_mm = base.pixel_mm * base.camera_width / width
+    return synth.RigGeometry(
+        l0_mm=base.l0_mm,
+        d0_mm=base.d0_mm,
+        f0_per_mm=base.f0_per_mm,
+        f0_frequency=base.f0_frequency,
+        pixel_mm=pixel_mm,
+        camera_width=width,
+        camera_height=height,
+        projector_width=base.projector_width,
+        projector_height=base.projector_height,
+    )
+
+
+@dataclass
+class SimulatedScan:
+    """Frames of an object and of the reference plane under the same patterns, with the truth."""
+
+    geometry: synth.RigGeometry
+    patterns: list[dict[str, Any]]
+    height_mm: np.ndarray                 # (H, W) true scene heights
+    object_frames: np.ndarray             # (N, H, W)
+    reference_frames: np.ndarray          # (N, H, W)
+    object_map: synth.ProjectorMap
+    reference_map: synth.ProjectorMap
+    description: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def lit(self) -> np.ndarray:
+        """Pixels the projector reaches in both the object and the reference scene."""
+        return self.object_map.lit & self.reference_map.lit
+
+    def calibration(self, reference: str = "reference") -> Calibration:
+        """The exact calibration of the simulated rig (reference-plane model)."""
+        g = self.geometry
+        return Calibration(
+            l0_mm=g.l0_mm,
+            d0_mm=g.d0_mm,
+            f0_per_mm=g.f0_per_mm,
+            f0_frequency=float(g.f0_frequency),
+            pixel_mm=g.pixel_mm,
+            reference=reference,
+            extra={"simulation": dict(self.description)},
+        )
+
+
+def simulate_scan(
+    scene: str | np.ndarray = "hemisphere",
+    geometry: synth.RigGeometry | None = None,
+    patterns: Sequence[Mapping[str, Any]] | None = None,
+    appearance: synth.Appearance | None = None,
+    seed: int | None = 0,
+    scene_params: Mapping[str, float] | None = None,
+) -> SimulatedScan:
+    """Render a scene and the flat reference plane under a pattern sequence.
+
+    Parameters
+    ----------
+    scene : str or (H, W) array
+        A name from :data:`mock_devices.scenes.SCENES` or a height map in mm.
+    geometry : RigGeometry, optional
+        Default :func:`demo_geometry` (640 x 480 camera).
+    patterns : list of capture-format pattern dicts, optional
+        Default 4-step sinusoids at frequencies 1, 8, 64 along x.
+    appearance : Appearance, optional
+        Photometry and noise; default a little ambient light and 35 dB SNR, 8-bit.
+    seed : int or None
+        Seed of the noise generator (reproducible by default).
+    scene_params : mapping, optional
+        Extra parameters of the named scene.
+    """
+    geometry = demo_geometry() if geometry is None else geometry
+    patterns = [dict(p) for p in (patterns or synth.sinusoid_patterns(DEFAULT_FREQUENCIES, DEFAULT_STEPS))]
+    appearance = synth.Appearance(ambient=0.1, gain=200.0, snr_db=35.0) if appearance is None else appearance
+    if isinstance(scene, str):
+        name = scene
+        height = scenes.make_scene(scene, geometry.camera_height, geometry.camera_width, geometry.pixel_mm, **(scene_params or {}))
+    else:
+        name = "custom"
+        height = np.asarray(scene, dtype=np.float64)
+    rng = np.random.default_rng(seed)
+    object_map = synth.projector_coordinates(height, geometry)
+    reference_map = synth.projector_coordinates(np.zeros_like(height), geometry)
+    object_frames = synth.render_stack(patterns, object_map, geometry, appearance, rng)
+    reference_frames = synth.render_stack(patterns, reference_map, geometry, appearance, rng)
+    description = {
+        "scene": name,
+        "scene_params": dict(scene_params or {}),
+        "seed": seed,
+        "snr_db": appearance.snr_db,
+        "max_height_mm": float(np.max(height)),
+    }
+    return SimulatedScan(
+        geometry=geometry,
+        patterns=patterns,
+        height_mm=height,
+        object_frames=object_frames,
+        reference_frames=reference_frames,
+        object_map=object_map,
+        reference_map=reference_map,
+        description=description,
+    )
+
+
+@dataclass
+class SimulatedPaths:
+    """Where :func:`write_simulated_scan` put things."""
+
+    root: Path
+    capture: Path
+    calibration: Path
+    reference: Path
+    truth: Path
+
+
+def write_simulated_scan(scan: SimulatedScan, out: str | os.PathLike[str], overwrite: bool = False) -> SimulatedPaths:
+    """Write the object capture, the calibration with its reference capture, and the true heights."""
+    root = Path(out)
+    paths = SimulatedPaths(
+        root=root,
+        capture=root / "object",
+        calibration=root / "calibration",
+        reference=root / "calibration" / "reference",
+        truth=root / "truth-height.npy",
+    )
+    g = scan.geometry
+    projector = {"width": g.projector_width, "height": g.projector_height}
+    extra = {"simulation": dict(scan.description)}
+    write_capture(paths.capture, scan.object_frames, scan.patterns, projector, scene="object", extra=extra, overwrite=overwrite)
+    write_capture(paths.reference, scan.reference_frames, scan.patterns, projector, scene="reference", extra=extra, overwrite=overwrite)
+    write_calibration(paths.calibration, scan.calibration(reference="reference"))
+    root.mkdir(parents=True, exist_ok=True)
+    np.save(paths.truth, scan.height_mm.astype(np.float32))
+    return paths
+
