@@ -34,7 +34,7 @@ class TriggerSource(enum.Enum):
 
 
 class TriggerMode(enum.Enum):
-    """How many frames one trigger produces: one, or a burst (frame per pulse with no re-arming)."""
+    """How many frames one trigger produces: one, or a burst of ``Camera.burst_length`` frames."""
 
     ONCE = "once"
     BURST = "burst"
@@ -130,6 +130,7 @@ class Camera(abc.ABC):
         self._pixel_format = PixelFormat.MONO8
         self._trigger_source = TriggerSource.SOFTWARE
         self._trigger_mode = TriggerMode.ONCE
+        self._burst_length = 1
         self._reset_sequence()
 
     # -- state ------------------------------------------------------------------------------------
@@ -271,6 +272,25 @@ class Camera(abc.ABC):
     def trigger_mode(self) -> TriggerMode:
         return self._trigger_mode
 
+    @property
+    def burst_length(self) -> int:
+        """Frames per trigger in ``TriggerMode.BURST``."""
+        return self._burst_length
+
+    @burst_length.setter
+    def burst_length(self, value: int) -> None:
+        if isinstance(value, bool) or int(value) != value or int(value) < 1:
+            raise ValueError(f"burst_length: expected an integer >= 1, found {value!r}")
+        self._require_stopped("change the burst length")
+        self._burst_length = int(value)
+        if self._is_open:
+            self._set_trigger(self._trigger_source, self._trigger_mode)
+
+    @property
+    def trigger_count(self) -> int:
+        """Triggers noted since start()."""
+        return self._trigger_count
+
     def set_trigger(self, source: TriggerSource, mode: TriggerMode = TriggerMode.ONCE) -> None:
         """Choose what starts an exposure; ``UnsupportedFeatureError`` if the device can't do it."""
         if not isinstance(source, TriggerSource) or not isinstance(mode, TriggerMode):
@@ -317,7 +337,8 @@ class Camera(abc.ABC):
 
         :meth:`trigger` calls it; backends that learn of hardware triggers may call it too.
         """
-        self._pending_triggers.append(float(time_s))
+        frames = self._burst_length if self._trigger_mode is TriggerMode.BURST else 1
+        self._pending_triggers.extend([float(time_s)] * frames)
         self._trigger_count += 1
 
     def fetch(self, timeout_s: float = 1.0) -> Frame:
@@ -420,7 +441,7 @@ class Camera(abc.ABC):
 
     @abc.abstractmethod
     def _set_trigger(self, source: TriggerSource, mode: TriggerMode) -> None:
-        """Configure triggering; UnsupportedFeatureError for a combination the device can't do."""
+        """Configure triggering (and ``burst_length`` in BURST mode); UnsupportedFeatureError if impossible."""
 
     @abc.abstractmethod
     def _start(self) -> None:

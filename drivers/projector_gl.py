@@ -1,0 +1,231 @@
+"""Pattern rendering with moderngl, and a projector that renders off-screen (headless EGL).
+
+:class:`PatternRenderer` draws any capture-format pattern with the gamma LUT applied in a
+fragment shader (``pattern.frag.glsl``) into whatever framebuffer is bound; it serves both the
+off-screen :class:`GLProjector` here and the on-screen ``WindowProjector``.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from drivers.errors import DeviceNotFoundError
+from drivers.projector import Projector
+from processing.patterns import sinusoid_shift
+
+log = logging.getLogger(__name__)
+
+SHADER_DIR = Path(__file__).resolve().parent
+KIND_CODES = {"sinusoid": 0, "speckle-sinusoid": 1, "gray": 2, "flat": 3}
+FRAMEBUFFER_DTYPES = {8: "f1", 32: "f4"}  # bits per pixel -> moderngl dtype (f1: normalised 8-bit)
+
+
+def _shader_source(name: str) -> str:
+    return (SHADER_DIR / name).read_text(encoding="utf-8")
+
+
+class PatternRenderer:
+    """Draws patterns of one projector size with a moderngl context into the bound framebuffer.
+
+    Parameters
+    ----------
+    ctx : moderngl.Context
+        An OpenGL >= 3.3 core context (headless EGL or a window's).
+    size : (width, height)
+        Projector resolution in pixels.
+    """
+
+    SPECKLE_CACHE = 4  # speckle textures kept (one per seed / dot size)
+
+    def __init__(self, ctx: Any, size: tuple[int, int]) -> None:
+        self.ctx = ctx
+        self.size = (int(size[0]), int(size[1]))
+        self.program = ctx.program(
+            vertex_shader=_shader_source("fullscreen.vert.glsl"),
+            fragment_shader=_shader_source("pattern.frag.glsl"),
+        )
+        self.vao = ctx.vertex_array(self.program, [])
+        self._speckle: dict[tuple[int, int], Any] = {}
+        self._lut_texture: Any | None = None
+        self._blank = self._texture(np.zeros((1, 1), dtype=np.float32))
+        self._set("size", self.size)
+        self._set("speckle", 0)
+        self._set("lut", 1)
+        self.set_lut(None)
+
+    def _set(self, name: str, value: Any) -> None:
+        if name in self.program:  # the GLSL compiler drops uniforms a shader does not use
+            self.program[name].value = value
+
+    def _texture(self, data: np.ndarray) -> Any:
+        rows, cols = data.shape
+        tex = self.ctx.texture((cols, rows), 1, np.ascontiguousarray(data, dtype=np.float32).tobytes(), dtype="f4")
+        import moderngl
+
+        tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        tex.repeat_x = tex.repeat_y = False
+        return tex
+
+    def set_lut(self, lut: np.ndarray | None) -> None:
+        """Upload a validated gamma LUT (float32 (N,), N >= 2) or None for the identity."""
+        if self._lut_texture is not None:
+            self._lut_texture.release()
+            self._lut_texture = None
+        if lut is not None:
+            self._lut_texture = self._texture(np.asarray(lut, dtype=np.float32)[None, :])
+        self._set("use_lut", lut is not None)
+        self._set("lut_size", 2 if lut is None else int(lut.size))
+
+    def _speckle_texture(self, seed: int, dot_px: int) -> Any:
+        key = (seed, dot_px)
+        if key not in self._speckle:
+            from processing.speckle import speckle_field
+
+            if len(self._speckle) >= self.SPECKLE_CACHE:
+                self._speckle.pop(next(iter(self._speckle))).release()
+            self._speckle[key] = self._texture(speckle_field(self.size[0], self.size[1], seed, dot_px))
+        return self._speckle[key]
+
+    def render(self, pattern: Mapping[str, Any]) -> None:
+        """Draw ``pattern`` (validated by the caller) over the whole bound framebuffer."""
+        kind = pattern["kind"]
+        self._set("kind", KIND_CODES[kind])
+        self._set("axis", 0 if pattern.get("axis", "x") == "x" else 1)
+        speckle = self._blank
+        if kind in ("sinusoid", "speckle-sinusoid"):
+            phase = float(pattern.get("phase_rad", 0.0)) + sinusoid_shift(pattern)
+            self._set("frequency", float(pattern["frequency"]))
+            self._set("offset", float(pattern.get("offset", 0.5)))
+            self._set("amplitude", float(pattern.get("amplitude", 0.5)))
+            self._set("phase", math.fmod(phase, 2.0 * math.pi) % (2.0 * math.pi))
+        if kind == "speckle-sinusoid":
+            from processing.speckle import DEFAULT_DOT_PX, DEFAULT_SEED, DEFAULT_SPECKLE_GAIN
+
+            self._set("speckle_gain", float(pattern.get("speckle_gain", DEFAULT_SPECKLE_GAIN)))
+            speckle = self._speckle_texture(int(pattern.get("seed", DEFAULT_SEED)), int(pattern.get("dot_px", DEFAULT_DOT_PX)))
+        elif kind == "gray":
+            self._set("bits", int(pattern["bits"]))
+            self._set("bit", int(pattern["bit"]))
+            self._set("inverted", bool(pattern.get("inverted", False)))
+        elif kind == "flat":
+            self._set("level", float(pattern["level"]))
+        speckle.use(location=0)
+        (self._lut_texture or self._blank).use(location=1)
+        self.ctx.viewport = (0, 0, *self.size)
+        self.vao.render(vertices=3)
+
+    def release(self) -> None:
+        for tex in self._speckle.values():
+            tex.release()
+        self._speckle.clear()
+        for obj in (self._lut_texture, self._blank, self.vao, self.program):
+            if obj is not None:
+                obj.release()
+        self._lut_texture = None
+
+
+def read_framebuffer(fbo: Any, size: tuple[int, int], bits: int = 8) -> np.ndarray:
+    """Red channel of a framebuffer (8-bit normalised or 32-bit float) as (H, W) float32, row 0 at the top."""
+    width, height = size
+    if bits == 32:
+        data = np.frombuffer(fbo.read(viewport=(0, 0, width, height), components=1, dtype="f4"), dtype=np.float32)
+        image = data.reshape(height, width)
+    else:
+        data = np.frombuffer(fbo.read(viewport=(0, 0, width, height), components=1, alignment=1), dtype=np.uint8)
+        image = data.reshape(height, width).astype(np.float32) / 255.0
+    return np.ascontiguousarray(image[::-1])
+
+
+class GLProjector(Projector):
+    """Renders patterns off-screen at the projector resolution with a headless EGL context.
+
+    What it renders is what a display of the given bit depth would show; :meth:`last_frame` hands
+    it back (the simulated camera looks at it).
+
+    Parameters
+    ----------
+    size : (width, height)
+        Projector resolution.
+    bits : {8, 32}
+        Framebuffer format: 8-bit like a display (default) or 32-bit float.
+    backend : str or None
+        moderngl standalone backend, ``"egl"`` (headless, default) or None for the platform default.
+    """
+
+    def __init__(
+        self, size: tuple[int, int], *, bits: int = 8, backend: str | None = "egl", name: str | None = None
+    ) -> None:
+        super().__init__(size, name)
+        if bits not in FRAMEBUFFER_DTYPES:
+            raise ValueError(f"bits: expected one of {tuple(FRAMEBUFFER_DTYPES)}, found {bits!r}")
+        self.bits = bits
+        self.backend = backend
+        self._ctx: Any = None
+        self._fbo: Any = None
+        self._renderer: PatternRenderer | None = None
+        self._frame: np.ndarray | None = None
+
+    def _open(self) -> None:
+        try:
+            import moderngl
+        except ImportError as exc:
+            raise DeviceNotFoundError(f"{self.name}: moderngl is not installed") from exc
+        kwargs = {"backend": self.backend} if self.backend else {}
+        try:
+            self._ctx = moderngl.create_standalone_context(require=330, **kwargs)
+        except Exception as exc:  # glcontext raises bare Exceptions for missing libraries / displays
+            raise DeviceNotFoundError(
+                f"{self.name}: no OpenGL 3.3 context (backend {self.backend or 'default'}): {exc}"
+            ) from exc
+        try:
+            colour = self._ctx.renderbuffer(self.size, components=1, dtype=FRAMEBUFFER_DTYPES[self.bits])
+            self._fbo = self._ctx.framebuffer(color_attachments=[colour])
+            self._renderer = PatternRenderer(self._ctx, self.size)
+        except Exception:
+            self._release()
+            raise
+
+    def _set_gamma_lut(self, lut: np.ndarray | None) -> None:
+        assert self._renderer is not None
+        self._renderer.set_lut(lut)
+
+    def _show(self, pattern: Mapping[str, Any]) -> None:
+        assert self._renderer is not None and self._fbo is not None
+        self._frame = None
+        self._fbo.use()
+        self._renderer.render(pattern)
+
+    def _wait(self, timeout_s: float) -> bool:
+        self._ctx.finish()  # off-screen: on screen means the GPU finished drawing
+        return True
+
+    def _last_frame(self) -> np.ndarray | None:
+        if self._frame is None:
+            self._frame = read_framebuffer(self._fbo, self.size, self.bits)
+        return self._frame.copy()
+
+    def _close(self) -> None:
+        self._release()
+
+    def _release(self) -> None:
+        self._frame = None
+        try:
+            if self._renderer is not None:
+                self._renderer.release()
+            if self._fbo is not None:
+                for attachment in self._fbo.color_attachments:
+                    attachment.release()
+                self._fbo.release()
+        finally:
+            if self._ctx is not None:
+                self._ctx.release()
+            self._ctx = self._fbo = self._renderer = None
+
+
+__all__ = ["GLProjector", "PatternRenderer", "read_framebuffer"]

@@ -1,0 +1,82 @@
+"""The off-screen moderngl projector against processing.patterns (within 1/255, LUT applied)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from contracts import PATTERNS, SIZE, ProjectorContract, expected_drive, pattern_id
+from drivers.errors import DeviceNotFoundError
+
+moderngl = pytest.importorskip("moderngl", reason="moderngl is not installed")
+
+from drivers.projector_gl import GLProjector  # noqa: E402
+
+
+def _egl_available() -> str | None:
+    try:
+        ctx = moderngl.create_standalone_context(backend="egl", require=330)
+    except Exception as exc:  # glcontext reports a missing libEGL / driver as a bare Exception
+        return f"no headless EGL OpenGL 3.3 context: {exc}"
+    ctx.release()
+    return None
+
+
+EGL_PROBLEM = _egl_available()
+pytestmark = pytest.mark.skipif(EGL_PROBLEM is not None, reason=str(EGL_PROBLEM))
+
+
+class TestGLProjector8Bit(ProjectorContract):
+    def make_projector(self, size):
+        return GLProjector(size)
+
+
+class TestGLProjectorFloat(ProjectorContract):
+    tolerance = 1e-4  # float32 framebuffer: only float32 cosine error remains
+
+    def make_projector(self, size):
+        return GLProjector(size, bits=32)
+
+
+@pytest.mark.parametrize("pattern", PATTERNS, ids=pattern_id)
+def test_8bit_output_is_the_rounded_drive_level(pattern: dict) -> None:
+    """An 8-bit framebuffer holds round(255 x) exactly, up to float32 cosine error at .5 ties."""
+    expected = expected_drive(pattern, SIZE)
+    with GLProjector(SIZE) as projector:
+        projector.show(pattern)
+        projector.wait_shown()
+        levels = projector.last_frame() * 255.0
+    assert np.allclose(levels, np.rint(levels), atol=1e-3)  # really 8-bit
+    mismatched = np.abs(levels - np.rint(expected * 255.0)) > 0.5
+    assert mismatched.mean() < 0.01
+
+
+def test_full_projector_resolution() -> None:
+    """The framebuffer is the projector's resolution (a tall DLP-like 912 x 1140), not the window's."""
+    size = (912, 1140)
+    pattern = {"kind": "gray", "axis": "y", "bit": 9, "bits": 10}
+    with GLProjector(size) as projector:
+        projector.show(pattern)
+        projector.wait_shown()
+        frame = projector.last_frame()
+    np.testing.assert_array_equal(frame, expected_drive(pattern, size))
+
+
+def test_last_frame_follows_the_latest_pattern() -> None:
+    with GLProjector(SIZE) as projector:
+        projector.show({"kind": "flat", "level": 1.0})
+        assert projector.last_frame().min() == 1.0
+        projector.show({"kind": "flat", "level": 0.0})
+        assert projector.last_frame().max() == 0.0
+
+
+def test_missing_backend_is_device_not_found() -> None:
+    projector = GLProjector(SIZE, backend="no-such-backend")
+    with pytest.raises(DeviceNotFoundError, match="no-such-backend"):
+        projector.open()
+    assert not projector.is_open
+
+
+def test_bad_bit_depth_is_refused() -> None:
+    with pytest.raises(ValueError, match="bits"):
+        GLProjector(SIZE, bits=16)
