@@ -302,9 +302,12 @@ def _section(data: Mapping[str, Any], name: str, where: str) -> dict[str, Any]:
     return values
 
 
-def parse_config(data: Mapping[str, Any], source: Path | None = None) -> RigConfig:
-    """Validated :class:`RigConfig` from parsed TOML; relative paths resolve against ``source``'s folder."""
-    where = str(source) if source is not None else "rig config"
+def parse_config(data: Mapping[str, Any], source: Path | None = None, where: str | None = None) -> RigConfig:
+    """Validated :class:`RigConfig` from parsed TOML; relative paths resolve against ``source``'s folder.
+
+    ``where`` starts every error message (default: the source file, else "rig config").
+    """
+    where = where or (str(source) if source is not None else "rig config")
     unknown = sorted(set(data) - set(_SCHEMA))
     if unknown:
         raise ConfigError(f"{where}: [{unknown[0]}]: unknown section; expected one of {', '.join(_SCHEMA)}")
