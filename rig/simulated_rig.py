@@ -1,0 +1,76 @@
+"""The built-in simulated rig: real drivers and simulated hardware wired like a lab rig.
+
+- projector: the moderngl off-screen projector really renders each pattern (EGL);
+- camera: :class:`mock_devices.camera.SimulatedCamera` looks at that rendered frame on a virtual
+  scene through the reference-plane geometry of ``[simulation]``;
+- trigger: :class:`mock_devices.trigger_box.FakeTriggerBox` serves the trigger-box protocol on a
+  real pseudo-terminal, the real :class:`drivers.trigger_box.SerialTriggerBox` drives it, and
+  every pulse reaches the camera's hardware input; or the camera's software trigger.
+
+The geometry, photometry and scene helpers here also serve ``rig simulate`` (offline synthesis).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import re
+from typing import Any
+
+import numpy as np
+
+from mock_devices import scenes, synth
+from rig.config import RigConfig
+from rig.errors import ConfigError
+
+PLANE_SCENE = re.compile(r"plane-at-(-?\d+(?:\.\d+)?)mm")
+
+
+def geometry_from_config(config: RigConfig) -> synth.RigGeometry:
+    """Reference-plane geometry of ``[simulation]`` with the configured camera and projector sizes."""
+    sim = config.simulation
+    try:
+        return synth.RigGeometry(
+            l0_mm=sim.l0_mm,
+            d0_mm=sim.d0_mm,
+            f0_per_mm=sim.f0_per_mm,
+            f0_frequency=sim.f0_frequency,
+            pixel_mm=config.pixel_mm(),
+            camera_width=config.camera.width,
+            camera_height=config.camera.height,
+            projector_width=config.projector.width,
+            projector_height=config.projector.height,
+        )
+    except ValueError as exc:
+        raise ConfigError(f"{config.source or 'rig config'}: [simulation] {exc}") from None
+
+
+def appearance_from_config(config: RigConfig) -> synth.Appearance:
+    """Photometry of ``[simulation]``: ambient light, projector gamma, camera gain and noise, 8 bit."""
+    sim = config.simulation
+    return synth.Appearance(ambient=sim.ambient, gamma=sim.gamma, gain=sim.camera_gain, snr_db=sim.snr_db, bit_depth=8)
+
+
+def scene_height(config: RigConfig, scene: str, geometry: synth.RigGeometry) -> np.ndarray:
+    """Height map (mm) in front of the simulated rig for a capture's ``scene`` label.
+
+    ``"object"``: the configured scene; ``"reference"``: the reference plane (zero);
+    ``"plane-at-25mm"``: a flat plane at that height (calibration); a scene name from
+    :data:`mock_devices.scenes.SCENES` is accepted too.
+    """
+    h, w, pixel_mm = geometry.camera_height, geometry.camera_width, geometry.pixel_mm
+    if scene == "object":
+        return scenes.make_scene(config.simulation.scene, h, w, pixel_mm)
+    if scene == "reference":
+        return np.zeros((h, w))
+    match = PLANE_SCENE.fullmatch(scene)
+    if match:
+        level = float(match.group(1))
+        if level >= geometry.l0_mm:
+            raise ConfigError(f"--scene {scene}: expected a plane below l0_mm = {geometry.l0_mm}")
+        return scenes.flat(h, w, pixel_mm, level_mm=level)
+    if scene in scenes.SCENES:
+        return scenes.make_scene(scene, h, w, pixel_mm)
+    raise ConfigError(
+        f"--scene: expected 'object', 'reference', 'plane-at-<height>mm' or one of {', '.join(scenes.SCENES)} "
+        f"for the simulated rig, found {scene!r}"
+    )
