@@ -82,6 +82,14 @@ def _valid(values: np.ndarray, mask: np.ndarray | None, name: str) -> np.ndarray
     return keep
 
 
+def _trimmed_mean(values: np.ndarray) -> float:
+    """Mean of the values within 5 scaled MADs of the median (medians of quantised phases are biased)."""
+    median = np.median(values)
+    mad = 1.4826 * np.median(np.abs(values - median))
+    inliers = values[np.abs(values - median) <= 5.0 * mad] if mad > 0 else values
+    return float(np.mean(inliers))
+
+
 def _block_medians(values: np.ndarray, blocks: int = 8) -> np.ndarray:
     """Medians of a ``blocks`` x ``blocks`` grid of tiles (NaN ignored): a shape, not pixel noise."""
     values = np.atleast_2d(values)
@@ -136,7 +144,7 @@ def fit_f0(
     cov = sigma2 * np.linalg.inv(design.T @ design)
     gx, gy = float(coef[0]), float(coef[1])
     slope = math.hypot(gx, gy)
-    if slope == 0.0:
+    if slope * max(phase.shape) < 1e-6:
         raise CalibrationError("reference phase: no phase slope across the view (is the projector on?)")
     slope_std = math.sqrt(max((gx * gx * cov[0, 0] + gy * gy * cov[1, 1] + 2 * gx * gy * cov[0, 1]) / slope**2, 0.0))
     scale = 1.0 / (2.0 * np.pi * pixel_mm)
@@ -232,7 +240,7 @@ def fit_l0_d0(
         keep = _valid(dphi, mask, f"plane at {h:g} mm")
         if not keep.any():
             raise CalibrationError(f"plane at {h:g} mm: no valid pixel")
-        means.append(float(np.median(dphi[keep])))
+        means.append(_trimmed_mean(dphi[keep]))
         maps.append(np.where(keep, dphi, np.nan))
     means_arr = np.asarray(means)
     if np.any(np.abs(means_arr) < 1e-9):
