@@ -1,0 +1,242 @@
+"""N-step phase shifting: wrapped phase, background and modulation from a fringe stack.
+
+Frames follow capture-format.md: ``I_k = A + B cos(phi + delta_k)`` with ``phi = 2 pi f u / W``
+(plus the pattern's ``phase_rad``, which the caller subtracts). Both the uniform shifts
+``delta_k = 2 pi k / N`` and arbitrary known shifts reduce to one linear model per pixel,
+
+    I_k = A + (B cos phi) cos delta_k - (B sin phi) sin delta_k,
+
+so a (3, N) weight matrix, computed once from the shifts, turns the whole stack into
+``(A, B cos phi, B sin phi)`` with a single matrix product: closed form for uniform shifts
+(thesis / DESIGN: ``phi = atan2(-sum I_k sin delta_k, sum I_k cos delta_k)``,
+``B = 2/N sqrt(S^2 + C^2)``), least squares (pseudo-inverse) otherwise.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from processing import _validate
+
+TWO_PI = 2.0 * np.pi
+
+
+@dataclass
+class PhaseShiftResult:
+    """Output of :func:`phase_shift`, all (H, W) float64.
+
+    Attributes
+    ----------
+    phase : wrapped phase phi in [-pi, pi)
+    background : A, the mean intensity
+    modulation : B, the fringe amplitude (>= 0); low in shadows and on dark surfaces
+    """
+
+    phase: np.ndarray
+    background: np.ndarray
+    modulation: np.ndarray
+
+
+@lru_cache(maxsize=64)
+def _uniform_weights(steps: int) -> np.ndarray:
+    delta = TWO_PI * np.arange(steps) / steps
+    return np.stack([np.full(steps, 1.0 / steps), 2.0 / steps * np.cos(delta), -2.0 / steps * np.sin(delta)])
+
+
+def shift_weights(steps: int, shifts: np.ndarray | None = None) -> np.ndarray:
+    """Weights (3, N) that map a stack of N frames to (A, B cos phi, B sin phi).
+
+    Parameters
+    ----------
+    steps : int
+        Number of frames N >= 3.
+    shifts : (N,) array, optional
+        Phase shifts delta_k in radians; default 2 pi k / N (closed form). Otherwise the least
+        squares solution of the 3-parameter model; the shifts must include three distinct
+        values modulo 2 pi.
+
+    Returns
+    -------
+    weights : (3, N) float64 array (read-only for the default shifts)
+    """
+    steps = _validate.positive_int(steps, "steps", minimum=3)
+    if shifts is None:
+        weights = _uniform_weights(steps)
+        weights.flags.writeable = False
+        return weights
+    delta = _validate.real_array(shifts, "shifts", ndim=1).astype(np.float64)
+    if delta.shape[0] != steps:
+        raise ValueError(f"shifts: expected {steps} values (one per frame), found {delta.shape[0]}")
+    if not np.all(np.isfinite(delta)):
+        raise ValueError("shifts: contains NaN or infinity")
+    design = np.column_stack([np.ones(steps), np.cos(delta), np.sin(delta)])
+    singular = np.linalg.svd(design, compute_uv=False)
+    if singular[-1] < 1e-6 * singular[0]:
+        raise ValueError("shifts: need at least three distinct shifts modulo 2 pi to separate A, B and phi")
+    # Normal equations (M^T M) x = M^T I, solved once for all pixels.
+    weights = np.linalg.solve(design.T @ design, design.T)
+    weights[2] *= -1.0  # the model's sine coefficient is -B sin phi
+    return weights
+
+
+# Pixels per block of the matrix product: a block of frames, cast to float32, stays in the CPU
+# cache, which makes the cast-and-multiply several times faster than one product over the image.
+_BLOCK = 16384
+
+
+def _coefficients(stack: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """(R, H*W) = weights (R, N) @ frames; float32 for integer or float32 input, else float64."""
+    n = stack.shape[0]
+    flat = stack.reshape(n, -1)
+    dtype = np.float64 if flat.dtype == np.float64 else np.float32
+    w = np.ascontiguousarray(weights, dtype=dtype)
+    pixels = flat.shape[1]
+    out = np.empty((w.shape[0], pixels), dtype=dtype)
+    for start in range(0, pixels, _BLOCK):  # blocks of pixels, not a loop over pixels
+        stop = min(start + _BLOCK, pixels)
+        np.matmul(w, flat[:, start:stop].astype(dtype, copy=False), out=out[:, start:stop])
+    return out
+
+
+def _wrapped(sin_part: np.ndarray, cos_part: np.ndarray) -> np.ndarray:
+    """atan2 folded into [-pi, pi) as float64 (float32 atan2 can return just above pi)."""
+    phase = np.arctan2(sin_part, cos_part).astype(np.float64)
+    phase[phase >= np.pi] -= TWO_PI
+    return phase
+
+
+def _magnitude(cos_part: np.ndarray, sin_part: np.ndarray) -> np.ndarray:
+    """sqrt(c^2 + s^2) as float64 (np.hypot is several times slower and not needed here)."""
+    squared = cos_part * cos_part
+    squared += sin_part * sin_part
+    return np.sqrt(squared, out=squared).astype(np.float64)
+
+
+def _check_stack(stack: np.ndarray) -> np.ndarray:
+    arr = _validate.real_array(stack, "stack", ndim=3)
+    if arr.shape[0] < 3:
+        raise ValueError(f"stack: expected at least 3 frames (N, H, W), found shape {arr.shape}")
+    return arr
+
+
+def phase_shift(stack: np.ndarray, shifts: np.ndarray | None = None) -> PhaseShiftResult:
+    """Wrapped phase, background and modulation of an N-step phase-shifted stack.
+
+    Parameters
+    ----------
+    stack : (N, H, W) array, any integer or float dtype
+        Frames I_k = A + B cos(phi + delta_k); N >= 3. Integer and float32 stacks are
+        processed in float32 (exact for 8- and 16-bit images), float64 stacks in float64.
+    shifts : (N,) array, optional
+        delta_k in radians; default 2 pi k / N.
+
+    Returns
+    -------
+    PhaseShiftResult
+        ``phase`` in [-pi, pi), ``background`` A and ``modulation`` B, each (H, W) float64.
+    """
+    arr = _check_stack(stack)
+    n, height, width = arr.shape
+    coeffs = _coefficients(arr, shift_weights(n, shifts))
+    background, cos_part, sin_part = coeffs
+    phase = _wrapped(sin_part, cos_part)
+    modulation = _magnitude(cos_part, sin_part)
+    return PhaseShiftResult(
+        phase=phase.reshape(height, width),
+        background=background.astype(np.float64).reshape(height, width),
+        modulation=modulation.reshape(height, width),
+    )
+
+
+def wrapped_phase(stack: np.ndarray, shifts: np.ndarray | None = None) -> np.ndarray:
+    """Wrapped phase from an N-step phase-shifted stack.
+
+    Parameters
+    ----------
+    stack : (N, H, W) array
+        Frames I_k = A + B cos(phi + delta_k); N >= 3.
+    shifts : (N,) array, optional
+        delta_k in radians; default 2 pi k / N.
+
+    Returns
+    -------
+    phi : (H, W) float64 array in [-pi, pi)
+    """
+    arr = _check_stack(stack)
+    n, height, width = arr.shape
+    weights = shift_weights(n, shifts)
+    coeffs = _coefficients(arr, weights[1:])
+    return _wrapped(coeffs[1], coeffs[0]).reshape(height, width)
+
+
+def shadow_mask(
+    modulation: np.ndarray,
+    background: np.ndarray | None = None,
+    min_modulation: float | None = None,
+    min_ratio: float = 0.2,
+) -> np.ndarray:
+    """Pixels lit by the fringes with enough modulation to trust their phase.
+
+    Parameters
+    ----------
+    modulation : (H, W) array
+        Fringe amplitude B from :func:`phase_shift`.
+    background : (H, W) array, optional
+        Mean intensity A. When given, a pixel also needs a data modulation B / A >= ``min_ratio``
+        (shadows lit only by ambient light have a background but almost no modulation).
+    min_modulation : float, optional
+        Absolute threshold on B in intensity units. Default (automatic): ``min_ratio`` times the
+        99th percentile of B over the image, a robust estimate of the modulation of a well-lit
+        surface that ignores a few saturated or hot pixels.
+    min_ratio : float
+        Fraction in (0, 1] used by the automatic threshold and the data-modulation test.
+
+    Returns
+    -------
+    valid : (H, W) bool array, True where the pixel is lit and well modulated; NaN is invalid.
+    """
+    b = _validate.image(modulation, "modulation").astype(np.float64, copy=False)
+    ratio = _validate.finite_float(min_ratio, "min_ratio", minimum=0.0, strict=True)
+    if ratio > 1.0:
+        raise ValueError(f"min_ratio: expected a fraction in (0, 1], found {min_ratio!r}")
+    finite = np.isfinite(b)
+    if min_modulation is None:
+        if not finite.any():
+            raise ValueError("modulation: no finite value to derive a threshold from")
+        threshold = ratio * float(np.percentile(b[finite], 99.0))
+    else:
+        threshold = _validate.finite_float(min_modulation, "min_modulation", minimum=0.0)
+    with np.errstate(invalid="ignore"):
+        valid = finite & (b >= threshold) & (b > 0)
+        if background is not None:
+            a = _validate.image(background, "background").astype(np.float64, copy=False)
+            _validate.same_shape(a, b.shape, "background")
+            valid &= np.isfinite(a) & (a > 0) & (b >= ratio * a)
+    return valid
+
+
+def quality_map(modulation: np.ndarray, background: np.ndarray) -> np.ndarray:
+    """Data modulation gamma = B / A, clipped to [0, 1]; 0 where A <= 0 or either is NaN.
+
+    A fringe of full contrast has gamma = 1; shadows, ambient light and defocus lower it. Use it
+    as the quality map of :func:`processing.spatial.unwrap_quality_guided` or for thresholds that
+    do not depend on the surface's reflectivity.
+
+    Parameters
+    ----------
+    modulation, background : (H, W) arrays
+        B and A from :func:`phase_shift`.
+
+    Returns
+    -------
+    gamma : (H, W) float64 array in [0, 1]
+    """
+    b = _validate.image(modulation, "modulation").astype(np.float64, copy=False)
+    a = _validate.image(background, "background").astype(np.float64, copy=False)
+    _validate.same_shape(a, b.shape, "background")
+    with np.errstate(divide="ignore", invalid="ignore"):
+        gamma = np.where(a > 0, b / a, 0.0)
+    return np.clip(np.nan_to_num(gamma, nan=0.0, posinf=0.0, neginf=0.0), 0.0, 1.0)

@@ -1,0 +1,492 @@
+"""Temporal phase unwrapping: absolute phase from wrapped phases at several frequencies.
+
+Inputs are wrapped phases of ``phi_i = 2 pi f_i u / W`` (capture-format.md; any 2 pi
+representation: [-pi, pi) from :mod:`processing.phase_shift` or [0, 2 pi)), with ``f_i`` the
+integer number of fringes across the projector. Every method returns the absolute phase at its
+highest frequency, ``Phi = 2 pi f_max u / W`` in [0, 2 pi f_max), with the fringe orders ``k``
+of that frequency (``Phi = phi + 2 pi k``, ``phi`` taken in [0, 2 pi)) and a validity mask.
+
+Methods
+-------
+- :func:`unwrap_two_frequency`: Ding's number-theoretic method, coprime f1 < f2,
+  ``m = round((f2 phi1 - f1 phi2) / 2 pi) = k2 f1 - k1 f2`` through a look-up table; exact
+  while the phase errors stay below ``pi / (f1 + f2)``.
+- :func:`unwrap_three_frequency`: the same on the pairs (f1, f3), (f2, f3) of three frequencies
+  without a common divisor, each pair giving f3's order modulo f3 / gcd; combined by the
+  Chinese remainder theorem. Tolerance ``min_i t_i pi / (f_i + f3)``, ``t_i = gcd(f_i, f3)``.
+- :func:`unwrap_hierarchical`: unit frequency first, each next frequency unwrapped with the
+  previous absolute phase scaled by the frequency ratio.
+- :func:`unwrap_heterodyne`: beat phases of two or three frequencies down to a unit beat
+  (e.g. 64, 58, 53 -> 6, 5 -> 1), then hierarchically back up to the highest frequency.
+- :func:`decode_gray` and :func:`unwrap_gray`: Gray-code stripe index (processing.patterns'
+  convention) and fringe orders from it, plain or complementary (Zhang et al., 2018).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from processing import _validate
+
+TWO_PI = 2.0 * np.pi
+
+
+@dataclass
+class UnwrapResult:
+    """Absolute phase at the highest frequency.
+
+    Attributes
+    ----------
+    phase : (H, W) float64
+        Absolute phase Phi = 2 pi f u / W of the highest frequency; NaN where an input was NaN.
+    orders : (H, W) int64
+        Fringe order k of that frequency: phase = (wrapped phase in [0, 2 pi)) + 2 pi k.
+    valid : (H, W) bool
+        False where the inputs were NaN or the method detected an inconsistency (a look-up
+        value no position on the projector produces, a residual beyond tolerance).
+    """
+
+    phase: np.ndarray
+    orders: np.ndarray
+    valid: np.ndarray
+
+
+# --------------------------------------------------------------------------- shared helpers
+
+
+def _normalised(phi: np.ndarray) -> np.ndarray:
+    """phi taken into [0, 2 pi) (a new array; NaN stays NaN). Arithmetic, no np.mod (slow)."""
+    turns = phi * (1.0 / TWO_PI)
+    np.floor(turns, out=turns)
+    turns *= -TWO_PI
+    turns += phi
+    with np.errstate(invalid="ignore"):
+        top = turns >= TWO_PI  # -tiny + 2 pi rounds to 2 pi
+    if top.any():
+        turns[top] = 0.0
+    return turns
+
+
+def _finite(*maps: np.ndarray) -> np.ndarray:
+    ok = np.isfinite(maps[0])
+    for m in maps[1:]:
+        ok &= np.isfinite(m)
+    return ok
+
+
+def _result(phi_norm: np.ndarray, orders: np.ndarray, valid: np.ndarray, finite: np.ndarray) -> UnwrapResult:
+    """Absolute phase phi + 2 pi k, NaN where an input was NaN; orders 0 there."""
+    phase = orders * TWO_PI
+    phase += phi_norm
+    if not finite.all():
+        bad = ~finite
+        phase[bad] = np.nan
+        orders[bad] = 0
+        valid &= finite
+    return UnwrapResult(phase=phase, orders=orders, valid=valid)
+
+
+def _check_frequencies_coprime(frequencies: Sequence[int], name: str) -> None:
+    if math.gcd(*frequencies) != 1:
+        raise ValueError(f"{name}: {list(frequencies)} share the common divisor {math.gcd(*frequencies)}; expected none > 1")
+
+
+# --------------------------------------------------------------------------- number-theoretic (Ding)
+
+
+@dataclass(frozen=True)
+class _PairTable:
+    """Look-up table m -> (ka, kb) for coprime (fa, fb), m = fa kb - fb ka, indexed by m + offset."""
+
+    offset: int
+    ka: np.ndarray
+    kb: np.ndarray
+    reachable: np.ndarray
+
+
+@lru_cache(maxsize=128)
+def pair_table(fa: int, fb: int) -> _PairTable:
+    """Precomputed look-up table of Ding's method for coprime frequencies ``fa``, ``fb``.
+
+    Every integer m in [-fb (fa - 1), fa (fb - 1)] gets the pair (ka, kb), 0 <= ka < fa,
+    0 <= kb < fb, with fa kb - fb ka = m (Chinese remainder theorem); ``reachable`` marks the
+    fa + fb - 1 values that some projector position actually produces (the others reveal a
+    phase error beyond the tolerance). Cached per (fa, fb); the arrays are read-only.
+    """
+    if math.gcd(fa, fb) != 1:
+        raise ValueError(f"frequencies: {fa} and {fb} are not coprime (gcd {math.gcd(fa, fb)})")
+    offset = fb * (fa - 1)
+    m = np.arange(-offset, fa * (fb - 1) + 1, dtype=np.int64)
+    # fa kb = m (mod fb), -fb ka = m (mod fa)
+    kb = (m * pow(fa, -1, fb)) % fb if fb > 1 else np.zeros_like(m)
+    ka = (-m * pow(fb, -1, fa)) % fa if fa > 1 else np.zeros_like(m)
+    # Positions u in [0, 1) between consecutive period boundaries j/fa, j/fb (integer units of
+    # 1 / (2 fa fb)) give the orders that really occur.
+    bounds = np.union1d(np.arange(fa) * 2 * fb, np.arange(fb) * 2 * fa)
+    mids = (bounds + np.append(bounds[1:], 2 * fa * fb)) // 2
+    seen = fa * (mids // (2 * fa)) - fb * (mids // (2 * fb))
+    reachable = np.zeros(m.shape, dtype=bool)
+    reachable[seen + offset] = True
+    for arr in (ka, kb, reachable):
+        arr.flags.writeable = False
+    return _PairTable(offset=offset, ka=ka, kb=kb, reachable=reachable)
+
+
+def _pair_lookup(pa: np.ndarray, pb: np.ndarray, fa: int, fb: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Orders (ka, kb) and reachability of normalised phases pa, pb of coprime fa, fb.
+
+    NaN phases give index 0 and must be masked by the caller.
+    """
+    table = pair_table(fa, fb)
+    index = pb * float(-fa)
+    index += fb * pa
+    index *= 1.0 / TWO_PI
+    np.rint(index, out=index)
+    index += table.offset
+    size = table.ka.shape[0]
+    with np.errstate(invalid="ignore"):
+        inside = (index >= 0) & (index < size)
+    if not inside.all():
+        index[~inside] = 0
+    idx = index.astype(np.intp)
+    reachable = table.reachable[idx]
+    reachable &= inside
+    return table.ka[idx], table.kb[idx], reachable
+
+
+def unwrap_two_frequency(phi1: np.ndarray, phi2: np.ndarray, f1: int, f2: int) -> UnwrapResult:
+    """Ding's number-theoretic two-frequency unwrapping.
+
+    Parameters
+    ----------
+    phi1, phi2 : (H, W) arrays
+        Wrapped phases of frequencies f1 and f2 (any 2 pi representation; NaN = invalid).
+    f1, f2 : int
+        Coprime fringe counts across the projector, f1 < f2.
+
+    Returns
+    -------
+    UnwrapResult
+        Absolute phase and orders at f2. ``valid`` is False where m is a value no projector
+        position produces (an error beyond the tolerance was detected) or an input is NaN.
+
+    Notes
+    -----
+    ``m = round((f2 phi1 - f1 phi2) / 2 pi)`` equals ``k2 f1 - k1 f2``; the look-up table of
+    :func:`pair_table` (cached per (f1, f2)) gives (k1, k2). The orders are exact while the
+    errors of phi1 and phi2 stay below ``pi / (f1 + f2)``.
+    """
+    f1 = _validate.positive_int(f1, "f1")
+    f2 = _validate.positive_int(f2, "f2")
+    if not f1 < f2:
+        raise ValueError(f"f2: expected f1 < f2, found f1 = {f1}, f2 = {f2}")
+    if math.gcd(f1, f2) != 1:
+        raise ValueError(f"f1, f2: {f1} and {f2} are not coprime (gcd {math.gcd(f1, f2)})")
+    p1 = _validate.phase_map(phi1, "phi1")
+    p2 = _validate.phase_map(phi2, "phi2", p1.shape)
+    n1, n2 = _normalised(p1), _normalised(p2)
+    _, k2, valid = _pair_lookup(n1, n2, f1, f2)
+    return _result(n2, k2.astype(np.int64), valid, _finite(p1, p2))
+
+
+@lru_cache(maxsize=64)
+def _crt_table(n1: int, n2: int, modulus: int) -> np.ndarray:
+    """k in [0, modulus) from (k mod n1, k mod n2); -1 for residue pairs no k produces."""
+    table = np.full((n1, n2), -1, dtype=np.int64)
+    k = np.arange(modulus)
+    table[k % n1, k % n2] = k
+    table.flags.writeable = False
+    return table
+
+
+def unwrap_three_frequency(phis: Sequence[np.ndarray], frequencies: Sequence[int]) -> UnwrapResult:
+    """Ding's three-frequency number-theoretic unwrapping.
+
+    Parameters
+    ----------
+    phis : sequence of three (H, W) arrays
+        Wrapped phases at ``frequencies`` (any 2 pi representation; NaN = invalid).
+    frequencies : sequence of three ints
+        f1, f2, f3 with f3 the largest and no common divisor > 1 of all three (pairs may share
+        one: e.g. 6, 10, 15).
+
+    Returns
+    -------
+    UnwrapResult
+        Absolute phase and orders at f3.
+
+    Notes
+    -----
+    For each pair (f_i, f3), with t = gcd(f_i, f3), ``m = round((f3 phi_i - f_i phi3) / (2 pi t))``
+    and the look-up table of the coprime pair (f_i / t, f3 / t) give k3 modulo f3 / t; as
+    gcd(t_1, t_2) = 1, the two residues fix k3 in [0, f3) (Chinese remainder theorem). Exact
+    while every phase error is below ``min_i t_i pi / (f_i + f3)``. ``valid`` is False where a
+    pair's m is unreachable or the residues disagree.
+    """
+    freqs = _validate.frequency_list(frequencies, "frequencies", count=3)
+    if len(set(freqs)) != 3:
+        raise ValueError(f"frequencies: expected three distinct values, found {freqs}")
+    _check_frequencies_coprime(freqs, "frequencies")
+    f1, f2, f3 = freqs
+    if f3 != max(freqs):
+        raise ValueError(f"frequencies: expected the largest last, found {freqs}")
+    maps = _validate.phase_maps(phis, "phis", 3)
+    norm = [_normalised(p) for p in maps]
+    residues = []
+    valid = np.ones(norm[0].shape, dtype=bool)
+    for fi, pi_ in ((f1, norm[0]), (f2, norm[1])):
+        t = math.gcd(fi, f3)
+        # m = ((f3 / t) phi_i - (fi / t) phi3) / 2 pi = (fi / t) k3 - (f3 / t) k_i: the table of
+        # the coprime reduced pair, whose reachable values are the same, gives k3 mod f3 / t.
+        _, k3_mod, reachable = _pair_lookup(pi_, norm[2], fi // t, f3 // t)
+        residues.append((k3_mod, f3 // t))
+        valid &= reachable
+    (r1, n1), (r2, n2) = residues
+    k3 = _crt_table(n1, n2, f3)[r1, r2]
+    valid &= k3 >= 0
+    np.maximum(k3, 0, out=k3)
+    return _result(norm[2], k3, valid, _finite(*maps))
+
+
+# --------------------------------------------------------------------------- hierarchical / heterodyne
+
+
+def _hierarchy(
+    coarse: np.ndarray, f_coarse: int, steps: Sequence[tuple[np.ndarray, int]], max_residual: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Climb from an absolute phase at ``f_coarse`` through (normalised phase, frequency) steps.
+
+    Returns the last step's normalised phase, its orders and where every residual
+    |scaled estimate - result| stayed within ``max_residual``.
+    """
+    absolute = coarse
+    valid = np.ones(coarse.shape, dtype=bool)
+    for phi, f in steps:
+        estimate = absolute * (f / f_coarse)
+        turns = estimate - phi
+        turns *= 1.0 / TWO_PI
+        np.rint(turns, out=turns)
+        absolute = turns * TWO_PI
+        absolute += phi
+        with np.errstate(invalid="ignore"):
+            valid &= np.abs(estimate - absolute) <= max_residual
+        f_coarse = f
+    orders = np.nan_to_num(turns, nan=0.0).astype(np.int64)
+    return phi, orders, valid
+
+
+def unwrap_hierarchical(
+    phis: Sequence[np.ndarray], frequencies: Sequence[int], max_residual: float = np.pi / 2
+) -> UnwrapResult:
+    """Hierarchical multi-frequency unwrapping from a unit frequency upwards.
+
+    Parameters
+    ----------
+    phis : sequence of (H, W) arrays
+        Wrapped phases at ``frequencies`` (any 2 pi representation; NaN = invalid).
+    frequencies : sequence of ints, increasing, the first equal to 1
+        The unit frequency covers the projector once, so its wrapped phase is absolute; each
+        next one is unwrapped with ``k = round((Phi_prev f / f_prev - phi) / 2 pi)``.
+    max_residual : float
+        A pixel is valid while every step's |Phi_prev f / f_prev - Phi| <= max_residual
+        (an order error needs pi; the default flags pixels with half that margin left).
+
+    Returns
+    -------
+    UnwrapResult
+        Absolute phase and orders at the last (highest) frequency. Noise at the two ends of the
+        projector can leave the phase a little below 0 or above 2 pi f (orders -1 or f there).
+    """
+    freqs = _validate.frequency_list(frequencies, "frequencies", minimum_count=2)
+    if freqs[0] != 1:
+        raise ValueError(f"frequencies: expected the unit frequency 1 first, found {freqs[0]}")
+    if any(b <= a for a, b in zip(freqs, freqs[1:])):
+        raise ValueError(f"frequencies: expected increasing values, found {freqs}")
+    tolerance = _validate.finite_float(max_residual, "max_residual", minimum=0.0, strict=True)
+    maps = _validate.phase_maps(phis, "phis", len(freqs))
+    norm = [_normalised(p) for p in maps]
+    phi, orders, valid = _hierarchy(norm[0], 1, list(zip(norm[1:], freqs[1:])), tolerance)
+    return _result(phi, orders, valid, _finite(*maps))
+
+
+def _beat(phi_high: np.ndarray, phi_low: np.ndarray) -> np.ndarray:
+    """Beat (difference) phase in [0, 2 pi) of two normalised phases."""
+    return _normalised(phi_high - phi_low)
+
+
+def unwrap_heterodyne(
+    phis: Sequence[np.ndarray], frequencies: Sequence[int], max_residual: float = np.pi / 2
+) -> UnwrapResult:
+    """Heterodyne (multi-wavelength) unwrapping of two or three frequencies.
+
+    Parameters
+    ----------
+    phis : sequence of two or three (H, W) arrays
+        Wrapped phases at ``frequencies`` (any 2 pi representation; NaN = invalid).
+    frequencies : sequence of two or three distinct ints
+        Two: their difference must be 1 (the beat covers the projector once). Three, sorted
+        fa > fb > fc: the beats fa - fb and fb - fc must differ by 1 (64, 58, 53 -> 6, 5 -> 1).
+    max_residual : float
+        Residual bound of each hierarchical step, as in :func:`unwrap_hierarchical`.
+
+    Returns
+    -------
+    UnwrapResult
+        Absolute phase and orders at the highest frequency.
+
+    Notes
+    -----
+    The beat of phases at fa > fb, ``(phi_a - phi_b) mod 2 pi``, is the wrapped phase of the
+    frequency fa - fb (equivalent wavelength l_a l_b / (l_b - l_a)). The unit beat is absolute;
+    then the largest beat and finally fa are unwrapped hierarchically. Beat phases add the
+    noise of their terms, so the tolerance is far below that of the individual phases.
+    """
+    freqs = _validate.frequency_list(frequencies, "frequencies")
+    if len(freqs) not in (2, 3):
+        raise ValueError(f"frequencies: expected two or three frequencies, found {len(freqs)}")
+    if len(set(freqs)) != len(freqs):
+        raise ValueError(f"frequencies: expected distinct values, found {freqs}")
+    tolerance = _validate.finite_float(max_residual, "max_residual", minimum=0.0, strict=True)
+    maps = _validate.phase_maps(phis, "phis", len(freqs))
+    order = sorted(range(len(freqs)), key=lambda i: -freqs[i])
+    fs = [freqs[i] for i in order]
+    norm = [_normalised(maps[i]) for i in order]
+    if len(fs) == 2:
+        if fs[0] - fs[1] != 1:
+            raise ValueError(f"frequencies: the beat {fs[0]} - {fs[1]} must be 1 to cover the projector once")
+        steps = [(norm[0], fs[0])]
+        unit = _beat(norm[0], norm[1])
+    else:
+        fa, fb, fc = fs
+        beat_ab, beat_bc = fa - fb, fb - fc
+        if abs(beat_ab - beat_bc) != 1:
+            raise ValueError(
+                f"frequencies: the beats {fa} - {fb} = {beat_ab} and {fb} - {fc} = {beat_bc} must differ by 1"
+            )
+        phase_ab, phase_bc = _beat(norm[0], norm[1]), _beat(norm[1], norm[2])
+        if beat_ab > beat_bc:
+            unit, wide = _beat(phase_ab, phase_bc), (phase_ab, beat_ab)
+        else:
+            unit, wide = _beat(phase_bc, phase_ab), (phase_bc, beat_bc)
+        steps = [wide, (norm[0], fa)] if wide[1] > 1 else [(norm[0], fa)]
+    phi, orders, valid = _hierarchy(unit, 1, steps, tolerance)
+    return _result(phi, orders, valid, _finite(*maps))
+
+
+# --------------------------------------------------------------------------- Gray code
+
+
+def decode_gray(
+    images: np.ndarray, inverted: np.ndarray | None = None, threshold: np.ndarray | float | None = None
+) -> np.ndarray:
+    """Stripe index from captured Gray-code bit planes (processing.patterns' convention).
+
+    Parameters
+    ----------
+    images : (B, H, W) array
+        Captures of bit planes 0 .. B-1, most significant first (pattern ``bit`` = index).
+    inverted : (B, H, W) array, optional
+        Captures of the inverted planes; a bit is 1 where ``images > inverted`` (robust to
+        reflectivity and ambient light). ``threshold`` is then ignored.
+    threshold : float or (H, W) array, optional
+        A bit is 1 where ``images > threshold``; e.g. (white + black) / 2 from two flat frames.
+        Default: per pixel (max + min) / 2 over the B planes; pixels whose planes barely differ
+        (range below a quarter of the image's median range: all bits equal, stripe 0 or the
+        stripe whose code is all ones) use the image's median of that mid-level instead.
+
+    Returns
+    -------
+    stripes : (H, W) int64 array in [0, 2**B)
+        Stripe index s (projector stripe s covers u in [s W / 2**B, (s + 1) W / 2**B)).
+    """
+    planes = _validate.real_array(images, "images", ndim=3)
+    if inverted is not None:
+        neg = _validate.real_array(inverted, "inverted", ndim=3)
+        _validate.same_shape(neg, planes.shape, "inverted")
+        bits = planes > neg
+    else:
+        if threshold is None:
+            level = _default_gray_threshold(planes)
+        else:
+            level = np.asarray(threshold, dtype=np.float64)
+            if level.ndim not in (0, 2) or (level.ndim == 2 and level.shape != planes.shape[1:]):
+                raise ValueError(
+                    f"threshold: expected a number or an array of shape {planes.shape[1:]}, found shape {level.shape}"
+                )
+        bits = planes > level
+    # Gray -> binary: b_i = g_0 ^ g_1 ^ ... ^ g_i (cumulative XOR over the planes, MSB first).
+    binary = np.bitwise_xor.accumulate(bits.astype(np.uint8), axis=0)
+    weights = (1 << np.arange(planes.shape[0] - 1, -1, -1, dtype=np.int64))
+    return np.tensordot(weights, binary.astype(np.int64), axes=(0, 0))
+
+
+def _default_gray_threshold(planes: np.ndarray) -> np.ndarray:
+    high = planes.max(axis=0).astype(np.float64)
+    low = planes.min(axis=0).astype(np.float64)
+    mid = (high + low) / 2.0
+    spread = high - low
+    flat = spread < 0.25 * np.median(spread)
+    if flat.any():
+        mid[flat] = np.median(mid[~flat]) if (~flat).any() else np.median(mid)
+    return mid
+
+
+def unwrap_gray(
+    phi: np.ndarray, stripes: np.ndarray, bits: int, frequency: int, complementary: bool = False
+) -> UnwrapResult:
+    """Absolute phase from a wrapped phase and a decoded Gray-code stripe index.
+
+    Parameters
+    ----------
+    phi : (H, W) array
+        Wrapped phase of the sinusoid with ``frequency`` fringes (any 2 pi representation,
+        periods starting at phase 0 as in capture-format.md; NaN = invalid).
+    stripes : (H, W) int array
+        Stripe index from :func:`decode_gray` with ``bits`` planes.
+    bits : int
+        Number of Gray-code planes.
+    frequency : int
+        Fringes across the projector.
+    complementary : bool
+        False (plain): order ``k = floor(stripes * frequency / 2**bits)`` (2**bits == frequency
+        gives one code word per period). Its boundaries fall exactly on the phase wraps, so
+        blur or a small misregistration makes off-by-one errors along every period edge.
+        True (complementary Gray code, Zhang et al. 2018): ``2**bits == 2 * frequency``, the
+        extra finest plane splitting each period in halves. ``K1 = stripes // 2`` (from the
+        first bits - 1 planes) changes at period edges, ``K2 = (stripes + 1) // 2`` in the
+        middle of periods; each pixel takes the one whose boundaries are far from its phase:
+        K2 for phase < pi / 2, K1 for pi / 2 <= phase < 3 pi / 2, K2 - 1 above.
+
+    Returns
+    -------
+    UnwrapResult
+        ``valid`` is False where a stripe index is outside [0, 2**bits) or phi is NaN.
+    """
+    bits = _validate.positive_int(bits, "bits")
+    frequency = _validate.positive_int(frequency, "frequency")
+    p = _validate.phase_map(phi, "phi")
+    s = np.asarray(stripes)
+    if not np.issubdtype(s.dtype, np.integer):
+        raise ValueError(f"stripes: expected an integer array, found dtype {s.dtype}")
+    _validate.same_shape(s, p.shape, "stripes")
+    s = s.astype(np.int64)
+    count = 1 << bits
+    valid = (s >= 0) & (s < count)
+    norm = _normalised(p)
+    if complementary:
+        if count != 2 * frequency:
+            raise ValueError(
+                f"bits: complementary Gray code needs 2**bits == 2 * frequency, found bits = {bits}, frequency = {frequency}"
+            )
+        k1 = s >> 1
+        k2 = (s + 1) >> 1
+        with np.errstate(invalid="ignore"):
+            orders = np.where(norm < np.pi / 2, k2, np.where(norm < 1.5 * np.pi, k1, k2 - 1))
+    else:
+        orders = (s * frequency) // count
+    return _result(norm, orders, valid, np.isfinite(p))
