@@ -222,9 +222,9 @@ class Camera(abc.ABC):
 
     @property
     def roi(self) -> tuple[int, int, int, int]:
-        """Region of interest (x, y, width, height) in sensor pixels."""
-        self._require_open("read the ROI")
-        assert self._roi is not None
+        """Region of interest (x, y, width, height) in sensor pixels (known once opened)."""
+        if self._roi is None:
+            raise IncompatibleStateError(f"{self.name}: ROI unknown until the camera is opened")
         return self._roi
 
     @roi.setter
