@@ -74,3 +74,100 @@ def scene_height(config: RigConfig, scene: str, geometry: synth.RigGeometry) -> 
         f"--scene: expected 'object', 'reference', 'plane-at-<height>mm' or one of {', '.join(scenes.SCENES)} "
         f"for the simulated rig, found {scene!r}"
     )
+
+
+def _readback_projector_class() -> type:
+    """GLProjector that reads its frame back when shown, in the thread that drives it.
+
+    An OpenGL context is current in one thread only, and the simulated camera is exposed from the
+    trigger box's serving thread (like a camera on a hardware trigger line); reading the frame back
+    in ``wait_shown`` hands that thread a finished image instead of a read from a foreign context.
+    """
+    from drivers.projector_gl import GLProjector
+
+    class ReadbackGLProjector(GLProjector):
+        def _wait(self, timeout_s: float) -> bool:
+            shown = super()._wait(timeout_s)
+            if shown:
+                self._last_frame()
+            return shown
+
+    return ReadbackGLProjector
+
+
+class SimulatedRig:
+    """Opens the simulated rig of ``config`` looking at ``scene``; closes everything on exit.
+
+    Attributes once entered: ``projector`` (GLProjector), ``camera`` (SimulatedCamera),
+    ``trigger_box`` (the SerialTriggerBox driver on the fake box's pty, or None for the
+    software trigger) and ``fake_box`` (the FakeTriggerBox behind it).
+    """
+
+    def __init__(
+        self,
+        config: RigConfig,
+        scene: str = "object",
+        camera_faults: Any = None,
+        trigger_faults: Any = None,
+    ) -> None:
+        self.config = config
+        self.scene = scene
+        self.geometry = geometry_from_config(config)
+        self.height_mm = scene_height(config, scene, self.geometry)
+        self.camera_faults = camera_faults
+        self.trigger_faults = trigger_faults
+        self.projector: Any = None
+        self.camera: Any = None
+        self.trigger_box: Any = None
+        self.fake_box: Any = None
+        self._stack = contextlib.ExitStack()
+
+    def description(self) -> dict[str, Any]:
+        """What capture.json records about the simulation (scene and geometry), for provenance."""
+        sim, g = self.config.simulation, self.geometry
+        return {
+            "scene": sim.scene if self.scene == "object" else self.scene,
+            "snr_db": sim.snr_db,
+            "seed": sim.seed,
+            "l0_mm": g.l0_mm,
+            "d0_mm": g.d0_mm,
+            "f0_per_mm": g.f0_per_mm,
+            "f0_frequency": g.f0_frequency,
+            "pixel_mm": g.pixel_mm,
+            "max_height_mm": float(np.max(self.height_mm)),
+        }
+
+    def __enter__(self) -> "SimulatedRig":
+        from mock_devices.camera import SimulatedCamera
+
+        try:
+            projector_class = _readback_projector_class()
+            self.projector = self._stack.enter_context(projector_class(self.config.projector.size, name="GLProjector"))
+            self.camera = SimulatedCamera(
+                self.projector,
+                self.geometry,
+                self.height_mm,
+                appearance_from_config(self.config),
+                reference_exposure_us=self.config.camera.exposure_us,
+                faults=self.camera_faults,
+                rng=np.random.default_rng(self.config.simulation.seed),
+            )
+            self._stack.enter_context(self.camera)
+            if self.config.trigger.backend != "software":
+                self._open_trigger_box()
+        except BaseException:
+            self._stack.close()
+            raise
+        return self
+
+    def _open_trigger_box(self) -> None:
+        from drivers.trigger_box import SerialTriggerBox
+        from mock_devices.trigger_box import FakeTriggerBox
+
+        self.fake_box = self._stack.enter_context(FakeTriggerBox(on_pulse=self.camera.pulse, faults=self.trigger_faults))
+        self.trigger_box = self._stack.enter_context(
+            SerialTriggerBox(self.fake_box.port, baudrate=self.config.trigger.baudrate, timeout_s=self.config.trigger.timeout_s)
+        )
+
+    def __exit__(self, *exc: object) -> None:
+        self._stack.close()

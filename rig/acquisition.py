@@ -1,0 +1,465 @@
+"""The acquisition loop: pattern -> project -> wait shown -> trigger -> fetch -> store.
+
+Every pattern gets exactly one frame, and a frame is stored under a pattern only when it is known
+to answer the trigger fired while that pattern was on screen:
+
+- the trigger path says which trigger index the frame must carry (the trigger box's pulse index,
+  or the count of software triggers); a frame that carries an older index is a late frame of an
+  earlier attempt and is discarded, a newer one is a mislabelling and stops the scan;
+- a camera that does not report trigger indices is checked by frame id instead (one frame per
+  trigger since the camera started);
+- duplicated frames are discarded; a timeout, a dropped or stale frame or a garbled reply makes
+  the loop show the same pattern again and fire a new trigger, ``retries`` times at most;
+- a device that fails for good (unplugged, closed) stops the scan at once with its error.
+
+Frames go to disk through :class:`rig.capture.CaptureWriter` on a writer thread, so encoding and
+fsync overlap the next exposure; the capture becomes complete only when every pattern has its
+frame. An error or Ctrl-C leaves the temporary ``*.incomplete-*`` directory, never a capture
+that claims to be complete. Camera settings changed for the scan are restored afterwards.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import queue
+import threading
+import time
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+from drivers.camera import (
+    Camera,
+    DroppedFrameError,
+    DuplicateFrameError,
+    Frame,
+    FrameSequenceError,
+    StaleFrameError,
+    TriggerMode,
+    TriggerSource,
+)
+from drivers.errors import DeviceError, DeviceTimeoutError, ProtocolError, WaitTimeoutError
+from drivers.projector import Projector
+from rig.capture import CaptureWriter
+from rig.errors import CaptureError
+
+log = logging.getLogger(__name__)
+
+# Errors after which showing the pattern again and firing a new trigger may succeed.
+RETRYABLE_ERRORS: tuple[type[Exception], ...] = (
+    DeviceTimeoutError,
+    WaitTimeoutError,
+    DroppedFrameError,
+    StaleFrameError,
+    ProtocolError,
+)
+
+
+class AcquisitionError(CaptureError):
+    """A pattern got no trustworthy frame within its retries; the capture stays incomplete."""
+
+
+@dataclass(frozen=True)
+class AcquisitionSettings:
+    """Per-step deadlines and the retry budget of a scan."""
+
+    show_timeout_s: float = 1.0
+    fetch_timeout_s: float = 2.0
+    retries: int = 2
+
+    def __post_init__(self) -> None:
+        for name in ("show_timeout_s", "fetch_timeout_s"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name}: expected > 0 s, found {getattr(self, name)}")
+        if self.retries < 0:
+            raise ValueError(f"retries: expected >= 0, found {self.retries}")
+
+
+# --------------------------------------------------------------------------- trigger paths
+
+
+class TriggerPath(Protocol):
+    """How an exposure is started: the camera's trigger source, and firing one trigger."""
+
+    source: TriggerSource
+
+    def fire(self) -> int:
+        """Start one exposure; return the trigger index the resulting frame will carry."""
+
+
+class SoftwareTrigger:
+    """The camera's own software trigger; indices count triggers since the camera started."""
+
+    source = TriggerSource.SOFTWARE
+
+    def __init__(self, camera: Camera) -> None:
+        self.camera = camera
+        self._fired = 0
+
+    def prepare(self, count: int) -> None:
+        self._fired = 0
+
+    def fire(self) -> int:
+        index = self._fired
+        self.camera.trigger()
+        self._fired += 1
+        return index
+
+    def finish(self) -> None:
+        pass
+
+
+class BoxTrigger:
+    """A trigger box pulsing the camera's hardware trigger line; indices are the box's pulse indices.
+
+    The box is reset and armed for the whole scan (retries included) before the first pattern,
+    and reset again afterwards, so it never stays armed.
+    """
+
+    source = TriggerSource.HARDWARE_RISING
+
+    def __init__(self, box: Any) -> None:
+        self.box = box
+
+    def prepare(self, count: int) -> None:
+        self.box.reset()
+        self.box.arm(count)
+
+    def fire(self) -> int:
+        return int(self.box.fire())
+
+    def finish(self) -> None:
+        try:
+            self.box.reset()
+        except DeviceError as exc:  # the box may be gone; the scan's own outcome matters more
+            log.warning("could not disarm the trigger box after the scan: %s", exc)
+
+
+# --------------------------------------------------------------------------- staging
+
+
+@contextlib.contextmanager
+def staged_camera(
+    camera: Camera,
+    source: TriggerSource,
+    mode: TriggerMode = TriggerMode.ONCE,
+    exposure_us: float | None = None,
+    gain: float | None = None,
+) -> Iterator[Camera]:
+    """Configure ``camera`` for a scan and start it; stop and restore the old settings afterwards.
+
+    If configuring fails half-way, what was already changed is rolled back before the error
+    propagates.
+    """
+    restore: list[Callable[[], None]] = []
+    try:
+        old_source, old_mode = camera.trigger_source, camera.trigger_mode
+        camera.set_trigger(source, mode)
+        restore.append(lambda: camera.set_trigger(old_source, old_mode))
+        if exposure_us is not None:
+            old_exposure = camera.exposure_us
+            camera.exposure_us = exposure_us
+            restore.append(lambda: setattr(camera, "exposure_us", old_exposure))
+        if gain is not None:
+            old_gain = camera.gain
+            camera.gain = gain
+            restore.append(lambda: setattr(camera, "gain", old_gain))
+        camera.start()
+        restore.append(camera.stop)
+        yield camera
+    finally:
+        for undo in reversed(restore):
+            try:
+                undo()
+            except DeviceError as exc:  # the device may be gone; the scan's own error matters more
+                log.warning("%s: could not restore a setting after the scan: %s", camera.name, exc)
+
+
+# --------------------------------------------------------------------------- writer thread
+
+
+class BackgroundWriter:
+    """Feeds frames to a :class:`CaptureWriter` from one thread, so disk work overlaps exposures.
+
+    ``put`` re-raises, in the caller's thread, any error the writer hit; :meth:`close` waits for
+    every queued frame. Use as a context manager inside the CaptureWriter's ``with``.
+    """
+
+    _STOP = object()
+
+    def __init__(self, writer: CaptureWriter, depth: int = 4) -> None:
+        self.writer = writer
+        self._queue: queue.Queue[Any] = queue.Queue(maxsize=depth)
+        self._error: BaseException | None = None
+        self.busy_s = 0.0
+        self._thread = threading.Thread(target=self._run, name="capture-writer", daemon=True)
+
+    def __enter__(self) -> "BackgroundWriter":
+        self._thread.start()
+        return self
+
+    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
+        self.close(raise_error=exc_type is None)
+
+    def _run(self) -> None:
+        while True:
+            item = self._queue.get()
+            if item is self._STOP:
+                return
+            if self._error is not None:
+                continue  # drain without writing after a failure
+            pattern, image, metadata = item
+            started = time.perf_counter()
+            try:
+                self.writer.add_frame(pattern, image, **metadata)
+            except BaseException as exc:  # handed to the scanning thread by put()/close()
+                self._error = exc
+            self.busy_s += time.perf_counter() - started
+
+    def _raise_if_failed(self) -> None:
+        if self._error is not None:
+            raise self._error
+
+    def put(self, pattern: int, image: np.ndarray, metadata: Mapping[str, Any]) -> None:
+        self._raise_if_failed()
+        self._queue.put((pattern, image, dict(metadata)))
+
+    def close(self, raise_error: bool = True) -> None:
+        if self._thread.is_alive():
+            self._queue.put(self._STOP)
+            self._thread.join()
+        if raise_error:
+            self._raise_if_failed()
+
+
+# --------------------------------------------------------------------------- the loop
+
+
+@dataclass
+class StepTimes:
+    """Seconds spent in each step of the loop, summed over the scan."""
+
+    show_s: float = 0.0      # projector: render / upload and wait until shown
+    trigger_s: float = 0.0   # firing the trigger
+    fetch_s: float = 0.0     # camera: waiting for the exposure and read-out
+    store_s: float = 0.0     # handing the frame over to the writer (queueing)
+    finish_s: float = 0.0    # waiting for the writer and committing the capture
+
+
+@dataclass
+class ScanResult:
+    """What a scan produced and what it cost."""
+
+    path: Path
+    frames: list[dict[str, Any]]
+    attempts: int
+    discarded: int
+    wall_s: float
+    times: StepTimes = field(default_factory=StepTimes)
+    writer_busy_s: float = 0.0
+
+
+def _pattern_label(index: int, total: int, pattern: Mapping[str, Any]) -> str:
+    keys = ", ".join(f"{k}={pattern[k]}" for k in ("frequency", "step", "bit", "level") if k in pattern)
+    return f"pattern {index} of {total} ({pattern.get('kind')}{': ' + keys if keys else ''})"
+
+
+class _TriggerCounter:
+    """Triggers fired since the camera started: the frame id a frame without trigger index must have."""
+
+    def __init__(self) -> None:
+        self.fired = 0
+
+
+def _classify(frame: Frame, expected_index: int, ordinal: int) -> str:
+    """'ours' if ``frame`` answers the trigger just fired, 'late' for an earlier trigger's, else 'ahead'."""
+    if frame.trigger_index is not None:
+        got, want = int(frame.trigger_index), expected_index
+    else:
+        got, want = int(frame.frame_id), ordinal
+    if got == want:
+        return "ours"
+    return "late" if got < want else "ahead"
+
+
+def acquire_pattern(
+    index: int,
+    pattern: Mapping[str, Any],
+    total: int,
+    projector: Projector,
+    camera: Camera,
+    trigger: TriggerPath,
+    settings: AcquisitionSettings,
+    matcher: _TriggerCounter,
+    times: StepTimes,
+) -> tuple[Frame, int, int]:
+    """The frame of one pattern: (frame, attempts used, frames discarded)."""
+    label = _pattern_label(index, total, pattern)
+    discarded = 0
+    last_error: Exception | None = None
+    for attempt in range(1, settings.retries + 2):
+        try:
+            started = time.perf_counter()
+            projector.show(pattern)
+            projector.wait_shown(settings.show_timeout_s)
+            shown = time.perf_counter()
+            ordinal = matcher.fired
+            matcher.fired += 1
+            expected = trigger.fire()
+            fired = time.perf_counter()
+            times.show_s += shown - started
+            times.trigger_s += fired - shown
+            try:
+                frame, dropped = _fetch_answer(camera, expected, ordinal, settings.fetch_timeout_s, label)
+            finally:
+                times.fetch_s += time.perf_counter() - fired
+            discarded += dropped
+            return frame, attempt, discarded
+        except RETRYABLE_ERRORS as exc:
+            last_error = exc
+            log.warning("%s: attempt %d of %d failed: %s", label, attempt, settings.retries + 1, exc)
+    raise AcquisitionError(
+        f"{label}: no frame after {settings.retries + 1} attempt(s); last error: {last_error}"
+    ) from last_error
+
+
+def _fetch_answer(camera: Camera, expected: int, ordinal: int, timeout_s: float, label: str) -> tuple[Frame, int]:
+    """Fetch until the frame answering trigger ``expected`` arrives; (frame, frames discarded)."""
+    deadline = time.monotonic() + timeout_s
+    discarded = 0
+    while True:
+        remaining = deadline - time.monotonic()
+        if remaining <= 0:
+            raise DeviceTimeoutError(f"{camera.name}: no frame for trigger {expected} within {timeout_s:g} s ({label})")
+        try:
+            frame = camera.fetch(remaining)
+        except DuplicateFrameError as exc:
+            log.info("%s: discarding duplicate frame %d", label, exc.frame.frame_id)
+            discarded += 1
+            continue
+        except DroppedFrameError as exc:
+            # The gap may be an earlier attempt's frame; keep this one only if it provably answers ours.
+            if exc.frame.trigger_index is None or int(exc.frame.trigger_index) != expected:
+                raise
+            log.info("%s: %s (an earlier attempt's frame); frame %d answers this trigger", label, exc, exc.frame.frame_id)
+            frame = exc.frame
+        if frame.sequence_error is not None and not isinstance(frame.sequence_error, DroppedFrameError):
+            if isinstance(frame.sequence_error, DuplicateFrameError):
+                discarded += 1
+                continue
+            raise frame.sequence_error
+        verdict = _classify(frame, expected, ordinal)
+        if verdict == "ours":
+            return frame, discarded
+        if verdict == "late":
+            log.info("%s: discarding late frame %d (trigger %s)", label, frame.frame_id, frame.trigger_index)
+            discarded += 1
+            continue
+        raise ProtocolError(
+            f"{camera.name}: frame {frame.frame_id} carries trigger {frame.trigger_index}, "
+            f"newer than the trigger {expected} just fired ({label})"
+        )
+
+
+def frame_metadata(frame: Frame, attempts: int) -> dict[str, Any]:
+    """Per-frame keys stored in capture.json beside pattern, file and sha256."""
+    meta: dict[str, Any] = {
+        "timestamp_s": round(float(frame.timestamp_s), 6),
+        "exposure_us": float(frame.exposure_us),
+        "frame_id": int(frame.frame_id),
+    }
+    if frame.trigger_index is not None:
+        meta["trigger_index"] = int(frame.trigger_index)
+    if attempts > 1:
+        meta["attempts"] = attempts
+    return meta
+
+
+class Progress(Protocol):
+    """What the loop reports progress to (:class:`rig.progress.Progress` fits)."""
+
+    def step(self, note: str = "", count: int = 1) -> None: ...
+
+
+def run_scan(
+    path: str | Path,
+    patterns: Sequence[Mapping[str, Any]],
+    projector: Projector,
+    camera: Camera,
+    trigger: Any,
+    settings: AcquisitionSettings = AcquisitionSettings(),
+    scene: str = "object",
+    extra: Mapping[str, Any] | None = None,
+    exposure_us: float | None = None,
+    gain: float | None = None,
+    progress: Progress | None = None,
+    overwrite: bool = False,
+) -> ScanResult:
+    """Acquire one frame per pattern and write the capture at ``path`` atomically.
+
+    Parameters
+    ----------
+    path : path
+        The capture directory to create (must not exist unless ``overwrite``).
+    patterns : sequence of capture-format pattern dicts
+        Projected in order.
+    projector, camera : opened devices
+    trigger : SoftwareTrigger or BoxTrigger
+        How exposures are started; the camera's trigger source is set to match for the scan.
+    settings : AcquisitionSettings
+        Deadlines and retries.
+    scene, extra : str, mapping
+        capture.json's ``scene`` and extra top-level keys.
+    exposure_us, gain : float, optional
+        Camera settings for the scan (restored afterwards); None keeps the current ones.
+    progress : Progress, optional
+        Stepped once per stored frame.
+    """
+    if not patterns:
+        raise ValueError("patterns: expected at least one pattern to scan")
+    started = time.perf_counter()
+    times = StepTimes()
+    records: list[dict[str, Any]] = []
+    attempts_total = discarded_total = 0
+    matcher = _TriggerCounter()
+    with staged_camera(camera, trigger.source, TriggerMode.ONCE, exposure_us, gain):
+        camera_info = {"width": camera.width, "height": camera.height, "bit_depth": camera.pixel_format.bit_depth}
+        projector_info = {"width": projector.width, "height": projector.height}
+        capture_extra = {"devices": {"projector": projector.name, "camera": camera.name, "trigger": type(trigger).__name__}}
+        capture_extra.update(extra or {})
+        writer = CaptureWriter(path, camera_info, projector_info, patterns, scene=scene, extra=capture_extra, overwrite=overwrite)
+        with writer:
+            with BackgroundWriter(writer) as background:
+                trigger.prepare(len(patterns) * (settings.retries + 1))
+                try:
+                    for index, pattern in enumerate(patterns):
+                        frame, attempts, discarded = acquire_pattern(
+                            index, pattern, len(patterns), projector, camera, trigger, settings, matcher, times
+                        )
+                        attempts_total += attempts
+                        discarded_total += discarded
+                        stored = time.perf_counter()
+                        meta = frame_metadata(frame, attempts)
+                        background.put(index, frame.image, meta)
+                        records.append({"pattern": index, **meta})
+                        times.store_s += time.perf_counter() - stored
+                        if progress is not None:
+                            progress.step(f"frame {index + 1}")
+                finally:
+                    trigger.finish()
+                finishing = time.perf_counter()
+            writer_busy = background.busy_s
+        times.finish_s = time.perf_counter() - finishing
+    return ScanResult(
+        path=Path(path),
+        frames=records,
+        attempts=attempts_total,
+        discarded=discarded_total,
+        wall_s=time.perf_counter() - started,
+        times=times,
+        writer_busy_s=writer_busy,
+    )

@@ -1,0 +1,131 @@
+"""Builds the devices a rig config names, opens them together and closes them in reverse order.
+
+Backends are imported only when a config names them, so a lab PC without pypylon or libusb can
+still run the simulated rig, and the simulated rig never enters a real rig's code path except
+through the same driver interfaces.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+from collections.abc import Iterator
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from drivers.camera import Camera
+from drivers.projector import Projector
+from rig.acquisition import BoxTrigger, SoftwareTrigger
+from rig.config import RigConfig
+from rig.errors import ConfigError
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class RigDevices:
+    """Opened devices of one rig, ready for :func:`rig.acquisition.run_scan`."""
+
+    projector: Projector
+    camera: Camera
+    trigger: SoftwareTrigger | BoxTrigger
+    config: RigConfig
+    simulation: Any = None  # rig.simulated_rig.SimulatedRig when the camera is simulated
+
+
+def load_gamma_lut(config: RigConfig) -> np.ndarray | None:
+    """The projector's gamma LUT file (.npy, or text with one drive level per line), or None."""
+    path = config.projector.gamma_lut
+    if path is None:
+        return None
+    try:
+        lut = np.load(path) if path.suffix == ".npy" else np.loadtxt(path, ndmin=1)
+    except (OSError, ValueError) as exc:
+        raise ConfigError(f"{path}: cannot read the gamma LUT ([projector] gamma_lut): {exc}") from None
+    lut = np.asarray(lut, dtype=np.float64).ravel()
+    if lut.size < 2 or not np.all(np.isfinite(lut)) or lut.min() < 0 or lut.max() > 1:
+        raise ConfigError(
+            f"{path}: gamma LUT: expected at least 2 drive levels in [0, 1], found {lut.size} values "
+            f"in [{lut.min() if lut.size else 'nan'}, {lut.max() if lut.size else 'nan'}]"
+        )
+    return lut
+
+
+def build_projector(config: RigConfig) -> Projector:
+    """The projector driver a config names (not opened)."""
+    backend = config.projector.backend
+    size = config.projector.size
+    if backend == "gl-offscreen":
+        from drivers.projector_gl import GLProjector
+
+        return GLProjector(size)
+    if backend == "window":
+        from drivers.projector_window import WindowProjector
+
+        return WindowProjector(size, monitor=config.projector.monitor)
+    if backend == "dlp4500":
+        from drivers.dlp import LightCrafter4500
+
+        return LightCrafter4500()
+    raise ConfigError(f"[projector] backend: unknown {backend!r}")
+
+
+def build_camera(config: RigConfig) -> Camera:
+    """A real camera driver a config names (not opened); the simulated camera is built by the simulated rig."""
+    backend = config.camera.backend
+    if backend == "opencv":
+        from drivers.camera_opencv import OpenCVCamera
+
+        return OpenCVCamera(config.camera.index)
+    if backend == "pylon":
+        from drivers.camera_pylon import PylonCamera
+
+        return PylonCamera(serial=config.camera.serial)
+    raise ConfigError(f"[camera] backend: unknown {backend!r}")
+
+
+def _configure_camera(camera: Camera, config: RigConfig) -> None:
+    """Pixel format and ROI (centred, of the configured size) before the scan starts."""
+    from drivers.camera import PixelFormat
+
+    camera.pixel_format = PixelFormat[config.camera.pixel_format.upper()]
+    sensor_w, sensor_h = camera.sensor_size
+    width, height = min(config.camera.width, sensor_w), min(config.camera.height, sensor_h)
+    if (width, height) != (sensor_w, sensor_h):
+        camera.roi = ((sensor_w - width) // 2, (sensor_h - height) // 2, width, height)
+
+
+@contextlib.contextmanager
+def open_rig(config: RigConfig, scene: str = "object") -> Iterator[RigDevices]:
+    """Open every device of ``config``; ``scene`` chooses what a simulated camera looks at."""
+    with contextlib.ExitStack() as stack:
+        if config.simulated:
+            from rig.simulated_rig import SimulatedRig
+
+            simulation = stack.enter_context(SimulatedRig(config, scene=scene))
+            projector, camera, box = simulation.projector, simulation.camera, simulation.trigger_box
+        else:
+            simulation = None
+            projector = build_projector(config)
+            stack.enter_context(projector)
+            camera = build_camera(config)
+            stack.enter_context(camera)
+            _configure_camera(camera, config)
+            box = None
+            if config.trigger.backend == "serial":
+                from drivers.trigger_box import SerialTriggerBox
+
+                box = SerialTriggerBox(config.trigger.port, baudrate=config.trigger.baudrate, timeout_s=config.trigger.timeout_s)
+                stack.enter_context(box)
+            elif config.trigger.backend == "simulated-serial":
+                raise ConfigError(
+                    "[trigger] backend: 'simulated-serial' pulses the simulated camera only; "
+                    f"use 'software' or 'serial' with camera backend {config.camera.backend!r}"
+                )
+        lut = load_gamma_lut(config)
+        if lut is not None:
+            projector.set_gamma_lut(lut)
+        trigger: SoftwareTrigger | BoxTrigger = SoftwareTrigger(camera) if box is None else BoxTrigger(box)
+        yield RigDevices(projector=projector, camera=camera, trigger=trigger, config=config, simulation=simulation)

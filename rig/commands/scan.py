@@ -1,0 +1,101 @@
+"""`rig scan`: project the pattern sequence, capture one frame per pattern, write a capture.
+
+Without ``--config`` the built-in simulated rig scans its virtual scene. With ``--calibration CAL
+--process`` the new capture is processed into a height map right away (like ``rig process``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from datetime import datetime, timezone
+from pathlib import Path
+
+from rig.acquisition import AcquisitionSettings, ScanResult, run_scan
+from rig.assembly import open_rig
+from rig.config import RigConfig, load_config
+from rig.errors import CaptureError, ConfigError
+from rig.progress import Progress
+
+log = logging.getLogger(__name__)
+
+
+def default_capture_path(now: datetime | None = None) -> Path:
+    """``capture-YYYYmmdd-HHMMSS`` in the current directory (UTC)."""
+    now = now or datetime.now(timezone.utc)
+    return Path(f"capture-{now.strftime('%Y%m%d-%H%M%S')}")
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "scan",
+        help="capture a fringe sequence with the rig (the simulated rig without --config)",
+        description="Project each pattern, trigger the camera, fetch its frame and write a capture "
+        "directory atomically (complete only if every pattern has its frame).",
+    )
+    parser.add_argument("--config", type=Path, metavar="RIG.toml", help="rig config file (default: the built-in simulated rig)")
+    parser.add_argument("-o", "--output", type=Path, metavar="CAPTURE", help="capture directory to create (default: capture-<UTC time>)")
+    parser.add_argument(
+        "--scene",
+        default="object",
+        help="what is in front of the rig: 'object' (default), 'reference' (the flat reference plane) "
+        "or another label such as 'plane-at-25mm'; the simulated rig shows that scene",
+    )
+    parser.add_argument("--calibration", type=Path, metavar="CAL", help="calibration directory, for --process")
+    parser.add_argument("--process", action="store_true", help="process the capture into a height map after the scan")
+    parser.add_argument("--process-output", type=Path, metavar="OUT", help="where --process writes (default: CAPTURE-processed)")
+    parser.add_argument("--overwrite", action="store_true", help="replace an existing capture directory")
+    parser.set_defaults(func=run)
+
+
+def scan(config: RigConfig, output: Path, scene: str = "object", overwrite: bool = False, show_progress: bool = True) -> ScanResult:
+    """Open the rig of ``config``, scan ``scene`` into ``output`` and close the rig."""
+    if output.exists() and not overwrite:  # fail before opening any device
+        raise CaptureError(f"{output}: already exists; refusing to overwrite (choose another -o or pass --overwrite)")
+    patterns = config.scan.patterns()
+    settings = AcquisitionSettings(
+        show_timeout_s=config.scan.show_timeout_s,
+        fetch_timeout_s=config.scan.fetch_timeout_s,
+        retries=config.scan.retries,
+    )
+    with open_rig(config, scene=scene) as devices, Progress(f"scan {output}", total=len(patterns), quiet=not show_progress) as progress:
+        extra = {"rig_config": str(config.source) if config.source else "built-in simulated rig"}
+        if devices.simulation is not None:
+            extra["simulation"] = devices.simulation.description()
+        return run_scan(
+            output,
+            patterns,
+            devices.projector,
+            devices.camera,
+            devices.trigger,
+            settings,
+            scene=scene,
+            extra=extra,
+            exposure_us=config.camera.exposure_us,
+            gain=config.camera.gain,
+            progress=progress,
+            overwrite=overwrite,
+        )
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.process and args.calibration is None:
+        raise ConfigError("--process needs --calibration CAL (the calibration to turn phase into height)")
+    if args.calibration is not None and not args.process:
+        raise ConfigError("--calibration is used only with --process")
+    config = load_config(args.config)
+    output = args.output or default_capture_path()
+    result = scan(config, output, scene=args.scene, overwrite=args.overwrite)
+    print(
+        f"{result.path}: {len(result.frames)} frames in {result.wall_s:.2f} s"
+        + (f" ({result.attempts - len(result.frames)} retried, {result.discarded} discarded)" if result.attempts > len(result.frames) or result.discarded else ""),
+        file=sys.stderr,
+    )
+    if args.process:
+        from rig.pipeline import process_capture
+
+        destination = args.process_output or output.with_name(output.name + "-processed")
+        process_capture(output, args.calibration, destination)
+        print(f"{destination}: processed", file=sys.stderr)
+    return 0
