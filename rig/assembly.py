@@ -97,6 +97,11 @@ def _configure_camera(camera: Camera, config: RigConfig) -> None:
         camera.roi = ((sensor_w - width) // 2, (sensor_h - height) // 2, width, height)
 
 
+def trigger_path(camera: Camera, box: Any | None) -> SoftwareTrigger | BoxTrigger:
+    """The camera's software trigger, or the trigger box pulsing its hardware line."""
+    return SoftwareTrigger(camera) if box is None else BoxTrigger(box)
+
+
 @contextlib.contextmanager
 def open_rig(config: RigConfig, scene: str = "object") -> Iterator[RigDevices]:
     """Open every device of ``config``; ``scene`` chooses what a simulated camera looks at."""
@@ -127,5 +132,4 @@ def open_rig(config: RigConfig, scene: str = "object") -> Iterator[RigDevices]:
         lut = load_gamma_lut(config)
         if lut is not None:
             projector.set_gamma_lut(lut)
-        trigger: SoftwareTrigger | BoxTrigger = SoftwareTrigger(camera) if box is None else BoxTrigger(box)
-        yield RigDevices(projector=projector, camera=camera, trigger=trigger, config=config, simulation=simulation)
+        yield RigDevices(projector, camera, trigger_path(camera, box), config, simulation)
