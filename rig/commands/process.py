@@ -1,0 +1,71 @@
+"""`rig process CAPTURE --calibration CAL -o OUT`: phase, height map, point cloud, report, preview."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from rig.pipeline import CORRECTIONS, DENOISERS, UNWRAP_METHODS, ProcessOptions, process, total_steps, write_outputs
+from rig.progress import Progress
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "process",
+        help="turn a capture into absolute phase, a height map and a point cloud",
+        description="Process a capture (and the reference-plane capture of its calibration) into "
+        "height.npy, phase.npy, mask.npy, points.ply, report.json and preview.png. Without "
+        "--calibration only the phase is computed (phase.npy, wrapped.npy, mask.npy, a phase preview).",
+    )
+    parser.add_argument("capture", type=Path, metavar="CAPTURE", help="capture directory")
+    parser.add_argument("--calibration", type=Path, metavar="CAL", help="calibration directory (calibration.json)")
+    parser.add_argument("-o", "--output", type=Path, metavar="OUT", help="output directory (default: CAPTURE-processed)")
+    parser.add_argument(
+        "--unwrap", default="auto", choices=UNWRAP_METHODS,
+        help="phase unwrapping method (default auto: gray or spatial for one frequency, hierarchical when "
+        "frequency 1 is present, two-frequency for 2 coprime, heterodyne or three-frequency for 3)",
+    )
+    parser.add_argument("--denoise", default="none", choices=sorted(DENOISERS), help="fringe denoising before phase (default none)")
+    parser.add_argument("--correction", default="none", choices=sorted(CORRECTIONS), help="phase / fringe-order correction (default none)")
+    parser.add_argument(
+        "--min-modulation", type=float, default=0.2, metavar="RATIO",
+        help="valid pixels need fringe modulation B >= RATIO x background and x the image's 99th percentile of B (default 0.2)",
+    )
+    parser.add_argument("--axis", choices=("x", "y"), help="fringe axis to use when a capture has both (default: the first)")
+    parser.add_argument("--salvage", action="store_true", help="accept an incomplete capture (interrupted scan)")
+    parser.add_argument("--json", action="store_true", help="print a summary as JSON on stdout")
+    parser.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
+    parser.set_defaults(func=run)
+
+
+def summary(report: dict, out: Path) -> dict:
+    """The short form of a report printed by --json."""
+    keys = ("valid_fraction", "height_mm", "points", "notes")
+    return {"output": str(out), "unwrap": report["methods"]["unwrap"], **{k: report[k] for k in keys if k in report},
+            "files": report["files"], "timings_s": report["timings_s"]}
+
+
+def run(args: argparse.Namespace) -> int:
+    out = args.output or args.capture.with_name(args.capture.name + "-processed")
+    options = ProcessOptions(
+        unwrap=args.unwrap, denoise=args.denoise, correction=args.correction,
+        min_modulation_ratio=args.min_modulation, axis=args.axis,
+    )
+    steps = total_steps(args.calibration is not None) + 1
+    with Progress(f"process {args.capture}", total=steps, quiet=args.quiet) as progress:
+        result = process(args.capture, args.calibration, options, progress=progress, salvage=args.salvage)
+        report = write_outputs(result, out)
+        progress.step("outputs")
+    if args.json:
+        print(json.dumps(summary(report, out), indent=2))
+    else:
+        line = f"{out}: valid {report['valid_fraction']:.1%}, unwrap {report['methods']['unwrap']}"
+        if "height_mm" in report:
+            h = report["height_mm"]
+            line += f", height {h['min']:.2f} .. {h['max']:.2f} mm, {report['points']} points"
+        print(line, file=sys.stderr)
+        for note in report["notes"]:
+            print(f"note: {note}", file=sys.stderr)
+    return 0

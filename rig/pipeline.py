@@ -1,0 +1,682 @@
+"""Capture (+ calibration) -> absolute phase, height map, point cloud: the stages of `rig process`.
+
+Each capture (the object, and the calibration's reference plane) goes through the same stages::
+
+    load -> denoise -> wrapped -> unwrap -> correction
+
+then the two meet in ``height`` (thesis eq. 1.15 on Phi_object - Phi_reference) and ``outputs``.
+Every stage is a plain function of a :class:`SceneState` and the :class:`ProcessOptions`; its
+wall-clock time goes into report.json. Methods plug in through registries, so a new denoiser or
+phase correction is one entry, not a new code path:
+
+- :data:`DENOISERS` ``name -> f(frames, groups, options) -> frames`` (``--denoise``);
+- :data:`CORRECTIONS` ``name -> f(state, options) -> None`` adjusting ``state.unwrapped``
+  (``--correction``); a correction may read ``state.reference`` (processed first);
+- :data:`SINGLE_SHOT` ``pattern kind -> f(state, options) -> None`` filling ``state.unwrapped``
+  for single-shot patterns (``speckle-sinusoid``);
+- :data:`HEIGHT_MODELS` ``calibration model -> f(object, reference, calibration) -> height``.
+
+Automatic choice of the unwrapping method (``--unwrap auto``), from the sinusoid frequencies
+along the fringe axis (the axis of the first sinusoid pattern):
+
+1. one frequency: ``gray`` if Gray-code planes along that axis are present, else ``spatial``
+   (quality-guided); a single frame per frequency: ``ftp`` (Fourier transform profilometry,
+   then spatial unwrapping);
+2. the lowest frequency is 1: ``hierarchical``;
+3. two coprime frequencies: ``two-frequency`` (number-theoretic, Ding);
+4. three close frequencies (highest < 2 x lowest) whose beats differ by 1 (64, 58, 53 -> 6, 5
+   -> 1): ``heterodyne``; otherwise, three frequencies without a common divisor:
+   ``three-frequency``;
+5. anything else: an error asking for ``--unwrap``.
+
+Methods that use fewer frequencies than captured take the highest ones. Spatial unwrapping gives
+phase up to a constant 2 pi k: the height stage then removes the multiple of 2 pi nearest to the
+median phase difference (right when the reference plane shows around the object) and says so.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from calibration.errors import CalibrationError
+from calibration.store import REFERENCE_PLANE, Calibration, read_calibration
+from processing.patterns import sinusoid_shift
+from rig import __version__
+from rig.capture import Capture, check_same_patterns, read_capture
+from rig.errors import CaptureError, ProcessingError
+
+log = logging.getLogger(__name__)
+
+TWO_PI = 2.0 * np.pi
+UNWRAP_METHODS = ("auto", "two-frequency", "three-frequency", "hierarchical", "heterodyne", "gray", "spatial", "ftp")
+
+
+# --------------------------------------------------------------------------- options and pattern groups
+
+
+@dataclass
+class ProcessOptions:
+    """What `rig process` was asked to do.
+
+    ``params`` carries method-specific settings of plug-in stages (e.g. RPCA's tau) by name.
+    """
+
+    unwrap: str = "auto"
+    denoise: str = "none"
+    correction: str = "none"
+    min_modulation_ratio: float = 0.2
+    axis: str | None = None
+    params: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class SinusoidGroup:
+    """The frames of one (axis, frequency): ``shifts`` include each pattern's ``phase_rad``.
+
+    With I_j = A + B cos(2 pi f u / W + phase_rad_j + shift_j), phase shifting with
+    delta_j = phase_rad_j + shift_j returns 2 pi f u / W directly (the reported convention).
+    """
+
+    axis: str
+    frequency: float
+    indices: list[int]
+    shifts: list[float]
+    kind: str = "sinusoid"
+
+    @property
+    def steps(self) -> int:
+        return len(self.indices)
+
+
+@dataclass
+class GrayGroup:
+    """Gray-code bit planes along one axis: pattern index of each bit (0 = most significant)."""
+
+    axis: str
+    bits: int
+    planes: dict[int, int] = field(default_factory=dict)
+    inverted: dict[int, int] = field(default_factory=dict)
+
+
+@dataclass
+class PatternGroups:
+    """A capture's patterns grouped for processing."""
+
+    sinusoids: list[SinusoidGroup]
+    gray: dict[str, GrayGroup]
+    flats: list[tuple[int, float]]
+    single_shot: list[SinusoidGroup]
+
+    def along(self, axis: str) -> list[SinusoidGroup]:
+        """Sinusoid groups along ``axis``, lowest frequency first."""
+        return sorted((g for g in self.sinusoids if g.axis == axis), key=lambda g: g.frequency)
+
+
+def group_patterns(patterns: Sequence[Mapping[str, Any]], where: str = "capture.json") -> PatternGroups:
+    """Group pattern entries by kind: sinusoids per (axis, frequency), Gray planes per axis, flats."""
+    sinusoids: dict[tuple[str, float], SinusoidGroup] = {}
+    single: dict[tuple[str, float], SinusoidGroup] = {}
+    gray: dict[str, GrayGroup] = {}
+    flats: list[tuple[int, float]] = []
+    for index, pattern in enumerate(patterns):
+        kind = pattern["kind"]
+        axis = pattern.get("axis", "x")
+        if kind in ("sinusoid", "speckle-sinusoid"):
+            table = sinusoids if kind == "sinusoid" else single
+            key = (axis, float(pattern["frequency"]))
+            group = table.setdefault(key, SinusoidGroup(axis, key[1], [], [], kind))
+            group.indices.append(index)
+            group.shifts.append(sinusoid_shift(pattern) + float(pattern.get("phase_rad", 0.0)))
+        elif kind == "gray":
+            bits = int(pattern["bits"])
+            group = gray.setdefault(axis, GrayGroup(axis, bits))
+            if group.bits != bits:
+                raise CaptureError(f"{where}: patterns[{index}].bits: expected {group.bits} like the other Gray planes, found {bits}")
+            table = group.inverted if pattern.get("inverted", False) else group.planes
+            table[int(pattern["bit"])] = index
+        elif kind == "flat":
+            flats.append((index, float(pattern["level"])))
+    for group in gray.values():
+        missing = [b for b in range(group.bits) if b not in group.planes]
+        if missing:
+            raise CaptureError(f"{where}: Gray code along {group.axis}: expected bits 0..{group.bits - 1}, missing {missing}")
+        if group.inverted and sorted(group.inverted) != sorted(group.planes):
+            raise CaptureError(f"{where}: Gray code along {group.axis}: inverted planes must cover the same bits as the normal ones")
+    return PatternGroups(list(sinusoids.values()), gray, flats, list(single.values()))
+
+
+def _beat_chain_ends_at_one(frequencies: Sequence[float]) -> bool:
+    values = sorted(frequencies, reverse=True)
+    while len(values) > 1:
+        values = sorted({abs(a - b) for a, b in zip(values, values[1:])}, reverse=True)
+    return bool(values) and values[0] == 1
+
+
+def _all_integers(frequencies: Sequence[float]) -> bool:
+    return all(float(f).is_integer() for f in frequencies)
+
+
+def choose_unwrap(groups: PatternGroups, axis: str) -> str:
+    """The unwrapping method the pattern set allows (see the module docstring for the rule)."""
+    along = groups.along(axis)
+    freqs = [g.frequency for g in along]
+    if not freqs:
+        raise ProcessingError(f"no sinusoid pattern along {axis}: nothing to unwrap")
+    if len(freqs) == 1:
+        if along[0].steps < 3:
+            return "ftp"
+        return "gray" if axis in groups.gray else "spatial"
+    if not _all_integers(freqs):
+        raise ProcessingError(f"frequencies {freqs}: temporal unwrapping needs whole fringe counts; choose --unwrap spatial")
+    ints = [int(f) for f in freqs]
+    if ints[0] == 1:
+        return "hierarchical"
+    if len(ints) == 2 and math.gcd(*ints) == 1:
+        return "two-frequency"
+    if len(ints) == 3:
+        if ints[2] < 2 * ints[0] and _beat_chain_ends_at_one(ints):
+            return "heterodyne"
+        if math.gcd(*ints) == 1:
+            return "three-frequency"
+    raise ProcessingError(
+        f"frequencies {ints}: no automatic unwrapping method fits; choose one with --unwrap "
+        f"({', '.join(UNWRAP_METHODS[1:])})"
+    )
+
+
+# --------------------------------------------------------------------------- per-capture state
+
+
+@dataclass
+class WrappedPhase:
+    """Wrapped phase per frequency (in [-pi, pi)), with the modulation and background of each."""
+
+    frequencies: list[float]
+    phase: list[np.ndarray]
+    modulation: list[np.ndarray]
+    background: list[np.ndarray]
+    valid: np.ndarray
+
+
+@dataclass
+class UnwrappedPhase:
+    """Absolute phase 2 pi f u / W at ``frequency`` (NaN where invalid); ``absolute`` False for spatial."""
+
+    phase: np.ndarray
+    valid: np.ndarray
+    frequency: float
+    method: str
+    absolute: bool = True
+    orders: np.ndarray | None = None
+
+
+@dataclass
+class SceneState:
+    """One capture on its way through the stages."""
+
+    name: str
+    capture: Capture
+    groups: PatternGroups
+    axis: str
+    frames: np.ndarray | None = None
+    wrapped: WrappedPhase | None = None
+    unwrapped: UnwrappedPhase | None = None
+    reference: "SceneState | None" = None
+    timings: dict[str, float] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+    info: dict[str, Any] = field(default_factory=dict)
+
+
+def stage_load(state: SceneState, options: ProcessOptions) -> None:
+    """Decode every frame (checksums, size and bit depth checked) into an (N, H, W) stack."""
+    state.frames = state.capture.load_frames()
+
+
+def _denoise_none(frames: np.ndarray, groups: PatternGroups, options: ProcessOptions) -> np.ndarray:
+    return frames
+
+
+DENOISERS: dict[str, Callable[[np.ndarray, PatternGroups, ProcessOptions], np.ndarray]] = {"none": _denoise_none}
+
+
+def stage_denoise(state: SceneState, options: ProcessOptions) -> None:
+    """Optional fringe denoising of the frames (``--denoise``)."""
+    if options.denoise == "none":
+        return
+    assert state.frames is not None
+    state.frames = DENOISERS[options.denoise](state.frames, state.groups, options)
+    state.info["denoise"] = options.denoise
+
+
+def stage_wrapped(state: SceneState, options: ProcessOptions) -> None:
+    """Wrapped phase of every sinusoid group along the fringe axis, and the valid-pixel mask."""
+    from processing.phase_shift import phase_shift, shadow_mask
+
+    if state.groups.single_shot:
+        return  # the single-shot handler computes its own phase in the unwrap stage
+    assert state.frames is not None
+    frames = state.frames
+    out = WrappedPhase([], [], [], [], np.ones(state.capture.shape, dtype=bool))
+    for group in state.groups.along(state.axis):
+        if group.steps < 3:
+            if group.steps != 1:
+                raise ProcessingError(
+                    f"sinusoid frequency {group.frequency:g}: expected 1 frame (FTP) or >= 3 phase shifts, found {group.steps}"
+                )
+            phase, amplitude, background = _ftp_frame(frames[group.indices[0]], state.axis, group.shifts[0])
+        else:
+            result = phase_shift(frames[group.indices], shifts=np.asarray(group.shifts))
+            phase, amplitude, background = result.phase, result.modulation, result.background
+        out.frequencies.append(group.frequency)
+        out.phase.append(phase)
+        out.modulation.append(amplitude)
+        out.background.append(background)
+        out.valid &= shadow_mask(amplitude, background, min_ratio=options.min_modulation_ratio)
+    state.wrapped = out
+    state.info["valid_after_modulation"] = float(out.valid.mean())
+
+
+def _ftp_frame(image: np.ndarray, axis: str, shift: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Wrapped phase of a single fringe frame by Fourier transform profilometry."""
+    from processing.ftp import ftp_phase
+
+    phase, amplitude = ftp_phase(np.asarray(image, dtype=np.float64), axis=1 if axis == "x" else 0)
+    phase = np.angle(np.exp(1j * (phase - shift)))
+    background = np.full(image.shape, float(np.mean(image)))
+    return phase, np.asarray(amplitude, dtype=np.float64), background
+
+
+def _speckle_not_supported(state: SceneState, options: ProcessOptions) -> None:
+    raise ProcessingError(
+        f"{state.capture.manifest_path}: speckle-sinusoid (single-shot) captures are not supported by rig process yet"
+    )
+
+
+SINGLE_SHOT: dict[str, Callable[[SceneState, ProcessOptions], None]] = {"speckle-sinusoid": _speckle_not_supported}
+
+
+def _as_unwrap_parts(result: Any) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """(phase, orders, valid) of an UnwrapResult, or of a bare phase array."""
+    if isinstance(result, np.ndarray):
+        return result, None, None
+    return np.asarray(result.phase), getattr(result, "orders", None), getattr(result, "valid", None)
+
+
+def _gray_threshold(state: SceneState) -> np.ndarray | None:
+    """Threshold for Gray planes: mid of white and black flat frames if captured (else decode_gray's default)."""
+    assert state.frames is not None
+    levels = {level: index for index, level in state.groups.flats}
+    if 1.0 in levels and 0.0 in levels:
+        return (state.frames[levels[1.0]].astype(np.float64) + state.frames[levels[0.0]]) / 2.0
+    return None
+
+
+def stage_unwrap(state: SceneState, options: ProcessOptions) -> None:
+    """Absolute (or, for spatial methods, relative) phase at the highest frequency."""
+    if state.groups.single_shot:
+        SINGLE_SHOT[state.groups.single_shot[0].kind](state, options)
+        return
+    wrapped = state.wrapped
+    assert wrapped is not None
+    method = options.unwrap if options.unwrap != "auto" else choose_unwrap(state.groups, state.axis)
+    freqs, phis = wrapped.frequencies, wrapped.phase
+    need = {"two-frequency": 2, "three-frequency": 3, "heterodyne": 2, "hierarchical": 2}.get(method, 1)
+    if len(freqs) < need:
+        raise ProcessingError(f"--unwrap {method}: needs at least {need} sinusoid frequencies, the capture has {freqs}")
+    absolute = True
+    if method in ("two-frequency", "three-frequency", "hierarchical", "heterodyne", "gray"):
+        from processing import temporal
+    if method in ("two-frequency", "three-frequency", "hierarchical", "heterodyne"):
+        if not _all_integers(freqs):
+            raise ProcessingError(f"--unwrap {method}: frequencies must be whole fringe counts, found {freqs}")
+        use = slice(-need, None) if method in ("two-frequency", "three-frequency") else slice(None)
+        ints, maps = [int(f) for f in freqs[use]], phis[use]
+        if method == "two-frequency":
+            result = temporal.unwrap_two_frequency(maps[0], maps[1], ints[0], ints[1])
+        elif method == "three-frequency":
+            result = temporal.unwrap_three_frequency(maps, ints)
+        elif method == "hierarchical":
+            result = temporal.unwrap_hierarchical(maps, ints)
+        else:
+            result = temporal.unwrap_heterodyne(maps, ints)
+    elif method == "gray":
+        gray = state.groups.gray.get(state.axis)
+        if gray is None:
+            raise ProcessingError(f"--unwrap gray: the capture has no Gray-code planes along {state.axis}")
+        assert state.frames is not None
+        planes = state.frames[[gray.planes[b] for b in range(gray.bits)]]
+        inverted = state.frames[[gray.inverted[b] for b in range(gray.bits)]] if gray.inverted else None
+        threshold = None if inverted is not None else _gray_threshold(state)
+        stripes = temporal.decode_gray(planes, inverted=inverted, threshold=threshold)
+        frequency = freqs[-1]
+        complementary = (1 << gray.bits) == 2 * int(frequency)
+        if not complementary and (1 << gray.bits) != int(frequency):
+            raise ProcessingError(
+                f"--unwrap gray: {gray.bits} Gray bits give {1 << gray.bits} stripes; expected the fringe count "
+                f"{frequency:g} (or twice it, complementary Gray code)"
+            )
+        result = temporal.unwrap_gray(phis[-1], stripes, gray.bits, int(frequency), complementary=complementary)
+    elif method in ("spatial", "ftp"):
+        from processing import spatial
+
+        result = spatial.unwrap_quality_guided(phis[-1], mask=wrapped.valid)
+        absolute = False
+    else:
+        raise ProcessingError(f"--unwrap: expected one of {', '.join(UNWRAP_METHODS)}, found {method!r}")
+    phase, orders, valid = _as_unwrap_parts(result)
+    mask = wrapped.valid & np.isfinite(phase)
+    if valid is not None:
+        mask &= np.asarray(valid, dtype=bool)
+    state.unwrapped = UnwrappedPhase(
+        phase=np.where(mask, phase, np.nan), valid=mask, frequency=freqs[-1], method=method,
+        absolute=absolute, orders=orders,
+    )
+
+
+def _correction_none(state: SceneState, options: ProcessOptions) -> None:
+    return None
+
+
+CORRECTIONS: dict[str, Callable[[SceneState, ProcessOptions], None]] = {"none": _correction_none}
+
+
+def stage_correction(state: SceneState, options: ProcessOptions) -> None:
+    """Optional correction of the unwrapped phase (``--correction``)."""
+    if options.correction == "none":
+        return
+    CORRECTIONS[options.correction](state, options)
+    state.info["correction"] = options.correction
+
+
+SCENE_STAGES: list[tuple[str, Callable[[SceneState, ProcessOptions], None]]] = [
+    ("load", stage_load),
+    ("denoise", stage_denoise),
+    ("wrapped", stage_wrapped),
+    ("unwrap", stage_unwrap),
+    ("correction", stage_correction),
+]
+
+
+# --------------------------------------------------------------------------- height
+
+
+def _height_reference_plane(obj: SceneState, ref: SceneState, calibration: Calibration, notes: list[str]) -> np.ndarray:
+    from processing.height import phase_to_height
+
+    assert obj.unwrapped is not None and ref.unwrapped is not None
+    delta = obj.unwrapped.phase - ref.unwrapped.phase
+    if not (obj.unwrapped.absolute and ref.unwrapped.absolute):
+        delta = _remove_region_offsets(delta)
+        notes.append(
+            "spatial unwrapping: phase known up to 2 pi k per connected region; removed from each region the "
+            "multiple of 2 pi nearest its median object-reference difference (right where the reference plane "
+            "shows in the region)"
+        )
+    f0 = calibration.per_mm(obj.unwrapped.frequency)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return phase_to_height(delta, calibration.l0_mm, calibration.d0_mm, f0)
+
+
+def _remove_region_offsets(delta: np.ndarray) -> np.ndarray:
+    """Subtract from each 4-connected region of finite ``delta`` the multiple of 2 pi nearest its median."""
+    from scipy import ndimage
+
+    finite = np.isfinite(delta)
+    labels, count = ndimage.label(finite)
+    if count == 0:
+        return delta
+    medians = np.asarray(ndimage.median(np.where(finite, delta, 0.0), labels, np.arange(1, count + 1)))
+    offsets = np.concatenate([[0.0], TWO_PI * np.round(medians / TWO_PI)])
+    return delta - offsets[labels]
+
+
+HEIGHT_MODELS: dict[str, Callable[[SceneState, SceneState, Calibration, list[str]], np.ndarray]] = {
+    REFERENCE_PLANE: _height_reference_plane,
+}
+
+
+# --------------------------------------------------------------------------- the whole run
+
+
+@dataclass
+class ProcessResult:
+    """Everything `rig process` computed, ready to be written."""
+
+    object: SceneState
+    reference: SceneState | None
+    calibration: Calibration | None
+    options: ProcessOptions
+    height: np.ndarray | None
+    mask: np.ndarray
+    timings: dict[str, Any]
+    notes: list[str]
+
+    @property
+    def phase(self) -> np.ndarray:
+        assert self.object.unwrapped is not None
+        return self.object.unwrapped.phase
+
+
+def _fringe_axis(groups: PatternGroups, options: ProcessOptions, where: str) -> str:
+    if options.axis is not None:
+        return options.axis
+    candidates = groups.sinusoids or groups.single_shot
+    if not candidates:
+        raise ProcessingError(f"{where}: no sinusoid pattern: nothing to compute a phase from")
+    return candidates[0].axis
+
+
+def _scene(name: str, capture: Capture, options: ProcessOptions) -> SceneState:
+    groups = group_patterns(capture.patterns, str(capture.manifest_path))
+    return SceneState(name=name, capture=capture, groups=groups, axis=_fringe_axis(groups, options, str(capture.manifest_path)))
+
+
+def total_steps(with_reference: bool) -> int:
+    """Progress steps of :func:`process` (stages of each capture, then height)."""
+    return len(SCENE_STAGES) * (2 if with_reference else 1) + 1
+
+
+def load_calibration_for(capture: Capture, calibration_path: str | Path) -> tuple[Calibration, Capture]:
+    """Read a calibration and its reference capture, and check that they fit ``capture``."""
+    calibration = read_calibration(calibration_path)
+    if calibration.model not in HEIGHT_MODELS:
+        raise CalibrationError(
+            f"{calibration.where}: model: expected one of {', '.join(HEIGHT_MODELS)} for rig process, found {calibration.model!r}"
+        )
+    ref_path = calibration.reference_path
+    if ref_path is None:
+        raise CalibrationError(f"{calibration.where}: reference: missing (the reference-plane capture)")
+    if not (ref_path / "capture.json").is_file():
+        raise CalibrationError(f"{calibration.where}: reference: no capture at {ref_path}")
+    reference = read_capture(ref_path)
+    try:
+        check_same_patterns(reference, capture)
+    except CaptureError as exc:
+        raise CalibrationError(f"{calibration.where}: the reference capture does not fit this capture: {exc}") from None
+    return calibration, reference
+
+
+def process(
+    capture_path: str | Path,
+    calibration_path: str | Path | None = None,
+    options: ProcessOptions | None = None,
+    progress: Any = None,
+    salvage: bool = False,
+) -> ProcessResult:
+    """Run the stages on a capture and, with a calibration, on its reference plane; compute heights.
+
+    ``progress`` is an object with ``step(note)`` (see :class:`rig.progress.Progress`) or None.
+    """
+    options = ProcessOptions() if options is None else options
+    _check_options(options)
+    started = time.perf_counter()
+    capture = read_capture(capture_path, salvage=salvage)
+    calibration, reference_capture = (None, None)
+    if calibration_path is not None:
+        calibration, reference_capture = load_calibration_for(capture, calibration_path)
+    obj = _scene("object", capture, options)
+    ref = _scene("reference", reference_capture, options) if reference_capture is not None else None
+    if ref is not None:
+        ref.axis = obj.axis
+        obj.reference = ref
+    for state in ([ref] if ref is not None else []) + [obj]:
+        for name, stage in SCENE_STAGES:
+            t0 = time.perf_counter()
+            stage(state, options)
+            state.timings[name] = time.perf_counter() - t0
+            if progress is not None:
+                progress.step(f"{state.name}: {name}")
+        state.frames = None  # the frames are not needed any more; free them early
+    notes: list[str] = []
+    assert obj.unwrapped is not None
+    height = None
+    mask = obj.unwrapped.valid.copy()
+    t0 = time.perf_counter()
+    if calibration is not None and ref is not None:
+        assert ref.unwrapped is not None
+        if ref.unwrapped.frequency != obj.unwrapped.frequency:
+            raise ProcessingError("object and reference phases are at different frequencies")
+        height = HEIGHT_MODELS[calibration.model](obj, ref, calibration, notes)
+        mask &= ref.unwrapped.valid & np.isfinite(height)
+        height = np.where(mask, height, np.nan).astype(np.float32)
+    else:
+        notes.append("no calibration: height, points and height preview skipped; phase, mask and wrapped phase written")
+    height_time = time.perf_counter() - t0
+    if progress is not None:
+        progress.step("height")
+    if not mask.any():
+        raise ProcessingError(f"{capture.manifest_path}: no valid pixel (all in shadow or too little fringe modulation)")
+    timings: dict[str, Any] = {"object": dict(obj.timings)}
+    if ref is not None:
+        timings["reference"] = dict(ref.timings)
+    timings["height"] = height_time
+    timings["total"] = time.perf_counter() - started
+    return ProcessResult(obj, ref, calibration, options, height, mask, timings, notes + obj.notes)
+
+
+def _check_options(options: ProcessOptions) -> None:
+    if options.unwrap not in UNWRAP_METHODS:
+        raise ProcessingError(f"--unwrap: expected one of {', '.join(UNWRAP_METHODS)}, found {options.unwrap!r}")
+    if options.denoise not in DENOISERS:
+        raise ProcessingError(f"--denoise: expected one of {', '.join(DENOISERS)}, found {options.denoise!r}")
+    if options.correction not in CORRECTIONS:
+        raise ProcessingError(f"--correction: expected one of {', '.join(CORRECTIONS)}, found {options.correction!r}")
+    if options.axis not in (None, "x", "y"):
+        raise ProcessingError(f"--axis: expected x or y, found {options.axis!r}")
+    if not 0 < options.min_modulation_ratio <= 1:
+        raise ProcessingError(f"--min-modulation: expected a fraction in (0, 1], found {options.min_modulation_ratio}")
+
+
+# --------------------------------------------------------------------------- outputs
+
+
+def _texture(state: SceneState) -> np.ndarray | None:
+    if state.wrapped is None or not state.wrapped.background:
+        return None
+    background = state.wrapped.background[-1] + state.wrapped.modulation[-1]
+    top = float(np.percentile(background, 99.5)) or 1.0
+    return np.clip(background / top * 255.0, 0, 255).astype(np.uint8)
+
+
+def write_outputs(result: ProcessResult, out_dir: str | Path) -> dict[str, Any]:
+    """Write the outputs of capture-format.md into ``out_dir``; returns the report (also in report.json)."""
+    from processing.height import point_cloud
+    from rig import outputs
+
+    t0 = time.perf_counter()
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    obj = result.object
+    assert obj.unwrapped is not None and obj.wrapped is not None
+    files: dict[str, str] = {}
+    phase = np.where(result.mask, obj.unwrapped.phase, np.nan)
+    files["phase"] = outputs.write_array(out / "phase.npy", phase.astype(np.float64)).name
+    files["mask"] = outputs.write_array(out / "mask.npy", result.mask.astype(bool)).name
+    report: dict[str, Any] = {
+        "program": f"fpp-rig {__version__}",
+        "capture": str(obj.capture.path),
+        "calibration": str(result.calibration.path) if result.calibration is not None else None,
+        "reference": str(result.reference.capture.path) if result.reference is not None else None,
+        "methods": {
+            "wrapped_phase": "phase-shifting" if obj.groups.sinusoids else "single-shot",
+            "unwrap": obj.unwrapped.method,
+            "unwrap_requested": result.options.unwrap,
+            "absolute_phase": obj.unwrapped.absolute,
+            "denoise": result.options.denoise,
+            "correction": result.options.correction,
+            "fringe_axis": obj.axis,
+            "frequencies": obj.wrapped.frequencies,
+            "phase_frequency": obj.unwrapped.frequency,
+            "min_modulation_ratio": result.options.min_modulation_ratio,
+            "params": result.options.params,
+        },
+        "image": {"width": obj.capture.width, "height": obj.capture.height},
+        "valid_fraction": float(result.mask.mean()),
+        "notes": list(result.notes),
+    }
+    if result.height is None:
+        wrapped = np.stack(obj.wrapped.phase) if obj.wrapped.phase else np.empty((0, *obj.capture.shape))
+        files["wrapped"] = outputs.write_array(out / "wrapped.npy", wrapped).name
+        report["wrapped_frequencies"] = obj.wrapped.frequencies
+        low, high = outputs.write_preview(out / "preview.png", phase, "rad", "absolute phase" if obj.unwrapped.absolute else "phase")
+        report["preview"] = {"shows": "phase", "unit": "rad", "range": [low, high]}
+    else:
+        cal = result.calibration
+        assert cal is not None
+        files["height"] = outputs.write_array(out / "height.npy", result.height.astype(np.float32)).name
+        points = point_cloud(result.height, cal.pixel_mm, cal.l0_mm, mask=result.mask)
+        texture = _texture(obj)
+        colours = None
+        if texture is not None:
+            grey = texture[result.mask]
+            colours = np.column_stack([grey, grey, grey])
+        files["points"] = outputs.write_ply(out / "points.ply", points, colours).name
+        low, high = outputs.write_preview(out / "preview.png", result.height, "mm", "height")
+        valid_h = result.height[result.mask]
+        report["height_mm"] = {
+            "min": float(np.min(valid_h)), "max": float(np.max(valid_h)), "median": float(np.median(valid_h)),
+        }
+        report["points"] = int(len(points))
+        report["calibration_model"] = cal.model
+        report["preview"] = {"shows": "height", "unit": "mm", "range": [low, high]}
+    files["preview"] = "preview.png"
+    files["report"] = "report.json"
+    report["files"] = files
+    timings = dict(result.timings)
+    timings["outputs"] = time.perf_counter() - t0
+    report["timings_s"] = timings
+    report["stage_info"] = {"object": obj.info, **({"reference": result.reference.info} if result.reference else {})}
+    report["versions"] = _versions()
+    outputs.write_report(out / "report.json", report)
+    return report
+
+
+def _versions() -> dict[str, str]:
+    import platform
+
+    import cv2
+    import scipy
+
+    return {"fpp-rig": __version__, "python": platform.python_version(), "numpy": np.__version__,
+            "scipy": scipy.__version__, "opencv": cv2.__version__}
+
+
+def process_capture(
+    capture_path: str | Path,
+    calibration_path: str | Path | None,
+    out_dir: str | Path,
+    options: ProcessOptions | None = None,
+    progress: Any = None,
+    salvage: bool = False,
+) -> dict[str, Any]:
+    """:func:`process` then :func:`write_outputs`; returns the report."""
+    result = process(capture_path, calibration_path, options, progress=progress, salvage=salvage)
+    return write_outputs(result, out_dir)
