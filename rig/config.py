@@ -50,7 +50,7 @@ class ProjectorConfig:
 class CameraConfig:
     backend: str = "simulated"
     exposure_us: float = 10000.0
-    gain: float = 0.0
+    gain: float | None = None  # None: leave the camera's gain as it is (units are the backend's)
     index: int = 0
     serial: str | None = None
     width: int = 1024

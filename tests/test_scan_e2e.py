@@ -1,0 +1,127 @@
+"""`rig scan` end to end on the simulated rig: devices -> capture on disk -> height map of the scene.
+
+The rig scans the flat reference plane, then the object, with the same patterns; the calibration
+is the simulated rig's exact geometry (what ``rig calibrate`` would estimate). Processing must
+give back the simulated scene's heights.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from calibration.store import Calibration, write_calibration
+from rig.capture import read_capture
+from rig.cli import COMMAND_MODULES, main
+from rig.config import load_config
+from rig.simulated_rig import geometry_from_config, scene_height
+
+SMALL_RIG = """
+[projector]
+size = [228, 285]
+[camera]
+size = [160, 120]
+[scan]
+frequencies = [1, 8]
+steps = 4
+[simulation]
+scene = "hemisphere"
+snr_db = 35
+"""
+
+# Heights of a ~100 mm hemisphere seen at 35 dB SNR through 8 fringes: the phase noise gives
+# ~0.1 mm; the tolerance leaves room for the quantisation and the hemisphere's steep rim.
+MEDIAN_ERROR_MM = 0.5
+P99_ERROR_MM = 3.0
+MIN_VALID_FRACTION = 0.85  # of the pixels the projector reaches in both scans
+
+
+def test_scan_without_arguments_writes_a_complete_capture(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(["scan"]) == 0
+    (capture_dir,) = tmp_path.glob("capture-*")
+    capture = read_capture(capture_dir)  # verifies every sha256
+    assert capture.complete and capture.scene == "object"
+    assert capture.shape == (768, 1024) and capture.projector_size == (912, 1140)
+    assert len(capture.patterns) == len(capture.frames) == 12
+    assert [f["trigger_index"] for f in capture.frames] == list(range(12))
+    assert capture.manifest["simulation"]["scene"] == "hemisphere"
+    image = capture.load_frame(0)
+    assert image.dtype == np.uint8 and image.std() > 10  # fringes, not a blank frame
+
+
+def test_scan_reference_then_object_processes_to_the_scene_heights(tmp_path):
+    config_path = tmp_path / "rig.toml"
+    config_path.write_text(SMALL_RIG)
+    config = load_config(config_path)
+    geometry = geometry_from_config(config)
+
+    calibration = tmp_path / "calibration"
+    assert main(["scan", "--config", str(config_path), "--scene", "reference", "-o", str(calibration / "reference")]) == 0
+    write_calibration(
+        calibration,
+        Calibration(
+            l0_mm=geometry.l0_mm,
+            d0_mm=geometry.d0_mm,
+            f0_per_mm=geometry.f0_per_mm,
+            f0_frequency=geometry.f0_frequency,
+            pixel_mm=geometry.pixel_mm,
+            reference="reference",
+        ),
+    )
+    capture = tmp_path / "object"
+    out = tmp_path / "processed"
+    assert main([
+        "scan", "--config", str(config_path), "-o", str(capture),
+        "--calibration", str(calibration), "--process", "--process-output", str(out),
+    ]) == 0
+
+    assert read_capture(capture).complete
+    height = np.load(out / "height.npy")
+    truth = scene_height(config, "object", geometry)
+    assert height.shape == truth.shape
+    from mock_devices.synth import projector_coordinates
+
+    lit = projector_coordinates(truth, geometry).lit & projector_coordinates(np.zeros_like(truth), geometry).lit
+    valid = np.isfinite(height) & lit
+    assert valid.sum() >= MIN_VALID_FRACTION * lit.sum()
+    error = np.abs(height[valid] - truth[valid])
+    assert np.median(error) < MEDIAN_ERROR_MM
+    assert np.percentile(error, 99) < P99_ERROR_MM
+    assert truth.max() > 50  # the scene is not trivially flat
+    report = json.loads((out / "report.json").read_text())
+    assert report  # written by the processing step
+
+
+@pytest.mark.skipif("process" not in COMMAND_MODULES, reason="`rig process` is not registered in rig/cli.py")
+def test_rig_process_reads_what_rig_scan_wrote(tmp_path):
+    config_path = tmp_path / "rig.toml"
+    config_path.write_text(SMALL_RIG.replace('scene = "hemisphere"', 'scene = "steps"'))
+    config = load_config(config_path)
+    geometry = geometry_from_config(config)
+    calibration = tmp_path / "calibration"
+    assert main(["scan", "--config", str(config_path), "--scene", "reference", "-o", str(calibration / "reference")]) == 0
+    write_calibration(
+        calibration,
+        Calibration(l0_mm=geometry.l0_mm, d0_mm=geometry.d0_mm, f0_per_mm=geometry.f0_per_mm,
+                    f0_frequency=geometry.f0_frequency, pixel_mm=geometry.pixel_mm, reference="reference"),
+    )
+    assert main(["scan", "--config", str(config_path), "-o", str(tmp_path / "object")]) == 0
+    assert main(["process", str(tmp_path / "object"), "--calibration", str(calibration), "-o", str(tmp_path / "out")]) == 0
+    height = np.load(tmp_path / "out" / "height.npy")
+    truth = scene_height(config, "object", geometry)
+    valid = np.isfinite(height)
+    assert valid.mean() > MIN_VALID_FRACTION * 0.9
+    assert np.median(np.abs(height[valid] - truth[valid])) < MEDIAN_ERROR_MM
+
+
+def test_bad_config_is_one_line_and_exit_1(tmp_path, capsys):
+    config_path = tmp_path / "rig.toml"
+    config_path.write_text("[camera]\nexposure_us = 0\n")
+    assert main(["scan", "--config", str(config_path), "-o", str(tmp_path / "c")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err == f"rig scan: error: {config_path}: [camera] exposure_us: expected a positive number, found 0"
+    assert not (tmp_path / "c").exists()
