@@ -131,6 +131,7 @@ class Camera(abc.ABC):
         self._trigger_source = TriggerSource.SOFTWARE
         self._trigger_mode = TriggerMode.ONCE
         self._burst_length = 1
+        self._set_before_open: set[str] = set()
         self._reset_sequence()
 
     # -- state ------------------------------------------------------------------------------------
@@ -150,8 +151,8 @@ class Camera(abc.ABC):
         self._open()
         self._is_open = True
         try:
-            width, height = self.sensor_size
-            self._roi = (0, 0, int(width), int(height))
+            roi = self._read_roi()
+            self._roi = (0, 0, *self.sensor_size) if roi is None else tuple(int(c) for c in roi)
             self._apply_settings()
         except BaseException:
             self.close()
@@ -203,11 +204,14 @@ class Camera(abc.ABC):
         if self._is_open:
             actual = self._set_exposure_us(value)
             value = value if actual is None else float(actual)
+        else:
+            self._set_before_open.add("exposure_us")
         self._exposure_us = value
         log.debug("%s: exposure %.1f us", self.name, value)
 
     @property
     def gain(self) -> float:
+        """Gain in the backend's unit (simulated and UVC: a factor; pylon: the Gain feature, dB)."""
         return self._gain
 
     @gain.setter
@@ -218,6 +222,8 @@ class Camera(abc.ABC):
         if self._is_open:
             actual = self._set_gain(value)
             value = value if actual is None else float(actual)
+        else:
+            self._set_before_open.add("gain")
         self._gain = value
 
     @property
@@ -420,13 +426,16 @@ class Camera(abc.ABC):
             raise IncompatibleStateError(f"{self.name}: cannot {action} while acquiring; stop() first")
 
     def _apply_settings(self) -> None:
-        """Push the settings chosen before open() to the device."""
+        """Push pixel format and trigger; exposure and gain if set before open(), else read them."""
         if self._pixel_format not in self.supported_pixel_formats:
             self._pixel_format = self.supported_pixel_formats[0]
         self._set_pixel_format(self._pixel_format)
-        actual = self._set_exposure_us(self._exposure_us)
+        if "exposure_us" in self._set_before_open:
+            actual = self._set_exposure_us(self._exposure_us)
+        else:
+            actual = self._read_exposure_us()
         self._exposure_us = self._exposure_us if actual is None else float(actual)
-        actual = self._set_gain(self._gain)
+        actual = self._set_gain(self._gain) if "gain" in self._set_before_open else self._read_gain()
         self._gain = self._gain if actual is None else float(actual)
         self._set_trigger(self._trigger_source, self._trigger_mode)
 
@@ -465,6 +474,18 @@ class Camera(abc.ABC):
 
     def _set_gain(self, value: float) -> float | None:
         """Set the gain; return the value the device accepted (None: as asked)."""
+        return None
+
+    def _read_roi(self) -> tuple[int, int, int, int] | None:
+        """The device's ROI at open (None: the full sensor)."""
+        return None
+
+    def _read_exposure_us(self) -> float | None:
+        """The device's exposure at open (None: keep the base's default)."""
+        return None
+
+    def _read_gain(self) -> float | None:
+        """The device's gain at open, in the backend's unit (None: keep the base's default)."""
         return None
 
     def _set_roi(self, roi: tuple[int, int, int, int]) -> None:

@@ -277,11 +277,19 @@ class CameraContract:
             with pytest.raises(ValueError, match="timeout_s"):
                 camera.fetch(timeout_s=0)
 
-    def test_roi_is_full_sensor_after_open(self, camera: Camera) -> None:
+    def test_roi_is_inside_the_sensor_and_settable(self, camera: Camera) -> None:
         with camera:
-            width, height = camera.sensor_size
-            assert camera.roi == (0, 0, width, height)
-            assert (camera.width, camera.height) == (width, height)
+            sensor_w, sensor_h = camera.sensor_size
+            x, y, w, h = camera.roi
+            assert 0 <= x and 0 <= y and x + w <= sensor_w and y + h <= sensor_h
+            assert (camera.width, camera.height) == (w, h)
+            try:
+                camera.roi = (x, y, w // 2, h // 2)
+            except UnsupportedFeatureError:
+                pytest.skip(f"{camera.name} has no ROI")
+            camera.start()
+            frame = self.grab_one(camera)
+        assert frame.image.shape == (h // 2, w // 2)
 
     def test_unsupported_pixel_format_is_refused(self, camera: Camera) -> None:
         with camera:
