@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import contextlib
 import re
+import zlib
 from typing import Any
 
 import numpy as np
@@ -150,7 +151,7 @@ class SimulatedRig:
                 appearance_from_config(self.config),
                 reference_exposure_us=self.config.camera.exposure_us,
                 faults=self.camera_faults,
-                rng=np.random.default_rng(self.config.simulation.seed),
+                rng=np.random.default_rng([self.config.simulation.seed, zlib.crc32(self.scene.encode())]),
             )
             self._stack.enter_context(self.camera)
             if self.config.trigger.backend != "software":
