@@ -1,0 +1,273 @@
+"""Projector-camera ("stereo") model: triangulate camera rays with projector planes from absolute phase.
+
+The projector is an inverse camera. A camera pixel's ray X = t (x, y, 1) (undistorted normalised
+coordinates) meets the plane of projector points whose column is the one the absolute phase
+names: with X_p = R X + T in the projector's frame (R, T: camera -> projector, mm) and that column's
+normalised coordinate x_p, (R_0 - x_p R_2) . X + (T_0 - x_p T_2) = 0 gives t in closed form. For
+horizontal fringes (axis "y") rows play the part of columns. The projector's lens distortion
+depends on both coordinates, of which a phase gives one: the other is taken from the current
+estimate of the point and the plane refined by a few fixed-point passes.
+
+calibration.json keys (``"model": "stereo"``): ``camera_matrix``, ``distortion``,
+``projector_matrix``, ``projector_distortion``, ``rotation`` (3x3), ``translation_mm`` (3),
+``camera_size`` and ``projector_size`` ([width, height], pixels), optional ``plane`` ([nx, ny, nz,
+d] in the camera frame: heights are n . X + d) and ``pixel_centre`` (0.5: projector pixel k spans
+k .. k + 1 in the product's phase convention, OpenCV puts its centre at k).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import cv2
+import numpy as np
+
+from calibration.errors import CalibrationError
+
+STEREO = "stereo"
+
+
+def _matrix(data: Mapping[str, Any], key: str, shape: tuple[int, ...], where: str) -> np.ndarray:
+    if key not in data:
+        raise CalibrationError(f"{where}: {key}: missing (model 'stereo' needs it)")
+    try:
+        value = np.asarray(data[key], dtype=np.float64)
+    except (TypeError, ValueError):
+        raise CalibrationError(f"{where}: {key}: expected numbers, found {data[key]!r}") from None
+    if value.size != int(np.prod(shape)) or not np.all(np.isfinite(value)):
+        raise CalibrationError(f"{where}: {key}: expected {'x'.join(map(str, shape))} finite numbers, found {value.size}")
+    return value.reshape(shape)
+
+
+def _distortion(data: Mapping[str, Any], key: str, where: str) -> np.ndarray:
+    value = np.asarray(data.get(key, []), dtype=np.float64).ravel()
+    if value.size not in (0, 4, 5, 8, 12, 14) or not np.all(np.isfinite(value)):
+        raise CalibrationError(f"{where}: {key}: expected 0, 4, 5, 8, 12 or 14 OpenCV coefficients, found {value.size}")
+    return value
+
+
+@dataclass(frozen=True)
+class StereoModel:
+    camera_matrix: np.ndarray
+    camera_distortion: np.ndarray
+    projector_matrix: np.ndarray
+    projector_distortion: np.ndarray
+    rotation: np.ndarray          # camera -> projector
+    translation_mm: np.ndarray    # camera -> projector
+    camera_size: tuple[int, int]  # (width, height)
+    projector_size: tuple[int, int]
+    plane: np.ndarray | None = None
+    pixel_centre: float = 0.5
+
+    @classmethod
+    def from_fields(cls, data: Mapping[str, Any], where: str = "calibration.json") -> "StereoModel":
+        """Build and validate from calibration.json keys (see the module docstring)."""
+        rotation = _matrix(data, "rotation", (3, 3), where)
+        if not np.allclose(rotation @ rotation.T, np.eye(3), atol=1e-5) or np.linalg.det(rotation) < 0:
+            raise CalibrationError(f"{where}: rotation: not a rotation matrix (R R^T != I or det < 0)")
+        camera_matrix = _matrix(data, "camera_matrix", (3, 3), where)
+        projector_matrix = _matrix(data, "projector_matrix", (3, 3), where)
+        for key, m in (("camera_matrix", camera_matrix), ("projector_matrix", projector_matrix)):
+            if not (m[0, 0] > 0 and m[1, 1] > 0 and np.allclose(m[2], [0, 0, 1])):
+                raise CalibrationError(f"{where}: {key}: expected [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0")
+        camera_size = tuple(int(v) for v in _matrix(data, "camera_size", (2,), where))
+        projector_size = tuple(int(v) for v in _matrix(data, "projector_size", (2,), where))
+        if min(camera_size) < 1 or min(projector_size) < 1:
+            raise CalibrationError(f"{where}: camera_size / projector_size: expected positive [width, height]")
+        plane = _matrix(data, "plane", (4,), where) if data.get("plane") is not None else None
+        if plane is not None:
+            norm = np.linalg.norm(plane[:3])
+            if norm == 0:
+                raise CalibrationError(f"{where}: plane: the normal is zero")
+            plane = plane / norm
+        return cls(
+            camera_matrix=camera_matrix,
+            camera_distortion=_distortion(data, "distortion", where),
+            projector_matrix=projector_matrix,
+            projector_distortion=_distortion(data, "projector_distortion", where),
+            rotation=rotation,
+            translation_mm=_matrix(data, "translation_mm", (3,), where),
+            camera_size=camera_size,  # type: ignore[arg-type]
+            projector_size=projector_size,  # type: ignore[arg-type]
+            plane=plane,
+            pixel_centre=float(data.get("pixel_centre", 0.5)),
+        )
+
+    def as_fields(self) -> dict[str, Any]:
+        out = {
+            "camera_matrix": self.camera_matrix.tolist(),
+            "distortion": self.camera_distortion.tolist(),
+            "projector_matrix": self.projector_matrix.tolist(),
+            "projector_distortion": self.projector_distortion.tolist(),
+            "rotation": self.rotation.tolist(),
+            "translation_mm": self.translation_mm.tolist(),
+            "camera_size": list(self.camera_size),
+            "projector_size": list(self.projector_size),
+            "pixel_centre": self.pixel_centre,
+        }
+        if self.plane is not None:
+            out["plane"] = self.plane.tolist()
+        return out
+
+    @property
+    def baseline_mm(self) -> float:
+        return float(np.linalg.norm(self.translation_mm))
+
+    def camera_rays(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """Undistorted normalised ray directions (N, 3) with z = 1 of camera pixels (rows, cols)."""
+        pts = np.stack([cols.astype(np.float64), rows.astype(np.float64)], axis=1).reshape(-1, 1, 2)
+        if pts.shape[0] == 0:
+            return np.empty((0, 3))
+        normalized = cv2.undistortPoints(
+            pts, self.camera_matrix, self.camera_distortion,
+            criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 1e-10),
+        ).reshape(-1, 2)
+        return np.column_stack([normalized, np.ones(len(normalized))])
+
+    def heights(self, points: np.ndarray) -> np.ndarray:
+        """Height map (H, W) of triangulated points: distance above ``plane`` if set, else depth Z."""
+        if self.plane is None:
+            return points[..., 2].copy()
+        return points @ self.plane[:3] + self.plane[3]
+
+
+def _distort_normalised(x: np.ndarray, y: np.ndarray, distortion: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """OpenCV's lens model applied to normalised coordinates (any distortion length)."""
+    if distortion.size == 0 or not np.any(distortion):
+        return x, y
+    pts = np.stack([x.ravel(), y.ravel(), np.ones(x.size)], axis=1).reshape(-1, 1, 3)
+    out, _ = cv2.projectPoints(pts, np.zeros(3), np.zeros(3), np.eye(3), distortion)
+    out = out.reshape(-1, 2)
+    return out[:, 0].reshape(x.shape), out[:, 1].reshape(x.shape)
+
+
+def projector_coordinate(absolute_phase: np.ndarray, frequency: float, extent: float, pixel_centre: float = 0.5) -> np.ndarray:
+    """Projector pixel coordinate (OpenCV convention) named by the absolute phase 2 pi f u / W."""
+    if not frequency > 0:
+        raise CalibrationError(f"frequency: expected > 0, found {frequency}")
+    return np.asarray(absolute_phase, dtype=np.float64) * extent / (2.0 * np.pi * frequency) - pixel_centre
+
+
+def triangulate(
+    model: StereoModel,
+    absolute_phase: np.ndarray,
+    frequency: float,
+    axis: str = "x",
+    mask: np.ndarray | None = None,
+    extent: float | None = None,
+    iterations: int = 4,
+) -> np.ndarray:
+    """3-D points (H, W, 3) in the camera frame (mm) of every pixel; NaN where invalid.
+
+    Parameters
+    ----------
+    model : StereoModel
+    absolute_phase : (H, W) array
+        2 pi f u / W for vertical fringes (``axis="x"``), the same in rows for ``"y"``.
+    frequency : float
+        Fringes across the projector of the phase given.
+    extent : float, optional
+        Pattern extent along the axis in projector pixels (default the projector's width/height).
+    iterations : int
+        Fixed-point passes for the projector's distortion (0 ignores it).
+    """
+    phase = np.asarray(absolute_phase, dtype=np.float64)
+    if phase.ndim != 2:
+        raise CalibrationError(f"absolute phase: expected a 2-D map, found shape {phase.shape}")
+    if axis not in ("x", "y"):
+        raise CalibrationError(f"axis: expected 'x' or 'y', found {axis!r}")
+    expected = (model.camera_size[1], model.camera_size[0])
+    if phase.shape != expected:
+        raise CalibrationError(
+            f"absolute phase: shape {phase.shape} does not match the calibrated camera {expected[1]}x{expected[0]}"
+        )
+    index = 0 if axis == "x" else 1
+    if extent is None:
+        extent = float(model.projector_size[index])
+    coordinate = projector_coordinate(phase, frequency, extent, model.pixel_centre)
+    k = model.projector_matrix
+    valid = np.isfinite(phase)
+    if mask is not None:
+        valid &= np.asarray(mask, dtype=bool)
+    rows, cols = np.nonzero(valid)
+    measured = coordinate[rows, cols]
+    rays = model.camera_rays(rows, cols)
+    r, t = model.rotation, model.translation_mm
+
+    def intersect(target: np.ndarray) -> np.ndarray:
+        normal = r[index][None, :] - target[:, None] * r[2][None, :]
+        offset = t[index] - target * t[2]
+        denominator = np.einsum("nk,nk->n", normal, rays)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            scale = -offset / denominator
+        return rays * scale[:, None]
+
+    # first guess: no distortion, no skew (the loop below corrects both)
+    target = (measured - k[0, 2]) / k[0, 0] if index == 0 else (measured - k[1, 2]) / k[1, 1]
+    points = intersect(target)
+    skewed = index == 0 and k[0, 1] != 0
+    if np.any(model.projector_distortion) or skewed:
+        for _ in range(max(iterations, 2 if skewed else 0)):
+            projected = points @ r.T + t
+            with np.errstate(divide="ignore", invalid="ignore"):
+                xn = projected[:, 0] / projected[:, 2]
+                yn = projected[:, 1] / projected[:, 2]
+            ok = np.isfinite(xn) & np.isfinite(yn)
+            xn, yn = np.where(ok, xn, 0.0), np.where(ok, yn, 0.0)
+            xd, yd = _distort_normalised(xn, yn, model.projector_distortion)
+            if index == 0:
+                pixel, scale, current = k[0, 0] * xd + k[0, 1] * yd + k[0, 2], k[0, 0], xn
+            else:
+                pixel, scale, current = k[1, 1] * yd + k[1, 2], k[1, 1], yn
+            # move the undistorted coordinate by the pixel misfit (d pixel / d undistorted ~ focal)
+            target = np.where(ok, current + (measured - pixel) / scale, target)
+            points = intersect(target)
+    good = (points[:, 2] > 0) & np.all(np.isfinite(points), axis=1)
+    out = np.full((*phase.shape, 3), np.nan)
+    out[rows[good], cols[good]] = points[good]
+    return out
+
+
+def stereo_calibration_fields(
+    camera_matrix: np.ndarray,
+    camera_distortion: Sequence[float],
+    projector_matrix: np.ndarray,
+    projector_distortion: Sequence[float],
+    rotation: np.ndarray,
+    translation_mm: Sequence[float],
+    camera_size: tuple[int, int],
+    projector_size: tuple[int, int],
+) -> dict[str, Any]:
+    """calibration.json keys of a stereo model, validated."""
+    model = StereoModel(
+        np.asarray(camera_matrix, float).reshape(3, 3), np.asarray(camera_distortion, float).ravel(),
+        np.asarray(projector_matrix, float).reshape(3, 3), np.asarray(projector_distortion, float).ravel(),
+        np.asarray(rotation, float).reshape(3, 3), np.asarray(translation_mm, float).ravel(),
+        tuple(int(v) for v in camera_size), tuple(int(v) for v in projector_size),  # type: ignore[arg-type]
+    )
+    fields = {"model": STEREO, **model.as_fields()}
+    StereoModel.from_fields(fields)
+    return fields
+
+
+def fit_plane(points: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
+    """Least-squares plane [nx, ny, nz, d] (unit normal) through points (..., 3), oriented so that
+    the camera (the origin) is on its positive side: heights n . X + d are positive towards it."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    keep = np.all(np.isfinite(pts), axis=1)
+    if mask is not None:
+        keep &= np.asarray(mask, dtype=bool).ravel()
+    pts = pts[keep]
+    if len(pts) < 3:
+        raise CalibrationError(f"plane: {len(pts)} valid points, need at least 3")
+    centre = pts.mean(axis=0)
+    _, singular, vt = np.linalg.svd(pts - centre, full_matrices=False)
+    if singular[1] < 1e-9 * max(singular[0], 1e-300):
+        raise CalibrationError("plane: the points lie on a line, the plane is undetermined")
+    normal = vt[2]
+    d = -float(normal @ centre)
+    if d < 0:
+        normal, d = -normal, -d
+    return np.concatenate([normal, [d]])

@@ -1,0 +1,119 @@
+"""Projector-camera (stereo) model: triangulation against a pinhole simulation, the OpenCV YAML
+import, and the real SLMaster eye capture."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from calibration.errors import CalibrationError
+from calibration.opencv_yaml import import_opencv_calibration
+from calibration.stereo import StereoModel, fit_plane, triangulate
+from mock_devices import synth
+from mock_devices.stereo_synth import calibration_fields, demo_rig, demo_scene, trace
+from processing.phase_shift import phase_shift
+from processing.temporal import decode_gray, unwrap_gray, unwrap_hierarchical
+
+EYE = Path(__file__).resolve().parents[2] / "shared" / "real-data" / "slmaster-eye"
+FREQUENCIES = (1, 8, 64)
+STEPS = 6
+
+
+@pytest.fixture(scope="module")
+def simulated():
+    rig = demo_rig(160, 128)
+    truth, mapping = trace(rig, demo_scene())
+    return rig, truth, mapping, StereoModel.from_fields(calibration_fields(rig))
+
+
+def test_exact_phase_triangulates_to_the_scene(simulated):
+    rig, truth, mapping, model = simulated
+    phase = 2 * np.pi * FREQUENCIES[-1] * mapping.u / rig.projector.width
+    points = triangulate(model, np.where(mapping.lit, phase, np.nan), FREQUENCIES[-1])
+    error = np.linalg.norm(points - truth, axis=2)[mapping.lit]
+    assert np.isfinite(error).all()
+    assert error.max() < 1e-4
+    # the projector's distortion matters: ignoring it costs millimetres
+    rough = triangulate(model, np.where(mapping.lit, phase, np.nan), FREQUENCIES[-1], iterations=0)
+    assert np.nanmax(np.linalg.norm(rough - truth, axis=2)) > 1.0
+
+
+def test_rendered_fringes_reproduce_the_object_within_0_2_mm_rms(simulated):
+    rig, truth, mapping, model = simulated
+    geometry = synth.RigGeometry(camera_width=rig.camera.width, camera_height=rig.camera.height,
+                                 projector_width=rig.projector.width, projector_height=rig.projector.height)
+    appearance = synth.Appearance(gain=200.0, ambient=0.05, snr_db=30.0, bit_depth=8)
+    frames = synth.render_stack(synth.sinusoid_patterns(FREQUENCIES, STEPS), mapping, geometry, appearance,
+                                np.random.default_rng(0))
+    results = [phase_shift(frames[i * STEPS:(i + 1) * STEPS]) for i in range(len(FREQUENCIES))]
+    unwrapped = unwrap_hierarchical([r.phase for r in results], list(FREQUENCIES))
+    mask = unwrapped.valid & mapping.lit
+    points = triangulate(model, np.where(mask, unwrapped.phase, np.nan), FREQUENCIES[-1])
+    error = np.linalg.norm(points - truth, axis=2)[mask]
+    assert mask.mean() > 0.95
+    assert float(np.sqrt(np.mean(error**2))) < 0.2
+    # heights above the background plane: the big sphere stands 40 mm out of it
+    plane = fit_plane(points, mask & (truth[..., 2] > 599.0))
+    assert plane[:3] @ np.array([0, 0, -1.0]) > 0.999 and plane[3] == pytest.approx(600.0, abs=0.2)
+    heights = StereoModel.from_fields({**calibration_fields(rig), "plane": plane.tolist()}).heights(points)
+    assert float(np.nanmax(heights)) == pytest.approx(40.0, abs=0.5)
+
+
+def test_fields_round_trip_and_validation(simulated):
+    rig, _, _, model = simulated
+    again = StereoModel.from_fields(model.as_fields())
+    assert np.array_equal(again.rotation, model.rotation) and again.projector_size == model.projector_size
+    fields = calibration_fields(rig)
+    with pytest.raises(CalibrationError, match="rotation: not a rotation matrix"):
+        StereoModel.from_fields({**fields, "rotation": (2 * np.eye(3)).tolist()})
+    with pytest.raises(CalibrationError, match="translation_mm: missing"):
+        StereoModel.from_fields({k: v for k, v in fields.items() if k != "translation_mm"})
+    with pytest.raises(CalibrationError, match="distortion: expected 0, 4, 5"):
+        StereoModel.from_fields({**fields, "distortion": [0.1, 0.2, 0.3]})
+    with pytest.raises(CalibrationError, match="does not match the calibrated camera 160x128"):
+        triangulate(model, np.zeros((10, 10)), 8)
+
+
+def test_bad_opencv_files_are_refused(tmp_path):
+    with pytest.raises(CalibrationError, match="missing"):
+        import_opencv_calibration(tmp_path / "none.yml", (1920, 1080))
+    partial = tmp_path / "partial.yml"
+    fs = cv2.FileStorage(str(partial), cv2.FILE_STORAGE_WRITE)
+    fs.write("M1", np.eye(3))
+    fs.release()
+    with pytest.raises(CalibrationError, match="partial.yml: D1: missing"):
+        import_opencv_calibration(partial, (1920, 1080))
+
+
+@pytest.mark.skipif(not EYE.is_dir(), reason="shared real data not present")
+def test_real_eye_capture_becomes_a_point_cloud():
+    fields = import_opencv_calibration(EYE / "caliInfo.yml", (1920, 1080))
+    model = StereoModel.from_fields(fields)
+    assert model.camera_size == (1280, 1024) and model.baseline_mm == pytest.approx(109.4, abs=0.1)
+    frames = np.stack([cv2.imread(str(EYE / "L" / f"{i}.png"), cv2.IMREAD_GRAYSCALE) for i in range(18)]).astype(np.float32)
+    shifted = phase_shift(frames[:12])
+    # the rig's periods start at -pi (phase_rad = pi); 6 complementary Gray planes for 32 periods
+    wrapped = np.mod(shifted.phase + np.pi, 2 * np.pi)
+    stripes = decode_gray(frames[12:], threshold=shifted.background)
+    unwrapped = unwrap_gray(wrapped, stripes, 6, 32, complementary=True)
+    mask = unwrapped.valid & (shifted.modulation > 10)
+    points = triangulate(model, np.where(mask, unwrapped.phase, np.nan), 32, extent=1920)
+    z = points[..., 2]
+    valid = np.isfinite(z)
+    assert valid.sum() > 150_000
+    low, high = np.percentile(z[valid], [5, 95])
+    assert 650 < low < high < 800 and high - low < 100   # a ~10 cm plaque about 0.7 m away
+    # the points are consistent with the projector: reprojected, they land on the measured column
+    rvec, _ = cv2.Rodrigues(model.rotation)
+    sample = np.argwhere(valid)[::97]
+    projected, _ = cv2.projectPoints(points[sample[:, 0], sample[:, 1]].reshape(-1, 1, 3), rvec, model.translation_mm,
+                                     model.projector_matrix, model.projector_distortion)
+    column = unwrapped.phase[sample[:, 0], sample[:, 1]] * 1920 / (2 * np.pi * 32) - 0.5
+    assert np.max(np.abs(projected.reshape(-1, 2)[:, 0] - column)) < 0.01
+    # a surface, not scatter: depth differs from its 5x5 median by little on most pixels
+    filled = np.where(valid, z, np.nanmedian(z)).astype(np.float32)
+    local = np.abs(filled - cv2.medianBlur(filled, 5))[valid]
+    assert np.median(local) < 0.5  # 0.22 mm here
