@@ -24,6 +24,14 @@ from dataclasses import dataclass
 
 import serial
 
+try:  # pyserial's POSIX backend lets termios errors through when a tty vanishes
+    import termios
+
+    _PORT_ERRORS: tuple[type[BaseException], ...] = (serial.SerialException, OSError,
+                                                     termios.error)
+except ImportError:  # Windows
+    _PORT_ERRORS = (serial.SerialException, OSError)
+
 from drivers import trigger_protocol as tp
 from drivers.errors import (
     DeviceError,
@@ -256,18 +264,18 @@ class SerialTriggerBox(TriggerBox):
         try:
             self._port = serial.serial_for_url(self.url, baudrate=self.baudrate,
                                                timeout=self.timeout_s, write_timeout=self.timeout_s)
-        except (serial.SerialException, OSError, ValueError) as exc:
+            self._port.reset_input_buffer()
+        except (*_PORT_ERRORS, ValueError) as exc:
             raise DeviceNotFoundError(
                 f"cannot open trigger box port {self.url}: {exc}; check the cable, the port name "
                 "and that you may open it (Linux: be in the 'dialout' group)") from exc
-        self._port.reset_input_buffer()
 
     def _do_close(self) -> None:
         port, self._port = self._port, None
         if port is not None:
             try:
                 port.close()
-            except (serial.SerialException, OSError) as exc:
+            except _PORT_ERRORS as exc:
                 log.warning("%s: error while closing: %s", self, exc)
 
     def _do_hello(self, version: int) -> int:
@@ -365,7 +373,7 @@ class SerialTriggerBox(TriggerBox):
         try:
             written = self._port.write(line)
             self._port.flush()
-        except (serial.SerialException, OSError) as exc:
+        except _PORT_ERRORS as exc:
             raise DeviceError(f"{self}: lost the box while sending {command}: {exc}") from exc
         if written is not None and written != len(line):
             raise DeviceTimeoutError(f"{self}: wrote {written} of {len(line)} bytes of {command}")
@@ -376,10 +384,10 @@ class SerialTriggerBox(TriggerBox):
         remaining = deadline - time.monotonic()
         if remaining <= 0:
             return b""
-        self._port.timeout = remaining
         try:
+            self._port.timeout = remaining
             return self._port.read_until(b"\n", tp.MAX_LINE_BYTES)
-        except (serial.SerialException, OSError) as exc:
+        except _PORT_ERRORS as exc:
             raise DeviceError(f"{self}: lost the box (unplugged or reset?) while waiting for "
                               f"{command}: {exc}") from exc
 
