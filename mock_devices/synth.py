@@ -153,19 +153,38 @@ def awgn(image: np.ndarray, snr_db: float, rng: np.random.Generator) -> np.ndarr
     return image + rng.normal(0.0, sigma, size=image.shape)
 
 
-def sample_projector_image(image: np.ndarray, mapping: ProjectorMap) -> np.ndarray:
-    """Bilinear sample of a rendered projector frame (rows x cols) at the mapped coordinates."""
-    img = np.asarray(image, dtype=np.float64)
-    rows, cols = img.shape
+def _bilinear_taps(mapping: ProjectorMap, rows: int, cols: int) -> tuple[np.ndarray, ...]:
+    """Flat indices of the 4 neighbours and the x / y weights of every mapped pixel, cached on ``mapping``.
+
+    A simulated camera samples every frame at the same coordinates: computing the taps once per
+    (mapping, frame size) keeps only the gathers and the weighted sum per frame. The cache assumes
+    ``mapping.u`` / ``mapping.v`` are not modified in place after the first sample.
+    """
+    cached = mapping.__dict__.get("_taps")
+    if cached is not None and cached[0] == (rows, cols):
+        return cached[1]
     x = np.clip(mapping.u - 0.5, 0.0, cols - 1.0)
     y = np.clip(mapping.v - 0.5, 0.0, rows - 1.0)
     x0 = np.minimum(np.floor(x).astype(np.intp), cols - 2) if cols > 1 else np.zeros_like(x, dtype=np.intp)
     y0 = np.minimum(np.floor(y).astype(np.intp), rows - 2) if rows > 1 else np.zeros_like(y, dtype=np.intp)
     fx, fy = x - x0, y - y0
     x1, y1 = np.minimum(x0 + 1, cols - 1), np.minimum(y0 + 1, rows - 1)
-    top = img[y0, x0] * (1 - fx) + img[y0, x1] * fx
-    bottom = img[y1, x0] * (1 - fx) + img[y1, x1] * fx
-    return top * (1 - fy) + bottom * fy
+    taps = (y0 * cols + x0, y0 * cols + x1, y1 * cols + x0, y1 * cols + x1, 1 - fx, fx, 1 - fy, fy)
+    mapping.__dict__["_taps"] = ((rows, cols), taps)
+    return taps
+
+
+def sample_projector_image(image: np.ndarray, mapping: ProjectorMap) -> np.ndarray:
+    """Bilinear sample of a rendered projector frame (rows x cols) at the mapped coordinates."""
+    img = np.asarray(image)
+    if img.dtype not in (np.float32, np.float64):  # float32 values promote exactly in the weighted sum
+        img = img.astype(np.float64)
+    rows, cols = img.shape
+    i00, i01, i10, i11, wx0, wx1, wy0, wy1 = _bilinear_taps(mapping, rows, cols)
+    flat = img.ravel()
+    top = flat[i00] * wx0 + flat[i01] * wx1
+    bottom = flat[i10] * wx0 + flat[i11] * wx1
+    return top * wy0 + bottom * wy1
 
 
 def expose(projected: np.ndarray, mapping: ProjectorMap, appearance: Appearance, rng: np.random.Generator) -> np.ndarray:

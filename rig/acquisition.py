@@ -236,6 +236,25 @@ class BackgroundWriter:
             self._raise_if_failed()
 
 
+class InlineWriter:
+    """Same interface as :class:`BackgroundWriter`, writing each frame at once in the caller's thread."""
+
+    def __init__(self, writer: CaptureWriter) -> None:
+        self.writer = writer
+        self.busy_s = 0.0
+
+    def __enter__(self) -> "InlineWriter":
+        return self
+
+    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
+        pass
+
+    def put(self, pattern: int, image: np.ndarray, metadata: Mapping[str, Any]) -> None:
+        started = time.perf_counter()
+        self.writer.add_frame(pattern, image, **metadata)
+        self.busy_s += time.perf_counter() - started
+
+
 # --------------------------------------------------------------------------- the loop
 
 
@@ -398,6 +417,7 @@ def run_scan(
     gain: float | None = None,
     progress: Progress | None = None,
     overwrite: bool = False,
+    background_writer: bool = True,
 ) -> ScanResult:
     """Acquire one frame per pattern and write the capture at ``path`` atomically.
 
@@ -418,6 +438,11 @@ def run_scan(
         Camera settings for the scan (restored afterwards); None keeps the current ones.
     progress : Progress, optional
         Stepped once per stored frame.
+    overwrite : bool
+        Replace an existing capture at ``path``.
+    background_writer : bool
+        Encode and write frames on a writer thread while the next one is acquired (default);
+        False writes each frame before the next pattern is shown.
     """
     if not patterns:
         raise ValueError("patterns: expected at least one pattern to scan")
@@ -433,7 +458,8 @@ def run_scan(
         capture_extra.update(extra or {})
         writer = CaptureWriter(path, camera_info, projector_info, patterns, scene=scene, extra=capture_extra, overwrite=overwrite)
         with writer:
-            with BackgroundWriter(writer) as background:
+            sink = BackgroundWriter(writer) if background_writer else InlineWriter(writer)
+            with sink as background:
                 trigger.prepare(len(patterns) * (settings.retries + 1))
                 try:
                     for index, pattern in enumerate(patterns):
