@@ -1,0 +1,132 @@
+"""Heights and points from absolute phase, whatever the calibration's model.
+
+* ``"reference-plane"``: thesis eq. 1.15 on Phi_object - Phi_reference with l0, d0, f0; lateral
+  coordinates X = (x - cx) pixel_mm (l0 - h) / l0 (capture-format.md);
+* ``"polynomial"``: per-pixel polynomial in Phi_object - Phi_reference
+  (:mod:`calibration.polynomial`), lateral coordinates as above when ``l0_mm`` and ``pixel_mm`` are
+  present, else ``pixel_mm`` alone;
+* ``"stereo"``: camera rays meet projector planes (:mod:`calibration.stereo`); the reference phase
+  is not needed; heights above the calibration's ``plane`` if it has one, else depth.
+
+:func:`height_from_phase` and :func:`points_from_phase` are what ``rig process`` calls.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Protocol
+
+import numpy as np
+
+from calibration.errors import CalibrationError
+from calibration.polynomial import POLYNOMIAL, load_polynomial
+from calibration.stereo import STEREO, StereoModel, triangulate
+
+REFERENCE_PLANE = "reference-plane"
+MODELS = (REFERENCE_PLANE, POLYNOMIAL, STEREO)
+
+
+class CalibrationLike(Protocol):
+    """What this module reads of :class:`calibration.store.Calibration`."""
+
+    model: str
+    l0_mm: float | None
+    d0_mm: float | None
+    pixel_mm: float | None
+
+    def per_mm(self, frequency: float) -> float: ...
+    def to_dict(self) -> dict[str, Any]: ...
+
+    @property
+    def where(self) -> str: ...
+
+
+def needs_reference(calibration: CalibrationLike) -> bool:
+    """Whether the model subtracts a reference-plane phase."""
+    _check_model(calibration)
+    return calibration.model != STEREO
+
+
+def _check_model(calibration: CalibrationLike) -> None:
+    if calibration.model not in MODELS:
+        raise CalibrationError(f"{calibration.where}: model: expected one of {', '.join(MODELS)}, found {calibration.model!r}")
+
+
+def _delta(object_phase: np.ndarray, reference_phase: np.ndarray | None, calibration: CalibrationLike) -> np.ndarray:
+    if reference_phase is None:
+        raise CalibrationError(f"{calibration.where}: model {calibration.model!r} needs the reference-plane phase")
+    obj = np.asarray(object_phase, dtype=np.float64)
+    ref = np.asarray(reference_phase, dtype=np.float64)
+    if obj.shape != ref.shape:
+        raise CalibrationError(f"reference phase: shape {ref.shape} differs from the object's {obj.shape}")
+    return obj - ref
+
+
+def stereo_model(calibration: CalibrationLike) -> StereoModel:
+    return StereoModel.from_fields(calibration.to_dict(), where=calibration.where)
+
+
+def height_from_phase(
+    calibration: CalibrationLike,
+    object_phase: np.ndarray,
+    reference_phase: np.ndarray | None,
+    frequency: float,
+    axis: str = "x",
+    extent: float | None = None,
+) -> np.ndarray:
+    """Height map (H, W) in mm from the object's absolute phase at ``frequency`` (NaN where invalid).
+
+    Parameters
+    ----------
+    calibration : Calibration
+        Any model of :data:`MODELS`.
+    object_phase, reference_phase : (H, W) arrays
+        Absolute phases 2 pi f u / W (NaN invalid); the reference is ignored by ``stereo``.
+    frequency : float
+        Fringes across the projector of the phases.
+    axis, extent :
+        Fringe axis and pattern extent in projector pixels (``stereo`` only; default the
+        calibrated projector size along the axis).
+    """
+    _check_model(calibration)
+    if calibration.model == REFERENCE_PLANE:
+        from processing.height import phase_to_height
+
+        delta = _delta(object_phase, reference_phase, calibration)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return phase_to_height(delta, calibration.l0_mm, calibration.d0_mm, calibration.per_mm(frequency))
+    if calibration.model == POLYNOMIAL:
+        model = load_polynomial(calibration.to_dict(), getattr(calibration, "path", None), calibration.where)
+        return model.height(_delta(object_phase, reference_phase, calibration), frequency)
+    model = stereo_model(calibration)
+    return model.heights(triangulate(model, object_phase, frequency, axis=axis, extent=extent))
+
+
+def points_from_phase(
+    calibration: CalibrationLike,
+    object_phase: np.ndarray,
+    reference_phase: np.ndarray | None,
+    frequency: float,
+    axis: str = "x",
+    extent: float | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Points (H, W, 3) in mm and the height map (H, W); NaN where invalid.
+
+    Stereo points are in the camera frame; the others are X, Y on the reference plane (origin at
+    the image centre) and Z = height.
+    """
+    _check_model(calibration)
+    if calibration.model == STEREO:
+        model = stereo_model(calibration)
+        points = triangulate(model, object_phase, frequency, axis=axis, extent=extent)
+        return points, model.heights(points)
+    height = height_from_phase(calibration, object_phase, reference_phase, frequency)
+    pixel = calibration.pixel_mm
+    if pixel is None:
+        raise CalibrationError(f"{calibration.where}: pixel_mm: missing (needed for lateral point coordinates)")
+    rows, cols = np.indices(height.shape, dtype=np.float64)
+    cx, cy = (height.shape[1] - 1) / 2.0, (height.shape[0] - 1) / 2.0
+    scale = np.full(height.shape, float(pixel))
+    if calibration.l0_mm:
+        scale = pixel * (calibration.l0_mm - height) / calibration.l0_mm
+    points = np.stack([(cols - cx) * scale, (rows - cy) * scale, height], axis=2)
+    return np.where(np.isfinite(height)[..., None], points, np.nan), height
