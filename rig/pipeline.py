@@ -14,7 +14,8 @@ phase correction is one entry, not a new code path:
   (``--correction``); a correction may read ``state.reference`` (processed first);
 - :data:`SINGLE_SHOT` ``pattern kind -> f(state, options) -> None`` filling ``state.unwrapped``
   for single-shot patterns (``speckle-sinusoid``);
-- :data:`HEIGHT_MODELS` ``calibration model -> f(object, reference, calibration) -> height``.
+- heights and points come from :mod:`calibration.models` (reference-plane, polynomial, stereo),
+  whatever the calibration's model; the reference plane is processed when the model needs it.
 
 Automatic choice of the unwrapping method (``--unwrap auto``), from the sinusoid frequencies
 along the fringe axis (the axis of the first sinusoid pattern):
@@ -47,7 +48,8 @@ from typing import Any
 import numpy as np
 
 from calibration.errors import CalibrationError
-from calibration.store import REFERENCE_PLANE, Calibration, read_calibration
+from calibration import models as calibration_models
+from calibration.store import Calibration, read_calibration
 from processing.patterns import sinusoid_shift
 from rig import __version__
 from rig.capture import Capture, check_same_patterns, read_capture
@@ -408,21 +410,37 @@ SCENE_STAGES: list[tuple[str, Callable[[SceneState, ProcessOptions], None]]] = [
 # --------------------------------------------------------------------------- height
 
 
-def _height_reference_plane(obj: SceneState, ref: SceneState, calibration: Calibration, notes: list[str]) -> np.ndarray:
-    from processing.height import phase_to_height
-
-    assert obj.unwrapped is not None and ref.unwrapped is not None
-    delta = obj.unwrapped.phase - ref.unwrapped.phase
-    if not (obj.unwrapped.absolute and ref.unwrapped.absolute):
-        delta = _remove_region_offsets(delta)
+def stage_height(
+    obj: SceneState, ref: SceneState | None, calibration: Calibration, notes: list[str]
+) -> tuple[np.ndarray, np.ndarray]:
+    """Points (H, W, 3) and heights (H, W) in mm from the object's (and reference's) absolute phase."""
+    assert obj.unwrapped is not None
+    obj_phase = obj.unwrapped.phase
+    ref_phase = None
+    if ref is not None:
+        assert ref.unwrapped is not None
+        if ref.unwrapped.frequency != obj.unwrapped.frequency:
+            raise ProcessingError("object and reference phases are at different frequencies")
+        ref_phase = ref.unwrapped.phase
+    if not (obj.unwrapped.absolute and (ref is None or ref.unwrapped.absolute)):
+        if ref_phase is None:
+            raise ProcessingError(
+                f"{obj.capture.manifest_path}: spatial unwrapping gives phase only up to 2 pi k, and the "
+                f"{calibration.model!r} calibration has no reference plane to fix k; capture temporal patterns"
+            )
+        obj_phase = ref_phase + _remove_region_offsets(obj_phase - ref_phase)
         notes.append(
             "spatial unwrapping: phase known up to 2 pi k per connected region; removed from each region the "
             "multiple of 2 pi nearest its median object-reference difference (right where the reference plane "
             "shows in the region)"
         )
-    f0 = calibration.per_mm(obj.unwrapped.frequency)
+    width, height = obj.capture.projector_size
+    extent = float(width if obj.axis == "x" else height)
     with np.errstate(invalid="ignore", divide="ignore"):
-        return phase_to_height(delta, calibration.l0_mm, calibration.d0_mm, f0)
+        points, heights = calibration_models.points_from_phase(
+            calibration, obj_phase, ref_phase, obj.unwrapped.frequency, axis=obj.axis, extent=extent
+        )
+    return points, heights
 
 
 def _remove_region_offsets(delta: np.ndarray) -> np.ndarray:
@@ -438,9 +456,6 @@ def _remove_region_offsets(delta: np.ndarray) -> np.ndarray:
     return delta - offsets[labels]
 
 
-HEIGHT_MODELS: dict[str, Callable[[SceneState, SceneState, Calibration, list[str]], np.ndarray]] = {
-    REFERENCE_PLANE: _height_reference_plane,
-}
 
 
 # --------------------------------------------------------------------------- the whole run
@@ -458,6 +473,7 @@ class ProcessResult:
     mask: np.ndarray
     timings: dict[str, Any]
     notes: list[str]
+    points: np.ndarray | None = None  # (H, W, 3) mm, NaN where invalid
 
     @property
     def phase(self) -> np.ndarray:
@@ -484,13 +500,15 @@ def total_steps(with_reference: bool) -> int:
     return len(SCENE_STAGES) * (2 if with_reference else 1) + 1
 
 
-def load_calibration_for(capture: Capture, calibration_path: str | Path) -> tuple[Calibration, Capture]:
-    """Read a calibration and its reference capture, and check that they fit ``capture``."""
+def load_calibration_for(capture: Capture, calibration_path: str | Path) -> tuple[Calibration, Capture | None]:
+    """Read a calibration and (when its model needs one) its reference capture, checked against ``capture``."""
     calibration = read_calibration(calibration_path)
-    if calibration.model not in HEIGHT_MODELS:
+    if calibration.model not in calibration_models.MODELS:
         raise CalibrationError(
-            f"{calibration.where}: model: expected one of {', '.join(HEIGHT_MODELS)} for rig process, found {calibration.model!r}"
+            f"{calibration.where}: model: expected one of {', '.join(calibration_models.MODELS)}, found {calibration.model!r}"
         )
+    if not calibration_models.needs_reference(calibration):
+        return calibration, None
     ref_path = calibration.reference_path
     if ref_path is None:
         raise CalibrationError(f"{calibration.where}: reference: missing (the reference-plane capture)")
@@ -537,15 +555,15 @@ def process(
         state.frames = None  # the frames are not needed any more; free them early
     notes: list[str] = []
     assert obj.unwrapped is not None
-    height = None
+    height = points = None
     mask = obj.unwrapped.valid.copy()
     t0 = time.perf_counter()
-    if calibration is not None and ref is not None:
-        assert ref.unwrapped is not None
-        if ref.unwrapped.frequency != obj.unwrapped.frequency:
-            raise ProcessingError("object and reference phases are at different frequencies")
-        height = HEIGHT_MODELS[calibration.model](obj, ref, calibration, notes)
-        mask &= ref.unwrapped.valid & np.isfinite(height)
+    if calibration is not None:
+        points, height = stage_height(obj, ref, calibration, notes)
+        if ref is not None:
+            assert ref.unwrapped is not None
+            mask &= ref.unwrapped.valid
+        mask &= np.isfinite(height)
         height = np.where(mask, height, np.nan).astype(np.float32)
     else:
         notes.append("no calibration: height, points and height preview skipped; phase, mask and wrapped phase written")
@@ -559,7 +577,7 @@ def process(
         timings["reference"] = dict(ref.timings)
     timings["height"] = height_time
     timings["total"] = time.perf_counter() - started
-    return ProcessResult(obj, ref, calibration, options, height, mask, timings, notes + obj.notes)
+    return ProcessResult(obj, ref, calibration, options, height, mask, timings, notes + obj.notes, points)
 
 
 def _check_options(options: ProcessOptions) -> None:
@@ -586,14 +604,20 @@ def _texture(state: SceneState) -> np.ndarray | None:
     return np.clip(background / top * 255.0, 0, 255).astype(np.uint8)
 
 
+OUTPUT_FILES = ("height.npy", "phase.npy", "mask.npy", "wrapped.npy", "points.ply", "report.json", "preview.png")
+
+
 def write_outputs(result: ProcessResult, out_dir: str | Path) -> dict[str, Any]:
     """Write the outputs of capture-format.md into ``out_dir``; returns the report (also in report.json)."""
-    from processing.height import point_cloud
     from rig import outputs
 
     t0 = time.perf_counter()
     out = Path(out_dir)
+    if (out / "capture.json").exists() or (out / "calibration.json").exists():
+        raise ProcessingError(f"{out}: is a capture or calibration directory; choose another output directory")
     out.mkdir(parents=True, exist_ok=True)
+    for name in OUTPUT_FILES:  # an earlier run's files must not pass for this run's
+        (out / name).unlink(missing_ok=True)
     obj = result.object
     assert obj.unwrapped is not None and obj.wrapped is not None
     files: dict[str, str] = {}
@@ -632,7 +656,8 @@ def write_outputs(result: ProcessResult, out_dir: str | Path) -> dict[str, Any]:
         cal = result.calibration
         assert cal is not None
         files["height"] = outputs.write_array(out / "height.npy", result.height.astype(np.float32)).name
-        points = point_cloud(result.height, cal.pixel_mm, cal.l0_mm, mask=result.mask)
+        assert result.points is not None
+        points = result.points[result.mask]
         texture = _texture(obj)
         colours = None
         if texture is not None:

@@ -217,9 +217,9 @@ def test_calibration_with_unknown_version_or_model(capsys, small_capture) -> Non
     path.write_text(json.dumps(dict(data, version=7)))
     code, _, err = _run(capsys, "process", small_capture.capture, "--calibration", small_capture.calibration, "-q")
     _assert_one_line_error(code, err, "calibration.json: version: expected 1", "found 7")
-    path.write_text(json.dumps(dict(data, model="stereo")))
+    path.write_text(json.dumps(dict(data, model="mystery")))
     code, _, err = _run(capsys, "process", small_capture.capture, "--calibration", small_capture.calibration, "-q")
-    _assert_one_line_error(code, err, "model: expected one of reference-plane for rig process, found 'stereo'")
+    _assert_one_line_error(code, err, "model: expected one of reference-plane, polynomial, stereo, found 'mystery'")
 
 
 def test_speckle_capture_is_not_supported_yet(capsys, tmp_path) -> None:
@@ -276,3 +276,13 @@ def test_demo_reports_a_small_height_error(capsys, tmp_path) -> None:
     code, _, err = _run(capsys, "demo", "-o", foreign, "-q")
     _assert_one_line_error(code, err, "is not an earlier demo output")
     assert (foreign / "thesis.tex").exists()
+
+
+def test_rerun_without_calibration_leaves_no_stale_height(capsys, small_capture, tmp_path) -> None:
+    out = tmp_path / "out"
+    assert _run(capsys, "process", small_capture.capture, "--calibration", small_capture.calibration, "-o", out, "-q")[0] == 0
+    assert (out / "height.npy").exists()
+    assert _run(capsys, "process", small_capture.capture, "-o", out, "-q")[0] == 0
+    assert not (out / "height.npy").exists() and not (out / "points.ply").exists() and (out / "wrapped.npy").exists()
+    code, _, err = _run(capsys, "process", small_capture.capture, "-o", small_capture.capture, "-q")
+    _assert_one_line_error(code, err, "is a capture or calibration directory")
