@@ -287,12 +287,21 @@ def stage_wrapped(state: SceneState, options: ProcessOptions) -> None:
 
 
 def _ftp_frame(image: np.ndarray, axis: str, shift: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Wrapped phase of a single fringe frame by Fourier transform profilometry."""
-    from processing.ftp import ftp_phase
+    """Wrapped phase, amplitude and background of a single fringe frame (Fourier transform profilometry).
 
-    phase, amplitude = ftp_phase(np.asarray(image, dtype=np.float64), axis=1 if axis == "x" else 0)
+    The background is the mean over one fringe period along the axis (the detected carrier).
+    """
+    import cv2
+
+    from processing.ftp import detect_carrier, ftp_phase
+
+    img = np.asarray(image, dtype=np.float64)
+    along = 1 if axis == "x" else 0
+    phase, amplitude = ftp_phase(img, axis=along)
     phase = np.angle(np.exp(1j * (phase - shift)))
-    background = np.full(image.shape, float(np.mean(image)))
+    period = max(int(round(1.0 / abs(detect_carrier(img, along)))), 1)
+    kernel = (period, 1) if axis == "x" else (1, period)
+    background = cv2.blur(img, kernel, borderType=cv2.BORDER_REFLECT)
     return phase, np.asarray(amplitude, dtype=np.float64), background
 
 
