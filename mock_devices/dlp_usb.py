@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import errno
 import logging
+import os
 from collections import deque
 from dataclasses import dataclass, field
 from types import SimpleNamespace
@@ -26,6 +27,7 @@ import usb.core
 import usb.util
 
 from drivers import dlp_protocol as dp
+from drivers.dlp_protocol import Command
 
 log = logging.getLogger(__name__)
 
@@ -180,3 +182,255 @@ class VirtualHidBackend(usb.backend.IBackend):
         n = min(len(buff), len(report))
         buff[:n] = type(buff)(buff.typecode, report[:n])
         return n
+
+
+@dataclass(frozen=True)
+class Dlpc350Faults:
+    """Faults the fake controller injects.
+
+    usb_error_on
+        ``{Command: errno}``: the OUT transfer carrying that command raises ``USBError``.
+    timeout_on
+        Commands the controller never answers (the IN transfer times out).
+    refuse
+        Commands answered with the error flag set.
+    disappear_after
+        After this many OUT reports the device is gone: enumeration finds nothing and every
+        transfer fails with ENODEV (unplugged mid-scan).
+    validation_busy_reads
+        Reads of the validation status that report "busy" before the result.
+    claim_errno
+        Claiming the interface fails with this errno (EACCES: no udev rule / permission).
+    """
+
+    usb_error_on: dict[int, int] = field(default_factory=dict)
+    timeout_on: frozenset[int] | set[int] = field(default_factory=frozenset)
+    refuse: frozenset[int] | set[int] = field(default_factory=frozenset)
+    disappear_after: int | None = None
+    validation_busy_reads: int = 1
+    claim_errno: int | None = None
+
+
+@dataclass
+class Dlpc350State:
+    """What the controller holds; tests inspect it."""
+
+    standby: bool = False
+    display_mode: int = 0
+    pattern_source: int = 0
+    trigger_mode: int = 0
+    exposure_us: int = 8333
+    frame_period_us: int = 8333
+    lut_control: dp.LutControl = field(
+        default_factory=lambda: dp.LutControl(1, True, 1, 1))
+    mailbox: int = dp.Mailbox.CLOSED
+    mailbox_address: int = 0
+    pattern_lut: dict[int, dp.PatternEntry] = field(default_factory=dict)
+    image_lut: dict[int, int] = field(default_factory=dict)
+    validation: int = 0
+    validated: bool = False
+    sequencer: str = "stopped"
+    hardware_status: int = 0x01  # internal initialization successful
+    system_status: int = 0x01  # internal memory test passed
+
+
+_DATA_LENGTH = {
+    Command.POWER_CONTROL: 1, Command.DISPLAY_MODE: 1, Command.PATTERN_SOURCE: 1,
+    Command.PATTERN_TRIGGER_MODE: 1, Command.PATTERN_START_STOP: 1,
+    Command.EXPOSURE_FRAME_PERIOD: 8, Command.LUT_CONTROL: 4, Command.MAILBOX_ADDRESS: 1,
+    Command.MAILBOX_CONTROL: 1, Command.LUT_VALIDATE: 1,
+}
+
+
+class FakeDlpc350Backend(VirtualHidBackend):
+    """pyusb backend emulating a LightCrafter 4500's DLPC350 controller."""
+
+    def __init__(self, faults: Dlpc350Faults | None = None) -> None:
+        super().__init__()
+        self.faults = faults or Dlpc350Faults()
+        self.state = Dlpc350State()
+        self.requests: list[dp.Request] = []  # every request parsed, in order
+        self._out_reports = 0
+        self._busy_reads_left = 0
+
+    def _before_transfer(self, direction: str) -> None:
+        limit = self.faults.disappear_after
+        if limit is not None and self._out_reports >= limit:
+            self.present = False
+        super()._before_transfer(direction)
+
+    def claim_interface(self, dev_handle, intf):
+        if self.faults.claim_errno is not None:
+            code = self.faults.claim_errno
+            raise usb.core.USBError(os.strerror(code), error_code=-3, errno=code)
+        super().claim_interface(dev_handle, intf)
+
+    def intr_write(self, dev_handle, ep, intf, data, timeout):
+        self._before_transfer("write")
+        try:
+            command = dp.decode_request(bytes(data)).command
+        except dp.PacketError:
+            command = None
+        if command in self.faults.usb_error_on:
+            code = self.faults.usb_error_on[command]
+            raise usb.core.USBError(os.strerror(code), error_code=-1, errno=code)
+        self._out_reports += 1
+        return super().intr_write(dev_handle, ep, intf, data, timeout)
+
+    # -- the controller -------------------------------------------------------------------------
+    def _on_out_report(self, report: bytes) -> bytes | None:
+        try:
+            request = dp.decode_request(report)
+        except dp.PacketError as exc:
+            log.warning("fake DLPC350 ignores a malformed report: %s", exc)
+            return None
+        self.requests.append(request)
+        if request.command in self.faults.timeout_on:
+            return None
+        try:
+            command = Command(request.command)
+        except ValueError:
+            command = None
+        if command is None or command in self.faults.refuse:
+            data, ok = b"", False
+        elif request.is_read:
+            data, ok = self._read(command)
+        else:
+            data, ok = b"", self._write(command, request.data)
+        if not request.wants_reply:
+            return None
+        return dp.encode_reply(request.sequence, data, error=not ok, read=request.is_read)
+
+    def _read(self, command: Command) -> tuple[bytes, bool]:
+        s = self.state
+        if command is Command.LUT_VALIDATE:
+            if self._busy_reads_left > 0:
+                self._busy_reads_left -= 1
+                return bytes([s.validation | dp.Validation.BUSY]), True
+            return bytes([s.validation]), True
+        if command is Command.HARDWARE_STATUS:
+            return bytes([s.hardware_status]), True
+        if command is Command.SYSTEM_STATUS:
+            return bytes([s.system_status]), True
+        if command is Command.MAIN_STATUS:
+            main = (0x01 if s.standby else 0) | (0x02 if s.sequencer == "running" else 0)
+            return bytes([main]), True
+        simple = {
+            Command.POWER_CONTROL: int(s.standby), Command.DISPLAY_MODE: s.display_mode,
+            Command.PATTERN_SOURCE: s.pattern_source,
+            Command.PATTERN_TRIGGER_MODE: s.trigger_mode,
+            Command.PATTERN_START_STOP: {"stopped": 0, "paused": 1, "running": 2}[s.sequencer],
+        }
+        if command in simple:
+            return bytes([simple[command]]), True
+        if command is Command.EXPOSURE_FRAME_PERIOD:
+            return dp.pack_exposure(s.exposure_us, s.frame_period_us), True
+        if command is Command.LUT_CONTROL:
+            return s.lut_control.pack(), True
+        return b"", False
+
+    def _write(self, command: Command, data: bytes) -> bool:
+        s = self.state
+        expected = _DATA_LENGTH.get(command)
+        if expected is not None and len(data) != expected:
+            return False
+        if command is Command.POWER_CONTROL:
+            if data[0] not in (0, 1):
+                return False
+            s.standby = bool(data[0])
+            if s.standby:
+                s.sequencer = "stopped"
+            return True
+        if command is Command.PATTERN_START_STOP:
+            return self._start_stop(data[0])
+        if command in (Command.DISPLAY_MODE, Command.PATTERN_SOURCE, Command.PATTERN_TRIGGER_MODE,
+                       Command.EXPOSURE_FRAME_PERIOD, Command.LUT_CONTROL):
+            if s.sequencer != "stopped":
+                return False  # the guide: stop the sequence before changing it
+            s.validated = False
+        if command is Command.DISPLAY_MODE:
+            if data[0] not in (0, 1):
+                return False
+            s.display_mode = data[0]
+        elif command is Command.PATTERN_SOURCE:
+            if data[0] not in (0, 3):
+                return False
+            s.pattern_source = data[0]
+        elif command is Command.PATTERN_TRIGGER_MODE:
+            if data[0] > 4:
+                return False
+            s.trigger_mode = data[0]
+        elif command is Command.EXPOSURE_FRAME_PERIOD:
+            s.exposure_us, s.frame_period_us = dp.unpack_exposure(data)
+        elif command is Command.LUT_CONTROL:
+            s.lut_control = dp.LutControl.unpack(data)
+        elif command is Command.MAILBOX_CONTROL:
+            if data[0] > 3:
+                return False
+            s.mailbox = data[0]
+        elif command is Command.MAILBOX_ADDRESS:
+            if data[0] >= dp.MAX_LUT_ENTRIES:
+                return False
+            s.mailbox_address = data[0]
+        elif command is Command.MAILBOX_DATA:
+            return self._mailbox_data(data)
+        elif command is Command.LUT_VALIDATE:
+            s.validation = self._validation_bits()
+            s.validated = not s.validation & dp.VALIDATION_ERRORS
+            self._busy_reads_left = self.faults.validation_busy_reads
+        else:
+            return False
+        return True
+
+    def _mailbox_data(self, data: bytes) -> bool:
+        s = self.state
+        if s.mailbox == dp.Mailbox.PATTERN_LUT:
+            if len(data) != 3:
+                return False
+            s.pattern_lut[s.mailbox_address] = dp.PatternEntry.unpack(data)
+            s.mailbox_address = (s.mailbox_address + 1) % dp.MAX_LUT_ENTRIES
+        elif s.mailbox == dp.Mailbox.IMAGE_INDEX:
+            for k, index in enumerate(data):
+                s.image_lut[s.mailbox_address + k] = index
+        else:
+            return False  # mailbox closed
+        s.validated = False
+        return True
+
+    def _start_stop(self, action: int) -> bool:
+        s = self.state
+        if action == dp.SequenceAction.START:
+            if s.standby or s.display_mode != 1 or not s.validated:
+                s.hardware_status |= 0x40  # sequencer abort
+                return False
+            s.sequencer = "running"
+        elif action == dp.SequenceAction.PAUSE:
+            if s.sequencer != "running":
+                return False
+            s.sequencer = "paused"
+        elif action == dp.SequenceAction.STOP:
+            s.sequencer = "stopped"
+        else:
+            return False
+        return True
+
+    def _validation_bits(self) -> int:
+        """The controller's checks of the programmed sequence (DLPU010, validate command)."""
+        s = self.state
+        bits = 0
+        entries = [s.pattern_lut.get(k) for k in range(s.lut_control.lut_entries)]
+        if any(e is None for e in entries):
+            return int(dp.Validation.PATTERN_NUMBER_INVALID)
+        for e in entries:
+            limit = dp.PATTERNS_PER_IMAGE.get(e.bit_depth, 0)
+            if not 0 <= e.pattern_number < limit:
+                bits |= dp.Validation.PATTERN_NUMBER_INVALID
+        depths = [e.bit_depth for e in entries if e.bit_depth in dp.MIN_EXPOSURE_US]
+        minimum = max((dp.MIN_EXPOSURE_US[d] for d in depths), default=0)
+        if s.exposure_us > s.frame_period_us or s.exposure_us < minimum:
+            bits |= dp.Validation.EXPOSURE_OR_PERIOD_INVALID
+        elif 0 < s.frame_period_us - s.exposure_us < dp.MIN_DARK_TIME_US:
+            bits |= dp.Validation.PERIOD_EXPOSURE_DIFFERENCE_WARNING
+        if any(e.insert_black and e.trigger_out_prev for e in entries):
+            bits |= dp.Validation.TRIGGER_OUT1_WARNING
+        return int(bits)

@@ -24,6 +24,13 @@ from mock_devices.dlp_usb import VirtualHidBackend
 Exchange = tuple[bytes, "bytes | None"]
 
 
+def _show(data: bytes) -> str:
+    """Lines as text; HID reports as hex without their zero padding."""
+    if data.endswith(b"\n"):
+        return repr(data)
+    return data.rstrip(b"\x00").hex(" ") or "(zeros)"
+
+
 class ExchangeScript:
     """The expected exchanges and what actually happened."""
 
@@ -35,11 +42,11 @@ class ExchangeScript:
     def respond(self, sent: bytes) -> bytes | None:
         with self.lock:
             if not self._pending:
-                self.errors.append(f"unexpected {sent!r}: no exchange left")
+                self.errors.append(f"unexpected {_show(sent)}: no exchange left")
                 return None
             expected, reply = self._pending.pop(0)
             if sent != expected:
-                self.errors.append(f"sent {sent!r}, expected {expected!r}")
+                self.errors.append(f"sent {_show(sent)}, expected {_show(expected)}")
                 self._pending.clear()
                 return None
             return reply
@@ -49,7 +56,7 @@ class ExchangeScript:
             problems = list(self.errors)
             if self._pending:
                 problems.append(f"{len(self._pending)} exchange(s) left over, next: "
-                                f"{self._pending[0][0]!r}")
+                                f"{_show(self._pending[0][0])}")
         assert not problems, "; ".join(problems)
 
 
@@ -81,6 +88,10 @@ def expected_serial_protocol(exchanges: Sequence[Exchange]) -> Iterator[str]:
     thread.start()
     try:
         yield os.ttyname(slave)
+    except Exception as exc:
+        if script.errors:  # the driver failed because the exchange went off script: say how
+            raise AssertionError("; ".join(script.errors)) from exc
+        raise
     finally:
         stop.set()
         thread.join(timeout=2.0)
@@ -97,7 +108,10 @@ class ScriptedHidBackend(VirtualHidBackend):
         self.script = script
 
     def _on_out_report(self, report: bytes) -> bytes | None:
-        return self.script.respond(report)
+        reply = self.script.respond(report)
+        if self.script.errors:
+            raise AssertionError("; ".join(self.script.errors))
+        return reply
 
 
 @contextlib.contextmanager
