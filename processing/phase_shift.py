@@ -20,6 +20,7 @@ from functools import lru_cache
 import numpy as np
 
 from processing import _validate
+from processing._blockwise import blockwise
 
 TWO_PI = 2.0 * np.pi
 
@@ -82,37 +83,36 @@ def shift_weights(steps: int, shifts: np.ndarray | None = None) -> np.ndarray:
     return weights
 
 
-# Pixels per block of the matrix product: a block of frames, cast to float32, stays in the CPU
-# cache, which makes the cast-and-multiply several times faster than one product over the image.
-_BLOCK = 16384
+def _kernel_dtype(stack: np.ndarray) -> type:
+    """float64 for float64 stacks; float32 (exact for 8/16-bit images) for everything else."""
+    return np.float64 if stack.dtype == np.float64 else np.float32
 
 
-def _coefficients(stack: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """(R, H*W) = weights (R, N) @ frames; float32 for integer or float32 input, else float64."""
-    n = stack.shape[0]
-    flat = stack.reshape(n, -1)
-    dtype = np.float64 if flat.dtype == np.float64 else np.float32
-    w = np.ascontiguousarray(weights, dtype=dtype)
-    pixels = flat.shape[1]
-    out = np.empty((w.shape[0], pixels), dtype=dtype)
-    for start in range(0, pixels, _BLOCK):  # blocks of pixels, not a loop over pixels
-        stop = min(start + _BLOCK, pixels)
-        np.matmul(w, flat[:, start:stop].astype(dtype, copy=False), out=out[:, start:stop])
-    return out
-
-
-def _wrapped(sin_part: np.ndarray, cos_part: np.ndarray) -> np.ndarray:
-    """atan2 folded into [-pi, pi) as float64 (float32 atan2 can return just above pi)."""
-    phase = np.arctan2(sin_part, cos_part).astype(np.float64)
+def _folded(phase: np.ndarray) -> np.ndarray:
+    """atan2 output as float64 in [-pi, pi) (float32 atan2 can return just above pi)."""
+    phase = phase.astype(np.float64, copy=False)
     phase[phase >= np.pi] -= TWO_PI
     return phase
 
 
-def _magnitude(cos_part: np.ndarray, sin_part: np.ndarray) -> np.ndarray:
-    """sqrt(c^2 + s^2) as float64 (np.hypot is several times slower and not needed here)."""
-    squared = cos_part * cos_part
-    squared += sin_part * sin_part
-    return np.sqrt(squared, out=squared).astype(np.float64)
+def _demodulate(stack: np.ndarray, weights: np.ndarray, full: bool) -> tuple[np.ndarray, ...]:
+    """(phase, background, modulation) or (phase,) as flat float64 arrays, block by block."""
+    n = stack.shape[0]
+    dtype = _kernel_dtype(stack)
+    w = np.ascontiguousarray(weights if full else weights[1:], dtype=dtype)
+
+    def kernel(frames: np.ndarray) -> tuple[np.ndarray, ...]:
+        coeffs = w @ frames.astype(dtype, copy=False)
+        cos_part, sin_part = coeffs[-2], coeffs[-1]
+        phase = _folded(np.arctan2(sin_part, cos_part))
+        if not full:
+            return (phase,)
+        squared = cos_part * cos_part
+        squared += sin_part * sin_part
+        return phase, coeffs[0], np.sqrt(squared, out=squared)
+
+    dtypes = (np.float64,) * (3 if full else 1)
+    return blockwise(kernel, [stack.reshape(n, -1)], dtypes)
 
 
 def _check_stack(stack: np.ndarray) -> np.ndarray:
@@ -140,13 +140,10 @@ def phase_shift(stack: np.ndarray, shifts: np.ndarray | None = None) -> PhaseShi
     """
     arr = _check_stack(stack)
     n, height, width = arr.shape
-    coeffs = _coefficients(arr, shift_weights(n, shifts))
-    background, cos_part, sin_part = coeffs
-    phase = _wrapped(sin_part, cos_part)
-    modulation = _magnitude(cos_part, sin_part)
+    phase, background, modulation = _demodulate(arr, shift_weights(n, shifts), full=True)
     return PhaseShiftResult(
         phase=phase.reshape(height, width),
-        background=background.astype(np.float64).reshape(height, width),
+        background=background.reshape(height, width),
         modulation=modulation.reshape(height, width),
     )
 
@@ -167,9 +164,8 @@ def wrapped_phase(stack: np.ndarray, shifts: np.ndarray | None = None) -> np.nda
     """
     arr = _check_stack(stack)
     n, height, width = arr.shape
-    weights = shift_weights(n, shifts)
-    coeffs = _coefficients(arr, weights[1:])
-    return _wrapped(coeffs[1], coeffs[0]).reshape(height, width)
+    (phase,) = _demodulate(arr, shift_weights(n, shifts), full=False)
+    return phase.reshape(height, width)
 
 
 def shadow_mask(
@@ -189,8 +185,9 @@ def shadow_mask(
         (shadows lit only by ambient light have a background but almost no modulation).
     min_modulation : float, optional
         Absolute threshold on B in intensity units. Default (automatic): ``min_ratio`` times the
-        99th percentile of B over the image, a robust estimate of the modulation of a well-lit
-        surface that ignores a few saturated or hot pixels.
+        99th percentile of B over the image (estimated on a regular subsample of about 65k
+        pixels), a robust estimate of the modulation of a well-lit surface that ignores a few
+        saturated or hot pixels.
     min_ratio : float
         Fraction in (0, 1] used by the automatic threshold and the data-modulation test.
 
@@ -202,20 +199,38 @@ def shadow_mask(
     ratio = _validate.finite_float(min_ratio, "min_ratio", minimum=0.0, strict=True)
     if ratio > 1.0:
         raise ValueError(f"min_ratio: expected a fraction in (0, 1], found {min_ratio!r}")
-    finite = np.isfinite(b)
     if min_modulation is None:
-        if not finite.any():
-            raise ValueError("modulation: no finite value to derive a threshold from")
-        threshold = ratio * float(np.percentile(b[finite], 99.0))
+        threshold = ratio * _robust_high(b)
     else:
         threshold = _validate.finite_float(min_modulation, "min_modulation", minimum=0.0)
-    with np.errstate(invalid="ignore"):
-        valid = finite & (b >= threshold) & (b > 0)
-        if background is not None:
-            a = _validate.image(background, "background").astype(np.float64, copy=False)
-            _validate.same_shape(a, b.shape, "background")
-            valid &= np.isfinite(a) & (a > 0) & (b >= ratio * a)
-    return valid
+    threshold = max(threshold, np.finfo(np.float64).tiny)  # B = 0 is never valid
+    inputs = [b.reshape(-1)]
+    if background is not None:
+        a = _validate.image(background, "background").astype(np.float64, copy=False)
+        _validate.same_shape(a, b.shape, "background")
+        inputs.append(a.reshape(-1))
+
+    def kernel(mod: np.ndarray, back: np.ndarray | None = None) -> tuple[np.ndarray]:
+        valid = mod >= threshold  # NaN compares False
+        if back is not None:
+            valid &= back > 0
+            valid &= mod >= ratio * back
+        return (valid,)
+
+    (valid,) = blockwise(kernel, inputs, (np.bool_,))
+    return valid.reshape(b.shape)
+
+
+def _robust_high(modulation: np.ndarray, samples: int = 1 << 16) -> float:
+    """99th percentile of the finite modulation, from a regular subsample of ~``samples`` pixels."""
+    flat = modulation.reshape(-1)
+    sub = flat[:: max(1, flat.size // samples)]
+    sub = sub[np.isfinite(sub)]
+    if sub.size == 0:
+        sub = flat[np.isfinite(flat)]
+        if sub.size == 0:
+            raise ValueError("modulation: no finite value to derive a threshold from")
+    return float(np.percentile(sub, 99.0))
 
 
 def quality_map(modulation: np.ndarray, background: np.ndarray) -> np.ndarray:

@@ -25,13 +25,14 @@ Methods
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
 
 from processing import _validate
+from processing._blockwise import blockwise
 
 TWO_PI = 2.0 * np.pi
 
@@ -57,51 +58,68 @@ class UnwrapResult:
 
 
 # --------------------------------------------------------------------------- shared helpers
+#
+# Kernels work on flat blocks of pixels (processing._blockwise) and in turns (phase / 2 pi), so
+# that normalising, rounding and look-ups are a handful of cheap vectorised operations.
+
+_BELOW_ONE = np.nextafter(1.0, 0.0)
 
 
-def _normalised(phi: np.ndarray) -> np.ndarray:
-    """phi taken into [0, 2 pi) (a new array; NaN stays NaN). Arithmetic, no np.mod (slow)."""
-    turns = phi * (1.0 / TWO_PI)
-    np.floor(turns, out=turns)
-    turns *= -TWO_PI
-    turns += phi
-    with np.errstate(invalid="ignore"):
-        top = turns >= TWO_PI  # -tiny + 2 pi rounds to 2 pi
-    if top.any():
-        turns[top] = 0.0
+def _fraction(turns: np.ndarray) -> np.ndarray:
+    """``turns`` taken into [0, 1) in place (NaN stays NaN); no np.mod, which is slow."""
+    turns -= np.floor(turns)
+    np.minimum(turns, _BELOW_ONE, out=turns)  # -tiny - floor(-tiny) rounds to 1.0
     return turns
 
 
-def _finite(*maps: np.ndarray) -> np.ndarray:
-    ok = np.isfinite(maps[0])
-    for m in maps[1:]:
-        ok &= np.isfinite(m)
-    return ok
+def _turns(phi: np.ndarray) -> np.ndarray:
+    """Phase in radians as normalised turns phi / 2 pi in [0, 1) (a new array)."""
+    return _fraction(phi * (1.0 / TWO_PI))
 
 
-def _result(phi_norm: np.ndarray, orders: np.ndarray, valid: np.ndarray, finite: np.ndarray) -> UnwrapResult:
-    """Absolute phase phi + 2 pi k, NaN where an input was NaN; orders 0 there."""
-    phase = orders * TWO_PI
-    phase += phi_norm
+def _finish(turns: np.ndarray, orders: np.ndarray, valid: np.ndarray, finite: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(phase = 2 pi (k + turns), orders, valid) of a block; NaN, order 0 and invalid where not finite."""
+    phase = orders + turns
+    phase *= TWO_PI
     if not finite.all():
         bad = ~finite
         phase[bad] = np.nan
         orders[bad] = 0
         valid &= finite
-    return UnwrapResult(phase=phase, orders=orders, valid=valid)
+    return phase, orders, valid
 
 
-def _check_frequencies_coprime(frequencies: Sequence[int], name: str) -> None:
-    if math.gcd(*frequencies) != 1:
-        raise ValueError(f"{name}: {list(frequencies)} share the common divisor {math.gcd(*frequencies)}; expected none > 1")
+def _integers(rounded: np.ndarray, finite: np.ndarray) -> np.ndarray:
+    """Rounded float orders as int64, 0 where not finite (casting NaN is undefined)."""
+    if not finite.all():
+        rounded = np.where(finite, rounded, 0.0)
+    return rounded.astype(np.int64)
+
+
+def _run(kernel: Callable[..., tuple[np.ndarray, ...]], maps: Sequence[np.ndarray]) -> UnwrapResult:
+    """Apply an elementwise unwrapping kernel block by block over same-shape (H, W) maps."""
+    shape = maps[0].shape
+    phase, orders, valid = blockwise(kernel, [m.reshape(-1) for m in maps], (np.float64, np.int64, np.bool_))
+    return UnwrapResult(phase=phase.reshape(shape), orders=orders.reshape(shape), valid=valid.reshape(shape))
 
 
 # --------------------------------------------------------------------------- number-theoretic (Ding)
 
 
 @dataclass(frozen=True)
-class _PairTable:
-    """Look-up table m -> (ka, kb) for coprime (fa, fb), m = fa kb - fb ka, indexed by m + offset."""
+class PairTable:
+    """Look-up table of Ding's method for a coprime pair (fa, fb), indexed by m + offset.
+
+    Attributes
+    ----------
+    offset : int
+        fa: m = round(fb ta - fa tb) of normalised turns ta, tb lies in [-fa, fb].
+    ka, kb : (fa + fb + 1,) int64
+        Orders with fa kb - fb ka = m (mod fa fb), 0 <= ka < fa, 0 <= kb < fb.
+    reachable : (fa + fb + 1,) bool
+        The fa + fb - 1 values of m that some projector position produces; any other value
+        reveals a phase error beyond the tolerance.
+    """
 
     offset: int
     ka: np.ndarray
@@ -110,53 +128,41 @@ class _PairTable:
 
 
 @lru_cache(maxsize=128)
-def pair_table(fa: int, fb: int) -> _PairTable:
-    """Precomputed look-up table of Ding's method for coprime frequencies ``fa``, ``fb``.
+def pair_table(fa: int, fb: int) -> PairTable:
+    """Precomputed look-up table m -> (ka, kb) of coprime frequencies ``fa``, ``fb`` (cached, read-only).
 
-    Every integer m in [-fb (fa - 1), fa (fb - 1)] gets the pair (ka, kb), 0 <= ka < fa,
-    0 <= kb < fb, with fa kb - fb ka = m (Chinese remainder theorem); ``reachable`` marks the
-    fa + fb - 1 values that some projector position actually produces (the others reveal a
-    phase error beyond the tolerance). Cached per (fa, fb); the arrays are read-only.
+    With normalised wrapped phases (in turns) ta, tb, ``m = round(fb ta - fa tb) = fa kb - fb ka``.
     """
     if math.gcd(fa, fb) != 1:
         raise ValueError(f"frequencies: {fa} and {fb} are not coprime (gcd {math.gcd(fa, fb)})")
-    offset = fb * (fa - 1)
-    m = np.arange(-offset, fa * (fb - 1) + 1, dtype=np.int64)
-    # fa kb = m (mod fb), -fb ka = m (mod fa)
+    m = np.arange(-fa, fb + 1, dtype=np.int64)
     kb = (m * pow(fa, -1, fb)) % fb if fb > 1 else np.zeros_like(m)
     ka = (-m * pow(fb, -1, fa)) % fa if fa > 1 else np.zeros_like(m)
-    # Positions u in [0, 1) between consecutive period boundaries j/fa, j/fb (integer units of
-    # 1 / (2 fa fb)) give the orders that really occur.
+    # Positions u in [0, 1) between consecutive period boundaries j / fa, j / fb (in integer
+    # units of 1 / (2 fa fb)) give the order pairs that really occur.
     bounds = np.union1d(np.arange(fa) * 2 * fb, np.arange(fb) * 2 * fa)
     mids = (bounds + np.append(bounds[1:], 2 * fa * fb)) // 2
     seen = fa * (mids // (2 * fa)) - fb * (mids // (2 * fb))
     reachable = np.zeros(m.shape, dtype=bool)
-    reachable[seen + offset] = True
+    reachable[seen + fa] = True
     for arr in (ka, kb, reachable):
         arr.flags.writeable = False
-    return _PairTable(offset=offset, ka=ka, kb=kb, reachable=reachable)
+    return PairTable(offset=fa, ka=ka, kb=kb, reachable=reachable)
 
 
-def _pair_lookup(pa: np.ndarray, pb: np.ndarray, fa: int, fb: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Orders (ka, kb) and reachability of normalised phases pa, pb of coprime fa, fb.
+def _pair_lookup(ta: np.ndarray, tb: np.ndarray, table: PairTable, fa: int, fb: int) -> tuple[np.ndarray, ...]:
+    """(kb, reachable, finite) for normalised turns ta, tb of the coprime pair (fa, fb).
 
-    NaN phases give index 0 and must be masked by the caller.
+    kb is the order of fb; pixels where ta or tb is NaN read entry 0 and come back not finite.
     """
-    table = pair_table(fa, fb)
-    index = pb * float(-fa)
-    index += fb * pa
-    index *= 1.0 / TWO_PI
+    index = ta * float(fb)
+    index -= tb * float(fa)
     np.rint(index, out=index)
+    finite = np.isfinite(index)
     index += table.offset
-    size = table.ka.shape[0]
-    with np.errstate(invalid="ignore"):
-        inside = (index >= 0) & (index < size)
-    if not inside.all():
-        index[~inside] = 0
+    np.fmax(index, 0.0, out=index)  # NaN -> 0; finite values are in range by construction
     idx = index.astype(np.intp)
-    reachable = table.reachable[idx]
-    reachable &= inside
-    return table.ka[idx], table.kb[idx], reachable
+    return table.kb[idx], table.reachable[idx], finite
 
 
 def unwrap_two_frequency(phi1: np.ndarray, phi2: np.ndarray, f1: int, f2: int) -> UnwrapResult:
@@ -189,9 +195,14 @@ def unwrap_two_frequency(phi1: np.ndarray, phi2: np.ndarray, f1: int, f2: int) -
         raise ValueError(f"f1, f2: {f1} and {f2} are not coprime (gcd {math.gcd(f1, f2)})")
     p1 = _validate.phase_map(phi1, "phi1")
     p2 = _validate.phase_map(phi2, "phi2", p1.shape)
-    n1, n2 = _normalised(p1), _normalised(p2)
-    _, k2, valid = _pair_lookup(n1, n2, f1, f2)
-    return _result(n2, k2.astype(np.int64), valid, _finite(p1, p2))
+    table = pair_table(f1, f2)
+
+    def kernel(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, ...]:
+        tb = _turns(b)
+        k2, valid, finite = _pair_lookup(_turns(a), tb, table, f1, f2)
+        return _finish(tb, k2, valid, finite)
+
+    return _run(kernel, [p1, p2])
 
 
 @lru_cache(maxsize=64)
@@ -236,48 +247,58 @@ def unwrap_three_frequency(phis: Sequence[np.ndarray], frequencies: Sequence[int
     if f3 != max(freqs):
         raise ValueError(f"frequencies: expected the largest last, found {freqs}")
     maps = _validate.phase_maps(phis, "phis", 3)
-    norm = [_normalised(p) for p in maps]
-    residues = []
-    valid = np.ones(norm[0].shape, dtype=bool)
-    for fi, pi_ in ((f1, norm[0]), (f2, norm[1])):
+    pairs = []
+    for fi in (f1, f2):
         t = math.gcd(fi, f3)
-        # m = ((f3 / t) phi_i - (fi / t) phi3) / 2 pi = (fi / t) k3 - (f3 / t) k_i: the table of
-        # the coprime reduced pair, whose reachable values are the same, gives k3 mod f3 / t.
-        _, k3_mod, reachable = _pair_lookup(pi_, norm[2], fi // t, f3 // t)
-        residues.append((k3_mod, f3 // t))
+        # ((f3 / t) phi_i - (fi / t) phi3) / 2 pi = (fi / t) k3 - (f3 / t) k_i: the table of the
+        # coprime reduced pair, whose reachable values are the same, gives k3 mod f3 / t.
+        pairs.append((pair_table(fi // t, f3 // t), fi // t, f3 // t))
+    crt = _crt_table(pairs[0][2], pairs[1][2], f3)
+
+    def kernel(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, ...]:
+        tc = _turns(c)
+        r1, valid, finite = _pair_lookup(_turns(a), tc, *pairs[0])
+        r2, reachable, finite_b = _pair_lookup(_turns(b), tc, *pairs[1])
         valid &= reachable
-    (r1, n1), (r2, n2) = residues
-    k3 = _crt_table(n1, n2, f3)[r1, r2]
-    valid &= k3 >= 0
-    np.maximum(k3, 0, out=k3)
-    return _result(norm[2], k3, valid, _finite(*maps))
+        finite &= finite_b
+        k3 = crt[r1, r2]
+        valid &= k3 >= 0
+        np.maximum(k3, 0, out=k3)
+        return _finish(tc, k3, valid, finite)
+
+    return _run(kernel, maps)
+
+
+def _check_frequencies_coprime(frequencies: Sequence[int], name: str) -> None:
+    if math.gcd(*frequencies) != 1:
+        raise ValueError(f"{name}: {list(frequencies)} share the common divisor {math.gcd(*frequencies)}; expected none > 1")
 
 
 # --------------------------------------------------------------------------- hierarchical / heterodyne
 
 
 def _hierarchy(
-    coarse: np.ndarray, f_coarse: int, steps: Sequence[tuple[np.ndarray, int]], max_residual: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Climb from an absolute phase at ``f_coarse`` through (normalised phase, frequency) steps.
+    coarse: np.ndarray, steps: Sequence[tuple[np.ndarray, int]], max_residual: float
+) -> tuple[np.ndarray, ...]:
+    """Climb from absolute turns at the unit frequency through (normalised turns, frequency) steps.
 
-    Returns the last step's normalised phase, its orders and where every residual
-    |scaled estimate - result| stayed within ``max_residual``.
+    Each step: ``k = round(Phi_prev f / f_prev - phi)``, all in turns. Returns the last step's
+    (phase, orders, valid) with valid where every residual |estimate - result| stayed within
+    ``max_residual`` radians.
     """
-    absolute = coarse
+    absolute, f_prev = coarse, 1
+    limit = max_residual / TWO_PI
     valid = np.ones(coarse.shape, dtype=bool)
-    for phi, f in steps:
-        estimate = absolute * (f / f_coarse)
-        turns = estimate - phi
-        turns *= 1.0 / TWO_PI
-        np.rint(turns, out=turns)
-        absolute = turns * TWO_PI
-        absolute += phi
-        with np.errstate(invalid="ignore"):
-            valid &= np.abs(estimate - absolute) <= max_residual
-        f_coarse = f
-    orders = np.nan_to_num(turns, nan=0.0).astype(np.int64)
-    return phi, orders, valid
+    for turns, f in steps:
+        estimate = absolute * (f / f_prev)
+        rounded = estimate - turns
+        np.rint(rounded, out=rounded)
+        absolute = rounded + turns
+        estimate -= absolute
+        valid &= np.abs(estimate, out=estimate) <= limit  # NaN compares False
+        f_prev = f
+    finite = np.isfinite(absolute)  # every input takes part in the chain
+    return _finish(turns, _integers(rounded, finite), valid, finite)
 
 
 def unwrap_hierarchical(
@@ -294,7 +315,7 @@ def unwrap_hierarchical(
         next one is unwrapped with ``k = round((Phi_prev f / f_prev - phi) / 2 pi)``.
     max_residual : float
         A pixel is valid while every step's |Phi_prev f / f_prev - Phi| <= max_residual
-        (an order error needs pi; the default flags pixels with half that margin left).
+        radians (an order error needs pi; the default flags pixels with half that margin left).
 
     Returns
     -------
@@ -309,14 +330,12 @@ def unwrap_hierarchical(
         raise ValueError(f"frequencies: expected increasing values, found {freqs}")
     tolerance = _validate.finite_float(max_residual, "max_residual", minimum=0.0, strict=True)
     maps = _validate.phase_maps(phis, "phis", len(freqs))
-    norm = [_normalised(p) for p in maps]
-    phi, orders, valid = _hierarchy(norm[0], 1, list(zip(norm[1:], freqs[1:])), tolerance)
-    return _result(phi, orders, valid, _finite(*maps))
 
+    def kernel(*raw: np.ndarray) -> tuple[np.ndarray, ...]:
+        turns = [_turns(r) for r in raw]
+        return _hierarchy(turns[0], list(zip(turns[1:], freqs[1:])), tolerance)
 
-def _beat(phi_high: np.ndarray, phi_low: np.ndarray) -> np.ndarray:
-    """Beat (difference) phase in [0, 2 pi) of two normalised phases."""
-    return _normalised(phi_high - phi_low)
+    return _run(kernel, maps)
 
 
 def unwrap_heterodyne(
@@ -355,27 +374,27 @@ def unwrap_heterodyne(
     maps = _validate.phase_maps(phis, "phis", len(freqs))
     order = sorted(range(len(freqs)), key=lambda i: -freqs[i])
     fs = [freqs[i] for i in order]
-    norm = [_normalised(maps[i]) for i in order]
-    if len(fs) == 2:
-        if fs[0] - fs[1] != 1:
-            raise ValueError(f"frequencies: the beat {fs[0]} - {fs[1]} must be 1 to cover the projector once")
-        steps = [(norm[0], fs[0])]
-        unit = _beat(norm[0], norm[1])
-    else:
-        fa, fb, fc = fs
-        beat_ab, beat_bc = fa - fb, fb - fc
-        if abs(beat_ab - beat_bc) != 1:
-            raise ValueError(
-                f"frequencies: the beats {fa} - {fb} = {beat_ab} and {fb} - {fc} = {beat_bc} must differ by 1"
-            )
-        phase_ab, phase_bc = _beat(norm[0], norm[1]), _beat(norm[1], norm[2])
+    if len(fs) == 2 and fs[0] - fs[1] != 1:
+        raise ValueError(f"frequencies: the beat {fs[0]} - {fs[1]} must be 1 to cover the projector once")
+    if len(fs) == 3 and abs((fs[0] - fs[1]) - (fs[1] - fs[2])) != 1:
+        raise ValueError(
+            f"frequencies: the beats {fs[0]} - {fs[1]} = {fs[0] - fs[1]} and {fs[1]} - {fs[2]} = {fs[1] - fs[2]} "
+            "must differ by 1"
+        )
+
+    def kernel(*raw: np.ndarray) -> tuple[np.ndarray, ...]:
+        turns = [_turns(raw[i]) for i in order]
+        if len(fs) == 2:
+            return _hierarchy(_fraction(turns[0] - turns[1]), [(turns[0], fs[0])], tolerance)
+        beat_ab, beat_bc = fs[0] - fs[1], fs[1] - fs[2]
+        turns_ab, turns_bc = _fraction(turns[0] - turns[1]), _fraction(turns[1] - turns[2])
         if beat_ab > beat_bc:
-            unit, wide = _beat(phase_ab, phase_bc), (phase_ab, beat_ab)
+            unit, wide = _fraction(turns_ab - turns_bc), (turns_ab, beat_ab)
         else:
-            unit, wide = _beat(phase_bc, phase_ab), (phase_bc, beat_bc)
-        steps = [wide, (norm[0], fa)] if wide[1] > 1 else [(norm[0], fa)]
-    phi, orders, valid = _hierarchy(unit, 1, steps, tolerance)
-    return _result(phi, orders, valid, _finite(*maps))
+            unit, wide = _fraction(turns_bc - turns_ab), (turns_bc, beat_bc)
+        return _hierarchy(unit, [wide, (turns[0], fs[0])], tolerance)
+
+    return _run(kernel, maps)
 
 
 # --------------------------------------------------------------------------- Gray code
@@ -474,19 +493,22 @@ def unwrap_gray(
     if not np.issubdtype(s.dtype, np.integer):
         raise ValueError(f"stripes: expected an integer array, found dtype {s.dtype}")
     _validate.same_shape(s, p.shape, "stripes")
-    s = s.astype(np.int64)
     count = 1 << bits
-    valid = (s >= 0) & (s < count)
-    norm = _normalised(p)
-    if complementary:
-        if count != 2 * frequency:
-            raise ValueError(
-                f"bits: complementary Gray code needs 2**bits == 2 * frequency, found bits = {bits}, frequency = {frequency}"
-            )
-        k1 = s >> 1
-        k2 = (s + 1) >> 1
-        with np.errstate(invalid="ignore"):
-            orders = np.where(norm < np.pi / 2, k2, np.where(norm < 1.5 * np.pi, k1, k2 - 1))
-    else:
-        orders = (s * frequency) // count
-    return _result(norm, orders, valid, np.isfinite(p))
+    if complementary and count != 2 * frequency:
+        raise ValueError(
+            f"bits: complementary Gray code needs 2**bits == 2 * frequency, found bits = {bits}, frequency = {frequency}"
+        )
+
+    def kernel(raw: np.ndarray, stripe: np.ndarray) -> tuple[np.ndarray, ...]:
+        stripe = stripe.astype(np.int64)
+        valid = (stripe >= 0) & (stripe < count)
+        turns = _turns(raw)
+        if complementary:
+            k1 = stripe >> 1
+            k2 = (stripe + 1) >> 1
+            orders = np.where(turns < 0.25, k2, np.where(turns < 0.75, k1, k2 - 1))
+        else:
+            orders = (stripe * frequency) // count
+        return _finish(turns, orders, valid, np.isfinite(turns))
+
+    return _run(kernel, [p, s])
