@@ -17,12 +17,12 @@ import cv2
 import numpy as np
 import pytest
 
-from calibration.store import read_calibration, write_calibration
+from calibration.store import read_calibration
 from mock_devices import synth
-from rig.capture import read_capture, write_capture
+from rig.capture import write_capture
 from rig.cli import main
 from rig.outputs import read_ply_points
-from rig.pipeline import ProcessOptions, choose_unwrap, group_patterns, process
+from rig.pipeline import choose_unwrap, group_patterns, process
 from rig.simulation import demo_geometry, simulate_scan, write_simulated_scan
 
 REPO = Path(__file__).resolve().parents[1]
