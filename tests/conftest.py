@@ -8,6 +8,8 @@ import pytest
 
 from rig.simulation import SimulatedPaths, SimulatedScan, demo_geometry, simulate_scan, write_simulated_scan
 
+pytest_plugins = ["conftest_devices"]  # the --device option for hardware contract tests
+
 # Small enough to keep every test quick, large enough for three-frequency unwrapping to be meaningful.
 SMALL_WIDTH, SMALL_HEIGHT = 160, 120
 
