@@ -287,8 +287,10 @@ class Capture:
         return self.path / PurePosixPath(str(frame["file"]).replace("\\", "/"))
 
     def read_frame_bytes(self, frame: Mapping[str, Any]) -> bytes:
-        """The file of one frame, its sha256 checked."""
+        """The file of one frame, its sha256 checked (and, through links, still inside the capture)."""
         path = self.frame_path(frame)
+        if path.is_symlink() and not path.resolve().is_relative_to(self.path.resolve()):
+            raise CaptureError(f"{path}: links outside the capture directory (to {path.resolve()})")
         try:
             data = path.read_bytes()
         except FileNotFoundError:

@@ -523,7 +523,7 @@ def load_calibration_for(capture: Capture, calibration_path: str | Path) -> tupl
         raise CalibrationError(f"{calibration.where}: reference: missing (the reference-plane capture)")
     if not (ref_path / "capture.json").is_file():
         raise CalibrationError(f"{calibration.where}: reference: no capture at {ref_path}")
-    reference = read_capture(ref_path)
+    reference = read_capture(ref_path, verify=False)  # verified when loaded
     try:
         check_same_patterns(reference, capture)
     except CaptureError as exc:
@@ -545,7 +545,7 @@ def process(
     options = ProcessOptions() if options is None else options
     _check_options(options)
     started = time.perf_counter()
-    capture = read_capture(capture_path, salvage=salvage)
+    capture = read_capture(capture_path, salvage=salvage, verify=False)  # the load stage checks every frame
     calibration, reference_capture = (None, None)
     if calibration_path is not None:
         calibration, reference_capture = load_calibration_for(capture, calibration_path)

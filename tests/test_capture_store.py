@@ -225,3 +225,13 @@ def test_windows_style_absolute_path_is_refused(capture_dir: Path) -> None:
     _rewrite(capture_dir, manifest)
     with pytest.raises(CaptureError, match="expected a path relative"):
         read_capture(capture_dir)
+
+
+def test_frame_linking_outside_the_capture_is_refused(capture_dir: Path, tmp_path: Path) -> None:
+    outside = tmp_path / "elsewhere.png"
+    frame = capture_dir / _manifest(capture_dir)["frames"][0]["file"]
+    outside.write_bytes(frame.read_bytes())
+    frame.unlink()
+    frame.symlink_to(outside)
+    with pytest.raises(CaptureError, match=r"000.png: links outside the capture directory"):
+        read_capture(capture_dir)

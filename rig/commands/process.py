@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 from rig.pipeline import CORRECTIONS, DENOISERS, UNWRAP_METHODS, ProcessOptions, process, total_steps, write_outputs
+from rig.errors import ConfigError
 from rig.progress import Progress
 
 
@@ -33,6 +34,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--min-modulation", type=float, default=0.2, metavar="RATIO",
         help="valid pixels need fringe modulation B >= RATIO x background and x the image's 99th percentile of B (default 0.2)",
     )
+    parser.add_argument(
+        "--param", action="append", default=[], metavar="KEY=VALUE",
+        help="a parameter of the chosen denoising / correction method (repeatable; VALUE read as JSON if it parses)",
+    )
     parser.add_argument("--axis", choices=("x", "y"), help="fringe axis to use when a capture has both (default: the first)")
     parser.add_argument("--salvage", action="store_true", help="accept an incomplete capture (interrupted scan)")
     parser.add_argument("--json", action="store_true", help="print a summary as JSON on stdout")
@@ -47,11 +52,25 @@ def summary(report: dict, out: Path) -> dict:
             "files": report["files"], "timings_s": report["timings_s"]}
 
 
+def parse_params(items: list[str]) -> dict[str, object]:
+    """``KEY=VALUE`` strings to a dict; values are JSON when they parse (numbers, true/false), else strings."""
+    params: dict[str, object] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise ConfigError(f"--param: expected KEY=VALUE, found {item!r}")
+        try:
+            params[key.strip()] = json.loads(value)
+        except json.JSONDecodeError:
+            params[key.strip()] = value
+    return params
+
+
 def run(args: argparse.Namespace) -> int:
     out = args.output or args.capture.with_name(args.capture.name + "-processed")
     options = ProcessOptions(
         unwrap=args.unwrap, denoise=args.denoise, correction=args.correction,
-        min_modulation_ratio=args.min_modulation, axis=args.axis,
+        min_modulation_ratio=args.min_modulation, axis=args.axis, params=parse_params(args.param),
     )
     steps = total_steps(args.calibration is not None) + 1
     with Progress(f"process {args.capture}", total=steps, quiet=args.quiet) as progress:
