@@ -67,8 +67,10 @@ def build_projector(config: RigConfig) -> Projector:
         return WindowProjector(size, monitor=config.projector.monitor)
     if backend == "dlp4500":
         from drivers.dlp import LightCrafter4500
+        from drivers.projector_window import WindowProjector
+        from rig.dlp_projector import DlpVideoProjector
 
-        return LightCrafter4500()
+        return DlpVideoProjector(WindowProjector(size, monitor=config.projector.monitor), LightCrafter4500())
     raise ConfigError(f"[projector] backend: unknown {backend!r}")
 
 

@@ -26,7 +26,6 @@ else:  # pragma: no cover - exercised on Python 3.10 only
 PROJECTOR_BACKENDS = ("gl-offscreen", "window", "dlp4500")
 CAMERA_BACKENDS = ("simulated", "opencv", "pylon")
 TRIGGER_BACKENDS = ("software", "serial", "simulated-serial")
-IMAGE_FORMATS = ("png", "tiff")
 PATTERN_AXES = ("x", "y")
 
 # The simulated rig's field of view on the reference plane, kept whatever the camera resolution.
@@ -75,8 +74,6 @@ class ScanConfig:
     show_timeout_s: float = 1.0
     fetch_timeout_s: float = 2.0
     retries: int = 2
-    image_format: str = "png"
-    png_compression: int = 1
 
     def patterns(self) -> list[dict[str, Any]]:
         """The capture-format pattern entries of one scan, in projection order.
@@ -257,8 +254,6 @@ _SCHEMA: dict[str, dict[str, Callable[[Any], Any]]] = {
         "show_timeout_s": _positive_number,
         "fetch_timeout_s": _positive_number,
         "retries": _int_range(0, 20),
-        "image_format": _choice(IMAGE_FORMATS),
-        "png_compression": _int_range(0, 9),
     },
     "simulation": {
         "scene": _string,
@@ -346,12 +341,11 @@ def _check_consistency(config: RigConfig, where: str) -> None:
             raise ConfigError(
                 f"{where}: [simulation] scene: expected one of {', '.join(SCENES)}, found {config.simulation.scene!r}"
             )
-        if config.camera.pixel_format != "Mono8":
+        if config.projector.backend != "gl-offscreen":
             raise ConfigError(
-                f"{where}: [camera] pixel_format: expected 'Mono8' for the simulated camera, found {config.camera.pixel_format!r}"
+                f"{where}: [projector] backend: expected 'gl-offscreen' with the simulated camera "
+                f"(it looks at the off-screen rendering), found {config.projector.backend!r}"
             )
-    if config.scan.image_format == "tiff" and config.scan.png_compression != ScanConfig.png_compression:
-        raise ConfigError(f"{where}: [scan] png_compression: expected no png_compression with image_format 'tiff'")
 
 
 def load_config(path: str | Path | None) -> RigConfig:

@@ -139,6 +139,7 @@ class SimulatedRig:
         }
 
     def __enter__(self) -> "SimulatedRig":
+        from drivers.camera import PixelFormat
         from mock_devices.camera import SimulatedCamera
 
         try:
@@ -154,6 +155,7 @@ class SimulatedRig:
                 rng=np.random.default_rng([self.config.simulation.seed, zlib.crc32(self.scene.encode())]),
             )
             self._stack.enter_context(self.camera)
+            self.camera.pixel_format = PixelFormat[self.config.camera.pixel_format.upper()]
             if self.config.trigger.backend != "software":
                 self._open_trigger_box()
         except BaseException:

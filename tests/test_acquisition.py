@@ -8,6 +8,7 @@ is stored under: a frame stored under the wrong pattern is off by a multiple of 
 
 from __future__ import annotations
 
+import errno
 import json
 from pathlib import Path
 
@@ -15,13 +16,17 @@ import numpy as np
 import pytest
 
 from drivers.camera import TriggerSource
+from drivers.dlp import LightCrafter4500
+from drivers.dlp_protocol import Command
 from drivers.errors import DeviceError, DeviceNotFoundError, DeviceTimeoutError
 from mock_devices.camera import CameraFaults
+from mock_devices.dlp_usb import Dlpc350Faults, FakeDlpc350Backend
 from mock_devices.trigger_box import TriggerFaults
 from processing.patterns import sinusoid_shift
 from rig.acquisition import AcquisitionError, AcquisitionSettings, run_scan
 from rig.assembly import trigger_path
 from rig.capture import INCOMPLETE_MARK, read_capture
+from rig.dlp_projector import DlpVideoProjector
 from rig.config import CameraConfig, ProjectorConfig, RigConfig, ScanConfig, SimulationConfig, TriggerConfig
 from rig.simulated_rig import SimulatedRig
 
@@ -242,3 +247,46 @@ def test_scan_refuses_to_overwrite_a_capture(tmp_path):
     scan(tmp_path, "software")
     with pytest.raises(Exception, match="already exists"):
         scan(tmp_path, "software")
+
+
+# --------------------------------------------------------------------------- DLP over USB
+
+
+def dlp_scan(tmp_path: Path, faults: Dlpc350Faults | None = None):
+    """Scan through a LightCrafter 4500 in video mode (fake DLPC350 on pyusb) whose HDMI input is the GL display."""
+    config = small_config("simulated-serial")
+    backend = FakeDlpc350Backend(faults)
+    with SimulatedRig(config, scene="reference") as rig:
+        dlp = DlpVideoProjector(rig.projector, LightCrafter4500(backend=backend, timeout_s=0.05))
+        with dlp:
+            path = trigger_path(rig.camera, rig.trigger_box)
+            result = run_scan(tmp_path / "capture", config.scan.patterns(), dlp, rig.camera, path, settings(config))
+            assert (backend.state.display_mode, backend.state.standby) == (0, False)  # video mode, awake
+        return result, rig, backend
+
+
+def test_scan_through_a_dlp_in_video_mode(tmp_path):
+    result, rig, backend = dlp_scan(tmp_path)
+    assert_every_frame_matches_its_pattern(result.path, rig)
+    status_reads = [r for r in backend.requests if r.command == Command.MAIN_STATUS]
+    assert len(status_reads) == STEPS  # health checked once per pattern
+
+
+def test_dlp_unplugged_mid_scan_stops_at_once(tmp_path):
+    # wake + video mode = 2 reports, then 3 status reads per pattern: the reply to the first
+    # report past the limit is lost, during pattern 4's check
+    with pytest.raises(DeviceNotFoundError, match="disconnected"):
+        dlp_scan(tmp_path, Dlpc350Faults(disappear_after=2 + 3 * 4 + 1))
+    assert_left_incomplete(tmp_path, frames_written=4)
+
+
+def test_dlp_usb_timeouts_are_retried_then_fail_cleanly(tmp_path):
+    with pytest.raises(AcquisitionError, match=r"pattern 0 of 8 .* no answer within"):
+        dlp_scan(tmp_path, Dlpc350Faults(timeout_on={Command.MAIN_STATUS}))
+    assert_left_incomplete(tmp_path, frames_written=0)
+
+
+def test_dlp_usb_transfer_error_stops_the_scan(tmp_path):
+    with pytest.raises(DeviceError, match="USB error during read HARDWARE_STATUS"):
+        dlp_scan(tmp_path, Dlpc350Faults(usb_error_on={Command.HARDWARE_STATUS: errno.EPIPE}))
+    assert_left_incomplete(tmp_path, frames_written=0)
