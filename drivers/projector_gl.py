@@ -146,7 +146,9 @@ class GLProjector(Projector):
     """Renders patterns off-screen at the projector resolution with a headless EGL context.
 
     What it renders is what a display of the given bit depth would show; :meth:`last_frame` hands
-    it back (the simulated camera looks at it).
+    it back (the simulated camera looks at it). The frame is read back when shown, in the thread
+    that owns the OpenGL context, so :meth:`last_frame` never touches OpenGL and may be called
+    from any thread (the simulated camera exposes from the trigger box's thread).
 
     Parameters
     ----------
@@ -200,15 +202,14 @@ class GLProjector(Projector):
         self._frame = None
         self._fbo.use()
         self._renderer.render(pattern)
+        self._frame = read_framebuffer(self._fbo, self.size, self.bits)  # waits for the GPU
 
     def _wait(self, timeout_s: float) -> bool:
-        self._ctx.finish()  # off-screen: on screen means the GPU finished drawing
-        return True
+        return self._frame is not None  # off-screen: shown once drawn and read back
 
     def _last_frame(self) -> np.ndarray | None:
-        if self._frame is None:
-            self._frame = read_framebuffer(self._fbo, self.size, self.bits)
-        return self._frame.copy()
+        frame = self._frame
+        return None if frame is None else frame.copy()
 
     def _close(self) -> None:
         self._release()

@@ -80,3 +80,17 @@ def test_missing_backend_is_device_not_found() -> None:
 def test_bad_bit_depth_is_refused() -> None:
     with pytest.raises(ValueError, match="bits"):
         GLProjector(SIZE, bits=16)
+
+
+def test_last_frame_is_readable_from_another_thread() -> None:
+    """The simulated camera reads frames from the trigger box's thread, where no GL context is current."""
+    import threading
+
+    pattern = {"kind": "sinusoid", "axis": "x", "frequency": 3, "steps": 4, "step": 1}
+    seen: list[np.ndarray | None] = []
+    with GLProjector(SIZE) as projector:
+        projector.show(pattern)
+        reader = threading.Thread(target=lambda: seen.append(projector.last_frame()))
+        reader.start()
+        reader.join()
+    np.testing.assert_allclose(seen[0], expected_drive(pattern, SIZE), atol=1 / 255)
