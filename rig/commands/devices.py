@@ -16,8 +16,6 @@ from dataclasses import dataclass
 log = logging.getLogger(__name__)
 
 OPENCV_PROBE_INDICES = 4  # probed where the platform does not list video devices
-TI_VENDOR_ID = 0x0451
-LIGHTCRAFTER_4500_PRODUCT_ID = 0x6401
 
 
 @dataclass
@@ -92,18 +90,21 @@ def probe_serial() -> Probe:
     return Probe("Serial ports (trigger box)", found, "" if found else "none")
 
 
-def probe_dlp() -> Probe:
-    """TI DLP LightCrafter 4500 controllers on USB."""
+def probe_dlp(backend: object | None = None) -> Probe:
+    """TI DLP LightCrafter 4500 controllers on USB (``backend``: a pyusb backend, default libusb)."""
     import usb.core
 
+    from drivers.dlp_protocol import USB_PRODUCT_ID, USB_VENDOR_ID
+
     try:
-        devices = list(usb.core.find(find_all=True, idVendor=TI_VENDOR_ID, idProduct=LIGHTCRAFTER_4500_PRODUCT_ID))
+        devices = list(usb.core.find(find_all=True, idVendor=USB_VENDOR_ID, idProduct=USB_PRODUCT_ID, backend=backend))
     except usb.core.NoBackendError:
         return Probe("DLP projectors (USB)", [], "no libusb backend installed (install libusb-1.0)")
     except usb.core.USBError as exc:
         return Probe("DLP projectors (USB)", [], f"USB enumeration failed: {exc}")
     found = [
-        Found("dlp4500", f"bus {d.bus} address {d.address}", "DLP LightCrafter 4500 (0451:6401)") for d in devices
+        Found("dlp4500", f"bus {d.bus} address {d.address}", f"DLP LightCrafter 4500 ({USB_VENDOR_ID:04x}:{USB_PRODUCT_ID:04x})")
+        for d in devices
     ]
     return Probe("DLP projectors (USB)", found, "" if found else "none")
 

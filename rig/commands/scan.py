@@ -92,6 +92,7 @@ def run(args: argparse.Namespace) -> int:
         + (f" ({result.attempts - len(result.frames)} retried, {result.discarded} discarded)" if result.attempts > len(result.frames) or result.discarded else ""),
         file=sys.stderr,
     )
+    print(result.path)  # stdout: the capture directory, for scripts (the default name has the time in it)
     if args.process:
         from rig.pipeline import process_capture
 
