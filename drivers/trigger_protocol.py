@@ -56,7 +56,11 @@ class ExposureSource(enum.Enum):
 
 
 class LineError(ValueError):
-    """A line could not be parsed (bad checksum, bad syntax, not ASCII, too long)."""
+    """A line could not be parsed (bad syntax, not ASCII, too long)."""
+
+
+class ChecksumError(LineError):
+    """A line's ``*HH`` checksum is missing, malformed or wrong."""
 
 
 def checksum(body: bytes) -> int:
@@ -74,22 +78,21 @@ def frame(body: str) -> bytes:
 
 
 def unframe(line: bytes) -> str:
-    """The body of one received line after checking terminator, length, ASCII and checksum."""
+    """The body of one received line after checking terminator, length, checksum and ASCII."""
     if not line.endswith(b"\n"):
         raise LineError(f"line not terminated: {line[:40]!r}")
     if len(line) > MAX_LINE_BYTES:
         raise LineError(f"line of {len(line)} bytes exceeds {MAX_LINE_BYTES}")
-    stripped = line.rstrip(b"\r\n")
+    stripped = line[:-1].removesuffix(b"\r")
     body, star, cs = stripped.rpartition(b"*")
-    if not star or len(cs) != 2:
-        raise LineError(f"no checksum in {stripped[:40]!r}")
+    if not star or len(cs) != 2 or any(c not in b"0123456789ABCDEF" for c in cs):
+        raise ChecksumError(f"no checksum in {stripped[:40]!r}")
+    if checksum(body) != int(cs, 16):
+        raise ChecksumError(f"checksum mismatch in {stripped[:40]!r}")
     try:
-        expected = int(cs.decode("ascii"), 16)
         text = body.decode("ascii")
-    except (UnicodeDecodeError, ValueError) as exc:
-        raise LineError(f"line is not ASCII with a hex checksum: {stripped[:40]!r}") from exc
-    if checksum(body) != expected:
-        raise LineError(f"checksum mismatch in {stripped[:40]!r}")
+    except UnicodeDecodeError as exc:
+        raise LineError(f"line is not ASCII: {stripped[:40]!r}") from exc
     if not text.isprintable():
         raise LineError(f"control characters in {stripped[:40]!r}")
     return text

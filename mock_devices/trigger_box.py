@@ -30,7 +30,7 @@ log = logging.getLogger(__name__)
 
 FIRMWARE_ID = "fpp-trigger-box/1.0.0"
 DEFAULT_PULSE_WIDTH_US = 100
-DEFAULT_WATCHDOG_S = 3.0
+DEFAULT_WATCHDOG_S = 10.0
 
 
 @dataclass(frozen=True)
@@ -106,7 +106,8 @@ class _BoxFirmware:
         try:
             request = tp.parse_request(line)
         except tp.LineError as exc:
-            code = tp.ErrorCode.BAD_CHECKSUM if "checksum" in str(exc) else tp.ErrorCode.SYNTAX
+            checksum_bad = isinstance(exc, tp.ChecksumError)
+            code = tp.ErrorCode.BAD_CHECKSUM if checksum_bad else tp.ErrorCode.SYNTAX
             out.reply = tp.encode_error(0, code, "request rejected")
             return out
         out.command, out.request_id = request.command, request.id
@@ -278,6 +279,7 @@ class FakeTriggerBox:
         self._garbled: dict[int, int] = {}
         self._dropped: dict[int, int] = {}
         self._gone = False
+        self._write(tp.encode_event("READY", protocol_version))  # the boot banner
         self._thread = threading.Thread(target=self._serve, name="fake-trigger-box", daemon=True)
         self._thread.start()
 
@@ -330,9 +332,9 @@ class FakeTriggerBox:
                 while b"\n" in buffer and not self._gone:
                     line, buffer = buffer.split(b"\n", 1)
                     self._handle(line + b"\n")
-                if len(buffer) > tp.MAX_LINE_BYTES:
+                if len(buffer) > tp.MAX_LINE_BYTES:  # a line too long: answered as SYNTAX
+                    self._handle(buffer + b"\n")
                     buffer = b""
-                    self._handle(b"\x00overflow\n")
 
     def _handle(self, line: bytes) -> None:
         self.received.append(line)

@@ -288,6 +288,18 @@ def test_on_pulse_failure_surfaces_when_fake_closes():
     assert isinstance(info.value.__cause__, ValueError)
 
 
+def test_unreadable_requests_are_answered_with_id_zero():
+    with FakeTriggerBox() as fake, SerialTriggerBox(fake.port) as box:
+        port = box._port
+        port.write(b"7 PING*00\n")  # wrong checksum
+        port.write(b"x" * 120 + b"\n")  # too long
+        port.write(b"0 PING*" + b"%02X" % tp.checksum(b"0 PING") + b"\n")  # id 0 is reserved
+        time.sleep(0.05)
+    assert fake.sent[-3:] == [b"0 ERR 6 BAD_CHECKSUM request rejected*09\n",
+                              b"0 ERR 7 SYNTAX request rejected*14\n",
+                              b"0 ERR 7 SYNTAX request rejected*14\n"]
+
+
 def test_fake_box_answers_the_wire_format_exactly():
     with FakeTriggerBox() as fake, SerialTriggerBox(fake.port) as box:
         box.arm(1)
@@ -295,5 +307,5 @@ def test_fake_box_answers_the_wire_format_exactly():
         box.reset()
     assert fake.received == [b"1 HELLO 1*42\n", b"2 ARM 1 SW*79\n", b"3 FIRE*0B\n",
                              b"4 RESET*41\n"]
-    assert fake.sent == [b"1 OK 1 fpp-trigger-box/1.0.0*51\n", b"2 OK 1 SW*23\n",
+    assert fake.sent == [b"! READY 1*5B\n", b"1 OK 1 fpp-trigger-box/1.0.0*51\n", b"2 OK 1 SW*23\n",
                          b"! PULSE 0*4E\n", b"3 OK 0*07\n", b"! DONE 1*10\n", b"4 OK*10\n"]
