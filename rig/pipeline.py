@@ -284,6 +284,9 @@ def stage_wrapped(state: SceneState, options: ProcessOptions) -> None:
         out.valid &= shadow_mask(amplitude, background, min_ratio=options.min_modulation_ratio)
     state.wrapped = out
     state.info["valid_after_modulation"] = float(out.valid.mean())
+    other = sorted({g.frequency for g in state.groups.sinusoids if g.axis != state.axis})
+    if other:
+        state.notes.append(f"sinusoids along the other axis (frequencies {other}) not used; choose them with --axis")
 
 
 def _ftp_frame(image: np.ndarray, axis: str, shift: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
