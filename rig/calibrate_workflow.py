@@ -1,0 +1,443 @@
+"""`rig calibrate`: acquire the calibration captures of a rig, then compute calibration.json from them.
+
+A calibration directory is also the record of the session that made it::
+
+    CAL/calibration.json          the result (capture-format.md), rewritten by --from
+    CAL/session.json              what was asked: heights, target, model (for --from)
+    CAL/reference/                the flat reference plane, with the scan's pattern set
+    CAL/planes/plane-at-25mm/     the plane at each known height (scene label carries the height)
+    CAL/board/plane/              a chessboard lying on the reference plane (pixel size on the plane)
+    CAL/board/view-01/ ...        more board views, tilted (camera intrinsics and distortion)
+    CAL/gamma/                    flat levels 0 .. 1 (projector gamma); CAL/gamma-lut.npy its LUT
+
+Acquisition (:func:`acquire`) asks an :class:`Operator` to set up each step: on the simulated rig
+nothing needs doing (the virtual scene follows the capture's label); on a real rig a console
+prompt ("move the plane to 25 mm, press Enter") or a motorised-stage command does it.
+Computation (:func:`compute`) only reads captures, so ``rig calibrate --from CAL`` reproduces a
+calibration from stored data and tries another model on the same captures.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import re
+import shlex
+import subprocess
+import sys
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from calibration.camera import BoardSpec, CameraCalibration, calibrate_camera, detect_board
+from calibration.errors import CalibrationError
+from calibration.gamma import fit_gamma, inverse_lut, mean_response, ramp_patterns
+from calibration.geometry import MIN_HEIGHTS, fit_f0, fit_l0_d0, pixel_mm_from_corners
+from calibration.polynomial import POLYNOMIAL, fit_polynomial
+from calibration.reference import REFERENCE_DIR, check_same_patterns
+from calibration.store import REFERENCE_PLANE, Calibration, write_calibration
+from rig.capture import read_capture, write_capture
+from rig.config import RigConfig
+from rig.errors import CaptureError, ConfigError
+
+log = logging.getLogger(__name__)
+
+SESSION_FILE = "session.json"
+PLANES_DIR = "planes"
+BOARD_DIR = "board"
+GAMMA_DIR = "gamma"
+GAMMA_LUT_FILE = "gamma-lut.npy"
+PLANE_LABEL = re.compile(r"plane-at-(-?\d+(?:\.\d+)?)mm")
+MODELS = (REFERENCE_PLANE, POLYNOMIAL)
+
+
+def plane_label(height_mm: float) -> str:
+    """Scene label of the plane at ``height_mm`` (``plane-at-25mm``; the simulated rig shows it)."""
+    return f"plane-at-{height_mm:g}mm"
+
+
+@dataclass
+class CalibrationPlan:
+    """What a calibration session measures and which model it fits."""
+
+    heights_mm: tuple[float, ...] = (25.0, 50.0, 100.0, 150.0)
+    model: str = REFERENCE_PLANE
+    degree: int = 3
+    board: BoardSpec | None = field(default_factory=BoardSpec)
+    board_views: int = 6          # tilted views for intrinsics (0: pixel size only)
+    pixel_mm: float | None = None  # given instead of measured with the board
+    gamma_levels: int = 0          # flat levels of the gamma ramp (0: skip)
+    flatness_tolerance_mm: float = 1.0
+
+    def check(self) -> None:
+        if self.model not in MODELS:
+            raise ConfigError(f"--model: expected one of {', '.join(MODELS)}, found {self.model!r}")
+        heights = [float(h) for h in self.heights_mm]
+        if len(heights) < MIN_HEIGHTS:
+            raise ConfigError(f"--heights: need at least {MIN_HEIGHTS} plane heights, found {len(heights)}")
+        if len(set(heights)) != len(heights) or any(h == 0 for h in heights):
+            raise ConfigError(f"--heights: expected distinct non-zero heights, found {heights}")
+        if self.board is None and self.pixel_mm is None:
+            raise ConfigError("calibration needs the pixel size on the plane: a board (--board) or --pixel-mm")
+        if self.gamma_levels and self.gamma_levels < 5:
+            raise ConfigError(f"--gamma: expected at least 5 levels, found {self.gamma_levels}")
+
+    def to_json(self) -> dict[str, Any]:
+        data = asdict(self)
+        data["heights_mm"] = list(self.heights_mm)
+        data["board"] = None if self.board is None else {**asdict(self.board), "squares": list(self.board.squares)}
+        return data
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any], where: str) -> "CalibrationPlan":
+        try:
+            board = data.get("board")
+            plan = cls(
+                heights_mm=tuple(float(h) for h in data.get("heights_mm", ())),
+                model=str(data.get("model", REFERENCE_PLANE)),
+                degree=int(data.get("degree", 3)),
+                board=None if board is None else BoardSpec(**{**board, "squares": tuple(board["squares"])}),
+                board_views=int(data.get("board_views", 0)),
+                pixel_mm=data.get("pixel_mm"),
+                gamma_levels=int(data.get("gamma_levels", 0)),
+                flatness_tolerance_mm=float(data.get("flatness_tolerance_mm", 1.0)),
+            )
+        except (TypeError, ValueError, KeyError) as exc:
+            raise CalibrationError(f"{where}: not a calibration session: {exc}") from None
+        return plan
+
+
+# --------------------------------------------------------------------------- the operator
+
+
+class Operator:
+    """Sets up each step of the session. The base does nothing (the simulated rig needs nothing)."""
+
+    def plane(self, height_mm: float) -> None:
+        """Put the flat plane at ``height_mm`` above the reference plane (0: the reference itself)."""
+
+    def board(self, index: int, on_plane: bool) -> None:
+        """Put the calibration board in view: flat on the reference plane, or tilted (view ``index``)."""
+
+    def clear(self) -> None:
+        """Clear the view down to the bare reference plane (for the gamma ramp)."""
+
+
+class ConsoleOperator(Operator):
+    """Asks a person at the console, and waits for Enter (``ask`` replaceable for tests)."""
+
+    def __init__(self, ask: Callable[[str], str] = input, stage: "StageCommand | None" = None) -> None:
+        self.ask = ask
+        self.stage = stage
+
+    def plane(self, height_mm: float) -> None:
+        if self.stage is not None:
+            self.stage.move(height_mm)
+            return
+        where = "the reference position (0 mm)" if height_mm == 0 else f"{height_mm:g} mm"
+        self.ask(f"move the plane to {where}, press Enter ")
+
+    def board(self, index: int, on_plane: bool) -> None:
+        if on_plane:
+            self.ask("lay the board flat on the reference plane, press Enter ")
+        else:
+            self.ask(f"hold the board tilted in view (view {index}), press Enter ")
+
+    def clear(self) -> None:
+        self.ask("clear the view down to the bare reference plane, press Enter ")
+
+
+class StageCommand:
+    """A motorised stage moved by a shell command template, e.g. ``"stage-move --mm {height_mm}"``."""
+
+    def __init__(self, template: str, timeout_s: float = 120.0) -> None:
+        if "{height_mm" not in template:
+            raise ConfigError(f"--stage-command: expected a '{{height_mm}}' placeholder, found {template!r}")
+        self.template = template
+        self.timeout_s = timeout_s
+
+    def move(self, height_mm: float) -> None:
+        command = shlex.split(self.template.format(height_mm=height_mm))
+        log.info("stage: %s", " ".join(command))
+        try:
+            done = subprocess.run(command, capture_output=True, text=True, timeout=self.timeout_s, check=False)
+        except FileNotFoundError:
+            raise ConfigError(f"--stage-command: {command[0]}: not found") from None
+        except subprocess.TimeoutExpired:
+            raise ConfigError(f"--stage-command: moving to {height_mm:g} mm took over {self.timeout_s:g} s") from None
+        if done.returncode != 0:
+            tail = (done.stderr or done.stdout).strip().splitlines()[-1:] or [""]
+            raise ConfigError(f"--stage-command: moving to {height_mm:g} mm failed (exit {done.returncode}): {tail[0]}")
+
+
+# --------------------------------------------------------------------------- acquisition
+
+
+def _scan(config: RigConfig, output: Path, patterns: Sequence[dict[str, Any]], scene: str, show_progress: bool) -> Path:
+    """One capture of ``patterns`` with the rig of ``config`` looking at ``scene``."""
+    from rig.acquisition import AcquisitionSettings, run_scan
+    from rig.assembly import open_rig
+    from rig.progress import Progress
+
+    settings = AcquisitionSettings(
+        show_timeout_s=config.scan.show_timeout_s, fetch_timeout_s=config.scan.fetch_timeout_s, retries=config.scan.retries
+    )
+    with open_rig(config, scene=scene) as devices, Progress(f"calibrate {output}", total=len(patterns), quiet=not show_progress) as progress:
+        extra: dict[str, Any] = {"rig_config": str(config.source) if config.source else "built-in simulated rig"}
+        if devices.simulation is not None:
+            extra["simulation"] = devices.simulation.description()
+        run_scan(output, patterns, devices.projector, devices.camera, devices.trigger, settings, scene=scene,
+                 extra=extra, exposure_us=config.camera.exposure_us, gain=config.camera.gain, progress=progress)
+    return output
+
+
+def _simulated_board_view(config: RigConfig, board: BoardSpec, index: int) -> np.ndarray:
+    """What the simulated rig's camera sees of a board: flat on the plane (index 0) or tilted.
+
+    The simulated camera looks straight down at l0 with ``pixel_mm`` per pixel on the plane: a
+    pinhole of focal l0 / pixel_mm without distortion.
+    """
+    from mock_devices import board_synth
+    from rig.simulated_rig import geometry_from_config
+
+    g = geometry_from_config(config)
+    camera = board_synth.PinholeCamera.simple(g.camera_width, g.camera_height, g.l0_mm / g.pixel_mm)
+    size = (board.squares[0] * board.square_mm, board.squares[1] * board.square_mm)
+    rng = np.random.default_rng([config.simulation.seed, index])
+    if index == 0:
+        rvec, tvec = board_synth.board_pose(0.0, 0.0, 2.0, (0.0, 0.0, g.l0_mm), size)
+    else:
+        tilt = rng.uniform(-30, 30, size=2)
+        shift = rng.uniform(-0.15, 0.15, size=2) * g.camera_width * g.pixel_mm
+        rvec, tvec = board_synth.board_pose(tilt[0], tilt[1], rng.uniform(-10, 10), (shift[0], shift[1] * 0.7, g.l0_mm * rng.uniform(0.8, 0.95)), size)
+    px_per_mm = max(2.0, 2.0 / g.pixel_mm)
+    if board.kind == "chessboard":
+        texture = board_synth.chessboard_texture(board.squares, board.square_mm, px_per_mm, board.square_mm)
+    else:
+        texture = board_synth.charuco_texture(board.squares, board.square_mm, board.marker_mm or 0.7 * board.square_mm,
+                                              px_per_mm, board.square_mm, board.dictionary)
+    return board_synth.render_board_view(texture, px_per_mm, board.square_mm, camera, rvec, tvec, rng=rng)
+
+
+def _board_capture(config: RigConfig, output: Path, board: BoardSpec, index: int, show_progress: bool) -> None:
+    scene = "board-on-reference" if index == 0 else f"board-view-{index}"
+    white = [{"kind": "flat", "level": 1.0}]
+    if config.simulated:
+        image = _simulated_board_view(config, board, index)
+        write_capture(output, [image], white, {"width": config.projector.width, "height": config.projector.height},
+                      scene=scene, bit_depth=8, extra={"simulation": "board view rendered by mock_devices.board_synth"})
+    else:
+        _scan(config, output, white, scene, show_progress)
+
+
+def acquire(
+    config: RigConfig,
+    plan: CalibrationPlan,
+    directory: Path,
+    operator: Operator | None = None,
+    show_progress: bool = True,
+    overwrite: bool = False,
+) -> None:
+    """Capture everything ``plan`` needs into ``directory`` (see the module docstring)."""
+    plan.check()
+    operator = operator or Operator()
+    if directory.exists() and any(directory.iterdir()):
+        if not overwrite:
+            raise CaptureError(f"{directory}: already exists and is not empty; choose another -o or pass --overwrite")
+        import shutil
+
+        shutil.rmtree(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    (directory / SESSION_FILE).write_text(json.dumps(plan.to_json(), indent=2) + "\n", encoding="utf-8")
+    patterns = config.scan.patterns()
+    if plan.gamma_levels:
+        operator.clear()
+        _scan(config, directory / GAMMA_DIR, ramp_patterns(plan.gamma_levels), "plane-at-0mm" if config.simulated else "gamma-ramp", show_progress)
+        lut = _gamma_from(directory / GAMMA_DIR)[1]
+        np.save(directory / GAMMA_LUT_FILE, lut)
+        # every later capture goes through the new LUT, as the scans will
+        config = replace(config, projector=replace(config.projector, gamma_lut=directory / GAMMA_LUT_FILE))
+    if plan.board is not None:
+        (directory / BOARD_DIR).mkdir(exist_ok=True)
+        for index in range(plan.board_views + 1):
+            operator.board(index, on_plane=index == 0)
+            name = "plane" if index == 0 else f"view-{index:02d}"
+            _board_capture(config, directory / BOARD_DIR / name, plan.board, index, show_progress)
+    operator.plane(0.0)
+    _scan(config, directory / REFERENCE_DIR, patterns, "reference", show_progress)
+    (directory / PLANES_DIR).mkdir(exist_ok=True)
+    for height in plan.heights_mm:
+        operator.plane(float(height))
+        label = plane_label(float(height))
+        _scan(config, directory / PLANES_DIR / label, patterns, label, show_progress)
+
+
+# --------------------------------------------------------------------------- computation
+
+
+@dataclass
+class CalibrationReport:
+    """What :func:`compute` found, for the summary printed by the command."""
+
+    calibration: Calibration
+    lines: list[str]
+
+
+def _absolute_phase(path: Path) -> tuple[np.ndarray, float, str, list[dict[str, Any]]]:
+    """Absolute phase (NaN invalid), its frequency, fringe axis and the patterns of a capture."""
+    from rig.pipeline import process
+
+    result = process(path)
+    unwrapped = result.object.unwrapped
+    if unwrapped is None or not unwrapped.absolute:
+        raise CalibrationError(
+            f"{path}: the pattern set gives no absolute phase (spatial unwrapping); calibrate with temporal unwrapping patterns"
+        )
+    phase = np.where(result.mask, unwrapped.phase, np.nan)
+    return phase, float(unwrapped.frequency), result.object.axis, result.object.capture.patterns
+
+
+def _gamma_from(directory: Path) -> tuple[Any, np.ndarray]:
+    capture = read_capture(directory)
+    levels = [float(p.get("level", np.nan)) for p in capture.patterns]
+    if any(p.get("kind") != "flat" for p in capture.patterns):
+        raise CalibrationError(f"{capture.manifest_path}: the gamma ramp must hold flat patterns only")
+    frames = capture.load_frames()
+    fit = fit_gamma(levels, mean_response(frames), saturation=float((1 << capture.bit_depth) - 1))
+    return fit, inverse_lut(fit)
+
+
+def _board_images(directory: Path) -> tuple[np.ndarray | None, list[np.ndarray]]:
+    """The board lying on the plane (or None) and the tilted views, from ``directory``'s captures."""
+    on_plane = None
+    views = []
+    if not directory.is_dir():
+        return None, []
+    for sub in sorted(p for p in directory.iterdir() if (p / "capture.json").is_file()):
+        image = read_capture(sub).load_frame(0)
+        if sub.name == "plane":
+            on_plane = image
+        else:
+            views.append(image)
+    return on_plane, views
+
+
+def _planes(directory: Path) -> list[tuple[float, Path]]:
+    planes_dir = directory / PLANES_DIR
+    if not planes_dir.is_dir():
+        raise CalibrationError(f"{planes_dir}: missing (the plane captures at known heights)")
+    found = []
+    for sub in sorted(p for p in planes_dir.iterdir() if p.is_dir()):
+        scene = read_capture(sub, verify=False).scene
+        match = PLANE_LABEL.fullmatch(scene)
+        if not match:
+            raise CalibrationError(f"{sub / 'capture.json'}: scene {scene!r}: expected 'plane-at-<height>mm'")
+        found.append((float(match.group(1)), sub))
+    return sorted(found)
+
+
+def compute(
+    directory: Path,
+    plan: CalibrationPlan | None = None,
+    output: Path | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> CalibrationReport:
+    """Compute and write ``calibration.json`` from the captures in ``directory``.
+
+    ``plan`` overrides the stored session (e.g. another model); ``output`` writes the calibration
+    elsewhere (the reference path then points back into ``directory``).
+    """
+    import os
+
+    note = progress or (lambda message: print(message, file=sys.stderr))
+    session = directory / SESSION_FILE
+    if plan is None:
+        if not session.is_file():
+            raise CalibrationError(f"{session}: missing (not a calibration session directory?)")
+        try:
+            plan = CalibrationPlan.from_json(json.loads(session.read_text(encoding="utf-8")), str(session))
+        except json.JSONDecodeError as exc:
+            raise CalibrationError(f"{session}: not valid JSON: {exc.msg}") from None
+    output = output or directory
+    lines: list[str] = []
+    extra: dict[str, Any] = {}
+
+    # projector gamma
+    if (directory / GAMMA_DIR).is_dir():
+        gamma, lut = _gamma_from(directory / GAMMA_DIR)
+        output.mkdir(parents=True, exist_ok=True)
+        np.save(output / GAMMA_LUT_FILE, lut)
+        extra["gamma"] = gamma.as_fields()
+        extra["gamma_lut"] = GAMMA_LUT_FILE
+        lines.append(f"projector gamma {gamma.gamma:.3f} (fit RMS {gamma.residual_rms:.2f} DN); LUT {GAMMA_LUT_FILE}")
+
+    # camera and pixel size
+    camera: CameraCalibration | None = None
+    pixel_mm = plan.pixel_mm
+    if plan.board is not None:
+        on_plane, views = _board_images(directory / BOARD_DIR)
+        if pixel_mm is None:
+            if on_plane is None:
+                raise CalibrationError(f"{directory / BOARD_DIR / 'plane'}: missing (the board lying on the reference plane)")
+            found = detect_board(on_plane, plan.board, name="board on the reference plane")
+            if found is None:
+                raise CalibrationError(f"{directory / BOARD_DIR / 'plane'}: the {plan.board.kind} was not found")
+            if plan.board.kind != "chessboard":
+                raise CalibrationError("pixel size: measure it with a chessboard (or give --pixel-mm)")
+            pixel_mm = pixel_mm_from_corners(found.image_points, plan.board.inner_corners, plan.board.square_mm)
+            lines.append(f"pixel size on the plane {pixel_mm:.5f} mm (from the {plan.board.kind})")
+        all_views = ([on_plane] if on_plane is not None else []) + views
+        if len(views) >= 2:
+            # k3 stays 0: a few views of a narrow-angle lens cannot tell it from k1, k2
+            camera = calibrate_camera(all_views, plan.board, flags=cv2.CALIB_FIX_K3)
+            extra.update(camera.as_fields())
+            lines.append(f"camera: {len(camera.views_used)} views, reprojection RMS {camera.rms_px:.3f} px")
+    if pixel_mm is None:
+        raise CalibrationError("pixel size: no board on the plane and no --pixel-mm")
+
+    # reference and planes
+    note("calibrate: reference plane")
+    reference, frequency, axis, patterns = _absolute_phase(directory / REFERENCE_DIR)
+    planes = _planes(directory)
+    if len(planes) < MIN_HEIGHTS:
+        raise CalibrationError(f"{directory / PLANES_DIR}: {len(planes)} plane captures, need at least {MIN_HEIGHTS} heights")
+    heights, deltas = [], []
+    for height, path in planes:
+        note(f"calibrate: plane at {height:g} mm")
+        phase, plane_frequency, _, plane_patterns = _absolute_phase(path)
+        check_same_patterns(patterns, plane_patterns, f"{directory / REFERENCE_DIR}", f"{path}")
+        heights.append(height)
+        deltas.append(phase - reference)
+    f0 = fit_f0(reference, pixel_mm)
+    lines.append(f"f0 = {f0.f0_per_mm:.6f} +- {f0.f0_std_per_mm:.2g} /mm at {frequency:g} fringes")
+
+    fit = fit_l0_d0(heights, deltas, f0.f0_per_mm, f0_std_per_mm=f0.f0_std_per_mm,
+                    flatness_tolerance_mm=plan.flatness_tolerance_mm if plan.model == REFERENCE_PLANE else None)
+    lines.append(f"l0 = {fit.l0_mm:.3f} +- {fit.l0_std_mm:.3f} mm, d0 = {fit.d0_mm:.3f} +- {fit.d0_std_mm:.3f} mm")
+    lines.append("residuals " + ", ".join(f"{h:g}: {r:+.4f}" for h, r in zip(fit.heights_mm, fit.residuals_mm)) + " mm")
+    extra.update({k: v for k, v in fit.as_fields().items() if k not in ("l0_mm", "d0_mm", "f0_per_mm")})
+    extra["uncertainty"]["f0_per_mm"] = f0.f0_std_per_mm
+    extra["fringe_axis"] = axis
+    if plan.model == POLYNOMIAL:
+        output.mkdir(parents=True, exist_ok=True)
+        poly = fit_polynomial(heights, deltas, frequency, degree=plan.degree)
+        extra.update({k: v for k, v in poly.save(output).items() if k != "model"})
+        lines.append(f"polynomial degree {plan.degree}: residual RMS {poly.residual_rms_mm:.4f} mm")
+
+    reference_rel = os.path.relpath(directory / REFERENCE_DIR, output)
+    calibration = Calibration(
+        model=plan.model,
+        l0_mm=fit.l0_mm,
+        d0_mm=fit.d0_mm,
+        f0_per_mm=f0.f0_per_mm,
+        f0_frequency=frequency,
+        pixel_mm=pixel_mm,
+        reference=Path(reference_rel).as_posix(),
+        extra=extra,
+    )
+    write_calibration(output, calibration)
+    return CalibrationReport(calibration, lines)

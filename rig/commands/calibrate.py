@@ -1,0 +1,163 @@
+"""`rig calibrate`: capture the calibration planes (and board, gamma ramp) and write calibration.json.
+
+Without ``--config`` the built-in simulated rig is calibrated unattended. With a real rig the
+operator is prompted for each step, or ``--stage-command`` moves a motorised stage. ``--from DIR``
+recomputes from the captures a previous session stored (optionally with another ``--model``);
+``--import-opencv FILE`` turns an OpenCV FileStorage projector-camera calibration into a
+``stereo`` calibration.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from calibration.camera import BoardSpec
+from calibration.errors import CalibrationError
+from rig.errors import ConfigError
+
+
+def _heights(text: str) -> tuple[float, ...]:
+    try:
+        return tuple(float(part) for part in text.split(",") if part.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated heights in mm, found {text!r}") from None
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        width, height = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, found {text!r}") from None
+    return width, height
+
+
+NO_BOARD = "none"
+
+
+def _board(text: str) -> BoardSpec | str:
+    """``chessboard:9x7:20`` or ``charuco:9x7:20:14`` (kind, squares, square mm, marker mm); ``none``."""
+    if text == NO_BOARD:
+        return NO_BOARD
+    parts = text.split(":")
+    try:
+        kind, squares, square = parts[0], _size(parts[1]), float(parts[2])
+        marker = float(parts[3]) if len(parts) > 3 else None
+    except (IndexError, ValueError, argparse.ArgumentTypeError):
+        raise argparse.ArgumentTypeError(f"expected KIND:COLSxROWS:SQUARE_MM[:MARKER_MM], found {text!r}") from None
+    try:
+        return BoardSpec(kind, squares, square, marker)
+    except CalibrationError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "calibrate",
+        help="calibrate the rig: reference plane, planes at known heights, board, gamma -> calibration.json",
+        description="Walk through a calibration session (the simulated rig runs it unattended) and fit "
+        "l0, d0, f0 (reference-plane model) or a per-pixel polynomial; or recompute from a stored "
+        "session (--from), or import an OpenCV projector-camera calibration (--import-opencv).",
+    )
+    parser.add_argument("-o", "--output", type=Path, metavar="CAL", help="calibration directory to create (default: calibration)")
+    parser.add_argument("--config", type=Path, metavar="RIG.toml", help="rig config file (default: the built-in simulated rig)")
+    parser.add_argument("--from", dest="from_dir", type=Path, metavar="DIR", help="recompute from the captures of a stored session")
+    parser.add_argument("--heights", type=_heights, default=None, metavar="MM,MM,...",
+                        help="plane heights above the reference plane (default 25,50,100,150)")
+    parser.add_argument("--model", choices=("reference-plane", "polynomial"), default=None,
+                        help="height model to fit (default reference-plane, eq. 1.15)")
+    parser.add_argument("--degree", type=int, default=None, help="polynomial degree (default 3)")
+    parser.add_argument("--board", type=_board, default=None, metavar="KIND:COLSxROWS:SQUARE_MM[:MARKER_MM]",
+                        help="calibration target (default chessboard:9x7:20 for real rigs; 'none' with --pixel-mm)")
+    parser.add_argument("--board-views", type=int, default=None, metavar="N",
+                        help="tilted board views for camera intrinsics (default 6; 0: pixel size only)")
+    parser.add_argument("--pixel-mm", type=float, default=None, help="pixel size on the plane, instead of measuring it")
+    parser.add_argument("--gamma", type=int, nargs="?", const=17, default=0, metavar="LEVELS",
+                        help="measure the projector gamma with a ramp of LEVELS flat levels (default 17) and write gamma-lut.npy")
+    parser.add_argument("--flatness-tolerance", type=float, default=None, metavar="MM",
+                        help="largest RMS height spread of a calibration plane (default 1 mm)")
+    parser.add_argument("--stage-command", metavar="CMD",
+                        help="move a motorised stage instead of prompting, e.g. 'stage-move --mm {height_mm}'")
+    parser.add_argument("--import-opencv", type=Path, metavar="FILE.yml",
+                        help="write a 'stereo' calibration from an OpenCV FileStorage file (M1 D1 M4 D4 Rlp Tlp S)")
+    parser.add_argument("--projector-size", type=_size, metavar="WxH", help="projector resolution for --import-opencv")
+    parser.add_argument("--overwrite", action="store_true", help="replace an existing calibration directory")
+    parser.add_argument("--json", action="store_true", help="print calibration.json on stdout")
+    parser.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
+    parser.set_defaults(func=run)
+
+
+def _import_opencv(args: argparse.Namespace) -> int:
+    from calibration.opencv_yaml import import_opencv_calibration
+    from calibration.store import Calibration, write_calibration
+
+    if args.projector_size is None:
+        raise ConfigError("--import-opencv needs --projector-size WxH (the FileStorage file does not record it)")
+    fields = import_opencv_calibration(args.import_opencv, args.projector_size)
+    fields.pop("model")
+    output = args.output or Path("calibration")
+    if (output / "calibration.json").exists() and not args.overwrite:
+        raise ConfigError(f"{output}: already holds a calibration; choose another -o or pass --overwrite")
+    target = write_calibration(output, Calibration(model="stereo", extra=fields))
+    print(f"{target}: stereo calibration imported from {args.import_opencv}", file=sys.stderr)
+    return 0
+
+
+def _plan(args: argparse.Namespace, base=None):
+    from rig.calibrate_workflow import CalibrationPlan
+
+    plan = base or CalibrationPlan()
+    updates = {
+        "heights_mm": args.heights, "model": args.model, "degree": args.degree, "board_views": args.board_views,
+        "pixel_mm": args.pixel_mm, "flatness_tolerance_mm": args.flatness_tolerance,
+    }
+    for key, value in updates.items():
+        if value is not None:
+            setattr(plan, key, value)
+    if args.board is not None:
+        plan.board = None if args.board == NO_BOARD else args.board
+    if args.gamma:
+        plan.gamma_levels = args.gamma
+    return plan
+
+
+def run(args: argparse.Namespace) -> int:
+    from rig.calibrate_workflow import CalibrationPlan, ConsoleOperator, Operator, StageCommand, acquire, compute
+
+    if args.import_opencv is not None:
+        return _import_opencv(args)
+    if args.from_dir is not None:
+        session = args.from_dir / "session.json"
+        base = None
+        if session.is_file():
+            try:
+                base = CalibrationPlan.from_json(json.loads(session.read_text(encoding="utf-8")), str(session))
+            except json.JSONDecodeError as exc:
+                raise CalibrationError(f"{session}: not valid JSON: {exc.msg}") from None
+        elif not (args.from_dir / "planes").is_dir():
+            raise CalibrationError(f"{args.from_dir}: not a calibration session (no session.json, no planes/)")
+        plan = _plan(args, base)
+        plan.check()
+        report = compute(args.from_dir, plan, output=args.output, progress=None if not args.quiet else (lambda _m: None))
+    else:
+        from rig.config import load_config
+
+        config = load_config(args.config)
+        plan = _plan(args)
+        output = args.output or Path("calibration")
+        if config.simulated:
+            operator: Operator = Operator()
+        else:
+            stage = StageCommand(args.stage_command) if args.stage_command else None
+            operator = ConsoleOperator(stage=stage)
+        acquire(config, plan, output, operator, show_progress=not args.quiet, overwrite=args.overwrite)
+        report = compute(output, plan, progress=None if not args.quiet else (lambda _m: None))
+    cal = report.calibration
+    for line in report.lines:
+        print(f"  {line}", file=sys.stderr)
+    print(f"{cal.where}: {cal.model} calibration written", file=sys.stderr)
+    if args.json:
+        print(json.dumps(cal.to_dict(), indent=2))
+    return 0

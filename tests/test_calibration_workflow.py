@@ -1,0 +1,171 @@
+"""`rig calibrate` on the simulated rig, then `rig scan --process`; --from; prompts; bad sessions.
+
+The simulated rig's true geometry (l0 = 1000 mm, d0 = 250 mm, f0 = 0.015625 /mm at 8 fringes,
+pixel 1.6 mm) is what the session must find, unattended, from its own captures.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from calibration.errors import CalibrationError
+from calibration.models import height_from_phase
+from calibration.store import read_calibration
+from rig.calibrate_workflow import CalibrationPlan, ConsoleOperator, StageCommand, acquire, compute
+from rig.capture import read_capture, write_capture
+from rig.cli import main
+from rig.config import load_config
+from rig.errors import ConfigError
+from rig.simulated_rig import geometry_from_config, scene_height
+
+RIG = """
+[projector]
+size = [456, 570]
+[camera]
+size = [256, 192]
+[scan]
+frequencies = [1, 8, 32]
+steps = 4
+[simulation]
+scene = "hemisphere"
+snr_db = 30
+gamma = 1.8
+"""
+BOARD = "chessboard:7x5:30"
+
+
+@pytest.fixture(scope="module")
+def session(tmp_path_factory):
+    root = tmp_path_factory.mktemp("calibrate")
+    config = root / "rig.toml"
+    config.write_text(RIG, encoding="utf-8")
+    code = main(["calibrate", "--config", str(config), "-o", str(root / "cal"), "--board", BOARD,
+                 "--board-views", "4", "--gamma", "9", "-q"])
+    assert code == 0
+    return root, config
+
+
+def test_unattended_session_recovers_the_simulated_geometry(session):
+    root, config = session
+    cal = read_calibration(root / "cal")
+    assert cal.model == "reference-plane" and cal.reference == "reference"
+    assert cal.f0_frequency == 32.0
+    assert cal.l0_mm == pytest.approx(1000.0, rel=0.005)
+    assert cal.d0_mm == pytest.approx(250.0, rel=0.005)
+    assert cal.per_mm(8.0) == pytest.approx(0.015625, rel=0.005)
+    assert cal.pixel_mm == pytest.approx(409.6 / 256, rel=0.005)
+    extra = cal.extra
+    assert extra["heights_mm"] == [25.0, 50.0, 100.0, 150.0]
+    assert max(abs(r) for r in extra["residuals_mm"]) < 0.1
+    assert set(extra["uncertainty"]) == {"l0_mm", "d0_mm", "f0_per_mm"}
+    assert extra["reprojection_rms_px"] < 0.2 and len(extra["camera_matrix"]) == 3
+    assert extra["gamma"]["gamma"] == pytest.approx(1.8, rel=0.03)
+    lut = np.load(root / "cal" / extra["gamma_lut"])
+    assert lut.shape == (256,) and lut[128] == pytest.approx(0.5 ** (1 / 1.8), abs=0.02)
+    for label in ("plane-at-25mm", "plane-at-150mm"):
+        assert read_capture(root / "cal" / "planes" / label).scene == label
+
+
+def test_scan_then_process_matches_the_virtual_scene(session):
+    root, config = session
+    # scans go through the measured LUT, as the calibration captures did
+    scan_config = root / "rig-lut.toml"
+    scan_config.write_text(RIG.replace("[camera]", f'gamma_lut = "{root / "cal" / "gamma-lut.npy"}"\n[camera]'), encoding="utf-8")
+    assert main(["scan", "--config", str(scan_config), "-o", str(root / "obj"), "--calibration", str(root / "cal"),
+                 "--process", "--process-output", str(root / "out")]) == 0
+    height = np.load(root / "out" / "height.npy")
+    rig_config = load_config(config)
+    truth = scene_height(rig_config, "object", geometry_from_config(rig_config))
+    valid = np.isfinite(height)
+    assert valid.mean() > 0.95
+    error = height[valid] - truth[valid]
+    assert float(np.sqrt(np.mean(error**2))) < 0.5
+    top = valid & (truth > truth.max() - 5)  # the hemisphere's top, ~100 mm up: no bias there either
+    assert abs(float(np.median(height[top] - truth[top]))) < 0.2
+
+
+def test_recompute_from_stored_captures_with_another_model(session, capsys):
+    root, _ = session
+    assert main(["calibrate", "--from", str(root / "cal"), "--model", "polynomial", "--degree", "3",
+                 "-o", str(root / "poly"), "--json", "-q"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    assert printed["model"] == "polynomial"
+    poly = read_calibration(root / "poly")
+    assert poly.reference == "../cal/reference" and (root / "poly" / "polynomial.npy").is_file()
+    # same captures, both models: heights of the 100 mm plane agree with it
+    reference = read_calibration(root / "cal")
+    from rig.calibrate_workflow import _absolute_phase
+
+    plane, frequency, _, _ = _absolute_phase(root / "cal" / "planes" / "plane-at-100mm")
+    ref_phase, _, _, _ = _absolute_phase(root / "cal" / "reference")
+    for cal in (reference, poly):
+        height = height_from_phase(cal, plane, ref_phase, frequency)
+        assert float(np.nanmedian(height)) == pytest.approx(100.0, abs=0.05)
+    # recomputing in place reproduces the stored calibration
+    again = compute(root / "cal")
+    assert again.calibration.l0_mm == pytest.approx(reference.l0_mm, rel=1e-9)
+
+
+def test_operator_is_prompted_for_every_step(tmp_path):
+    config = tmp_path / "rig.toml"
+    config.write_text(RIG, encoding="utf-8")
+    prompts: list[str] = []
+    plan = CalibrationPlan(heights_mm=(20.0, 40.0, 60.0), board=None, pixel_mm=1.6)
+    acquire(load_config(config), plan, tmp_path / "cal", ConsoleOperator(ask=prompts.append), show_progress=False)
+    assert prompts == [
+        "move the plane to the reference position (0 mm), press Enter ",
+        "move the plane to 20 mm, press Enter ",
+        "move the plane to 40 mm, press Enter ",
+        "move the plane to 60 mm, press Enter ",
+    ]
+    result = compute(tmp_path / "cal", progress=lambda _m: None)
+    assert result.calibration.l0_mm == pytest.approx(1000.0, rel=0.02)
+
+
+def test_stage_command_moves_a_motorised_stage(tmp_path):
+    log = tmp_path / "stage.log"
+    script = f"import sys; open({str(log)!r}, 'a').write(sys.argv[1] + '\\n')"
+    stage = StageCommand(f"{sys.executable} -c {json.dumps(script)} {{height_mm}}")
+    operator = ConsoleOperator(ask=lambda _m: pytest.fail("no prompt expected with a stage"), stage=stage)
+    operator.plane(25.0)
+    operator.plane(0.0)
+    assert log.read_text().split() == ["25.0", "0.0"]
+    with pytest.raises(ConfigError, match="moving to 5 mm failed \\(exit 3\\)"):
+        StageCommand(f"{sys.executable} -c 'import sys; sys.exit(3)' {{height_mm}}").move(5.0)
+    with pytest.raises(ConfigError, match="placeholder"):
+        StageCommand("stage-move 10")
+
+
+def test_bad_sessions_give_one_line_errors(session, tmp_path, capsys):
+    root, config = session
+    assert main(["calibrate", "--config", str(config), "--heights", "25,50", "-o", str(tmp_path / "x")]) == 1
+    assert "need at least 3 plane heights" in capsys.readouterr().err
+    assert main(["calibrate", "--from", str(tmp_path)]) == 1
+    assert "not a calibration session" in capsys.readouterr().err
+    # a plane captured with other patterns than the reference
+    broken = tmp_path / "broken"
+    import shutil
+
+    shutil.copytree(root / "cal", broken)
+    plane = broken / "planes" / "plane-at-50mm"
+    capture = read_capture(plane)
+    frames = capture.load_frames()
+    patterns = [dict(p, frequency=16 if p["frequency"] == 32 else p["frequency"]) for p in capture.patterns]
+    shutil.rmtree(plane)
+    write_capture(plane, frames, patterns, {"width": 456, "height": 570}, scene="plane-at-50mm")
+    assert main(["calibrate", "--from", str(broken), "-q"]) == 1
+    err = capsys.readouterr().err
+    assert "plane-at-50mm: pattern 8 frequency = 16 but" in err and "Traceback" not in err
+    # a plane whose label carries no height
+    shutil.rmtree(plane)
+    write_capture(plane, frames, capture.patterns, {"width": 456, "height": 570}, scene="some-plane")
+    with pytest.raises(CalibrationError, match="scene 'some-plane': expected 'plane-at-<height>mm'"):
+        compute(broken, progress=lambda _m: None)
+    assert main(["calibrate", "--import-opencv", str(tmp_path / "none.yml"), "--projector-size", "1920x1080",
+                 "-o", str(tmp_path / "st")]) == 1
+    assert "none.yml: missing" in capsys.readouterr().err
