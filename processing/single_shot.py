@@ -1,0 +1,530 @@
+"""Single-shot absolute phase from one speckle-embedded fringe image (thesis ch. 2.3).
+
+The projected pattern is I = A + B cos(2 pi f0 x) + C Z(x, y) (:mod:`processing.speckle`).
+From one camera image of the object and one of the flat reference plane:
+
+1. RPCA (inexact ALM) splits each image into a low-rank fringe part and a sparse speckle part;
+2. FTP on the fringe part gives the wrapped phase;
+3. the fringe order of every pixel is the candidate whose reference speckle correlates best with
+   the captured speckle (normalised cross-correlation, NCC, over ``patch`` x ``patch`` windows,
+   thesis eq. 2.13). The candidates of a pixel are the reference pixels of its row with the same
+   wrapped phase, one per fringe period;
+4. row-wise voting between wrapped-phase jumps (Ding et al., thesis ref. [119]) replaces every
+   run's orders by their majority.
+
+How step 3 is vectorised: unwrap the wrapped phase along each row (spatially, only to index the
+candidates) into psi = phi + 2 pi n and offset each row to lie near the reference's absolute
+phase. For an order shift ``s`` the hypothesis "the absolute phase is psi + 2 pi s" maps every
+pixel to the reference pixel of its row with that absolute phase (= the same projector column);
+warping the reference speckle by that map (``cv2.remap``) gives an image that, where the
+hypothesis holds, equals the captured speckle. Box-filter NCC of the two images scores the
+hypothesis at every pixel at once, so there is one pass per shift ``s`` and no loop over pixels.
+A pixel's candidates are its shifts ``s`` with n + s inside the orders the reference shows.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from processing import _validate
+
+log = logging.getLogger(__name__)
+
+TWO_PI = 2.0 * np.pi
+DEFAULT_PATCH = 27
+DEFAULT_RPCA_TOL = 1e-5
+_NO_SCORE = -2.0  # below any NCC
+
+
+@dataclass
+class SingleShotReference:
+    """The reference plane prepared once for many single-shot images (all (H, W)).
+
+    Attributes
+    ----------
+    fringe, speckle : float32 arrays
+        Low-rank and sparse parts of the reference image.
+    wrapped_phase : float64, in [-pi, pi)
+    absolute_phase : float64, increasing along each row
+    frequency : float
+        Fringes across the projector.
+    carrier : float
+        FTP carrier of the reference in cycles per pixel, reused for the object images.
+    seconds : float
+        Time spent preparing it.
+    """
+
+    fringe: np.ndarray
+    speckle: np.ndarray
+    wrapped_phase: np.ndarray
+    absolute_phase: np.ndarray
+    frequency: float
+    carrier: float
+    seconds: float = 0.0
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.absolute_phase.shape  # type: ignore[return-value]
+
+
+@dataclass
+class SingleShotResult:
+    """Output of :func:`single_shot_unwrap`, all maps (H, W).
+
+    Attributes
+    ----------
+    absolute_phase : float64, NaN outside ``mask``; after voting
+    orders : int64 fringe orders (absolute_phase = wrapped_phase + 2 pi orders); -1 outside ``mask``
+    wrapped_phase : float64 FTP phase of the fringe part
+    fringe, speckle : float32 low-rank and sparse parts of the image
+    correlation_orders : int64 orders chosen by speckle correlation alone (before voting)
+    correlation : float32 NCC of the chosen candidate
+    mask : bool, pixels with fringe modulation (not shadowed)
+    timings : seconds per stage ("rpca", "ftp", "correlation", "voting", "total")
+    rpca : the RPCA result of the image (None when separation was switched off)
+    """
+
+    absolute_phase: np.ndarray
+    orders: np.ndarray
+    wrapped_phase: np.ndarray
+    fringe: np.ndarray
+    speckle: np.ndarray
+    correlation_orders: np.ndarray
+    correlation: np.ndarray
+    mask: np.ndarray
+    timings: dict[str, float] = field(default_factory=dict)
+    rpca: object | None = None
+
+
+def _check_axis(axis: int) -> int:
+    if axis not in (0, 1):
+        raise ValueError(f"axis: expected 0 (fringes along y) or 1 (along x), found {axis!r}")
+    return axis
+
+
+def _finite_image(value: object, name: str, shape: tuple[int, ...] | None = None) -> np.ndarray:
+    arr = _validate.image(value, name).astype(np.float32)
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name}: contains NaN or infinity")
+    _validate.same_shape(arr, shape, name)
+    if min(arr.shape) < 8:
+        raise ValueError(f"{name}: expected at least 8x8 pixels, found shape {arr.shape}")
+    return arr
+
+
+def separate_fringe_speckle(image: np.ndarray, tau: float | None = None, tol: float = DEFAULT_RPCA_TOL, svd: str = "auto"):
+    """Low-rank fringe part and sparse speckle part of one image by inexact ALM RPCA.
+
+    Stable principal component pursuit (thesis eq. 2.16: D = L + S + dense noise): the solver
+    stops once ||D - L - S||_F reaches the image's noise level, estimated robustly, or at the
+    relative residual ``tol``. Driving the residual further only pushes camera noise into L and
+    raises its rank (and the cost) without improving the fringe part.
+
+    Returns
+    -------
+    fringe, speckle : (H, W) float32
+    result : RPCAResult
+    """
+    from processing.rpca import rpca_ialm
+
+    scale = float(np.max(np.abs(image))) or 1.0
+    result = rpca_ialm(
+        np.asarray(image, dtype=np.float32) / scale, tau=tau, tol=tol, svd=svd, dtype=np.float32, stable=True
+    )
+    fringe = (result.low_rank * scale).astype(np.float32)
+    speckle = (result.sparse * scale).astype(np.float32)
+    return fringe, speckle, result
+
+
+def _row_monotone_absolute(wrapped: np.ndarray) -> np.ndarray:
+    """Spatially unwrapped phase of a reference plane: first column down, then every row across."""
+    phase = wrapped.astype(np.float64).copy()
+    phase[:, 0] = np.unwrap(phase[:, 0])
+    phase = np.unwrap(phase, axis=1)
+    return phase - TWO_PI * np.floor(np.nanmin(phase) / TWO_PI)
+
+
+def prepare_reference(
+    reference_image: np.ndarray,
+    reference_absolute_phase: np.ndarray | None,
+    frequency: float,
+    *,
+    axis: int = 1,
+    carrier: float | None = None,
+    bandwidth: float = 1.0,
+    tau: float | None = None,
+    rpca_tol: float = DEFAULT_RPCA_TOL,
+    separate: bool = True,
+    svd: str = "auto",
+) -> SingleShotReference:
+    """Separate and phase the reference-plane image once, for :func:`single_shot_unwrap`.
+
+    Parameters
+    ----------
+    reference_image : (H, W) array
+        Camera image of the flat reference plane under the speckle-embedded pattern.
+    reference_absolute_phase : (H, W) array or None
+        The plane's absolute phase (e.g. from a phase-shifted capture). None: the FTP phase of
+        the reference, unwrapped spatially (a plane has no discontinuity) with its smallest
+        fringe order 0. Heights only need object - reference, which that offset cancels.
+    frequency : float
+        Fringes across the projector (the number of candidate orders).
+    axis : 0 or 1
+        Image axis across the fringes (1: fringes vary along x).
+    carrier, bandwidth : FTP parameters (:func:`processing.ftp.ftp_phase`); carrier default: detected
+        on the reference's fringe part. The band is wide (1.0: 0 .. 2 carrier) because RPCA has
+        already removed the speckle, and deformed fringes on steep slopes need the room.
+    tau, rpca_tol, svd : RPCA parameters; ``separate=False`` skips RPCA (speckle = image - fringe
+        is then taken from a smoothed copy), for comparison only.
+    """
+    start = time.perf_counter()
+    _check_axis(axis)
+    frequency = _validate.finite_float(frequency, "frequency", minimum=0.0, strict=True)
+    ref = _finite_image(reference_image, "reference_image")
+    absolute = None
+    if reference_absolute_phase is not None:
+        absolute = _validate.phase_map(reference_absolute_phase, "reference_absolute_phase", ref.shape)
+        if np.isnan(absolute).all():
+            raise ValueError("reference_absolute_phase: no finite value")
+    if axis == 0:
+        ref = ref.T
+        absolute = None if absolute is None else absolute.T
+    fringe, speckle, _ = _split(ref, tau, rpca_tol, separate, svd)
+    if carrier is None:
+        from processing.ftp import detect_carrier
+
+        carrier = detect_carrier(fringe, axis=1)
+    wrapped, _ = _ftp_wrapped(fringe, carrier, bandwidth)
+    if absolute is None:
+        absolute = _row_monotone_absolute(wrapped)
+    else:
+        # Orders from the given phase, fraction from the FTP phase, so that object and reference
+        # phases come from the same estimator and match where the projector columns match.
+        absolute = _fill_rows(absolute)
+        absolute = wrapped + TWO_PI * np.round((absolute - wrapped) / TWO_PI)
+    absolute = np.maximum.accumulate(absolute, axis=1)  # the plane's phase increases along each row
+    if axis == 0:
+        fringe, speckle, wrapped, absolute = fringe.T, speckle.T, wrapped.T, absolute.T
+    return SingleShotReference(
+        fringe=np.ascontiguousarray(fringe),
+        speckle=np.ascontiguousarray(speckle),
+        wrapped_phase=np.ascontiguousarray(wrapped),
+        absolute_phase=np.ascontiguousarray(absolute),
+        frequency=frequency,
+        carrier=float(carrier),
+        seconds=time.perf_counter() - start,
+    )
+
+
+def _fill_rows(phase: np.ndarray) -> np.ndarray:
+    """Fill NaN of a plane's phase by linear interpolation along each row (vectorised)."""
+    if not np.isnan(phase).any():
+        return phase
+    rows, cols = phase.shape
+    x = np.arange(cols, dtype=np.float64)
+    good = np.isfinite(phase)
+    filled = phase.copy()
+    # Least-squares line per row through the good pixels: a plane's phase is nearly linear.
+    count = good.sum(axis=1)
+    sx = np.where(good, x, 0.0).sum(axis=1)
+    sy = np.where(good, phase, 0.0).sum(axis=1)
+    sxx = np.where(good, x * x, 0.0).sum(axis=1)
+    sxy = np.where(good, x * np.nan_to_num(phase), 0.0).sum(axis=1)
+    denom = count * sxx - sx * sx
+    slope = np.where(denom > 0, (count * sxy - sx * sy) / np.where(denom > 0, denom, 1.0), 0.0)
+    intercept = np.where(count > 0, (sy - slope * sx) / np.maximum(count, 1), 0.0)
+    line = intercept[:, None] + slope[:, None] * x[None, :]
+    filled[~good] = line[~good]
+    if (count == 0).any():
+        raise ValueError("reference_absolute_phase: a whole row is NaN")
+    return filled
+
+
+def _split(image: np.ndarray, tau, rpca_tol, separate: bool, svd: str):
+    if separate:
+        return separate_fringe_speckle(image, tau=tau, tol=rpca_tol, svd=svd)
+    fringe = cv2.GaussianBlur(image, (0, 0), 2.0)
+    return fringe, (image - fringe).astype(np.float32), None
+
+
+def _ftp_wrapped(fringe: np.ndarray, carrier: float, bandwidth: float) -> tuple[np.ndarray, np.ndarray]:
+    """FTP wrapped phase and amplitude of a fringe part (fringes along x)."""
+    from processing.ftp import ftp_phase
+
+    phase, amplitude = ftp_phase(fringe, carrier=carrier, axis=1, bandwidth=bandwidth)
+    return np.asarray(phase, dtype=np.float64), np.asarray(amplitude, dtype=np.float64)
+
+
+def _box_mean(image: np.ndarray, patch: int) -> np.ndarray:
+    return cv2.blur(image, (patch, patch), borderType=cv2.BORDER_REFLECT)
+
+
+@dataclass
+class _InverseTable:
+    """Column of each reference row at which its absolute phase takes a value, on a uniform grid.
+
+    ``table[y, j]`` is the column where row ``y`` reaches ``start + j * step``; looking a phase
+    up is then one bilinear ``cv2.remap`` of the table, for all pixels at once.
+    """
+
+    table: np.ndarray  # (H, J) float32
+    start: float
+    step: float
+
+    def columns(self, phase: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        grid = ((phase - np.float32(self.start)) * np.float32(1.0 / self.step)).astype(np.float32)
+        return cv2.remap(self.table, grid, rows, interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+
+
+def _inverse_table(ref_abs: np.ndarray) -> _InverseTable:
+    """Build :class:`_InverseTable` for a row-wise increasing phase map (one searchsorted)."""
+    rows, cols = ref_abs.shape
+    slope = np.diff(ref_abs, axis=1)
+    typical = float(np.median(slope[slope > 0])) if np.any(slope > 0) else 1.0
+    step = typical / 2.0  # half a pixel's phase: the table is finer than the image
+    start = float(ref_abs.min())
+    count = int(np.ceil((float(ref_abs.max()) - start) / step)) + 2
+    grid = start + step * np.arange(count)
+    # Stack the rows into one increasing sequence (row y offset by y * span) so one
+    # searchsorted inverts every row; a tiny ramp makes flat stretches strictly increasing.
+    span = float(ref_abs.max()) - start + 4.0 * step
+    stacked = (ref_abs - start + np.arange(cols) * 1e-9 + (np.arange(rows) * span)[:, None]).ravel()
+    keys = ((grid - start)[None, :] + (np.arange(rows) * span)[:, None]).ravel()
+    idx = np.clip(np.searchsorted(stacked, keys, side="right"), 1, stacked.size - 1)
+    left, right = stacked[idx - 1], stacked[idx]
+    frac = np.clip((keys - left) / np.maximum(right - left, 1e-12), 0.0, 1.0)
+    col = ((idx - 1) % cols + frac).reshape(rows, count)
+    # Phases beyond a row's ends map to its first / last column (candidates there are refused).
+    below = grid[None, :] <= ref_abs[:, :1]
+    above = grid[None, :] >= ref_abs[:, -1:]
+    col = np.where(below, 0.0, np.where(above, cols - 1.0, col))
+    return _InverseTable(table=col.astype(np.float32), start=start, step=step)
+
+
+def correlate_orders(
+    speckle: np.ndarray,
+    wrapped_phase: np.ndarray,
+    reference: SingleShotReference,
+    patch: int = DEFAULT_PATCH,
+    mask: np.ndarray | None = None,
+    max_shift: int | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Fringe order of every pixel by speckle NCC against the reference (fringes along x).
+
+    Parameters
+    ----------
+    speckle : (H, W) float32
+        Speckle part of the object image.
+    wrapped_phase : (H, W) float64
+        Wrapped phase of the object image.
+    reference : SingleShotReference
+        In the same orientation (fringes along x).
+    patch : int
+        Odd side of the correlation window (thesis: 27).
+    mask : (H, W) bool, optional
+        Pixels to solve; others get order -1.
+    max_shift : int, optional
+        Largest |order shift| (in periods, relative to the reference at the same pixel) to test;
+        default every order the reference shows.
+
+    Returns
+    -------
+    orders : (H, W) int64
+    score : (H, W) float32, best NCC (-2 where no candidate was valid)
+    """
+    rows, cols = speckle.shape
+    ref_abs = reference.absolute_phase
+    psi = np.unwrap(wrapped_phase, axis=1)
+    # Offset every row by whole periods so that psi lies near the reference's absolute phase.
+    weights = np.ones(psi.shape, dtype=bool) if mask is None else mask
+    turns = np.where(weights, (ref_abs - psi) / TWO_PI, 0.0)
+    counts = weights.sum(axis=1)
+    # The mean is enough: the offset is rounded to whole periods and the height shift is smooth.
+    row_offset = np.round(turns.sum(axis=1) / np.maximum(counts, 1))
+    psi = psi + TWO_PI * row_offset[:, None]
+    base_order = np.round((psi - wrapped_phase) / TWO_PI).astype(np.int64)  # n: psi = phi + 2 pi n
+
+    order_lo = int(np.floor(np.min(ref_abs) / TWO_PI))
+    order_hi = int(np.floor(np.max(ref_abs) / TWO_PI))
+    shift_lo, shift_hi = order_lo - int(base_order.max()), order_hi - int(base_order.min())
+    if max_shift is not None:
+        shift_lo, shift_hi = max(shift_lo, -int(max_shift)), min(shift_hi, int(max_shift))
+
+    inverse = _inverse_table(ref_abs)
+    row_lo = ref_abs[:, 0]
+    row_hi = ref_abs[:, -1]
+    map_y = np.broadcast_to(np.arange(rows, dtype=np.float32)[:, None], (rows, cols)).copy()
+    psi32 = psi.astype(np.float32)
+
+    # Pixels outside the mask (shadows) carry no speckle: zero them in both images so that a
+    # window straddling a shadow compares only what both sides can see.
+    keep = np.ones((rows, cols), dtype=np.float32) if mask is None else mask.astype(np.float32)
+    a = speckle.astype(np.float32) * keep
+    mean_a = _box_mean(a, patch)
+    var_a = np.maximum(_box_mean(a * a, patch) - mean_a * mean_a, 0.0)
+    b_src = reference.speckle.astype(np.float32)
+    best = np.full((rows, cols), _NO_SCORE, dtype=np.float32)
+    best_order = np.full((rows, cols), -1, dtype=np.int64)
+    for shift in range(shift_lo, shift_hi + 1):
+        target = psi32 + np.float32(TWO_PI * shift)
+        inside = (target >= row_lo[:, None]) & (target <= row_hi[:, None])
+        map_x = inverse.columns(target, map_y)
+        b = cv2.remap(b_src, map_x, map_y, interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT) * keep
+        mean_b = _box_mean(b, patch)
+        var_b = np.maximum(_box_mean(b * b, patch) - mean_b * mean_b, 0.0)
+        cov = _box_mean(a * b, patch) - mean_a * mean_b
+        ncc = cov / np.sqrt(np.maximum(var_a * var_b, 1e-20))
+        order = base_order + shift
+        valid = inside & (order >= order_lo) & (order <= order_hi)
+        ncc = np.where(valid, ncc, _NO_SCORE)
+        better = ncc > best
+        best = np.where(better, ncc, best)
+        best_order = np.where(better, order, best_order)
+    if mask is not None:
+        best_order = np.where(mask, best_order, -1)
+    return best_order, best
+
+
+def single_shot_unwrap(
+    image: np.ndarray,
+    reference_image: np.ndarray | SingleShotReference,
+    reference_absolute_phase: np.ndarray | None,
+    frequency: float,
+    *,
+    axis: int = 1,
+    patch: int = DEFAULT_PATCH,
+    mask: np.ndarray | None = None,
+    min_modulation: float = 0.5,
+    carrier: float | None = None,
+    bandwidth: float = 1.0,
+    tau: float | None = None,
+    rpca_tol: float = DEFAULT_RPCA_TOL,
+    separate: bool = True,
+    vote: bool = True,
+    max_shift: int | None = None,
+    svd: str = "auto",
+) -> SingleShotResult:
+    """Absolute phase from one speckle-embedded fringe image (thesis ch. 2.3).
+
+    Parameters
+    ----------
+    image : (H, W) array
+        Camera image of the object under the ``speckle-sinusoid`` pattern.
+    reference_image : (H, W) array or SingleShotReference
+        The reference plane under the same pattern, or its :func:`prepare_reference` (then
+        ``reference_absolute_phase`` must be None; preparing once saves one RPCA per shot).
+    reference_absolute_phase : (H, W) array or None
+        See :func:`prepare_reference`.
+    frequency : float
+        Fringes across the projector.
+    axis : 0 or 1
+        Image axis across the fringes.
+    patch : int
+        Odd side of the NCC window (thesis: 27).
+    mask : (H, W) bool, optional
+        Pixels to solve; default those whose FTP modulation is above ``min_modulation`` times
+        the median modulation (shadows excluded).
+    carrier, bandwidth : FTP parameters.
+    tau, rpca_tol, svd : RPCA parameters; ``separate=False`` skips RPCA (for comparison).
+    vote : bool
+        Apply the row-wise voting of thesis ref. [119] after correlation.
+    max_shift : int, optional
+        Largest order shift from the reference to test (default: all orders).
+
+    Returns
+    -------
+    SingleShotResult
+    """
+    start = time.perf_counter()
+    _check_axis(axis)
+    frequency = _validate.finite_float(frequency, "frequency", minimum=0.0, strict=True)
+    patch = _validate.positive_int(patch, "patch", minimum=3)
+    if patch % 2 == 0:
+        raise ValueError(f"patch: expected an odd window side, found {patch}")
+    if not 0.0 <= float(min_modulation) < 1.0:
+        raise ValueError(f"min_modulation: expected a value in [0, 1), found {min_modulation}")
+    img = _finite_image(image, "image")
+    if isinstance(reference_image, SingleShotReference):
+        if reference_absolute_phase is not None:
+            raise ValueError("reference_absolute_phase: must be None when reference_image is a prepared reference")
+        reference = reference_image
+        _validate.same_shape(np.empty(reference.shape), img.shape, "reference_image")
+        if reference.frequency != frequency:
+            raise ValueError(f"frequency: {frequency} differs from the prepared reference's {reference.frequency}")
+    else:
+        _finite_image(reference_image, "reference_image", img.shape)
+        if reference_absolute_phase is not None:
+            _validate.phase_map(reference_absolute_phase, "reference_absolute_phase", img.shape)
+        reference = prepare_reference(
+            reference_image, reference_absolute_phase, frequency, axis=axis, carrier=carrier,
+            bandwidth=bandwidth, tau=tau, rpca_tol=rpca_tol, separate=separate, svd=svd,
+        )
+    user_mask = _validate.bool_mask(mask, "mask", img.shape)
+    timings: dict[str, float] = {"reference": reference.seconds}
+
+    if axis == 0:
+        img = img.T
+        user_mask = None if user_mask is None else user_mask.T
+        reference = _transposed(reference)
+
+    t0 = time.perf_counter()
+    fringe, speckle, rpca_result = _split(img, tau, rpca_tol, separate, svd)
+    timings["rpca"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    wrapped, amplitude = _ftp_wrapped(fringe, reference.carrier, bandwidth)
+    timings["ftp"] = time.perf_counter() - t0
+    if user_mask is None:
+        valid = amplitude > min_modulation * float(np.median(amplitude))
+    else:
+        valid = user_mask.copy()
+
+    t0 = time.perf_counter()
+    corr_orders, score = correlate_orders(speckle, wrapped, reference, patch=patch, mask=valid, max_shift=max_shift)
+    valid &= corr_orders >= 0
+    timings["correlation"] = time.perf_counter() - t0
+
+    absolute = np.where(valid, wrapped + TWO_PI * corr_orders, np.nan)
+    t0 = time.perf_counter()
+    if vote and valid.any():
+        from processing.voting import vote_row_orders
+
+        absolute = np.asarray(vote_row_orders(absolute, wrapped, mask=valid), dtype=np.float64)
+        absolute = np.where(valid, absolute, np.nan)
+    timings["voting"] = time.perf_counter() - t0
+    orders = np.where(valid, np.round((np.nan_to_num(absolute) - wrapped) / TWO_PI), -1).astype(np.int64)
+
+    outputs = [absolute, orders, wrapped, fringe, speckle, corr_orders, score, valid]
+    if axis == 0:
+        outputs = [np.ascontiguousarray(o.T) for o in outputs]
+    timings["total"] = time.perf_counter() - start
+    log.info("single-shot unwrap %dx%d: %s", img.shape[0], img.shape[1], {k: round(v, 3) for k, v in timings.items()})
+    return SingleShotResult(
+        absolute_phase=outputs[0],
+        orders=outputs[1],
+        wrapped_phase=outputs[2],
+        fringe=outputs[3],
+        speckle=outputs[4],
+        correlation_orders=outputs[5],
+        correlation=outputs[6],
+        mask=outputs[7],
+        timings=timings,
+        rpca=rpca_result,
+    )
+
+
+def _transposed(reference: SingleShotReference) -> SingleShotReference:
+    return SingleShotReference(
+        fringe=np.ascontiguousarray(reference.fringe.T),
+        speckle=np.ascontiguousarray(reference.speckle.T),
+        wrapped_phase=np.ascontiguousarray(reference.wrapped_phase.T),
+        absolute_phase=np.ascontiguousarray(reference.absolute_phase.T),
+        frequency=reference.frequency,
+        carrier=reference.carrier,
+        seconds=reference.seconds,
+    )
