@@ -8,6 +8,7 @@ give back the simulated scene's heights.
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +19,9 @@ from rig.capture import read_capture
 from rig.cli import COMMAND_MODULES, main
 from rig.config import load_config
 from rig.simulated_rig import geometry_from_config, scene_height
+
+# pylon reads PYLON_CAMEMU when pypylon first loads (see tests/test_camera_pylon.py).
+os.environ.setdefault("PYLON_CAMEMU", "1")
 
 SMALL_RIG = """
 [projector]
@@ -128,3 +132,41 @@ def test_bad_config_is_one_line_and_exit_1(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert err == f"rig scan: error: {config_path}: [camera] exposure_us: expected a positive number, found 0"
     assert not (tmp_path / "c").exists()
+
+
+PYLON_RIG = """
+[projector]
+backend = "gl-offscreen"
+size = [96, 120]
+[camera]
+backend = "pylon"             # no serial: the first camera, pylon's emulator here
+size = [64, 48]
+exposure_us = 2000
+[trigger]
+backend = "software"
+[scan]
+frequencies = [1]
+steps = 3
+fetch_timeout_s = 5.0
+"""
+
+
+def test_scan_with_a_real_backend_pylon_emulator(tmp_path):
+    """The real-device path of `rig scan`: pylon driver (against pylon's emulator), GL projector, software trigger.
+
+    The emulator has no trigger counter, so frames are matched to triggers by frame id.
+    """
+    pylon = pytest.importorskip("pypylon.pylon", reason="pypylon is not installed (optional extra 'pylon')")
+    devices = pylon.TlFactory.GetInstance().EnumerateDevices()
+    if not any(d.GetDeviceClass() == "BaslerCamEmu" for d in devices) or len(devices) != sum(
+        d.GetDeviceClass() == "BaslerCamEmu" for d in devices
+    ):
+        pytest.skip("needs pylon's camera emulator as the only camera (PYLON_CAMEMU set before pypylon loads)")
+    config_path = tmp_path / "rig.toml"
+    config_path.write_text(PYLON_RIG)
+    assert main(["scan", "--config", str(config_path), "-o", str(tmp_path / "capture")]) == 0
+    capture = read_capture(tmp_path / "capture")
+    assert capture.shape == (48, 64) and capture.projector_size == (96, 120)
+    assert [f["frame_id"] for f in capture.frames] == [0, 1, 2]
+    assert all(f["exposure_us"] == pytest.approx(2000, rel=0.05) for f in capture.frames)
+    assert capture.manifest["devices"]["camera"] != "simulated camera"
