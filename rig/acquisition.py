@@ -44,6 +44,7 @@ from drivers.camera import (
 )
 from drivers.errors import DeviceError, DeviceTimeoutError, ProtocolError, WaitTimeoutError
 from drivers.projector import Projector
+from drivers.trigger_box import TriggerBox
 from rig.capture import CaptureWriter
 from rig.errors import CaptureError
 
@@ -87,8 +88,14 @@ class TriggerPath(Protocol):
 
     source: TriggerSource
 
+    def prepare(self, count: int) -> None:
+        """Get ready for at most ``count`` triggers (the camera is already started)."""
+
     def fire(self) -> int:
         """Start one exposure; return the trigger index the resulting frame will carry."""
+
+    def finish(self) -> None:
+        """Leave the trigger hardware idle; called after the scan, whatever its outcome."""
 
 
 class SoftwareTrigger:
@@ -122,7 +129,7 @@ class BoxTrigger:
 
     source = TriggerSource.HARDWARE_RISING
 
-    def __init__(self, box: Any) -> None:
+    def __init__(self, box: TriggerBox) -> None:
         self.box = box
 
     def prepare(self, count: int) -> None:
@@ -409,7 +416,7 @@ def run_scan(
     patterns: Sequence[Mapping[str, Any]],
     projector: Projector,
     camera: Camera,
-    trigger: Any,
+    trigger: TriggerPath,
     settings: AcquisitionSettings = AcquisitionSettings(),
     scene: str = "object",
     extra: Mapping[str, Any] | None = None,
@@ -428,8 +435,9 @@ def run_scan(
     patterns : sequence of capture-format pattern dicts
         Projected in order.
     projector, camera : opened devices
-    trigger : SoftwareTrigger or BoxTrigger
-        How exposures are started; the camera's trigger source is set to match for the scan.
+    trigger : TriggerPath
+        How exposures are started (:class:`SoftwareTrigger`, :class:`BoxTrigger`); the camera's
+        trigger source is set to match for the scan.
     settings : AcquisitionSettings
         Deadlines and retries.
     scene, extra : str, mapping
