@@ -143,7 +143,8 @@ class _BoxFirmware:
         try:
             return getattr(self, "_cmd_" + cmd.lower())(rid, args, out)
         except _BadArgument as exc:
-            return tp.encode_error(rid, tp.ErrorCode.BAD_ARGUMENT, str(exc))
+            log.debug("fake trigger box: %s: %s", cmd, exc)
+            return tp.encode_error(rid, tp.ErrorCode.BAD_ARGUMENT, _USAGE[cmd])
 
     def _cmd_hello(self, rid: int, args: tuple[str, ...], out: _Output) -> bytes:
         (version,) = _ints(args, 1, (0, 255))
@@ -217,6 +218,18 @@ class _BoxFirmware:
 
 class _BadArgument(Exception):
     pass
+
+
+# Texts of BAD_ARGUMENT replies, as the firmware sends them.
+_USAGE = {
+    "HELLO": "HELLO takes one version",
+    "PING": "PING takes no argument",
+    "CONFIG": "CONFIG takes width_us delay_us POS or NEG",
+    "ARM": "ARM takes count SW or EXT",
+    "FIRE": "FIRE takes no argument",
+    "STATUS": "STATUS takes no argument",
+    "RESET": "RESET takes no argument",
+}
 
 
 def _ints(args: tuple[str, ...], count: int, bounds: tuple[int, int]) -> list[int]:
