@@ -48,8 +48,9 @@ class UnwrapResult:
     orders : (H, W) int64
         Fringe order k of that frequency: phase = (wrapped phase in [0, 2 pi)) + 2 pi k.
     valid : (H, W) bool
-        False where the inputs were NaN or the method detected an inconsistency (a look-up
-        value no position on the projector produces, a residual beyond tolerance).
+        False where the inputs were NaN or the method detected an inconsistency (see each
+        method: a look-up value no position inside the projector produces, a residual beyond
+        tolerance).
     """
 
     phase: np.ndarray
@@ -117,8 +118,8 @@ class PairTable:
     ka, kb : (fa + fb + 1,) int64
         Orders with fa kb - fb ka = m (mod fa fb), 0 <= ka < fa, 0 <= kb < fb.
     reachable : (fa + fb + 1,) bool
-        The fa + fb - 1 values of m that some projector position produces; any other value
-        reveals a phase error beyond the tolerance.
+        The fa + fb - 1 values of m that some projector position produces; the other two
+        (-fa, fb) only appear when noise crosses the boundaries at u = 0 = W together.
     """
 
     offset: int
@@ -178,8 +179,11 @@ def unwrap_two_frequency(phi1: np.ndarray, phi2: np.ndarray, f1: int, f2: int) -
     Returns
     -------
     UnwrapResult
-        Absolute phase and orders at f2. ``valid`` is False where m is a value no projector
-        position produces (an error beyond the tolerance was detected) or an input is NaN.
+        Absolute phase and orders at f2. ``valid`` is False where an input is NaN or m is one of
+        the two values (-f1, f2) no position inside the projector produces: noise across both
+        period boundaries at the projector's ends (u = 0 = W), whose order is ambiguous.
+        Errors beyond the tolerance elsewhere land on other valid pairs and cannot be detected
+        (order errors of several fringes).
 
     Notes
     -----
@@ -236,8 +240,8 @@ def unwrap_three_frequency(phis: Sequence[np.ndarray], frequencies: Sequence[int
     For each pair (f_i, f3), with t = gcd(f_i, f3), ``m = round((f3 phi_i - f_i phi3) / (2 pi t))``
     and the look-up table of the coprime pair (f_i / t, f3 / t) give k3 modulo f3 / t; as
     gcd(t_1, t_2) = 1, the two residues fix k3 in [0, f3) (Chinese remainder theorem). Exact
-    while every phase error is below ``min_i t_i pi / (f_i + f3)``. ``valid`` is False where a
-    pair's m is unreachable or the residues disagree.
+    while every phase error is below ``min_i t_i pi / (f_i + f3)``. Errors beyond it give other
+    valid-looking orders; ``valid`` is False only where an input is NaN.
     """
     freqs = _validate.frequency_list(frequencies, "frequencies", count=3)
     if len(set(freqs)) != 3:
@@ -257,10 +261,12 @@ def unwrap_three_frequency(phis: Sequence[np.ndarray], frequencies: Sequence[int
 
     def kernel(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, ...]:
         tc = _turns(c)
-        r1, valid, finite = _pair_lookup(_turns(a), tc, *pairs[0])
-        r2, reachable, finite_b = _pair_lookup(_turns(b), tc, *pairs[1])
-        valid &= reachable
+        # The reduced pairs' boundaries coincide at multiples of 1 / t inside the projector,
+        # where noise legitimately produces their edge values of m: reachability says nothing.
+        r1, _, finite = _pair_lookup(_turns(a), tc, *pairs[0])
+        r2, _, finite_b = _pair_lookup(_turns(b), tc, *pairs[1])
         finite &= finite_b
+        valid = np.ones(tc.shape, dtype=bool)
         k3 = crt[r1, r2]
         valid &= k3 >= 0
         np.maximum(k3, 0, out=k3)
