@@ -72,6 +72,7 @@ class ProcessOptions:
     """
 
     unwrap: str = "auto"
+    undistort: bool | None = None  # None: when the calibration has camera_matrix + distortion
     denoise: str = "none"
     correction: str = "none"
     min_modulation_ratio: float = 0.2
@@ -235,11 +236,38 @@ class SceneState:
     timings: dict[str, float] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
     info: dict[str, Any] = field(default_factory=dict)
+    calibration: Calibration | None = None
 
 
 def stage_load(state: SceneState, options: ProcessOptions) -> None:
     """Decode every frame (checksums, size and bit depth checked) into an (N, H, W) stack."""
     state.frames = state.capture.load_frames()
+
+
+def stage_undistort(state: SceneState, options: ProcessOptions) -> None:
+    """Remove lens distortion with the calibration's ``camera_matrix`` / ``distortion``.
+
+    Done by default when they are present, except for the stereo model, whose triangulation
+    undistorts camera rays itself. ``--no-undistort`` skips it.
+    """
+    cal = state.calibration
+    if cal is None or options.undistort is False or cal.model == "stereo":
+        return
+    matrix, distortion = cal.extra.get("camera_matrix"), cal.extra.get("distortion")
+    if matrix is None or distortion is None:
+        if options.undistort:
+            raise CalibrationError(f"{cal.where}: camera_matrix / distortion: missing, cannot undistort")
+        return
+    from calibration.camera import undistort_stack
+
+    try:
+        matrix_arr = np.asarray(matrix, dtype=np.float64).reshape(3, 3)
+        dist_arr = np.asarray(distortion, dtype=np.float64).ravel()
+    except (TypeError, ValueError):
+        raise CalibrationError(f"{cal.where}: camera_matrix / distortion: expected a 3x3 matrix and a list of numbers") from None
+    assert state.frames is not None
+    state.frames = undistort_stack(state.frames, matrix_arr, dist_arr)
+    state.info["undistorted"] = True
 
 
 def _denoise_none(frames: np.ndarray, groups: PatternGroups, options: ProcessOptions) -> np.ndarray:
@@ -412,6 +440,7 @@ def stage_correction(state: SceneState, options: ProcessOptions) -> None:
 
 SCENE_STAGES: list[tuple[str, Callable[[SceneState, ProcessOptions], None]]] = [
     ("load", stage_load),
+    ("undistort", stage_undistort),
     ("denoise", stage_denoise),
     ("wrapped", stage_wrapped),
     ("unwrap", stage_unwrap),
@@ -554,6 +583,9 @@ def process(
         calibration, reference_capture = load_calibration_for(capture, calibration_path)
     obj = _scene("object", capture, options)
     ref = _scene("reference", reference_capture, options) if reference_capture is not None else None
+    for state in (obj, ref):
+        if state is not None:
+            state.calibration = calibration
     if ref is not None:
         ref.axis = obj.axis
         obj.reference = ref
@@ -648,6 +680,7 @@ def write_outputs(result: ProcessResult, out_dir: str | Path) -> dict[str, Any]:
             "absolute_phase": obj.unwrapped.absolute,
             "denoise": result.options.denoise,
             "correction": result.options.correction,
+            "undistorted": bool(obj.info.get("undistorted", False)),
             "fringe_axis": obj.axis,
             "frequencies": obj.wrapped.frequencies,
             "phase_frequency": obj.unwrapped.frequency,

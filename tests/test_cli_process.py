@@ -22,7 +22,7 @@ from mock_devices import synth
 from rig.capture import write_capture
 from rig.cli import main
 from rig.outputs import read_ply_points
-from rig.pipeline import choose_unwrap, group_patterns, process
+from rig.pipeline import ProcessOptions, choose_unwrap, group_patterns, process
 from rig.simulation import demo_geometry, simulate_scan, write_simulated_scan
 
 REPO = Path(__file__).resolve().parents[1]
@@ -163,6 +163,21 @@ def test_single_frame_uses_fourier_transform_profilometry(tmp_path) -> None:
     result = process(paths.capture, paths.calibration)
     assert result.object.unwrapped.method == "ftp"
     assert np.median(np.abs(_height_error(scan, result))) < 1.0  # FTP blurs edges; the bulk is right
+
+
+def test_lens_distortion_of_the_calibration_is_removed(small_capture, small_scan, tmp_path) -> None:
+    path = small_capture.calibration / "calibration.json"
+    data = json.loads(path.read_text())
+    matrix = [[100.0, 0.0, 79.5], [0.0, 100.0, 59.5], [0.0, 0.0, 1.0]]
+    path.write_text(json.dumps(dict(data, camera_matrix=matrix, distortion=[0.0, 0.0, 0.0, 0.0, 0.0])))
+    plain = process(small_capture.capture, small_capture.calibration, ProcessOptions(undistort=False))
+    identity = process(small_capture.capture, small_capture.calibration)
+    assert identity.object.info.get("undistorted") and not plain.object.info.get("undistorted")
+    np.testing.assert_allclose(identity.height, plain.height, atol=1e-3, equal_nan=True)  # zero distortion: same
+    path.write_text(json.dumps(dict(data, camera_matrix=matrix, distortion=[-0.3, 0.0, 0.0, 0.0, 0.0])))
+    barrel = process(small_capture.capture, small_capture.calibration)
+    changed = np.isfinite(barrel.height) & np.isfinite(plain.height)
+    assert np.mean(np.abs(barrel.height[changed] - plain.height[changed]) > 1.0) > 0.01  # the remap moved the object
 
 
 # ------------------------------------------------------------------ bad inputs: one line, exit 1

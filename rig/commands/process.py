@@ -39,6 +39,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="a parameter of the chosen denoising / correction method (repeatable; VALUE read as JSON if it parses)",
     )
     parser.add_argument("--axis", choices=("x", "y"), help="fringe axis to use when a capture has both (default: the first)")
+    parser.add_argument("--no-undistort", dest="undistort", action="store_false", default=None,
+                        help="keep lens distortion (default: removed when the calibration has camera_matrix and distortion)")
     parser.add_argument("--salvage", action="store_true", help="accept an incomplete capture (interrupted scan)")
     parser.add_argument("--json", action="store_true", help="print a summary as JSON on stdout")
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
@@ -71,6 +73,7 @@ def run(args: argparse.Namespace) -> int:
     options = ProcessOptions(
         unwrap=args.unwrap, denoise=args.denoise, correction=args.correction,
         min_modulation_ratio=args.min_modulation, axis=args.axis, params=parse_params(args.param),
+        undistort=args.undistort,
     )
     steps = total_steps(args.calibration is not None) + 1
     with Progress(f"process {args.capture}", total=steps, quiet=args.quiet) as progress:
