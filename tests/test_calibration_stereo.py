@@ -90,7 +90,8 @@ def test_bad_opencv_files_are_refused(tmp_path):
 
 @pytest.mark.skipif(not EYE.is_dir(), reason="shared real data not present")
 def test_real_eye_capture_becomes_a_point_cloud():
-    fields = import_opencv_calibration(EYE / "caliInfo.yml", (1920, 1080))
+    # SLMaster's phase is 2 pi f k / W at projector column k: OpenCV's pixel centre, so pixel_centre 0
+    fields = import_opencv_calibration(EYE / "caliInfo.yml", (1920, 1024), pixel_centre=0.0)
     model = StereoModel.from_fields(fields)
     assert model.camera_size == (1280, 1024) and model.baseline_mm == pytest.approx(109.4, abs=0.1)
     frames = np.stack([cv2.imread(str(EYE / "L" / f"{i}.png"), cv2.IMREAD_GRAYSCALE) for i in range(18)]).astype(np.float32)
@@ -111,7 +112,7 @@ def test_real_eye_capture_becomes_a_point_cloud():
     sample = np.argwhere(valid)[::97]
     projected, _ = cv2.projectPoints(points[sample[:, 0], sample[:, 1]].reshape(-1, 1, 3), rvec, model.translation_mm,
                                      model.projector_matrix, model.projector_distortion)
-    column = unwrapped.phase[sample[:, 0], sample[:, 1]] * 1920 / (2 * np.pi * 32) - 0.5
+    column = unwrapped.phase[sample[:, 0], sample[:, 1]] * 1920 / (2 * np.pi * 32)
     assert np.max(np.abs(projected.reshape(-1, 2)[:, 0] - column)) < 0.01
     # a surface, not scatter: depth differs from its 5x5 median by little on most pixels
     filled = np.where(valid, z, np.nanmedian(z)).astype(np.float32)

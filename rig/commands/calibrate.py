@@ -83,6 +83,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--import-opencv", type=Path, metavar="FILE.yml",
                         help="write a 'stereo' calibration from an OpenCV FileStorage file (M1 D1 M4 D4 Rlp Tlp S)")
     parser.add_argument("--projector-size", type=_size, metavar="WxH", help="projector resolution for --import-opencv")
+    parser.add_argument("--pixel-centre", type=float, default=0.5, metavar="P",
+                        help="for --import-opencv: where projector pixel k sits in the phase convention "
+                        "(0.5: this product's patterns; 0: phase 2 pi f k / W at column k, as SLMaster)")
     parser.add_argument("--overwrite", action="store_true", help="replace an existing calibration directory")
     parser.add_argument("--json", action="store_true", help="print calibration.json on stdout")
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
@@ -95,7 +98,7 @@ def _import_opencv(args: argparse.Namespace) -> int:
 
     if args.projector_size is None:
         raise ConfigError("--import-opencv needs --projector-size WxH (the FileStorage file does not record it)")
-    fields = import_opencv_calibration(args.import_opencv, args.projector_size)
+    fields = import_opencv_calibration(args.import_opencv, args.projector_size, pixel_centre=args.pixel_centre)
     fields.pop("model")
     output = args.output or Path("calibration")
     if (output / "calibration.json").exists() and not args.overwrite:
