@@ -385,10 +385,12 @@ def stage_unwrap(state: SceneState, options: ProcessOptions) -> None:
             result = temporal.unwrap_two_frequency(maps[0], maps[1], ints[0], ints[1])
         elif method == "three-frequency":
             result = temporal.unwrap_three_frequency(maps, ints)
-        elif method == "hierarchical":
-            result = temporal.unwrap_hierarchical(maps, ints)
         else:
-            result = temporal.unwrap_heterodyne(maps, ints)
+            extra = {}
+            if "max_residual" in options.params:  # e.g. --param max_residual=3.14 for rendered data with drifting beats
+                extra["max_residual"] = float(options.params["max_residual"])
+            unwrap = temporal.unwrap_hierarchical if method == "hierarchical" else temporal.unwrap_heterodyne
+            result = unwrap(maps, ints, **extra)
     elif method == "gray":
         gray = state.groups.gray.get(state.axis)
         if gray is None:

@@ -125,9 +125,17 @@ def _height_error(scan, result) -> np.ndarray:
     return result.height[valid] - scan.height_mm[valid]
 
 
-@pytest.mark.parametrize("bits,frequency", [(4, 16), (5, 16)], ids=["plain", "complementary"])
-def test_gray_code_plus_phase_shifting(tmp_path, bits, frequency) -> None:
+@pytest.mark.parametrize(
+    "bits,frequency,extra",
+    [(4, 16, "none"), (5, 16, "none"), (5, 16, "inverted"), (5, 16, "flats")],
+    ids=["plain", "complementary", "complementary+inverted", "complementary+flats"],
+)
+def test_gray_code_plus_phase_shifting(tmp_path, bits, frequency, extra) -> None:
     gray = [{"kind": "gray", "axis": "x", "bit": b, "bits": bits} for b in range(bits)]
+    if extra == "inverted":
+        gray += [dict(g, inverted=True) for g in gray]
+    elif extra == "flats":
+        gray += [{"kind": "flat", "level": 1.0}, {"kind": "flat", "level": 0.0}]
     scan, paths = _scan_with(tmp_path, synth.sinusoid_patterns((frequency,), 4) + gray)
     result = process(paths.capture, paths.calibration)
     assert result.object.unwrapped.method == "gray"
