@@ -7,6 +7,7 @@ off-screen :class:`GLProjector` here and the on-screen ``WindowProjector``.
 
 from __future__ import annotations
 
+import ctypes
 import logging
 import math
 from collections.abc import Mapping
@@ -130,6 +131,19 @@ class PatternRenderer:
         self._lut_texture = None
 
 
+def release_egl_thread() -> None:
+    """Drop the EGL context glcontext leaves current on this thread after ``release()``.
+
+    Left bound, it makes a later GLX context on the same thread (a glfw window) fail with an X
+    BadAccess error, which Xlib answers by exiting the process.
+    """
+    try:
+        egl = ctypes.CDLL("libEGL.so.1")
+    except OSError:
+        return
+    egl.eglReleaseThread()
+
+
 def read_framebuffer(fbo: Any, size: tuple[int, int], bits: int = 8) -> np.ndarray:
     """Red channel of a framebuffer (8-bit normalised or 32-bit float) as (H, W) float32, row 0 at the top."""
     width, height = size
@@ -186,23 +200,28 @@ class GLProjector(Projector):
                 f"{self.name}: no OpenGL 3.3 context (backend {self.backend or 'default'}): {exc}"
             ) from exc
         try:
-            colour = self._ctx.renderbuffer(self.size, components=1, dtype=FRAMEBUFFER_DTYPES[self.bits])
-            self._fbo = self._ctx.framebuffer(color_attachments=[colour])
-            self._renderer = PatternRenderer(self._ctx, self.size)
+            with self._ctx:
+                colour = self._ctx.renderbuffer(self.size, components=1, dtype=FRAMEBUFFER_DTYPES[self.bits])
+                self._fbo = self._ctx.framebuffer(color_attachments=[colour])
+                self._renderer = PatternRenderer(self._ctx, self.size)
         except Exception:
             self._release()
             raise
 
+    # Every GL call runs inside ``with self._ctx``: several projectors (or a window) may be open
+    # in one thread, and a standalone context is not made current by moderngl on its own.
     def _set_gamma_lut(self, lut: np.ndarray | None) -> None:
         assert self._renderer is not None
-        self._renderer.set_lut(lut)
+        with self._ctx:
+            self._renderer.set_lut(lut)
 
     def _show(self, pattern: Mapping[str, Any]) -> None:
         assert self._renderer is not None and self._fbo is not None
         self._frame = None
-        self._fbo.use()
-        self._renderer.render(pattern)
-        self._frame = read_framebuffer(self._fbo, self.size, self.bits)  # waits for the GPU
+        with self._ctx:
+            self._fbo.use()
+            self._renderer.render(pattern)
+            self._frame = read_framebuffer(self._fbo, self.size, self.bits)  # waits for the GPU
 
     def _wait(self, timeout_s: float) -> bool:
         return self._frame is not None  # off-screen: shown once drawn and read back
@@ -216,17 +235,21 @@ class GLProjector(Projector):
 
     def _release(self) -> None:
         self._frame = None
+        if self._ctx is None:
+            return
         try:
-            if self._renderer is not None:
-                self._renderer.release()
-            if self._fbo is not None:
-                for attachment in self._fbo.color_attachments:
-                    attachment.release()
-                self._fbo.release()
+            with self._ctx:
+                if self._renderer is not None:
+                    self._renderer.release()
+                if self._fbo is not None:
+                    for attachment in self._fbo.color_attachments:
+                        attachment.release()
+                    self._fbo.release()
         finally:
-            if self._ctx is not None:
-                self._ctx.release()
+            self._ctx.release()
             self._ctx = self._fbo = self._renderer = None
+            if self.backend == "egl":
+                release_egl_thread()
 
 
 __all__ = ["GLProjector", "PatternRenderer", "read_framebuffer"]

@@ -116,6 +116,7 @@ class WindowProjector(Projector):
 
     def _set_gamma_lut(self, lut: np.ndarray | None) -> None:
         assert self._renderer is not None
+        _glfw().make_context_current(self._window)
         self._renderer.set_lut(lut)
 
     def _show(self, pattern: Mapping[str, Any]) -> None:
@@ -143,12 +144,15 @@ class WindowProjector(Projector):
     def _release(self, glfw: Any) -> None:
         self._frame = None
         try:
+            if self._window:
+                glfw.make_context_current(self._window)
             if self._renderer is not None:
                 self._renderer.release()
             if self._ctx is not None:
                 self._ctx.release()
         finally:
             if self._window:
+                glfw.make_context_current(None)
                 glfw.destroy_window(self._window)
             self._window = self._ctx = self._renderer = None
             glfw.terminate()

@@ -14,11 +14,12 @@ from drivers.projector_gl import GLProjector  # noqa: E402
 
 
 def _egl_available() -> str | None:
+    projector = GLProjector(SIZE)
     try:
-        ctx = moderngl.create_standalone_context(backend="egl", require=330)
-    except Exception as exc:  # glcontext reports a missing libEGL / driver as a bare Exception
+        projector.open()
+    except DeviceNotFoundError as exc:
         return f"no headless EGL OpenGL 3.3 context: {exc}"
-    ctx.release()
+    projector.close()
     return None
 
 
@@ -80,6 +81,20 @@ def test_missing_backend_is_device_not_found() -> None:
 def test_bad_bit_depth_is_refused() -> None:
     with pytest.raises(ValueError, match="bits"):
         GLProjector(SIZE, bits=16)
+
+
+def test_open_projectors_do_not_draw_into_each_other() -> None:
+    """Each projector makes its own context current: opening a second one must not divert the first."""
+    first, second = GLProjector(SIZE), GLProjector((32, 24))
+    with first, second:
+        first.show({"kind": "flat", "level": 0.5})
+        second.show({"kind": "flat", "level": 0.25})
+        first.show({"kind": "flat", "level": 1.0})
+        assert first.last_frame().shape == (SIZE[1], SIZE[0]) and np.all(first.last_frame() == 1.0)
+        assert np.all(second.last_frame() == 64 / 255)
+    with first:
+        first.show({"kind": "flat", "level": 0.0})
+        assert np.all(first.last_frame() == 0.0)
 
 
 def test_last_frame_is_readable_from_another_thread() -> None:
