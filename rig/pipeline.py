@@ -2,9 +2,10 @@
 
 Each capture (the object, and the calibration's reference plane) goes through the same stages::
 
-    load -> denoise -> wrapped -> unwrap -> correction
+    load -> undistort -> denoise -> wrapped -> unwrap -> correction
 
-then the two meet in ``height`` (thesis eq. 1.15 on Phi_object - Phi_reference) and ``outputs``.
+then the two meet in ``height`` (:mod:`calibration.models`: thesis eq. 1.15 on Phi_object -
+Phi_reference for the reference-plane model) and ``outputs``.
 Every stage is a plain function of a :class:`SceneState` and the :class:`ProcessOptions`; its
 wall-clock time goes into report.json. Methods plug in through registries, so a new denoiser or
 phase correction is one entry, not a new code path:
@@ -31,8 +32,9 @@ along the fringe axis (the axis of the first sinusoid pattern):
 5. anything else: an error asking for ``--unwrap``.
 
 Methods that use fewer frequencies than captured take the highest ones. Spatial unwrapping gives
-phase up to a constant 2 pi k: the height stage then removes the multiple of 2 pi nearest to the
-median phase difference (right when the reference plane shows around the object) and says so.
+phase up to a constant 2 pi k per connected region: the height stage then removes from each region
+the multiple of 2 pi nearest its median object-reference difference (right when the reference
+plane shows in the region) and says so in the report.
 """
 
 from __future__ import annotations
@@ -47,8 +49,8 @@ from typing import Any
 
 import numpy as np
 
-from calibration.errors import CalibrationError
 from calibration import models as calibration_models
+from calibration.errors import CalibrationError
 from calibration.store import Calibration, read_calibration
 from processing.patterns import sinusoid_shift
 from rig import __version__
