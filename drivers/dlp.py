@@ -30,6 +30,9 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
+import usb.core
+import usb.util
+
 from drivers import dlp_protocol as dp
 from drivers.dlp_protocol import Command, Led, PatternEntry, TriggerType, Validation
 from drivers.errors import (
@@ -450,9 +453,6 @@ class LightCrafter4500(DlpController):
 
     # -- hooks ----------------------------------------------------------------------------------
     def _do_open(self) -> None:
-        import usb.core
-        import usb.util
-
         try:
             dev = usb.core.find(idVendor=dp.USB_VENDOR_ID, idProduct=dp.USB_PRODUCT_ID,
                                 backend=self._backend)
@@ -482,9 +482,6 @@ class LightCrafter4500(DlpController):
         self._dev = dev
 
     def _do_close(self) -> None:
-        import usb.core
-        import usb.util
-
         dev, self._dev = self._dev, None
         if dev is None:
             return
@@ -545,8 +542,6 @@ class LightCrafter4500(DlpController):
 
     def _transact(self, command: Command, data: bytes, read: bool) -> bytes:
         """Send one request (reply requested) and return the data of its reply."""
-        import usb.core
-
         if self._dev is None:
             raise IncompatibleStateError(f"{self}: not open")
         self._seq = (self._seq + 1) & 0xFF

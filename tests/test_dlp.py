@@ -12,6 +12,7 @@ from drivers import dlp_protocol as dp
 from drivers.dlp import (
     DisplayMode,
     DlpCommandError,
+    DlpController,
     DlpLimitError,
     DlpValidationError,
     ExposureError,
@@ -32,6 +33,7 @@ from drivers.errors import (
     UnsupportedFeatureError,
 )
 from mock_devices.dlp_usb import Dlpc350Faults, FakeDlpc350Backend
+from tests.contracts import device_option
 from tests.protocol import expected_usb_protocol
 
 
@@ -382,3 +384,56 @@ def test_default_backend_without_a_projector_raises_device_not_found():
     # the real pyusb path: either libusb is missing or no LightCrafter is plugged in here
     with pytest.raises(DeviceNotFoundError, match="libusb|plug it in|permission|udev"):
         LightCrafter4500().open()
+
+
+# -- contract: every DlpController backend, simulated or real ---------------------------------
+
+class DlpContract:
+    """Mix into a class whose ``make_dlp()`` returns an unopened DlpController."""
+
+    def make_dlp(self) -> DlpController:
+        raise NotImplementedError
+
+    def test_sequence_runs_and_stops(self):
+        with self.make_dlp() as dlp:
+            dlp.wake()
+            dlp.set_display_mode(DisplayMode.PATTERN)
+            dlp.configure_sequence(valid_sequence(n=3, depth=8))
+            assert dlp.validate().ok
+            dlp.start()
+            assert dlp.status().sequencer_running
+            dlp.stop()
+            assert not dlp.status().sequencer_running
+            assert dlp.status().healthy
+            dlp.set_display_mode(DisplayMode.VIDEO)
+
+    def test_limits_are_refused_before_sending(self):
+        with self.make_dlp() as dlp:
+            dlp.wake()
+            dlp.set_display_mode(DisplayMode.PATTERN)
+            with pytest.raises(ExposureError):
+                dlp.configure_sequence(PatternSequence([PatternEntry(0, bit_depth=8)], 1000, 1000))
+            with pytest.raises(IncompatibleStateError):
+                dlp.start()
+            dlp.set_display_mode(DisplayMode.VIDEO)
+
+    def test_closed_controller_refuses(self):
+        with pytest.raises(IncompatibleStateError):
+            self.make_dlp().status()
+
+
+class TestFakeLightCrafter(DlpContract):
+    def make_dlp(self) -> DlpController:
+        return LightCrafter4500(backend=FakeDlpc350Backend())
+
+
+class TestLightCrafterOnDevice(DlpContract):
+    """A real projector: ``pytest --device dlp4500`` (uses flash image 0)."""
+
+    @pytest.fixture(autouse=True)
+    def _device(self, request: pytest.FixtureRequest) -> None:
+        if device_option(request, "dlp4500") is None:
+            pytest.skip("no LightCrafter 4500 requested (run with --device dlp4500)")
+
+    def make_dlp(self) -> DlpController:
+        return LightCrafter4500()

@@ -20,9 +20,11 @@ from drivers.trigger_box import (
     ExposureSource,
     Polarity,
     SerialTriggerBox,
+    TriggerBox,
     TriggerBoxRefusedError,
 )
 from mock_devices.trigger_box import FakeTriggerBox, TriggerFaults
+from tests.contracts import device_option
 from tests.protocol import expected_serial_protocol
 
 HELLO = (b"1 HELLO 1*42\n", b"1 OK 1 box-fw/2.1*6F\n")
@@ -309,3 +311,77 @@ def test_fake_box_answers_the_wire_format_exactly():
                              b"4 RESET*41\n"]
     assert fake.sent == [b"! READY 1*5B\n", b"1 OK 1 fpp-trigger-box/1.0.0*51\n", b"2 OK 1 SW*23\n",
                          b"! PULSE 0*4E\n", b"3 OK 0*07\n", b"! DONE 1*10\n", b"4 OK*10\n"]
+
+
+# -- contract: every TriggerBox backend, simulated or real ------------------------------------
+
+class TriggerBoxContract:
+    """Mix into a class whose ``make_box()`` returns an unopened TriggerBox."""
+
+    def make_box(self) -> TriggerBox:
+        raise NotImplementedError
+
+    def test_open_negotiates_our_version(self):
+        with self.make_box() as box:
+            assert box.is_open
+            assert box.hello() == tp.PROTOCOL_VERSION
+        assert not box.is_open
+
+    def test_configure_arm_fire_status(self):
+        with self.make_box() as box:
+            box.reset()
+            box.configure(pulse_width_us=150, delay_us=20, polarity=Polarity.ACTIVE_HIGH)
+            box.arm(2)
+            assert box.status().state == "ARMED"
+            assert [box.fire(), box.fire()] == [0, 1]
+            status = box.status()
+            assert (status.state, status.fired, status.pulse_width_us, status.delay_us) == (
+                "DONE", 2, 150, 20)
+            with pytest.raises(IncompatibleStateError):
+                box.fire()
+            box.reset()
+            assert box.status().state == "IDLE"
+
+    def test_bad_arguments_and_states_are_refused(self):
+        with self.make_box() as box:
+            box.reset()
+            with pytest.raises(ValueError):
+                box.configure(pulse_width_us=tp.MAX_PULSE_WIDTH_US + 1)
+            box.arm(1)
+            with pytest.raises(IncompatibleStateError):
+                box.arm(1)
+            box.reset()
+
+    def test_ping_measures_a_round_trip(self):
+        with self.make_box() as box:
+            assert 0 < box.ping() < 1.0
+
+    def test_closed_box_refuses_commands(self):
+        box = self.make_box()
+        with pytest.raises(IncompatibleStateError):
+            box.status()
+
+
+class TestFakeTriggerBox(TriggerBoxContract):
+    @pytest.fixture(autouse=True)
+    def _fake(self):
+        with FakeTriggerBox() as fake:
+            self.fake = fake
+            yield
+
+    def make_box(self) -> TriggerBox:
+        return SerialTriggerBox(self.fake.port)
+
+
+class TestTriggerBoxOnDevice(TriggerBoxContract):
+    """A real box: ``pytest --device trigger-box:/dev/ttyACM0``."""
+
+    @pytest.fixture(autouse=True)
+    def _device(self, request: pytest.FixtureRequest) -> None:
+        address = device_option(request, "trigger-box")
+        if not address:
+            pytest.skip("no trigger box requested (run with --device trigger-box:PORT)")
+        self.port = address
+
+    def make_box(self) -> TriggerBox:
+        return SerialTriggerBox(self.port, timeout_s=2.0)
