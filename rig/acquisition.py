@@ -71,9 +71,10 @@ class AcquisitionSettings:
     show_timeout_s: float = 1.0
     fetch_timeout_s: float = 2.0
     retries: int = 2
+    keepalive_s: float = 0.5  # longest silence towards the trigger hardware while waiting for a frame
 
     def __post_init__(self) -> None:
-        for name in ("show_timeout_s", "fetch_timeout_s"):
+        for name in ("show_timeout_s", "fetch_timeout_s", "keepalive_s"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name}: expected > 0 s, found {getattr(self, name)}")
         if self.retries < 0:
@@ -93,6 +94,9 @@ class TriggerPath(Protocol):
 
     def fire(self) -> int:
         """Start one exposure; return the trigger index the resulting frame will carry."""
+
+    def keepalive(self) -> None:
+        """Called while waiting for a frame, at least every ``keepalive_s``."""
 
     def finish(self) -> None:
         """Leave the trigger hardware idle; called after the scan, whatever its outcome."""
@@ -116,6 +120,9 @@ class SoftwareTrigger:
         self._fired += 1
         return index
 
+    def keepalive(self) -> None:
+        pass
+
     def finish(self) -> None:
         pass
 
@@ -124,6 +131,7 @@ class BoxTrigger:
     """A trigger box pulsing the camera's hardware trigger line; indices are the box's pulse indices.
 
     The box is reset and armed for the whole scan (retries included) before the first pattern,
+    pinged while the loop waits for a frame (its watchdog disarms it after a few silent seconds)
     and reset again afterwards, so it never stays armed.
     """
 
@@ -138,6 +146,10 @@ class BoxTrigger:
 
     def fire(self) -> int:
         return int(self.box.fire())
+
+    def keepalive(self) -> None:
+        """Heartbeat: an armed box disarms itself after a few seconds without a command."""
+        self.box.ping()
 
     def finish(self) -> None:
         try:
@@ -340,7 +352,7 @@ def acquire_pattern(
             times.show_s += shown - started
             times.trigger_s += fired - shown
             try:
-                frame, dropped = _fetch_answer(camera, expected, ordinal, settings.fetch_timeout_s, label)
+                frame, dropped = _fetch_answer(camera, trigger, expected, ordinal, settings, label)
             finally:
                 times.fetch_s += time.perf_counter() - fired
             discarded += dropped
@@ -353,8 +365,14 @@ def acquire_pattern(
     ) from last_error
 
 
-def _fetch_answer(camera: Camera, expected: int, ordinal: int, timeout_s: float, label: str) -> tuple[Frame, int]:
-    """Fetch until the frame answering trigger ``expected`` arrives; (frame, frames discarded)."""
+def _fetch_answer(
+    camera: Camera, trigger: TriggerPath, expected: int, ordinal: int, settings: AcquisitionSettings, label: str
+) -> tuple[Frame, int]:
+    """Fetch until the frame answering trigger ``expected`` arrives; (frame, frames discarded).
+
+    Waits in slices of ``keepalive_s``, keeping the trigger hardware alive in between.
+    """
+    timeout_s = settings.fetch_timeout_s
     deadline = time.monotonic() + timeout_s
     discarded = 0
     while True:
@@ -362,7 +380,14 @@ def _fetch_answer(camera: Camera, expected: int, ordinal: int, timeout_s: float,
         if remaining <= 0:
             raise DeviceTimeoutError(f"{camera.name}: no frame for trigger {expected} within {timeout_s:g} s ({label})")
         try:
-            frame = camera.fetch(remaining)
+            frame = camera.fetch(min(remaining, settings.keepalive_s))
+        except DeviceTimeoutError:
+            if deadline - time.monotonic() <= 0:
+                raise DeviceTimeoutError(
+                    f"{camera.name}: no frame for trigger {expected} within {timeout_s:g} s ({label})"
+                ) from None
+            trigger.keepalive()
+            continue
         except DuplicateFrameError as exc:
             log.info("%s: discarding duplicate frame %d", label, exc.frame.frame_id)
             discarded += 1

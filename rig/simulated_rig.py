@@ -110,6 +110,7 @@ class SimulatedRig:
         scene: str = "object",
         camera_faults: Any = None,
         trigger_faults: Any = None,
+        fake_box_options: dict[str, Any] | None = None,
     ) -> None:
         self.config = config
         self.scene = scene
@@ -117,6 +118,7 @@ class SimulatedRig:
         self.height_mm = scene_height(config, scene, self.geometry)
         self.camera_faults = camera_faults
         self.trigger_faults = trigger_faults
+        self.fake_box_options = dict(fake_box_options or {})  # more FakeTriggerBox arguments (watchdog_s, ...)
         self.projector: Any = None
         self.camera: Any = None
         self.trigger_box: Any = None
@@ -167,7 +169,7 @@ class SimulatedRig:
         from drivers.trigger_box import SerialTriggerBox
         from mock_devices.trigger_box import FakeTriggerBox
 
-        self.fake_box = self._stack.enter_context(FakeTriggerBox(on_pulse=self.camera.pulse, faults=self.trigger_faults))
+        self.fake_box = self._stack.enter_context(FakeTriggerBox(on_pulse=self.camera.pulse, faults=self.trigger_faults, **self.fake_box_options))
         self.trigger_box = self._stack.enter_context(
             SerialTriggerBox(self.fake_box.port, baudrate=self.config.trigger.baudrate, timeout_s=self.config.trigger.timeout_s)
         )

@@ -188,6 +188,20 @@ def test_frame_of_an_unacknowledged_pulse_is_discarded_not_stored(tmp_path):
     assert result.discarded == 1
 
 
+def test_trigger_box_is_kept_armed_while_the_loop_waits_for_a_slow_frame(tmp_path):
+    # The box disarms itself after 0.3 s without a command; a missed trigger makes the loop wait
+    # 1 s for a frame before retrying: without heartbeats the next FIRE would find it disarmed.
+    config = small_config("simulated-serial")
+    slow = AcquisitionSettings(fetch_timeout_s=1.0, retries=2, keepalive_s=0.1)
+    with SimulatedRig(config, scene="reference", camera_faults=CameraFaults(timeout_on={2}),
+                      fake_box_options={"watchdog_s": 0.3}) as rig:
+        path = trigger_path(rig.camera, rig.trigger_box)
+        result = run_scan(tmp_path / "capture", config.scan.patterns(), rig.projector, rig.camera, path, slow)
+        assert_every_frame_matches_its_pattern(result.path, rig)
+        assert not any(e.name == "WATCHDOG" for e in rig.trigger_box.events)
+        assert sum(b"PING" in line for line in rig.fake_box.received) >= 5
+
+
 def test_silent_trigger_box_fails_cleanly(tmp_path):
     # The box answers HELLO, RESET and ARM, then goes silent.
     with pytest.raises(AcquisitionError, match=r"pattern 0 of 8 .* no reply to FIRE"):
