@@ -20,6 +20,7 @@ import abc
 import collections
 import logging
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import serial
@@ -213,16 +214,27 @@ class SerialTriggerBox(TriggerBox):
         115200 for the reference firmware.
     timeout_s : float
         Deadline of one reply; FIRE adds the configured delay and width.
+    command_timeouts : mapping, optional
+        Per-command deadlines overriding ``timeout_s``; by default HELLO gets
+        ``HELLO_TIMEOUT_S`` (boards that reset when the port opens need ~1.5 s to boot).
     retries : int
         Extra attempts after a missing or garbled reply. A retry resends the same request id,
         which the box answers from its reply cache without acting twice (FIRE never doubles).
     """
 
+    HELLO_TIMEOUT_S = 2.0
+
     def __init__(self, url: str, baudrate: int = 115200, timeout_s: float = 0.5,
-                 retries: int = 2) -> None:
+                 retries: int = 2, command_timeouts: Mapping[str, float] | None = None) -> None:
         super().__init__()
         if timeout_s <= 0:
             raise ValueError(f"timeout_s must be > 0, got {timeout_s}")
+        self.command_timeouts = {"HELLO": max(timeout_s, self.HELLO_TIMEOUT_S)}
+        self.command_timeouts.update(command_timeouts or {})
+        for command, seconds in self.command_timeouts.items():
+            if command not in tp.COMMANDS or seconds <= 0:
+                raise ValueError(f"command_timeouts: expected positive seconds for one of "
+                                 f"{', '.join(tp.COMMANDS)}, got {command}={seconds}")
         if retries < 0:
             raise ValueError(f"retries must be >= 0, got {retries}")
         self.url = url
@@ -333,16 +345,17 @@ class SerialTriggerBox(TriggerBox):
         self._next_id = self._next_id % tp.MAX_REQUEST_ID + 1
         request_id = self._next_id
         line = tp.encode_request(request_id, command, *args)
+        timeout_s = self.command_timeouts.get(command, self.timeout_s) + extra_timeout_s
         failure: DeviceError | None = None
         for attempt in range(self.retries + 1):
             if attempt:
                 log.warning("%s: retrying %s (attempt %d): %s", self, command, attempt + 1, failure)
             self._write(line, command)
             try:
-                reply = self._read_reply(request_id, command, self.timeout_s + extra_timeout_s)
+                reply = self._read_reply(request_id, command, timeout_s)
             except _NoReply as exc:
                 failure = DeviceTimeoutError(f"{self}: no reply to {command} within "
-                                             f"{self.timeout_s + extra_timeout_s:.3g} s ({exc})")
+                                             f"{timeout_s:.3g} s ({exc})")
                 continue
             except _Garbled as exc:
                 failure = ProtocolError(f"{self}: garbled reply to {command}: {exc}")

@@ -151,6 +151,18 @@ def test_error_replies_map_to_device_errors(reply, error):
             box.arm(1)
 
 
+def test_hello_has_its_own_longer_deadline_for_booting_boards():
+    exchanges = [(b"1 HELLO 1*42\n", None), HELLO]  # the first HELLO is lost while booting
+    with expected_serial_protocol(exchanges) as port:
+        box = SerialTriggerBox(port, timeout_s=0.02, command_timeouts={"HELLO": 0.1})
+        start = time.monotonic()
+        box.open()
+        assert time.monotonic() - start >= 0.1
+        box.close()
+    with pytest.raises(ValueError, match="command_timeouts"):
+        SerialTriggerBox("loop://", command_timeouts={"FLY": 1.0})
+
+
 def test_box_version_other_than_ours_is_refused_and_port_closed():
     with expected_serial_protocol([(b"1 HELLO 1*42\n", b"1 OK 2 box-fw/2.1*6C\n")]) as port:
         box = SerialTriggerBox(port)
