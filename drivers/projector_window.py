@@ -17,7 +17,7 @@ import numpy as np
 
 from drivers.errors import DeviceError, DeviceNotFoundError, UnsupportedFeatureError
 from drivers.projector import Projector
-from drivers.projector_gl import PatternRenderer, read_framebuffer
+from drivers.projector_gl import PatternRenderer, read_framebuffer, release_egl_thread
 
 log = logging.getLogger(__name__)
 
@@ -65,6 +65,9 @@ class WindowProjector(Projector):
 
     def _open(self) -> None:
         glfw = _glfw()
+        # An EGL context left current on this thread (a released standalone moderngl context)
+        # makes the GLX MakeCurrent below fail with BadAccess, and Xlib then exits the process.
+        release_egl_thread()
         if not glfw.init():
             raise DeviceNotFoundError(f"{self.name}: glfw cannot start (no display? check $DISPLAY)")
         try:

@@ -6,8 +6,10 @@ shows, independently of OpenGL. Skips with a reason when Xvfb or glfw is missing
 
 from __future__ import annotations
 
+import ctypes
 import os
 import shutil
+import signal
 import subprocess
 from collections.abc import Iterator
 from pathlib import Path
@@ -38,6 +40,14 @@ def read_xwd(path: Path) -> np.ndarray:
     return pixels[..., [2, 1, 0]] if byte_order == 0 else pixels[..., [1, 2, 3]]  # LSBFirst: B G R x
 
 
+def _die_with_parent() -> None:
+    """In the Xvfb child: get SIGTERM when the test process dies, even if it never tears down."""
+    try:
+        ctypes.CDLL("libc.so.6").prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+    except OSError:
+        pass
+
+
 @pytest.fixture(scope="module")
 def xvfb(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
     """An Xvfb server with one SIZE screen; yields the file holding its screen pixels."""
@@ -47,7 +57,7 @@ def xvfb(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
     # -noreset: otherwise the server resets when a projector closes and refuses the next one.
     server = subprocess.Popen(
         ["Xvfb", "-displayfd", str(write_fd), "-screen", "0", f"{SIZE[0]}x{SIZE[1]}x24", "-fbdir", str(fbdir), "-nolisten", "tcp", "-noreset"],
-        pass_fds=(write_fd,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+        pass_fds=(write_fd,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, preexec_fn=_die_with_parent,
     )
     os.close(write_fd)
     try:
@@ -98,3 +108,17 @@ def test_size_must_match_the_monitor_mode(xvfb: Path) -> None:
 def test_missing_monitor_is_device_not_found(xvfb: Path) -> None:
     with pytest.raises(DeviceNotFoundError, match="monitor 3 not found"):
         WindowProjector(SIZE, monitor=3).open()
+
+
+def test_opens_after_a_released_standalone_egl_context(xvfb: Path) -> None:
+    """Regression: glcontext leaves a released EGL context current; the GLX window then hit an X
+    BadAccess and Xlib exited the whole test process."""
+    moderngl = pytest.importorskip("moderngl")
+    try:
+        moderngl.create_standalone_context(backend="egl").release()
+    except Exception as exc:  # glcontext reports a missing libEGL as a bare Exception
+        pytest.skip(f"no EGL: {exc}")
+    with WindowProjector(SIZE) as projector:
+        projector.show({"kind": "flat", "level": 1.0})
+        projector.wait_shown()
+        assert np.all(projector.last_frame() == 1.0)
