@@ -25,14 +25,6 @@ from dataclasses import dataclass
 
 import serial
 
-try:  # pyserial's POSIX backend lets termios errors through when a tty vanishes
-    import termios
-
-    _PORT_ERRORS: tuple[type[BaseException], ...] = (serial.SerialException, OSError,
-                                                     termios.error)
-except ImportError:  # Windows
-    _PORT_ERRORS = (serial.SerialException, OSError)
-
 from drivers import trigger_protocol as tp
 from drivers.errors import (
     DeviceError,
@@ -55,6 +47,14 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
+
+try:  # pyserial's POSIX backend lets termios errors through when a tty vanishes
+    import termios
+
+    _PORT_ERRORS: tuple[type[BaseException], ...] = (serial.SerialException, OSError,
+                                                     termios.error)
+except ImportError:  # Windows
+    _PORT_ERRORS = (serial.SerialException, OSError)
 
 
 class TriggerBoxRefusedError(DeviceError, ValueError):

@@ -143,3 +143,38 @@ def calibration_fields(rig: StereoRig) -> dict:
         "camera_size": [rig.camera.width, rig.camera.height],
         "projector_size": [rig.projector.width, rig.projector.height],
     }
+
+
+def board_scene(rvec: np.ndarray, tvec: np.ndarray) -> Scene:
+    """The (infinite) plane of a board at pose (rvec, tvec), board frame -> camera frame."""
+    rotation, _ = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64))
+    normal = rotation[:, 2]
+    distance = float(normal @ np.asarray(tvec, dtype=np.float64).ravel())
+    if distance < 0:
+        normal, distance = -normal, -distance
+    return Scene(plane_normal=tuple(normal), plane_distance=distance)
+
+
+def board_session(
+    rig: StereoRig, count: int = 8, squares: tuple[int, int] = (9, 7), square_mm: float = 30.0,
+    distance_mm: float = 600.0, seed: int = 0,
+) -> list[tuple[np.ndarray, ProjectorMap]]:
+    """``count`` poses of a chessboard in front of the rig: per pose the camera's image of the board
+    (mock_devices.board_synth) and the projector map of the board's plane (for fringe rendering
+    with the board image as reflectivity)."""
+    from mock_devices import board_synth
+
+    rng = np.random.default_rng(seed)
+    camera = board_synth.PinholeCamera(rig.camera.matrix, rig.camera.distortion, rig.camera.width, rig.camera.height)
+    px_per_mm, margin = 2.0, square_mm
+    texture = board_synth.chessboard_texture(squares, square_mm, px_per_mm, margin)
+    size = (squares[0] * square_mm, squares[1] * square_mm)
+    out = []
+    for _ in range(count):
+        tilt = rng.uniform(-25, 25, 2)
+        centre = (rng.uniform(-40, 40), rng.uniform(-30, 30), distance_mm * rng.uniform(0.92, 1.08))
+        rvec, tvec = board_synth.board_pose(tilt[0], tilt[1], rng.uniform(-10, 10), centre, size)
+        image = board_synth.render_board_view(texture, px_per_mm, margin, camera, rvec, tvec, rng=rng)
+        _, mapping = trace(rig, board_scene(rvec, tvec))
+        out.append((image, mapping))
+    return out

@@ -85,7 +85,7 @@ class _BoxFirmware:
         self.protocol_version = protocol_version
         self.watchdog_s = watchdog_s
         self.hello_done = False
-        self.last_id = 0
+        self.last_request = b""  # the last executed request line, as received
         self.last_reply = b""
         self.last_line_at = now
         self._defaults()
@@ -111,11 +111,12 @@ class _BoxFirmware:
             out.reply = tp.encode_error(0, code, "request rejected")
             return out
         out.command, out.request_id = request.command, request.id
-        if request.id == self.last_id and self.last_reply:
+        raw = line.rstrip(b"\n").removesuffix(b"\r")
+        if raw == self.last_request:
             out.reply = self.last_reply  # a retransmission: answer again, never act twice
             return out
         out.reply = self._execute(request, out)
-        self.last_id, self.last_reply = request.id, out.reply
+        self.last_request, self.last_reply = raw, out.reply
         return out
 
     def sync_edge(self) -> _Output:

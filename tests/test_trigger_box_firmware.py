@@ -61,7 +61,8 @@ def run_fake(steps) -> list[bytes]:
 
 SCENARIOS = {
     "scan": [req(1, "HELLO", 1), req(2, "CONFIG", 250, 40, "NEG"), req(3, "ARM", 3),
-             req(4, "FIRE"), req(4, "FIRE"), req(5, "FIRE"), req(6, "STATUS"), req(7, "FIRE"),
+             req(4, "FIRE"), req(4, "FIRE"), req(4, "STATUS"), req(5, "FIRE"), req(6, "STATUS"),
+             req(7, "FIRE"),
              req(8, "FIRE"), req(9, "RESET"), req(10, "STATUS")],
     "refusals": [req(1, "FIRE"), req(2, "HELLO", 2), req(3, "HELLO", "x"), req(4, "HELLO", 1),
                  req(5, "JUMP"), req(6, "CONFIG", 0, 0, "POS"), req(7, "CONFIG", 5, 5, "UP"),

@@ -5,8 +5,8 @@
 //
 // The host sends checksummed ASCII lines "<id> <COMMAND> [args]*HH\n"; the box answers
 // "<id> OK [data]*HH\n" or "<id> ERR <code> <NAME> [text]*HH\n" and sends events "! <EVENT> ...".
-// A request repeating the id of the last executed request is answered from the reply cache and
-// not executed again (a retried FIRE never fires twice). mock_devices/trigger_box.py emulates
+// A request identical to the last executed one (same id, command and arguments) is answered
+// from the reply cache and not executed again (a retried FIRE never fires twice). mock_devices/trigger_box.py emulates
 // this firmware; keep the two in step.
 //
 // Pins: D8 pulse out (camera trigger), D2 sync in (INT0, rising edge), D13 LED (armed).
@@ -67,8 +67,8 @@ static unsigned long armedCount = 0;
 static unsigned long firedCount = 0;
 static bool helloDone = false;
 
-static unsigned long lastId = 0;          // id of the last executed request (0: none)
-static char lastReply[MAX_LINE + 1] = "";  // its reply body, without "*HH"
+static char lastRequest[MAX_LINE + 1] = "";  // the last executed request line, as received
+static char lastReply[MAX_LINE + 1] = "";    // its reply body, without "*HH"
 static unsigned long lastLineMs = 0;
 
 static char lineBuf[MAX_LINE + 2];
@@ -317,6 +317,9 @@ static void execute(unsigned long id, char *command, char **args, uint8_t nargs)
 static void handleLine(char *line, uint8_t len) {
   lastLineMs = millis();
   if (len && line[len - 1] == '\r') line[--len] = '\0';
+  char received[MAX_LINE + 1];
+  strncpy(received, line, sizeof received - 1);
+  received[sizeof received - 1] = '\0';
 
   // checksum: "...*HH"
   if (len < 3 || line[len - 3] != '*' || hexValue(line[len - 2]) < 0 ||
@@ -361,11 +364,11 @@ static void handleLine(char *line, uint8_t len) {
     if (*c >= 'a' && *c <= 'z') *c -= 'a' - 'A';
   }
 
-  if (id == lastId && lastReply[0]) {  // a retransmission: answer again, never act twice
+  if (lastReply[0] && !strcmp(received, lastRequest)) {  // a retransmission: answer again
     sendLine(lastReply);
     return;
   }
-  lastId = id;
+  strcpy(lastRequest, received);
   execute(id, tokens[1], tokens + 2, ntokens - 2);
 }
 
