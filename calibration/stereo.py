@@ -271,3 +271,139 @@ def fit_plane(points: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
     if d < 0:
         normal, d = -normal, -d
     return np.concatenate([normal, [d]])
+
+
+@dataclass(frozen=True)
+class BoardPhaseView:
+    """One pose of a calibration board seen by the camera, with the projector's absolute phases.
+
+    ``image_points`` (N, 2) camera pixels of the board corners, ``object_points`` (N, 3) their board
+    coordinates (mm), ``phase_x`` / ``phase_y`` (H, W) absolute phase of vertical / horizontal
+    fringes (NaN invalid) at ``frequency_x`` / ``frequency_y``.
+    """
+
+    image_points: np.ndarray
+    object_points: np.ndarray
+    phase_x: np.ndarray
+    phase_y: np.ndarray
+    frequency_x: float
+    frequency_y: float
+
+
+def projector_corners(
+    view: BoardPhaseView, projector_size: tuple[int, int], window_px: int = 7, pixel_centre: float = 0.5, min_pixels: int = 12
+) -> tuple[np.ndarray, np.ndarray]:
+    """Projector pixel coordinates (OpenCV convention) of a view's corners, and which were found.
+
+    The phases of the pixels around each corner (a square of half-width ``window_px``) give a
+    local homography camera -> projector (the board is flat), evaluated at the sub-pixel corner:
+    less noise than one pixel's phase, no bias from the corner's own dark/bright junction.
+    """
+    width, height = projector_size
+    u = projector_coordinate(view.phase_x, view.frequency_x, width, pixel_centre)
+    v = projector_coordinate(view.phase_y, view.frequency_y, height, pixel_centre)
+    valid = np.isfinite(u) & np.isfinite(v)
+    rows, cols = u.shape
+    out = np.full((len(view.image_points), 2), np.nan)
+    for index, (x, y) in enumerate(view.image_points):
+        x0, x1 = int(max(round(x) - window_px, 0)), int(min(round(x) + window_px + 1, cols))
+        y0, y1 = int(max(round(y) - window_px, 0)), int(min(round(y) + window_px + 1, rows))
+        keep = valid[y0:y1, x0:x1]
+        if keep.sum() < min_pixels:
+            continue
+        gy, gx = np.nonzero(keep)
+        source = np.column_stack([gx + x0, gy + y0]).astype(np.float64)
+        target = np.column_stack([u[y0:y1, x0:x1][keep], v[y0:y1, x0:x1][keep]])
+        homography, _ = cv2.findHomography(source - (x, y), target, 0)
+        if homography is None:
+            continue
+        out[index] = homography[:2, 2] / homography[2, 2]
+    return out, np.all(np.isfinite(out), axis=1)
+
+
+@dataclass(frozen=True)
+class StereoCalibration:
+    model: StereoModel
+    rms_px: float                 # stereoCalibrate's RMS reprojection error (camera and projector)
+    camera_rms_px: float
+    projector_rms_px: float
+    views_used: int
+
+
+def calibrate_stereo(
+    views: Sequence[BoardPhaseView],
+    camera_size: tuple[int, int],
+    projector_size: tuple[int, int],
+    pixel_centre: float = 0.5,
+    flags: int = 0,
+    min_views: int = 3,
+) -> StereoCalibration:
+    """Camera and projector intrinsics, distortion and pose from board views with phase maps.
+
+    The projector "sees" each corner at the coordinates the phases name (:func:`projector_corners`);
+    both devices are calibrated on their own (``cv2.calibrateCamera``), then jointly
+    (``cv2.stereoCalibrate`` with those intrinsics as the starting guess).
+    """
+    if len(views) < min_views:
+        raise CalibrationError(f"stereo calibration: {len(views)} board views, need at least {min_views}")
+    object_points, camera_points, projector_points = [], [], []
+    for index, view in enumerate(views):
+        expected = (camera_size[1], camera_size[0])
+        if view.phase_x.shape != expected or view.phase_y.shape != expected:
+            raise CalibrationError(f"stereo view {index}: phase maps {view.phase_x.shape} do not match the camera {expected}")
+        corners, found = projector_corners(view, projector_size, pixel_centre=pixel_centre)
+        if found.sum() < 6:
+            raise CalibrationError(
+                f"stereo view {index}: only {int(found.sum())} corners have a projector coordinate (is the board lit by the fringes?)"
+            )
+        object_points.append(view.object_points[found].astype(np.float32).reshape(-1, 1, 3))
+        camera_points.append(view.image_points[found].astype(np.float32).reshape(-1, 1, 2))
+        projector_points.append(corners[found].astype(np.float32).reshape(-1, 1, 2))
+    cam_rms, cam_matrix, cam_dist, _, _ = cv2.calibrateCamera(object_points, camera_points, tuple(camera_size), None, None, flags=flags)
+    proj_rms, proj_matrix, proj_dist, _, _ = cv2.calibrateCamera(object_points, projector_points, tuple(projector_size), None, None, flags=flags)
+    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-12)
+    rms, cam_matrix, cam_dist, proj_matrix, proj_dist, rotation, translation, _, _ = cv2.stereoCalibrate(
+        object_points, camera_points, projector_points, cam_matrix, cam_dist, proj_matrix, proj_dist,
+        tuple(camera_size), criteria=criteria, flags=flags | cv2.CALIB_USE_INTRINSIC_GUESS,
+    )
+    model = StereoModel(
+        camera_matrix=np.asarray(cam_matrix, float), camera_distortion=np.asarray(cam_dist, float).ravel(),
+        projector_matrix=np.asarray(proj_matrix, float), projector_distortion=np.asarray(proj_dist, float).ravel(),
+        rotation=np.asarray(rotation, float), translation_mm=np.asarray(translation, float).ravel(),
+        camera_size=tuple(int(v) for v in camera_size), projector_size=tuple(int(v) for v in projector_size),  # type: ignore[arg-type]
+        pixel_centre=pixel_centre,
+    )
+    return StereoCalibration(model, float(rms), float(cam_rms), float(proj_rms), len(views))
+
+
+def hierarchical_phase(frames: np.ndarray, frequencies: Sequence[int], steps: int, min_modulation_ratio: float = 0.15) -> np.ndarray:
+    """Absolute phase at the last frequency from ``steps``-step stacks at ``frequencies`` (1 first),
+    NaN where the fringe modulation is below ``min_modulation_ratio`` of its 99th percentile."""
+    from processing.phase_shift import phase_shift
+    from processing.temporal import unwrap_hierarchical
+
+    stack = np.asarray(frames)
+    if stack.ndim != 3 or stack.shape[0] != steps * len(frequencies):
+        raise CalibrationError(f"board fringes: expected {steps * len(frequencies)} frames, found shape {stack.shape}")
+    results = [phase_shift(stack[i * steps:(i + 1) * steps]) for i in range(len(frequencies))]
+    unwrapped = unwrap_hierarchical([r.phase for r in results], list(frequencies))
+    modulation = results[-1].modulation
+    lit = modulation > min_modulation_ratio * np.percentile(modulation, 99)
+    return np.where(unwrapped.valid & lit, unwrapped.phase, np.nan)
+
+
+def board_phase_view(
+    board_image: np.ndarray, board: Any, frames_x: np.ndarray, frames_y: np.ndarray, frequencies: Sequence[int], steps: int
+) -> BoardPhaseView | None:
+    """A :class:`BoardPhaseView` from a board image and vertical / horizontal fringe stacks on it
+    (hierarchical frequencies, 1 first); None when the board is not found in the image."""
+    from calibration.camera import detect_board
+
+    found = detect_board(board_image, board)
+    if found is None:
+        return None
+    frequency = float(frequencies[-1])
+    return BoardPhaseView(
+        found.image_points, found.object_points,
+        hierarchical_phase(frames_x, frequencies, steps), hierarchical_phase(frames_y, frequencies, steps), frequency, frequency,
+    )

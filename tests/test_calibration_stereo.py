@@ -11,9 +11,10 @@ import pytest
 
 from calibration.errors import CalibrationError
 from calibration.opencv_yaml import import_opencv_calibration
-from calibration.stereo import StereoModel, fit_plane, triangulate
+from calibration.camera import BoardSpec
+from calibration.stereo import StereoModel, board_phase_view, calibrate_stereo, fit_plane, triangulate
 from mock_devices import synth
-from mock_devices.stereo_synth import calibration_fields, demo_rig, demo_scene, trace
+from mock_devices.stereo_synth import board_session, calibration_fields, demo_rig, demo_scene, trace
 from processing.phase_shift import phase_shift
 from processing.temporal import decode_gray, unwrap_gray, unwrap_hierarchical
 
@@ -60,6 +61,49 @@ def test_rendered_fringes_reproduce_the_object_within_0_2_mm_rms(simulated):
     assert plane[:3] @ np.array([0, 0, -1.0]) > 0.999 and plane[3] == pytest.approx(600.0, abs=0.2)
     heights = StereoModel.from_fields({**calibration_fields(rig), "plane": plane.tolist()}).heights(points)
     assert float(np.nanmax(heights)) == pytest.approx(40.0, abs=0.5)
+
+
+def rigid_rms(found: np.ndarray, truth: np.ndarray) -> float:
+    """RMS distance after the best rigid alignment (a calibrated camera frame is itself estimated)."""
+    a, b = found - found.mean(axis=0), truth - truth.mean(axis=0)
+    u, _, vt = np.linalg.svd(a.T @ b)
+    d = np.sign(np.linalg.det(u @ vt))
+    rotation = u @ np.diag([1.0, 1.0, d]) @ vt
+    return float(np.sqrt(np.mean(np.sum((a @ rotation - b) ** 2, axis=1))))
+
+
+def test_stereo_calibrated_from_board_views_reproduces_the_object():
+    rig = demo_rig(320, 256)
+    geometry = synth.RigGeometry(camera_width=320, camera_height=256, projector_width=rig.projector.width,
+                                 projector_height=rig.projector.height)
+    rng = np.random.default_rng(1)
+    views = []
+    for image, mapping in board_session(rig, count=8, seed=3):
+        appearance = synth.Appearance(reflectivity=image / 220.0, gain=200.0, ambient=0.05, snr_db=30.0, bit_depth=8)
+        stacks = [synth.render_stack(synth.sinusoid_patterns(FREQUENCIES, 4, axis=axis), mapping, geometry, appearance, rng)
+                  for axis in ("x", "y")]
+        view = board_phase_view(image, BoardSpec("chessboard", (9, 7), 30.0), stacks[0], stacks[1], FREQUENCIES, 4)
+        assert view is not None
+        views.append(view)
+    result = calibrate_stereo(views, (320, 256), (rig.projector.width, rig.projector.height), flags=cv2.CALIB_FIX_K3)
+    model = result.model
+    assert result.rms_px < 0.2
+    assert model.camera_matrix[0, 0] == pytest.approx(rig.camera.matrix[0, 0], rel=0.005)
+    assert model.projector_matrix[0, 0] == pytest.approx(rig.projector.matrix[0, 0], rel=0.005)
+    assert model.baseline_mm == pytest.approx(float(np.linalg.norm(rig.translation_mm)), rel=0.005)
+    truth, mapping = trace(rig, demo_scene())
+    phase = np.where(mapping.lit, 2 * np.pi * FREQUENCIES[-1] * mapping.u / rig.projector.width, np.nan)
+    points = triangulate(model, phase, FREQUENCIES[-1])
+    valid = np.isfinite(points[..., 2])
+    assert valid.mean() > 0.95
+    heights_true = 600.0 - truth[..., 2]
+    on = valid & (heights_true > 0.5)   # the spheres: shape after rigid alignment
+    assert rigid_rms(points[on], truth[on]) < 0.2
+    assert rigid_rms(points[valid], truth[valid]) < 0.3  # the whole view, corners beyond the boards included
+    # heights above the background plane, as measured by the calibrated model, match the sphere
+    plane = fit_plane(points, valid & (heights_true < 0.01))
+    heights = points @ plane[:3] + plane[3]
+    assert float(np.sqrt(np.mean((heights[on] - heights_true[on]) ** 2))) < 0.2
 
 
 def test_fields_round_trip_and_validation(simulated):
