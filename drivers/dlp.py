@@ -5,29 +5,26 @@ logs; backends implement the ``_do_`` hooks. ``LightCrafter4500`` speaks TI's HI
 (:mod:`drivers.dlp_protocol`) through pyusb; pass ``backend=`` (e.g.
 ``mock_devices.dlp_usb.FakeDlpc350Backend()``) to run it without hardware.
 
-Typical use in a scan (patterns stored in the projector's flash, one camera trigger per
+Typical use in a scan (patterns stored in the projector's flash, one external trigger per
 pattern)::
 
-    with LightCrafter4500() as dlp:
-        dlp.wake()
-        dlp.set_display_mode(DisplayMode.PATTERN)
-        dlp.configure_sequence(PatternSequence(
-            entries=[PatternEntry(k, bit_depth=8, trigger=TriggerType.EXTERNAL_POSITIVE,
-                                  buffer_swap=True) for k in range(3)], ...))
-        dlp.validate()
-        dlp.start()
-        ...
-        dlp.stop()
+    sequence = PatternSequence(
+        entries=[PatternEntry(k, bit_depth=8, trigger=TriggerType.EXTERNAL_POSITIVE,
+                              buffer_swap=(k == 0)) for k in range(3)],
+        exposure_us=10_000, frame_period_us=10_000)
+    with LightCrafter4500() as dlp, dlp.running(sequence):
+        ...  # trigger each pattern; on exit the sequence stops and the old mode returns
 """
 
 from __future__ import annotations
 
 import abc
+import contextlib
 import enum
 import errno
 import logging
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 import usb.core
@@ -368,6 +365,39 @@ class DlpController(abc.ABC):
         log.info("%s: stop sequence", self)
         self._do_sequence(dp.SequenceAction.STOP)
         self._state = SequenceState.STOPPED
+
+    @contextlib.contextmanager
+    def running(self, sequence: PatternSequence) -> Iterator[DlpController]:
+        """Run ``sequence`` for the duration of a ``with`` block, then restore.
+
+        Wakes the controller, selects pattern mode, configures, validates and starts; on exit
+        (or if any step fails) stops the sequence and restores the previous display mode and
+        power state. Errors while restoring are logged; the block's own error wins.
+        """
+        self._require_open("run a sequence")
+        was_standby, old_mode = self._standby, self._mode
+        try:
+            if was_standby:
+                self.wake()
+            self.set_display_mode(DisplayMode.PATTERN)
+            self.configure_sequence(sequence)
+            self.validate()
+            self.start()
+            yield self
+        finally:
+            self._restore(was_standby, old_mode)
+
+    def _restore(self, was_standby: bool, old_mode: DisplayMode | None) -> None:
+        steps: list[tuple[str, Callable[[], None]]] = [("stop", self.stop)]
+        if old_mode is not None and old_mode is not DisplayMode.PATTERN:
+            steps.append(("restore display mode", lambda: self.set_display_mode(old_mode)))
+        if was_standby:
+            steps.append(("return to standby", self.standby))
+        for what, step in steps:
+            try:
+                step()
+            except DeviceError as exc:
+                log.warning("%s: could not %s after the sequence: %s", self, what, exc)
 
     def status(self) -> DlpStatus:
         self._require_open("status")

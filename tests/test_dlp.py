@@ -437,3 +437,27 @@ class TestLightCrafterOnDevice(DlpContract):
 
     def make_dlp(self) -> DlpController:
         return LightCrafter4500()
+
+
+def test_running_restores_video_mode_and_standby():
+    backend = FakeDlpc350Backend()
+    with LightCrafter4500(backend=backend) as dlp:
+        dlp.set_display_mode(DisplayMode.VIDEO)
+        dlp.standby()
+        with dlp.running(valid_sequence()):
+            assert backend.state.sequencer == "running"
+            assert not backend.state.standby
+        assert backend.state.sequencer == "stopped"
+        assert backend.state.display_mode == DisplayMode.VIDEO
+        assert backend.state.standby
+
+
+def test_running_rolls_back_when_start_is_refused():
+    backend = FakeDlpc350Backend(Dlpc350Faults(refuse={Command.PATTERN_START_STOP}))
+    with LightCrafter4500(backend=backend) as dlp:
+        dlp.wake()
+        dlp.set_display_mode(DisplayMode.VIDEO)
+        with pytest.raises(DlpCommandError, match="PATTERN_START_STOP"):
+            with dlp.running(valid_sequence()):
+                pytest.fail("the block must not run")
+        assert backend.state.display_mode == DisplayMode.VIDEO  # restored despite the failure
