@@ -14,6 +14,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+import moderngl
 import numpy as np
 
 from drivers.errors import DeviceNotFoundError
@@ -67,8 +68,6 @@ class PatternRenderer:
     def _texture(self, data: np.ndarray) -> Any:
         rows, cols = data.shape
         tex = self.ctx.texture((cols, rows), 1, np.ascontiguousarray(data, dtype=np.float32).tobytes(), dtype="f4")
-        import moderngl
-
         tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
         tex.repeat_x = tex.repeat_y = False
         return tex
@@ -188,10 +187,6 @@ class GLProjector(Projector):
         self._frame: np.ndarray | None = None
 
     def _open(self) -> None:
-        try:
-            import moderngl
-        except ImportError as exc:
-            raise DeviceNotFoundError(f"{self.name}: moderngl is not installed") from exc
         kwargs = {"backend": self.backend} if self.backend else {}
         try:
             self._ctx = moderngl.create_standalone_context(require=330, **kwargs)

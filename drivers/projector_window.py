@@ -13,6 +13,7 @@ import logging
 from collections.abc import Mapping
 from typing import Any
 
+import moderngl
 import numpy as np
 
 from drivers.errors import DeviceError, DeviceNotFoundError, UnsupportedFeatureError
@@ -108,8 +109,6 @@ class WindowProjector(Projector):
         glfw.make_context_current(self._window)
         glfw.swap_interval(1 if self.vsync else 0)
         glfw.set_input_mode(self._window, glfw.CURSOR, glfw.CURSOR_HIDDEN)
-        import moderngl
-
         self._ctx = moderngl.create_context(require=330)
         found = tuple(glfw.get_framebuffer_size(self._window))
         if found != self.size:
