@@ -17,7 +17,7 @@ from __future__ import annotations
 import collections
 import logging
 import threading
-from collections.abc import Collection
+from collections.abc import Callable, Collection
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -73,6 +73,9 @@ class SimulatedCamera(Camera):
     faults : CameraFaults, optional
     rng : numpy Generator, optional
         Noise source (seed it for reproducible frames).
+    sleep : callable, optional
+        Called with each exposure's duration in seconds; ``time.sleep`` makes exposures take real
+        time (default: they take none, only the camera's own clock advances).
     """
 
     def __init__(
@@ -85,6 +88,7 @@ class SimulatedCamera(Camera):
         reference_exposure_us: float = 10_000.0,
         faults: CameraFaults | None = None,
         rng: np.random.Generator | None = None,
+        sleep: Callable[[float], None] | None = None,
         name: str | None = None,
         on_sequence_error: str = "raise",
     ) -> None:
@@ -101,6 +105,7 @@ class SimulatedCamera(Camera):
         self.reference_exposure_us = float(reference_exposure_us)
         self.faults = faults or CameraFaults()
         self.rng = rng if rng is not None else np.random.default_rng()
+        self.sleep = sleep
         self._mapping: ProjectorMap | None = None
         self.set_scene(scene_height_mm)
         self._exposure_us = reference_exposure_us
@@ -173,6 +178,8 @@ class SimulatedCamera(Camera):
         self._exposures += 1
         start_s = self._clock_s
         self._clock_s += self._exposure_us * 1e-6 + READOUT_S
+        if self.sleep is not None:
+            self.sleep(self._exposure_us * 1e-6)
         if index in faults.timeout_on:
             log.debug("%s: exposure %d: trigger missed (fault)", self.name, index)
             return

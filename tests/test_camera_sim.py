@@ -288,3 +288,16 @@ class TestFaults:
             camera.pulse(0)
             with pytest.raises(DeviceNotFoundError):
                 camera.fetch(timeout_s=1.0)
+
+
+def test_exposures_take_no_real_time_unless_asked() -> None:
+    slept: list[float] = []
+    with SimulatedCamera(None, GEOMETRY, appearance=CLEAN, sleep=slept.append) as camera:
+        camera.exposure_us = 2500
+        camera.start()
+        for _ in range(2):
+            camera.trigger()
+            camera.fetch(timeout_s=0.1)
+        clock = camera.now()
+    assert slept == [0.0025, 0.0025]
+    assert clock == pytest.approx(2 * (0.0025 + 0.001))  # the camera clock: exposure + readout each
