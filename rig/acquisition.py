@@ -37,7 +37,6 @@ from drivers.camera import (
     DroppedFrameError,
     DuplicateFrameError,
     Frame,
-    FrameSequenceError,
     StaleFrameError,
     TriggerMode,
     TriggerSource,

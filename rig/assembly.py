@@ -134,4 +134,7 @@ def open_rig(config: RigConfig, scene: str = "object") -> Iterator[RigDevices]:
         lut = load_gamma_lut(config)
         if lut is not None:
             projector.set_gamma_lut(lut)
-        yield RigDevices(projector, camera, trigger_path(camera, box), config, simulation)
+        trigger = trigger_path(camera, box)
+        log.info("rig open: projector %s %s, camera %s, trigger %s", projector.name, projector.size, camera.name,
+                 "software" if box is None else box)
+        yield RigDevices(projector, camera, trigger, config, simulation)

@@ -67,6 +67,7 @@ class DlpVideoProjector(Projector):
         self.display.wait_shown(timeout_s)
         if self.check_health:
             status = self.controller.status()
+            log.debug("%s: status %s", self.controller, status)
             if not status.healthy:
                 raise DeviceError(f"{self.controller}: unhealthy: {'; '.join(status.problems)}")
         return True

@@ -69,6 +69,7 @@ def probe_pylon() -> Probe:
     try:
         devices = pylon.TlFactory.GetInstance().EnumerateDevices()
     except Exception as exc:  # pypylon raises its own GenICam exception types
+        log.debug("pylon enumeration failed", exc_info=True)
         return Probe("Basler (pylon) cameras", [], f"pylon could not enumerate devices: {exc}")
     found = [
         Found("pylon", f'serial = "{d.GetSerialNumber()}"', f"{d.GetModelName()} ({d.GetDeviceClass()})")

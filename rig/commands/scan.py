@@ -59,6 +59,7 @@ def scan(config: RigConfig, output: Path, scene: str = "object", overwrite: bool
         fetch_timeout_s=config.scan.fetch_timeout_s,
         retries=config.scan.retries,
     )
+    log.info("scanning %d patterns into %s (%s)", len(patterns), output, settings)
     with open_rig(config, scene=scene) as devices, Progress(f"scan {output}", total=len(patterns), quiet=not show_progress) as progress:
         extra = {"rig_config": str(config.source) if config.source else "built-in simulated rig"}
         if devices.simulation is not None:
