@@ -129,8 +129,7 @@ class _BoxFirmware:
         out = _Output()
         if (self.state == "ARMED" and self.watchdog_s is not None
                 and now - self.last_line_at > self.watchdog_s):
-            self.state = "IDLE"
-            self.armed = 0
+            self.state, self.armed, self.fired = "IDLE", 0, 0
             out.before.append(tp.encode_event("WATCHDOG"))
         return out
 
@@ -213,7 +212,8 @@ class _BoxFirmware:
         out.before.append(tp.encode_event("PULSE", index))
         if self.fired == self.armed:
             self.state = "DONE"
-            (out.after if done_after_reply else out.before).append(tp.encode_event("DONE", index + 1))
+            done = tp.encode_event("DONE", self.armed)
+            (out.after if done_after_reply else out.before).append(done)
         return index
 
 
