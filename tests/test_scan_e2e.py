@@ -124,6 +124,14 @@ def test_rig_process_reads_what_rig_scan_wrote(tmp_path):
     assert np.median(np.abs(height[valid] - truth[valid])) < MEDIAN_ERROR_MM
 
 
+def test_missing_calibration_stops_before_scanning(tmp_path, capsys):
+    args = ["scan", "-o", str(tmp_path / "c"), "--calibration", str(tmp_path / "nope"), "--process"]
+    assert main(args) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("rig scan: error: ") and "nope" in err and "\n" not in err
+    assert not list(tmp_path.glob("c*"))  # nothing scanned
+
+
 def test_bad_config_is_one_line_and_exit_1(tmp_path, capsys):
     config_path = tmp_path / "rig.toml"
     config_path.write_text("[camera]\nexposure_us = 0\n")

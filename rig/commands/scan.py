@@ -86,6 +86,10 @@ def run(args: argparse.Namespace) -> int:
     if args.calibration is not None and not args.process:
         raise ConfigError("--calibration is used only with --process")
     config = load_config(args.config)
+    if args.process:  # a wrong calibration should stop us before the scan, not after it
+        from calibration.store import read_calibration
+
+        read_calibration(args.calibration)
     output = args.output or default_capture_path()
     result = scan(config, output, scene=args.scene, overwrite=args.overwrite)
     print(
@@ -95,9 +99,10 @@ def run(args: argparse.Namespace) -> int:
     )
     print(result.path)  # stdout: the capture directory, for scripts (the default name has the time in it)
     if args.process:
-        from rig.pipeline import process_capture
+        from rig.pipeline import process_capture, total_steps
 
         destination = args.process_output or output.with_name(output.name + "-processed")
-        process_capture(output, args.calibration, destination)
-        print(f"{destination}: processed", file=sys.stderr)
+        with Progress(f"process {output}", total=total_steps(with_reference=True)) as progress:
+            process_capture(output, args.calibration, destination, progress=progress)
+        print(destination)
     return 0
