@@ -341,6 +341,11 @@ def _check_consistency(config: RigConfig, where: str) -> None:
             raise ConfigError(
                 f"{where}: [simulation] scene: expected one of {', '.join(SCENES)}, found {config.simulation.scene!r}"
             )
+        if config.trigger.backend == "serial":
+            raise ConfigError(
+                f"{where}: [trigger] backend: expected 'simulated-serial' or 'software' with the simulated camera "
+                "(a real trigger box cannot expose it), found 'serial'"
+            )
         if config.projector.backend != "gl-offscreen":
             raise ConfigError(
                 f"{where}: [projector] backend: expected 'gl-offscreen' with the simulated camera "
