@@ -291,7 +291,11 @@ class SerialTriggerBox(TriggerBox):
                 log.warning("%s: error while closing: %s", self, exc)
 
     def _do_hello(self, version: int) -> int:
-        tokens = self._command("HELLO", version)
+        try:
+            tokens = self._command("HELLO", version)
+        except DeviceTimeoutError as exc:
+            raise DeviceTimeoutError(f"{exc}; is the trigger box (firmware/trigger_box) on this "
+                                     "port and powered?") from exc
         if not tokens or not tokens[0].isdigit():
             raise ProtocolError(f"{self}: HELLO reply without version: {tokens!r}")
         box_version = int(tokens[0])
