@@ -9,6 +9,7 @@ A calibration directory is also the record of the session that made it::
     CAL/board/plane/              a chessboard lying on the reference plane (pixel size on the plane)
     CAL/board/view-01/ ...        more board views, tilted (camera intrinsics and distortion)
     CAL/gamma/                    flat levels 0 .. 1 (projector gamma); CAL/gamma-lut.npy its LUT
+    CAL/stereo/pose-01/ ...       model "stereo": a board pose, white + fringes along x and y
 
 Acquisition (:func:`acquire`) asks an :class:`Operator` to set up each step: on the simulated rig
 nothing needs doing (the virtual scene follows the capture's label); on a real rig a console
@@ -39,6 +40,7 @@ from calibration.gamma import fit_gamma, inverse_lut, mean_response, ramp_patter
 from calibration.geometry import MIN_HEIGHTS, fit_f0, fit_l0_d0, pixel_mm_from_corners
 from calibration.polynomial import POLYNOMIAL, fit_polynomial
 from calibration.reference import REFERENCE_DIR, check_same_patterns
+from calibration.stereo import STEREO, board_phase_view, calibrate_stereo, fit_plane, triangulate
 from calibration.store import REFERENCE_PLANE, Calibration, write_calibration
 from rig.capture import read_capture, write_capture
 from rig.config import RigConfig
@@ -51,8 +53,9 @@ PLANES_DIR = "planes"
 BOARD_DIR = "board"
 GAMMA_DIR = "gamma"
 GAMMA_LUT_FILE = "gamma-lut.npy"
+STEREO_DIR = "stereo"
 PLANE_LABEL = re.compile(r"plane-at-(-?\d+(?:\.\d+)?)mm")
-MODELS = (REFERENCE_PLANE, POLYNOMIAL)
+MODELS = (REFERENCE_PLANE, POLYNOMIAL, STEREO)
 
 
 def plane_label(height_mm: float) -> str:
@@ -76,6 +79,12 @@ class CalibrationPlan:
     def check(self) -> None:
         if self.model not in MODELS:
             raise ConfigError(f"--model: expected one of {', '.join(MODELS)}, found {self.model!r}")
+        if self.model == STEREO:
+            if self.board is None or self.board.kind != "chessboard":
+                raise ConfigError("--model stereo: needs a chessboard (--board chessboard:COLSxROWS:SQUARE_MM)")
+            if self.board_views < 3:
+                raise ConfigError(f"--model stereo: needs at least 3 board poses (--board-views), found {self.board_views}")
+            return
         heights = [float(h) for h in self.heights_mm]
         if len(heights) < MIN_HEIGHTS:
             raise ConfigError(f"--heights: need at least {MIN_HEIGHTS} plane heights, found {len(heights)}")
@@ -254,6 +263,9 @@ def acquire(
     directory.mkdir(parents=True, exist_ok=True)
     (directory / SESSION_FILE).write_text(json.dumps(plan.to_json(), indent=2) + "\n", encoding="utf-8")
     patterns = config.scan.patterns()
+    if plan.model == STEREO:
+        _acquire_stereo(config, plan, directory, operator, show_progress)
+        return
     if plan.gamma_levels:
         operator.clear()
         _scan(config, directory / GAMMA_DIR, ramp_patterns(plan.gamma_levels), "plane-at-0mm" if config.simulated else "gamma-ramp", show_progress)
@@ -274,6 +286,28 @@ def acquire(
         operator.plane(float(height))
         label = plane_label(float(height))
         _scan(config, directory / PLANES_DIR / label, patterns, label, show_progress)
+
+
+def stereo_patterns(config: RigConfig) -> list[dict[str, Any]]:
+    """A stereo pose's patterns: white (the board image), then the scan's sinusoids along x and y."""
+    along = [replace(config.scan, axis=axis, gray_bits=0).patterns() for axis in ("x", "y")]
+    return [{"kind": "flat", "level": 1.0}, *along[0], *along[1]]
+
+
+def _acquire_stereo(config: RigConfig, plan: CalibrationPlan, directory: Path, operator: Operator, show_progress: bool) -> None:
+    if config.simulated:
+        raise ConfigError(
+            "--model stereo: the built-in simulated rig's camera follows the reference-plane geometry, not a "
+            "pinhole; a stereo session needs a real rig (or --from a stored session)"
+        )
+    if min(config.scan.frequencies) != 1:
+        raise ConfigError("--model stereo: the scan frequencies must start at 1 (hierarchical unwrapping on the board)")
+    (directory / STEREO_DIR).mkdir(exist_ok=True)
+    for index in range(1, plan.board_views + 1):
+        operator.board(index, on_plane=False)
+        _scan(config, directory / STEREO_DIR / f"pose-{index:02d}", stereo_patterns(config), f"board-pose-{index}", show_progress)
+    operator.plane(0.0)
+    _scan(config, directory / REFERENCE_DIR, config.scan.patterns(), "reference", show_progress)
 
 
 # --------------------------------------------------------------------------- computation
@@ -375,6 +409,9 @@ def compute(
         extra["gamma_lut"] = GAMMA_LUT_FILE
         lines.append(f"projector gamma {gamma.gamma:.3f} (fit RMS {gamma.residual_rms:.2f} DN); LUT {GAMMA_LUT_FILE}")
 
+    if plan.model == STEREO:
+        return _compute_stereo(directory, plan, output, lines, extra, note)
+
     # camera and pixel size
     camera: CameraCalibration | None = None
     pixel_mm = plan.pixel_mm
@@ -439,5 +476,62 @@ def compute(
         reference=Path(reference_rel).as_posix(),
         extra=extra,
     )
+    write_calibration(output, calibration)
+    return CalibrationReport(calibration, lines)
+
+
+def _pose_view(path: Path, board: BoardSpec) -> Any:
+    """Board corners and projector phases of one stored stereo pose."""
+    capture = read_capture(path)
+    patterns = capture.patterns
+    white = [i for i, p in enumerate(patterns) if p.get("kind") == "flat" and float(p.get("level", 0)) == 1.0]
+    groups = {axis: [i for i, p in enumerate(patterns) if p.get("kind") == "sinusoid" and p.get("axis", "x") == axis]
+              for axis in ("x", "y")}
+    if not white or not groups["x"] or not groups["y"]:
+        raise CalibrationError(f"{capture.manifest_path}: a stereo pose needs a white frame and sinusoids along x and y")
+    frames = capture.load_frames()
+    frequencies = sorted({int(patterns[i]["frequency"]) for i in groups["x"]})
+    steps = int(patterns[groups["x"][0]]["steps"])
+    if frequencies[0] != 1 or len(groups["x"]) != steps * len(frequencies) or len(groups["y"]) != len(groups["x"]):
+        raise CalibrationError(
+            f"{capture.manifest_path}: stereo poses need the same {steps}-step sinusoids along x and y at frequencies starting at 1"
+        )
+    view = board_phase_view(frames[white[0]], board, frames[groups["x"]], frames[groups["y"]], frequencies, steps)
+    if view is None:
+        raise CalibrationError(f"{capture.manifest_path}: the {board.kind} was not found in the white frame")
+    return view, capture
+
+
+def _compute_stereo(
+    directory: Path, plan: CalibrationPlan, output: Path, lines: list[str], extra: dict[str, Any], note: Callable[[str], None]
+) -> CalibrationReport:
+    poses = sorted(p for p in (directory / STEREO_DIR).glob("pose-*") if (p / "capture.json").is_file())
+    if len(poses) < 3:
+        raise CalibrationError(f"{directory / STEREO_DIR}: {len(poses)} board poses, need at least 3")
+    assert plan.board is not None
+    views = []
+    for path in poses:
+        note(f"calibrate: {path.name}")
+        view, capture = _pose_view(path, plan.board)
+        views.append(view)
+    camera_size = (capture.width, capture.height)
+    projector_size = tuple(int(v) for v in capture.projector_size)
+    result = calibrate_stereo(views, camera_size, projector_size, flags=cv2.CALIB_FIX_K3)  # type: ignore[arg-type]
+    fields = result.model.as_fields()
+    lines.append(
+        f"stereo: {result.views_used} poses, reprojection RMS {result.rms_px:.3f} px (camera {result.camera_rms_px:.3f}, "
+        f"projector {result.projector_rms_px:.3f}), baseline {result.model.baseline_mm:.2f} mm"
+    )
+    extra.update(fields)
+    extra["reprojection_rms_px"] = result.rms_px
+    if (directory / REFERENCE_DIR / "capture.json").is_file():
+        note("calibrate: reference plane")
+        phase, frequency, axis, _ = _absolute_phase(directory / REFERENCE_DIR)
+        points = triangulate(result.model, phase, frequency, axis=axis)
+        plane = fit_plane(points)
+        extra["plane"] = plane.tolist()
+        heights = points @ plane[:3] + plane[3]
+        lines.append(f"reference plane {plane[3]:.2f} mm from the camera, flat to {np.nanstd(heights):.3f} mm RMS: heights are above it")
+    calibration = Calibration(model=STEREO, extra=extra)
     write_calibration(output, calibration)
     return CalibrationReport(calibration, lines)

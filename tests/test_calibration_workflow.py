@@ -169,3 +169,42 @@ def test_bad_sessions_give_one_line_errors(session, tmp_path, capsys):
     assert main(["calibrate", "--import-opencv", str(tmp_path / "none.yml"), "--projector-size", "1920x1080",
                  "-o", str(tmp_path / "st")]) == 1
     assert "none.yml: missing" in capsys.readouterr().err
+
+
+def test_stereo_session_recomputed_from_stored_poses(tmp_path):
+    """A projector-camera session on disk (board poses with fringes along x and y, and the
+    reference plane), as a real pinhole rig would leave it, rendered by mock_devices.stereo_synth."""
+    from mock_devices import synth
+    from mock_devices.stereo_synth import Scene, board_session, demo_rig, demo_scene, trace
+    from rig.calibrate_workflow import stereo_patterns
+
+    rig = demo_rig(320, 256)
+    projector = {"width": rig.projector.width, "height": rig.projector.height}
+    geometry = synth.RigGeometry(camera_width=320, camera_height=256, projector_width=rig.projector.width,
+                                 projector_height=rig.projector.height)
+    config = load_config(None)
+    patterns = stereo_patterns(config)
+    rng = np.random.default_rng(5)
+    cal = tmp_path / "cal"
+    for index, (image, mapping) in enumerate(board_session(rig, count=6, seed=11), start=1):
+        appearance = synth.Appearance(reflectivity=image / 220.0, gain=200.0, ambient=0.05, snr_db=30.0, bit_depth=8)
+        frames = [image] + list(synth.render_stack(patterns[1:], mapping, geometry, appearance, rng))
+        write_capture(cal / "stereo" / f"pose-{index:02d}", frames, patterns, projector, scene=f"board-pose-{index}")
+    appearance = synth.Appearance(gain=200.0, ambient=0.05, snr_db=30.0, bit_depth=8)
+    scan = config.scan.patterns()
+    _, plane_map = trace(rig, Scene(plane_distance=600.0))
+    write_capture(cal / "reference", synth.render_stack(scan, plane_map, geometry, appearance, rng), scan, projector, scene="reference")
+    (cal / "session.json").write_text(json.dumps(CalibrationPlan(model="stereo", board=None, board_views=6).to_json()))
+    assert main(["calibrate", "--from", str(cal), "--board", "chessboard:9x7:30", "-q"]) == 0
+    stereo = read_calibration(cal)
+    assert stereo.model == "stereo" and stereo.extra["reprojection_rms_px"] < 0.2
+    assert stereo.extra["plane"][3] == pytest.approx(600.0, rel=0.003)
+    # heights of the simulated object above the measured reference plane
+    truth, mapping = trace(rig, demo_scene())
+    phase = np.where(mapping.lit, 2 * np.pi * 64 * mapping.u / rig.projector.width, np.nan)
+    height = height_from_phase(stereo, phase, None, 64)
+    on = np.isfinite(height) & (600.0 - truth[..., 2] > 0.5)
+    assert float(np.sqrt(np.mean((height[on] - (600.0 - truth[..., 2])[on]) ** 2))) < 0.3
+    # the simulated rig cannot run a stereo session itself: it says why
+    with pytest.raises(ConfigError, match="not a\npinhole|not a pinhole"):
+        acquire(config, CalibrationPlan(model="stereo", board_views=3), tmp_path / "sim", show_progress=False)

@@ -66,8 +66,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--from", dest="from_dir", type=Path, metavar="DIR", help="recompute from the captures of a stored session")
     parser.add_argument("--heights", type=_heights, default=None, metavar="MM,MM,...",
                         help="plane heights above the reference plane (default 25,50,100,150)")
-    parser.add_argument("--model", choices=("reference-plane", "polynomial"), default=None,
-                        help="height model to fit (default reference-plane, eq. 1.15)")
+    parser.add_argument("--model", choices=("reference-plane", "polynomial", "stereo"), default=None,
+                        help="height model to fit (default reference-plane, eq. 1.15; stereo: projector-camera "
+                        "calibration from board poses with fringes along x and y)")
     parser.add_argument("--degree", type=int, default=None, help="polynomial degree (default 3)")
     parser.add_argument("--board", type=_board, default=None, metavar="KIND:COLSxROWS:SQUARE_MM[:MARKER_MM]",
                         help="calibration target (default chessboard:9x7:20 for real rigs; 'none' with --pixel-mm)")
