@@ -8,11 +8,13 @@ first unexpected byte string or if an exchange is left over when the block ends.
   yielded path through pyserial, as it would a real port): exchanges are lines.
 - :func:`expected_usb_protocol` is a pyusb backend: exchanges are interrupt-OUT reports and the
   interrupt-IN report that answers them.
+- :func:`expected_protocol` picks one of those for a driver class and yields the driver, opened.
 """
 
 from __future__ import annotations
 
 import contextlib
+import inspect
 import os
 import select
 import threading
@@ -120,3 +122,24 @@ def expected_usb_protocol(exchanges: Sequence[Exchange]) -> Iterator[ScriptedHid
     script = ExchangeScript(exchanges)
     yield ScriptedHidBackend(script)
     script.check()
+
+
+@contextlib.contextmanager
+def expected_protocol(driver_class: type, exchanges: Sequence[Exchange],
+                      **kwargs: object) -> Iterator[object]:
+    """pymeasure's form: yield an opened ``driver_class`` whose peer follows ``exchanges``.
+
+    Serial drivers (constructor argument ``url``) get a scripted pty, USB drivers (``backend``)
+    a scripted pyusb backend; ``kwargs`` go to the constructor. Opening is part of the script
+    (e.g. the trigger box's HELLO).
+    """
+    parameters = inspect.signature(driver_class).parameters
+    if "url" in parameters:
+        with expected_serial_protocol(exchanges) as port, driver_class(port, **kwargs) as driver:
+            yield driver
+    elif "backend" in parameters:
+        with expected_usb_protocol(exchanges) as backend, \
+                driver_class(backend=backend, **kwargs) as driver:
+            yield driver
+    else:
+        raise TypeError(f"{driver_class.__name__} takes neither url nor backend")

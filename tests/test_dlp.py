@@ -34,7 +34,7 @@ from drivers.errors import (
 )
 from mock_devices.dlp_usb import Dlpc350Faults, FakeDlpc350Backend
 from tests.contracts import device_option
-from tests.protocol import expected_usb_protocol
+from tests.protocol import expected_protocol, expected_usb_protocol
 
 
 def report(hex_bytes: str) -> bytes:
@@ -160,7 +160,7 @@ def test_status_reads_three_registers():
     exchanges = [(report("c0 01 02 00 0a 1a"), report("80 01 01 00 41")),
                  (report("c0 02 02 00 0b 1a"), report("80 02 01 00 01")),
                  (report("c0 03 02 00 0c 1a"), report("80 03 01 00 02"))]
-    with expected_usb_protocol(exchanges) as backend, LightCrafter4500(backend=backend) as dlp:
+    with expected_protocol(LightCrafter4500, exchanges) as dlp:
         status = dlp.status()
     assert status.sequencer_running and not status.parked
     assert status.problems == ["sequencer abort"]

@@ -25,7 +25,7 @@ from drivers.trigger_box import (
 )
 from mock_devices.trigger_box import FakeTriggerBox, TriggerFaults
 from tests.contracts import device_option
-from tests.protocol import expected_serial_protocol
+from tests.protocol import expected_protocol, expected_serial_protocol
 
 HELLO = (b"1 HELLO 1*42\n", b"1 OK 1 box-fw/2.1*6F\n")
 
@@ -84,7 +84,7 @@ def test_full_exposure_sequence_lines():
         (b"7 STATUS*03\n",
          b"7 OK state=DONE armed=2 fired=2 width=250 delay=40 polarity=NEG source=SW*0B\n"),
     ]
-    with expected_serial_protocol(exchanges) as port, opened(port) as box:
+    with expected_protocol(SerialTriggerBox, exchanges) as box:
         box.ping()
         box.configure(pulse_width_us=250, delay_us=40, polarity=Polarity.ACTIVE_LOW)
         box.arm(2)
