@@ -126,11 +126,6 @@ def open_rig(config: RigConfig, scene: str = "object") -> Iterator[RigDevices]:
 
                 box = SerialTriggerBox(config.trigger.port, baudrate=config.trigger.baudrate, timeout_s=config.trigger.timeout_s)
                 stack.enter_context(box)
-            elif config.trigger.backend == "simulated-serial":
-                raise ConfigError(
-                    "[trigger] backend: 'simulated-serial' pulses the simulated camera only; "
-                    f"use 'software' or 'serial' with camera backend {config.camera.backend!r}"
-                )
         lut = load_gamma_lut(config)
         if lut is not None:
             projector.set_gamma_lut(lut)

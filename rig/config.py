@@ -316,6 +316,8 @@ def parse_config(data: Mapping[str, Any], source: Path | None = None, where: str
         projector["gamma_lut"] = lut
     camera = _section(data, "camera", where)
     trigger = _section(data, "trigger", where)
+    if "backend" not in trigger and camera.get("backend", CameraConfig.backend) != "simulated":
+        trigger["backend"] = "software"  # the fake trigger box can only pulse the simulated camera
     if trigger.get("backend") == "serial" and "port" not in trigger:
         raise ConfigError(f"{where}: [trigger] port: expected a serial port or pyserial URL for backend 'serial', found nothing")
     scan = _section(data, "scan", where)
@@ -334,6 +336,11 @@ def parse_config(data: Mapping[str, Any], source: Path | None = None, where: str
 
 def _check_consistency(config: RigConfig, where: str) -> None:
     """Rules that tie several keys together."""
+    if not config.simulated and config.trigger.backend == "simulated-serial":
+        raise ConfigError(
+            f"{where}: [trigger] backend: expected 'software' or 'serial' with camera backend "
+            f"{config.camera.backend!r} ('simulated-serial' pulses the simulated camera only), found 'simulated-serial'"
+        )
     if config.simulated:
         from mock_devices.scenes import SCENES
 

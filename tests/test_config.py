@@ -74,6 +74,11 @@ def test_values_are_read(tmp_path):
     assert patterns[-1] == {"kind": "gray", "axis": "y", "bit": 2, "bits": 3, "inverted": True}
 
 
+def test_a_real_camera_defaults_to_its_software_trigger(tmp_path):
+    config = load_config(write(tmp_path, '[camera]\nbackend = "opencv"\nindex = 1\n'))
+    assert (config.camera.backend, config.camera.index, config.trigger.backend) == ("opencv", 1, "software")
+
+
 def test_gamma_lut_resolves_against_the_config_folder(tmp_path):
     (tmp_path / "lut.npy").write_bytes(b"")
     config = load_config(write(tmp_path, '[projector]\ngamma_lut = "lut.npy"\n'))
@@ -104,6 +109,7 @@ def test_gamma_lut_resolves_against_the_config_folder(tmp_path):
         ("[simulation]\nd0_mm = 0\n", "[simulation] d0_mm: expected a non-zero number, found 0"),
         ('[simulation]\nsnr_db = "loud"\n', "[simulation] snr_db: expected a number in dB or \"none\", found 'loud'"),
         ('[projector]\nbackend = "window"\n', "[projector] backend: expected 'gl-offscreen' with the simulated camera"),
+        ('[camera]\nbackend = "opencv"\n[trigger]\nbackend = "simulated-serial"\n', "[trigger] backend: expected 'software' or 'serial' with camera backend 'opencv'"),
         ("[cameras]\nindex = 0\n", "[cameras]: unknown section; expected one of projector, camera"),
         ("camera = 3\n", "[camera]: expected a table, found 3"),
         ("[camera\n", "not valid TOML"),
