@@ -177,3 +177,21 @@ def test_scan_with_a_real_backend_pylon_emulator(tmp_path):
     assert [f["frame_id"] for f in capture.frames] == [0, 1, 2]
     assert all(f["exposure_us"] == pytest.approx(2000, rel=0.05) for f in capture.frames)
     assert capture.manifest["devices"]["camera"] != "simulated camera"
+
+
+def test_gamma_lut_from_the_config_linearises_the_projector(tmp_path):
+    """A projector with gamma 2.2, pre-corrected by the LUT the config names, behaves like a linear one."""
+    np.save(tmp_path / "lut.npy", np.linspace(0.0, 1.0, 256) ** (1 / 2.2))
+    linear = SMALL_RIG.replace("snr_db = 35", 'snr_db = "none"').replace("frequencies = [1, 8, 32]", "frequencies = [8]")
+    rigs = {  # [simulation] is the last table: appended keys land there
+        "linear": linear,
+        "gamma": linear + "gamma = 2.2\n",
+        "corrected": linear.replace("size = [228, 285]\n", 'size = [228, 285]\ngamma_lut = "lut.npy"\n', 1) + "gamma = 2.2\n",
+    }
+    frames = {}
+    for name, text in rigs.items():
+        (tmp_path / f"{name}.toml").write_text(text)
+        assert main(["scan", "--config", str(tmp_path / f"{name}.toml"), "--scene", "reference", "-o", str(tmp_path / name)]) == 0
+        frames[name] = read_capture(tmp_path / name).load_frames().astype(float)
+    assert np.abs(frames["corrected"] - frames["linear"]).mean() < 1.5  # DN: 8-bit framebuffer and camera
+    assert np.abs(frames["gamma"] - frames["linear"]).mean() > 10
