@@ -133,3 +133,22 @@ def test_missing_file_is_named(tmp_path):
 def test_directory_instead_of_file(tmp_path):
     with pytest.raises(ConfigError, match="expected a rig config file, found a directory"):
         load_config(tmp_path)
+
+
+@pytest.mark.parametrize(
+    ("content", "expected"),
+    [
+        ("0.0\n0.5\n2.0\n", "gamma LUT: expected at least 2 drive levels in [0, 1], found 3 values in [0.0, 2.0]"),
+        ("0.5\n", "gamma LUT: expected at least 2 drive levels in [0, 1], found 1 values"),
+        ("zero\none\n", "cannot read the gamma LUT ([projector] gamma_lut)"),
+    ],
+)
+def test_bad_gamma_lut_file_is_one_line(tmp_path, content, expected):
+    from rig.assembly import load_gamma_lut
+
+    (tmp_path / "lut.txt").write_text(content)
+    config = load_config(write(tmp_path, '[projector]\ngamma_lut = "lut.txt"\n'))
+    with pytest.raises(ConfigError) as info:
+        load_gamma_lut(config)
+    assert str(info.value).startswith(str(tmp_path / "lut.txt")) and expected in str(info.value)
+    assert "\n" not in str(info.value)
