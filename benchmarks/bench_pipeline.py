@@ -9,11 +9,16 @@ temporal unwrapping and no height). Prints medians, the ratio, peak memory and a
 result against the simulated truth.
 
     python benchmarks/bench_pipeline.py [--runs 9] [--frequencies 15 16] [--snr-db 30]
+
+Rows: our path with the processing thread pool (processing._blockwise.THREADS) and with one
+thread, OpenCV, then ours again after asking glibc to keep freed memory (see
+``retain_freed_memory``; it cannot be undone within the process, so those rows come last).
 """
 
 from __future__ import annotations
 
 import argparse
+import ctypes
 import resource
 import statistics
 import sys
@@ -26,6 +31,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from mock_devices import scenes, synth  # noqa: E402
+from processing import _blockwise  # noqa: E402
 from processing.height import phase_to_height  # noqa: E402
 from processing.phase_shift import phase_shift, shadow_mask  # noqa: E402
 from processing.temporal import unwrap_two_frequency  # noqa: E402
@@ -60,8 +66,9 @@ def our_pipeline(stack, frequencies, reference_phase, geometry) -> np.ndarray:
     unwrapped, high = absolute_phase(stack, frequencies)
     valid = shadow_mask(high.modulation, high.background)
     valid &= unwrapped.valid
-    height = phase_to_height(unwrapped.phase - reference_phase, geometry.l0_mm, geometry.d0_mm,
-                             geometry.per_mm(frequencies[1]))
+    delta = unwrapped.phase
+    delta -= reference_phase  # in place: the unwrapped phase is ours to reuse
+    height = phase_to_height(delta, geometry.l0_mm, geometry.d0_mm, geometry.per_mm(frequencies[1]))
     height[~valid] = np.nan
     return height
 
@@ -81,14 +88,47 @@ def opencv_pipeline(stack, frequencies, geometry):
     return low_phase, pattern.unwrapPhaseMap(high_phase, size, shadowMask=high_mask)
 
 
-def timed(func, runs: int) -> list[float]:
-    func()  # warm-up: caches, look-up tables, page faults of the first allocation
-    times = []
+def timed(funcs: dict, runs: int) -> dict[str, list[float]]:
+    """Wall-clock times of each function, interleaved run by run so load changes hit all alike."""
+    times: dict[str, list[float]] = {name: [] for name in funcs}
+    for func in funcs.values():
+        func()  # warm-up: caches, look-up tables, thread pool, first page faults
     for _ in range(runs):
-        start = time.perf_counter()
-        func()
-        times.append(time.perf_counter() - start)
+        for name, func in funcs.items():
+            start = time.perf_counter()
+            func()
+            times[name].append(time.perf_counter() - start)
     return times
+
+
+def with_threads(count: int, func):
+    """``func`` run with the processing thread count set to ``count``."""
+
+    def run():
+        saved = _blockwise.THREADS
+        _blockwise.THREADS = count
+        try:
+            return func()
+        finally:
+            _blockwise.THREADS = saved
+
+    return run
+
+
+def retain_freed_memory() -> bool:
+    """Ask glibc to keep freed memory instead of returning it to the kernel (mallopt).
+
+    Every output image is a fresh 6 MB array; by default glibc unmaps or trims such blocks when
+    they are freed, so the next scan pays the page faults again (costly in this VM). A long-running
+    scanner process can opt out the same way (or with MALLOC_TRIM_THRESHOLD_ /
+    MALLOC_MMAP_THRESHOLD_ in its environment).
+    """
+    try:
+        libc = ctypes.CDLL("libc.so.6")
+    except OSError:
+        return False
+    m_trim_threshold, m_mmap_threshold = -1, -3
+    return bool(libc.mallopt(m_mmap_threshold, 32 * 2**20)) and bool(libc.mallopt(m_trim_threshold, 512 * 2**20))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -96,40 +136,66 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--runs", type=int, default=9, help="timed runs per path (median reported; >= 7)")
     parser.add_argument("--frequencies", type=int, nargs=2, default=(15, 16), metavar=("F1", "F2"))
     parser.add_argument("--snr-db", type=float, default=30.0)
-    parser.add_argument("--opencv-runs", type=int, default=None, help="runs of the (slow) OpenCV path; default --runs")
     args = parser.parse_args(argv)
+    if args.runs < 7:
+        parser.error("--runs: expected at least 7")
     freqs = tuple(args.frequencies)
     print(f"simulating 1024x768, frequencies {freqs}, {STEPS} steps, SNR {args.snr_db} dB ...", file=sys.stderr)
     geometry, heights, obj_map, obj, ref = simulate(freqs, args.snr_db)
     reference, _ = absolute_phase(ref, freqs)  # calibration's job, done once
     reference_phase = reference.phase
 
-    height = our_pipeline(obj, freqs, reference_phase, geometry)
-    truth_orders = np.floor(synth.true_absolute_phase(obj_map, geometry, freqs[1]) / (2 * np.pi))
+    def ours():
+        return our_pipeline(obj, freqs, reference_phase, geometry)
+
+    # Check the result against the simulated truth (orders: phase within pi of the truth).
+    height = ours()
     unwrapped, _ = absolute_phase(obj, freqs)
-    lit = obj_map.lit & np.isfinite(height)
-    order_ok = float(np.mean(unwrapped.orders[lit] == truth_orders[lit]))
+    truth_phase = synth.true_absolute_phase(obj_map, geometry, freqs[1])
+    valid = np.isfinite(height)
+    lit = obj_map.lit & valid
+    order_errors = int(np.sum(np.abs(unwrapped.phase[lit] - truth_phase[lit]) >= np.pi))
     rms = float(np.sqrt(np.mean((height[lit] - heights[lit]) ** 2)))
 
-    rss_before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    ours = timed(lambda: our_pipeline(obj, freqs, reference_phase, geometry), args.runs)
-    rss_after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     tracemalloc.start()
-    our_pipeline(obj, freqs, reference_phase, geometry)
+    ours()
     _, traced_peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
-    print("running the OpenCV path ...", file=sys.stderr)
-    peer = timed(lambda: opencv_pipeline(obj, freqs, geometry), args.opencv_runs or args.runs)
+    rss_before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 
-    ours_ms, peer_ms = statistics.median(ours) * 1e3, statistics.median(peer) * 1e3
-    print(f"{'path':<52} {'median ms':>10} {'min ms':>8} {'runs':>5}")
-    print(f"{'fpp-rig: 2x phase_shift + Ding unwrap + mask + height':<52} {ours_ms:>10.1f} {min(ours) * 1e3:>8.1f} {len(ours):>5}")
-    print(f"{'OpenCV PSP: 2x computePhaseMap + unwrapPhaseMap':<52} {peer_ms:>10.1f} {min(peer) * 1e3:>8.1f} {len(peer):>5}")
-    print(f"speed-up (median): {peer_ms / ours_ms:.1f}x")
-    print(f"peak numpy allocations (tracemalloc, one run): {traced_peak / 2**20:.1f} MiB; "
-          f"maxrss growth over the timed runs: {(rss_after - rss_before) / 1024:.1f} MiB")
-    print(f"check: fringe orders right on {100 * order_ok:.3f}% of valid lit pixels, "
-          f"height RMS error {rms:.3f} mm, valid {100 * np.mean(np.isfinite(height)):.1f}%")
+    threads = _blockwise.THREADS
+    print(f"timing {args.runs} interleaved runs (the OpenCV path takes about a second each) ...", file=sys.stderr)
+    rows = timed(
+        {
+            f"fpp-rig, {threads} threads": with_threads(threads, ours),
+            "fpp-rig, 1 thread": with_threads(1, ours),
+            "OpenCV PSP 2x computePhaseMap + unwrapPhaseMap": lambda: opencv_pipeline(obj, freqs, geometry),
+        },
+        args.runs,
+    )
+    if retain_freed_memory():
+        rows.update(
+            timed(
+                {
+                    f"fpp-rig, {threads} threads, freed memory retained": with_threads(threads, ours),
+                    "fpp-rig, 1 thread, freed memory retained": with_threads(1, ours),
+                },
+                args.runs,
+            )
+        )
+    rss_after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+
+    peer = statistics.median(rows["OpenCV PSP 2x computePhaseMap + unwrapPhaseMap"]) * 1e3
+    print("12 uint8 frames 1024x768 (2 frequencies x 6 steps) -> height map; fpp-rig = 2x phase_shift "
+          "+ unwrap_two_frequency + shadow_mask + phase_to_height")
+    print(f"{'path':<50} {'median ms':>10} {'min ms':>8} {'runs':>5} {'OpenCV/this':>12}")
+    for name, times in rows.items():
+        median = statistics.median(times) * 1e3
+        print(f"{name:<50} {median:>10.1f} {min(times) * 1e3:>8.1f} {len(times):>5} {peer / median:>11.1f}x")
+    print(f"peak numpy allocations of one run (tracemalloc): {traced_peak / 2**20:.1f} MiB; "
+          f"process maxrss {rss_after / 1024:.0f} MiB (+{(rss_after - rss_before) / 1024:.0f} MiB while timing)")
+    print(f"check: {order_errors} wrong fringe orders among {lit.sum()} valid lit pixels, "
+          f"height RMS error {rms:.3f} mm, valid {100 * valid.mean():.1f}%")
     return 0
 
 

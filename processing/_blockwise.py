@@ -1,19 +1,53 @@
-"""Run an elementwise numpy kernel over blocks of pixels.
+"""Run an elementwise numpy kernel over blocks of pixels, on up to a few threads.
 
 A chain of numpy operations on full 1024 x 768 float64 images allocates a fresh 6 MB temporary
 per operation and streams every one through main memory. Cutting the pixels into blocks of a few
 thousand keeps the temporaries in the CPU cache and in the allocator's small-block pool; only the
-outputs are allocated at full size. The loop is over blocks (about a hundred per megapixel),
-never over pixels.
+outputs are allocated at full size. The loop is over blocks (about fifty per megapixel), never
+over pixels.
+
+numpy releases the GIL inside its loops, so the blocks are shared between the calling thread and
+a small pool: ``FPP_THREADS`` (environment) sets the number of threads, default the CPUs this
+process may use, at most 4; 1 disables the pool.
 """
 
 from __future__ import annotations
 
+import os
+import threading
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-BLOCK = 8192  # pixels per block: float64 temporaries of 64 KiB stay in L2 and below malloc's mmap threshold
+BLOCK = 16384  # pixels per block: float64 temporaries of 128 KiB stay in L2
+
+
+def _thread_count() -> int:
+    configured = os.environ.get("FPP_THREADS")
+    if configured is not None:
+        try:
+            return max(1, int(configured))
+        except ValueError:
+            raise ValueError(f"FPP_THREADS: expected a positive integer, found {configured!r}") from None
+    try:
+        available = len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        available = os.cpu_count() or 1
+    return max(1, min(4, available))
+
+
+THREADS = _thread_count()
+_pool: ThreadPoolExecutor | None = None
+_pool_lock = threading.Lock()
+
+
+def _executor() -> ThreadPoolExecutor:
+    global _pool
+    with _pool_lock:
+        if _pool is None:
+            _pool = ThreadPoolExecutor(max_workers=THREADS - 1, thread_name_prefix="fpp-blockwise")
+        return _pool
 
 
 def blockwise(
@@ -27,7 +61,8 @@ def blockwise(
     Parameters
     ----------
     kernel : callable
-        ``kernel(*blocks) -> tuple`` of one array per output, each of the block's length.
+        ``kernel(*blocks) -> tuple`` of one array per output, each of the block's length. It
+        must not share state between calls (blocks may run concurrently).
     inputs : sequence of arrays
         Arrays whose last axis runs over the same P pixels (e.g. (P,) maps, (N, P) stacks).
     out_dtypes : sequence of dtypes
@@ -41,9 +76,26 @@ def blockwise(
     """
     pixels = inputs[0].shape[-1]
     outputs = tuple(np.empty(pixels, dtype=dtype) for dtype in out_dtypes)
-    for start in range(0, pixels, block):
-        window = slice(start, min(start + block, pixels))
-        results = kernel(*(x[..., window] for x in inputs))
-        for out, result in zip(outputs, results):
-            out[window] = result
+    starts = range(0, pixels, block)
+
+    def run(part: Sequence[int]) -> None:
+        for start in part:
+            window = slice(start, min(start + block, pixels))
+            results = kernel(*(x[..., window] for x in inputs))
+            for out, result in zip(outputs, results):
+                out[window] = result
+
+    threads = min(THREADS, len(starts))
+    if threads <= 1:
+        run(starts)
+        return outputs
+    # Contiguous runs of blocks, one per thread; the calling thread takes the first.
+    bounds = np.linspace(0, len(starts), threads + 1).astype(int)
+    parts = [starts[bounds[i] : bounds[i + 1]] for i in range(threads)]
+    futures = [_executor().submit(run, part) for part in parts[1:]]
+    try:
+        run(parts[0])
+    finally:
+        for future in futures:  # wait for every part, re-raising the first error
+            future.result()
     return outputs

@@ -20,7 +20,11 @@ def phase_to_height(delta_phase: np.ndarray, l0_mm: float, d0_mm: float, f0_per_
     """
     _check_geometry(l0_mm, d0_mm, f0_per_mm)
     dphi = np.asarray(delta_phase, dtype=np.float64)
-    return l0_mm * dphi / (dphi - 2.0 * np.pi * f0_per_mm * d0_mm)
+    # One temporary instead of three: a full-size image costs more to allocate than to compute.
+    height = np.asarray(dphi - 2.0 * np.pi * f0_per_mm * d0_mm)
+    np.divide(dphi, height, out=height)
+    height *= l0_mm
+    return height if height.ndim else height[()]
 
 
 def height_to_phase(height_mm: np.ndarray, l0_mm: float, d0_mm: float, f0_per_mm: float) -> np.ndarray:

@@ -66,16 +66,23 @@ class UnwrapResult:
 _BELOW_ONE = np.nextafter(1.0, 0.0)
 
 
-def _fraction(turns: np.ndarray) -> np.ndarray:
-    """``turns`` taken into [0, 1) in place (NaN stays NaN); no np.mod, which is slow."""
+def _fraction(turns: np.ndarray, exact_top: bool = True) -> np.ndarray:
+    """``turns`` taken into [0, 1) in place (NaN stays NaN); no np.mod, which is slow.
+
+    -tiny - floor(-tiny) rounds to 1.0; ``exact_top`` moves such values just below 1 (skip it
+    where 1.0 is harmless, e.g. the index of a pair look-up, which then reads the same order).
+    """
     turns -= np.floor(turns)
-    np.minimum(turns, _BELOW_ONE, out=turns)  # -tiny - floor(-tiny) rounds to 1.0
+    if exact_top:
+        top = turns >= 1.0
+        if top.any():
+            turns[top] = _BELOW_ONE
     return turns
 
 
-def _turns(phi: np.ndarray) -> np.ndarray:
+def _turns(phi: np.ndarray, exact_top: bool = True) -> np.ndarray:
     """Phase in radians as normalised turns phi / 2 pi in [0, 1) (a new array)."""
-    return _fraction(phi * (1.0 / TWO_PI))
+    return _fraction(phi * (1.0 / TWO_PI), exact_top)
 
 
 def _finish(turns: np.ndarray, orders: np.ndarray, valid: np.ndarray, finite: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -146,6 +153,8 @@ def pair_table(fa: int, fb: int) -> PairTable:
     seen = fa * (mids // (2 * fa)) - fb * (mids // (2 * fb))
     reachable = np.zeros(m.shape, dtype=bool)
     reachable[seen + fa] = True
+    if reachable[0] or reachable[-1] or not reachable[1:-1].all():  # _pair_lookup relies on this
+        raise AssertionError(f"look-up table of ({fa}, {fb}): unexpected reachable set")
     for arr in (ka, kb, reachable):
         arr.flags.writeable = False
     return PairTable(offset=fa, ka=ka, kb=kb, reachable=reachable)
@@ -158,12 +167,15 @@ def _pair_lookup(ta: np.ndarray, tb: np.ndarray, table: PairTable, fa: int, fb: 
     """
     index = ta * float(fb)
     index -= tb * float(fa)
+    index += table.offset
     np.rint(index, out=index)
     finite = np.isfinite(index)
-    index += table.offset
-    np.fmax(index, 0.0, out=index)  # NaN -> 0; finite values are in range by construction
-    idx = index.astype(np.intp)
-    return table.kb[idx], table.reachable[idx], finite
+    if not finite.all():
+        index[~finite] = 0.0
+    # Reachable: every entry but the two ends (m = -fa, fb), see PairTable.
+    reachable = index > 0.0
+    reachable &= index < table.kb.shape[0] - 1
+    return table.kb[index.astype(np.intp)], reachable, finite
 
 
 def unwrap_two_frequency(phi1: np.ndarray, phi2: np.ndarray, f1: int, f2: int) -> UnwrapResult:
@@ -203,7 +215,7 @@ def unwrap_two_frequency(phi1: np.ndarray, phi2: np.ndarray, f1: int, f2: int) -
 
     def kernel(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, ...]:
         tb = _turns(b)
-        k2, valid, finite = _pair_lookup(_turns(a), tb, table, f1, f2)
+        k2, valid, finite = _pair_lookup(_turns(a, exact_top=False), tb, table, f1, f2)
         return _finish(tb, k2, valid, finite)
 
     return _run(kernel, [p1, p2])
