@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import errno
 import json
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -266,41 +267,47 @@ def test_scan_refuses_to_overwrite_a_capture(tmp_path):
 # --------------------------------------------------------------------------- DLP over USB
 
 
-def dlp_scan(tmp_path: Path, faults: Dlpc350Faults | None = None):
-    """Scan through a LightCrafter 4500 in video mode (fake DLPC350 on pyusb) whose HDMI input is the GL display."""
+def dlp_scan(tmp_path: Path, faults: Callable[[int], Dlpc350Faults] | None = None):
+    """Scan through a LightCrafter 4500 in video mode (fake DLPC350 on pyusb) whose HDMI input is the GL display.
+
+    ``faults`` receives the number of USB requests made while opening, and returns the faults
+    to inject from then on (the scan's requests are counted from there).
+    """
     config = small_config("simulated-serial")
-    backend = FakeDlpc350Backend(faults)
+    backend = FakeDlpc350Backend()
     with SimulatedRig(config, scene="reference") as rig:
         dlp = DlpVideoProjector(rig.projector, LightCrafter4500(backend=backend, timeout_s=0.05))
         with dlp:
+            opened = len(backend.requests)
+            if faults is not None:
+                backend.faults = faults(opened)
             path = trigger_path(rig.camera, rig.trigger_box)
             result = run_scan(tmp_path / "capture", config.scan.patterns(), dlp, rig.camera, path, settings(config))
             assert (backend.state.display_mode, backend.state.standby) == (0, False)  # video mode, awake
-        return result, rig, backend
+        return result, rig, backend.requests[opened:]
 
 
 def test_scan_through_a_dlp_in_video_mode(tmp_path):
-    result, rig, backend = dlp_scan(tmp_path)
+    result, rig, requests = dlp_scan(tmp_path)
     assert_every_frame_matches_its_pattern(result.path, rig)
-    status_reads = [r for r in backend.requests if r.command == Command.MAIN_STATUS]
-    assert len(status_reads) == STEPS  # health checked once per pattern
+    assert sum(r.command == Command.MAIN_STATUS for r in requests) == STEPS  # health checked once per pattern
 
 
 def test_dlp_unplugged_mid_scan_stops_at_once(tmp_path):
-    # wake + video mode = 2 reports, then 3 status reads per pattern: the reply to the first
-    # report past the limit is lost, during pattern 4's check
+    # 3 status reads per pattern: the reply to the first request past the limit is lost,
+    # during pattern 4's check
     with pytest.raises(DeviceNotFoundError, match="disconnected"):
-        dlp_scan(tmp_path, Dlpc350Faults(disappear_after=2 + 3 * 4 + 1))
+        dlp_scan(tmp_path, lambda opened: Dlpc350Faults(disappear_after=opened + 3 * 4 + 1))
     assert_left_incomplete(tmp_path, frames_written=4)
 
 
 def test_dlp_usb_timeouts_are_retried_then_fail_cleanly(tmp_path):
     with pytest.raises(AcquisitionError, match=r"pattern 0 of 8 .* no answer within"):
-        dlp_scan(tmp_path, Dlpc350Faults(timeout_on={Command.MAIN_STATUS}))
+        dlp_scan(tmp_path, lambda opened: Dlpc350Faults(timeout_on={Command.MAIN_STATUS}))
     assert_left_incomplete(tmp_path, frames_written=0)
 
 
 def test_dlp_usb_transfer_error_stops_the_scan(tmp_path):
     with pytest.raises(DeviceError, match="USB error during read HARDWARE_STATUS"):
-        dlp_scan(tmp_path, Dlpc350Faults(usb_error_on={Command.HARDWARE_STATUS: errno.EPIPE}))
+        dlp_scan(tmp_path, lambda opened: Dlpc350Faults(usb_error_on={Command.HARDWARE_STATUS: errno.EPIPE}))
     assert_left_incomplete(tmp_path, frames_written=0)
