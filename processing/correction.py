@@ -1,0 +1,153 @@
+"""Registry of absolute-phase correction methods, one calling convention for all.
+
+Every entry is ``f(absolute_phase, wrapped_phase, orders=None, mask=None, frequency=None,
+**params) -> (corrected_phase, info)``:
+
+- ``absolute_phase``: (H, W) unwrapped phase, NaN where invalid;
+- ``wrapped_phase``: (H, W) the wrapped phase it came from (any 2 pi representation);
+- ``orders``: optional fringe orders (ignored: re-derived from the two phases, which cannot
+  disagree with them);
+- ``mask``: optional valid pixels (default: finite ``absolute_phase``);
+- ``frequency``: fringes across the projector, recorded in ``info`` (and reserved for methods
+  that bound the orders).
+
+``info`` holds ``method``, ``parameters``, ``iterations``, ``rank`` and ``seconds`` (plus what
+the method adds), for reports. The corrected phase is NaN outside the mask.
+
+Methods: ``none``; ``vote`` (Ding's row voting, thesis [119]); ``rpca-orders`` (thesis ch. 3);
+``rpca-phase`` (thesis ch. 4, stable inexact ALM); ``auto``, the most accurate combination
+measured on the thesis' Table 4.1 protocol (see :func:`correct_auto`).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from processing import _validate
+from processing.order_correction import correct_orders_rpca
+from processing.phase_correction import correct_phase_rpca, reorder_from_low_rank, restore_detail
+from processing.shadow_fill import valid_mask
+from processing.voting import vote_row_orders
+
+TWO_PI = 2.0 * np.pi
+
+Correction = Callable[..., tuple[np.ndarray, dict[str, Any]]]
+
+
+def _inputs(absolute_phase: np.ndarray, wrapped_phase: np.ndarray, mask: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    phase = _validate.phase_map(absolute_phase, "absolute_phase")
+    wrapped = _validate.phase_map(wrapped_phase, "wrapped_phase", phase.shape)
+    valid = valid_mask(phase, mask, "absolute_phase")
+    if np.any(valid & ~np.isfinite(wrapped)):
+        raise ValueError("wrapped_phase: NaN at pixels where absolute_phase is valid")
+    return phase, wrapped, valid
+
+
+def _info(method: str, parameters: dict[str, Any], start: float, frequency: float | None, **extra: Any) -> dict[str, Any]:
+    info: dict[str, Any] = {
+        "method": method,
+        "parameters": parameters,
+        "iterations": extra.pop("iterations", 0),
+        "rank": extra.pop("rank", None),
+        "seconds": round(time.perf_counter() - start, 4),
+    }
+    if frequency is not None:
+        info["frequency"] = float(frequency)
+    info.update(extra)
+    return info
+
+
+def correct_none(absolute_phase, wrapped_phase, orders=None, mask=None, frequency=None, **params: Any):
+    """No correction: the phase as unwrapped (NaN outside the mask)."""
+    start = time.perf_counter()
+    phase, _, valid = _inputs(absolute_phase, wrapped_phase, mask)
+    return np.where(valid, phase, np.nan), _info("none", {}, start, frequency)
+
+
+def correct_vote(absolute_phase, wrapped_phase, orders=None, mask=None, frequency=None, min_segment: int = 4):
+    """Ding's row-wise voting between wrapped-phase jumps ([119])."""
+    start = time.perf_counter()
+    phase, wrapped, valid = _inputs(absolute_phase, wrapped_phase, mask)
+    out = vote_row_orders(phase, wrapped, valid, min_segment=min_segment)
+    return out, _info("vote", {"min_segment": min_segment}, start, frequency)
+
+
+def correct_rpca_orders(
+    absolute_phase, wrapped_phase, orders=None, mask=None, frequency=None,
+    t: float = 0.034, beta: float | None = None, postprocess: bool = True, solver: str = "ialm", svd: str = "auto",
+):
+    """RPCA on the fringe-order map, then the monotonicity pass (thesis ch. 3)."""
+    start = time.perf_counter()
+    phase, wrapped, valid = _inputs(absolute_phase, wrapped_phase, mask)
+    k = np.where(valid, np.rint((phase - np.mod(wrapped, TWO_PI)) / TWO_PI), 0.0)
+    out, _, result = correct_orders_rpca(k, wrapped, valid, t=t, beta=beta, postprocess=postprocess, solver=solver, svd=svd)
+    parameters = {"t": t, "beta": beta, "postprocess": postprocess, "solver": solver, "svd": svd}
+    return out, _info(
+        "rpca-orders", parameters, start, frequency,
+        iterations=result.iterations, rank=result.rank, converged=result.converged,
+    )
+
+
+def correct_rpca_phase(
+    absolute_phase, wrapped_phase, orders=None, mask=None, frequency=None,
+    tau: float | None = None, stable: bool = True, svd: str = "auto",
+):
+    """Low-rank part of the absolute phase by inexact ALM RPCA (thesis ch. 4)."""
+    start = time.perf_counter()
+    phase, _, valid = _inputs(absolute_phase, wrapped_phase, mask)
+    out, result = correct_phase_rpca(phase, valid, tau=tau, stable=stable, svd=svd)
+    parameters = {"tau": tau if tau is not None else 1.0 / np.sqrt(max(phase.shape)), "stable": stable, "svd": svd}
+    return out, _info(
+        "rpca-phase", parameters, start, frequency,
+        iterations=result.iterations, rank=result.rank, converged=result.converged,
+    )
+
+
+def correct_auto(
+    absolute_phase, wrapped_phase, orders=None, mask=None, frequency=None,
+    tau: float | None = None, k_sigma: float = 3.0, svd: str = "auto",
+):
+    """The most accurate method measured: ch. 4 RPCA, re-derived orders, measured detail restored.
+
+    1. L = low-rank part of the phase (stable inexact ALM, thesis ch. 4);
+    2. re-derive every pixel's fringe order from L and the measured wrapped phase;
+    3. keep L (denoised) where the re-derived phase agrees with it within ``k_sigma`` noise
+       standard deviations, the re-derived measured phase where it does not.
+    """
+    start = time.perf_counter()
+    phase, wrapped, valid = _inputs(absolute_phase, wrapped_phase, mask)
+    low_rank, result = correct_phase_rpca(phase, valid, tau=tau, stable=True, svd=svd)
+    reordered = reorder_from_low_rank(low_rank, wrapped, valid)
+    out = restore_detail(low_rank, reordered, valid, k_sigma=k_sigma)
+    changed = valid & (np.abs(reordered - phase) > np.pi)
+    parameters = {
+        "tau": tau if tau is not None else 1.0 / np.sqrt(max(phase.shape)),
+        "stable": True, "k_sigma": k_sigma, "svd": svd,
+    }
+    return out, _info(
+        "auto", parameters, start, frequency,
+        iterations=result.iterations, rank=result.rank, converged=result.converged,
+        steps=["rpca-phase", "reorder", "restore-detail"], orders_changed=int(np.count_nonzero(changed)),
+    )
+
+
+CORRECTIONS: dict[str, Correction] = {
+    "none": correct_none,
+    "vote": correct_vote,
+    "rpca-orders": correct_rpca_orders,
+    "rpca-phase": correct_rpca_phase,
+    "auto": correct_auto,
+}
+
+
+def correct(name: str, absolute_phase: np.ndarray, wrapped_phase: np.ndarray, **kwargs: Any) -> tuple[np.ndarray, dict[str, Any]]:
+    """Run the correction ``name`` of :data:`CORRECTIONS`."""
+    try:
+        method = CORRECTIONS[name]
+    except KeyError:
+        raise ValueError(f"correction: expected one of {', '.join(CORRECTIONS)}, found {name!r}") from None
+    return method(absolute_phase, wrapped_phase, **kwargs)

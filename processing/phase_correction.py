@@ -1,0 +1,131 @@
+"""Absolute phase error correction by RPCA (thesis ch. 4), and order re-derivation from it.
+
+The measured absolute phase is Phi_hat = Phi + S + J: the phase of the scene (low rank for
+smooth surfaces), sparse errors of multiples of 2 pi from wrong fringe orders, and dense noise.
+The inexact ALM with tau = 1 / sqrt(max(M, N)) separates them; heights come from the low-rank
+parts of the object's and the reference's phase (thesis ch. 4.2.2).
+
+By default the solver runs as stable PCP: it stops once ||Phi_hat - L - S||_F reaches the
+noise level sqrt(M N) sigma (sigma estimated robustly from the map) instead of exact equality.
+On the thesis' Table 4.1 protocol this is both far more accurate (the low-rank part then carries
+no noise: NMSE_h ~4e-4 against ~2e-3 for exact equality) and ~50x faster (rank 1-3 instead of
+hundreds).
+
+Beyond the thesis, :func:`reorder_from_low_rank` keeps the measured phase and only re-derives
+each pixel's fringe order from the low-rank estimate, k = round((L - phi) / 2 pi): exact orders
+wherever L is within pi of the truth, and every measured detail kept. :func:`restore_detail`
+combines both: the low-rank phase, except where the re-derived phase departs from it by more
+than the noise explains (structure the low-rank model missed).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from processing import _validate
+from processing.rpca import RPCAResult, robust_noise_sigma, rpca_ialm
+from processing.shadow_fill import fill_shadows, valid_mask
+
+TWO_PI = 2.0 * np.pi
+
+
+def correct_phase_rpca(
+    absolute_phase: np.ndarray,
+    mask: np.ndarray | None = None,
+    tau: float | None = None,
+    stable: bool = True,
+    svd: str = "auto",
+    tol: float = 1e-7,
+    max_iter: int = 500,
+    noise_sigma: float | None = None,
+) -> tuple[np.ndarray, RPCAResult]:
+    """Low-rank part of an absolute phase map by inexact ALM RPCA (thesis ch. 4).
+
+    Parameters
+    ----------
+    absolute_phase : (H, W) array
+        Unwrapped phase (NaN where invalid).
+    mask : (H, W) bool array, optional
+        True where valid; default the finite pixels. Shadows are filled by row-wise linear
+        interpolation before RPCA and are NaN in the result.
+    tau : float, optional
+        Weight of ||S||_1; default 1 / sqrt(max(H, W)).
+    stable : bool
+        Stop at the noise level (stable PCP, the default: measured more accurate) rather than
+        at ||D - L - S||_F / ||D||_F < tol (the thesis' rule).
+    svd : {"auto", "partial", "full"}
+    tol, max_iter : solver controls, see :func:`processing.rpca.rpca_ialm`.
+    noise_sigma : float, optional
+        Phase noise in radians for ``stable``; default estimated from the valid pixels.
+
+    Returns
+    -------
+    low_rank_phase : (H, W) float64, NaN outside the mask
+    result : RPCAResult
+    """
+    phase = _validate.phase_map(absolute_phase, "absolute_phase")
+    valid = valid_mask(phase, mask, "absolute_phase")
+    filled = fill_shadows(phase, valid)
+    if stable and noise_sigma is None:
+        noise_sigma = robust_noise_sigma(filled, valid)
+    result = rpca_ialm(filled, tau=tau, tol=tol, max_iter=max_iter, svd=svd, stable=stable, noise_sigma=noise_sigma)
+    return np.where(valid, result.low_rank, np.nan), result
+
+
+def reorder_from_low_rank(
+    low_rank_phase: np.ndarray, wrapped_phase: np.ndarray, mask: np.ndarray | None = None
+) -> np.ndarray:
+    """Measured wrapped phase with fringe orders re-derived from a low-rank estimate.
+
+    k = round((L - phi) / 2 pi), Phi = phi + 2 pi k: the integer order nearest the estimate, so
+    the result is exact wherever |L - Phi_true| < pi, and keeps the measured detail.
+
+    Parameters
+    ----------
+    low_rank_phase : (H, W) array
+        Estimate L of the absolute phase (NaN where invalid).
+    wrapped_phase : (H, W) array
+        Measured wrapped phase phi (any 2 pi representation).
+    mask : (H, W) bool array, optional
+        True where valid; default the finite pixels of ``low_rank_phase``.
+
+    Returns
+    -------
+    (H, W) float64, NaN outside the mask
+    """
+    estimate = _validate.phase_map(low_rank_phase, "low_rank_phase")
+    wrapped = _validate.phase_map(wrapped_phase, "wrapped_phase", estimate.shape)
+    valid = valid_mask(estimate, mask, "low_rank_phase")
+    if np.any(valid & ~np.isfinite(wrapped)):
+        raise ValueError("wrapped_phase: NaN at pixels where low_rank_phase is valid")
+    out = np.full(estimate.shape, np.nan)
+    phi = wrapped[valid]
+    out[valid] = phi + TWO_PI * np.rint((estimate[valid] - phi) / TWO_PI)
+    return out
+
+
+def restore_detail(
+    low_rank_phase: np.ndarray, measured_phase: np.ndarray, mask: np.ndarray | None = None, k_sigma: float = 3.0
+) -> np.ndarray:
+    """Low-rank phase, except where the measured phase departs from it beyond the noise.
+
+    Where |measured - L| > k_sigma sigma (sigma: robust noise estimate of ``measured``), the
+    low-rank model missed structure (an edge, a small feature) and the measured value is kept.
+    ``measured_phase`` should be free of order errors, e.g. from :func:`reorder_from_low_rank`.
+
+    Returns
+    -------
+    (H, W) float64, NaN outside the mask
+    """
+    estimate = _validate.phase_map(low_rank_phase, "low_rank_phase")
+    measured = _validate.phase_map(measured_phase, "measured_phase", estimate.shape)
+    valid = valid_mask(estimate, mask, "low_rank_phase")
+    if np.any(valid & ~np.isfinite(measured)):
+        raise ValueError("measured_phase: NaN at pixels where low_rank_phase is valid")
+    k_sigma = float(k_sigma)
+    if not k_sigma > 0:
+        raise ValueError(f"k_sigma: expected > 0, found {k_sigma}")
+    sigma = robust_noise_sigma(np.where(valid, measured, np.nan), valid)
+    keep = valid & (np.abs(measured - estimate) > k_sigma * sigma)
+    out = np.where(keep, measured, estimate)
+    return np.where(valid, out, np.nan)
