@@ -314,6 +314,27 @@ def test_heterodyne_on_real_capture() -> None:
     assert 0.0 <= unwrapped.phase[good].min() and unwrapped.phase[good].max() < TWO_PI * 64
 
 
+@pytest.mark.skipif(not (REAL_DATA / "slmaster-eye").is_dir(), reason="shared real data not available")
+def test_complementary_gray_on_real_capture() -> None:
+    """SLMaster's eye relief: 12-step at 32 periods (phase_rad = -pi) and 5 + 1 complementary Gray
+    planes without inverses, thresholded at the phase-shifting background A."""
+    cv2 = pytest.importorskip("cv2")
+    folder = REAL_DATA / "slmaster-eye" / "L"
+    frames = np.stack([cv2.imread(str(folder / f"{i}.png"), cv2.IMREAD_UNCHANGED)[300:700] for i in range(18)])
+    result = phase_shift(frames[:12])
+    phi = result.phase + np.pi
+    lit = result.modulation > 0.2 * np.percentile(result.modulation, 99)
+    stripes = decode_gray(frames[12:], threshold=result.background)
+
+    def jumps(unwrapped: UnwrapResult) -> float:
+        good = lit & unwrapped.valid
+        pairs = good[:, 1:] & good[:, :-1]
+        return float(np.mean(np.abs(np.diff(unwrapped.phase, axis=1)[pairs]) > np.pi))
+
+    assert jumps(unwrap_gray(phi, stripes >> 1, 5, 32)) > 0.005  # plain: period-edge errors
+    assert jumps(unwrap_gray(phi, stripes, 6, 32, complementary=True)) < 0.0005
+
+
 # ----------------------------------------------------------------------------- bad input
 
 
