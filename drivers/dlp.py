@@ -250,11 +250,19 @@ class DlpController(abc.ABC):
         return self._state
 
     def open(self) -> None:
+        """Connect and read the controller's power, display mode and sequencer state."""
         if self._is_open:
             return
         self._do_open()
         self._is_open = True
-        log.info("%s opened", self)
+        try:
+            self._standby, self._mode, running = self._do_read_state()
+        except BaseException:
+            self.close()
+            raise
+        self._state = SequenceState.RUNNING if running else SequenceState.STOPPED
+        log.info("%s opened: %s, %s mode, sequence %s", self,
+                 "standby" if self._standby else "awake", self._mode.name, self._state.value)
 
     def close(self) -> None:
         if not self._is_open:
@@ -428,6 +436,10 @@ class DlpController(abc.ABC):
     def _do_close(self) -> None: ...
 
     @abc.abstractmethod
+    def _do_read_state(self) -> tuple[bool, DisplayMode, bool]:
+        """(standby, display mode, sequencer running) as the controller reports them."""
+
+    @abc.abstractmethod
     def _do_set_power(self, standby: bool) -> None: ...
 
     @abc.abstractmethod
@@ -521,6 +533,12 @@ class LightCrafter4500(DlpController):
             log.warning("%s: releasing the interface failed: %s", self, exc)
         finally:
             usb.util.dispose_resources(dev)
+
+    def _do_read_state(self) -> tuple[bool, DisplayMode, bool]:
+        standby = bool(self._read_byte(Command.POWER_CONTROL) & 0x01)
+        mode = DisplayMode(self._read_byte(Command.DISPLAY_MODE) & 0x01)
+        running = bool(self._read_byte(Command.MAIN_STATUS) & 0x02)
+        return standby, mode, running
 
     def _do_set_power(self, standby: bool) -> None:
         self._write(Command.POWER_CONTROL, bytes([int(standby)]))

@@ -83,7 +83,7 @@ class VirtualHidBackend(usb.backend.IBackend):
 
     # -- what the device does (subclasses) ------------------------------------------------------
     def _on_out_report(self, report: bytes) -> bytes | None:
-        """Answer one OUT report; return the IN report to queue, or None."""
+        """Answer one OUT report: the IN report(s) to queue (64 bytes each), or None."""
         raise NotImplementedError
 
     def _before_transfer(self, direction: str) -> None:
@@ -167,8 +167,10 @@ class VirtualHidBackend(usb.backend.IBackend):
             raise usb.core.USBError("Pipe error", error_code=-9, errno=errno.EPIPE)
         report = bytes(data)
         reply = self._on_out_report(report)
-        if reply is not None:
-            self._in_queue.append(bytes(reply).ljust(dp.REPORT_SIZE, b"\x00"))
+        if reply is not None:  # one or more IN reports
+            for k in range(0, max(len(reply), 1), dp.REPORT_SIZE):
+                self._in_queue.append(bytes(reply[k:k + dp.REPORT_SIZE]).ljust(dp.REPORT_SIZE,
+                                                                               b"\x00"))
         return len(report)
 
     def intr_read(self, dev_handle, ep, intf, buff, timeout):

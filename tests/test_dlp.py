@@ -52,6 +52,17 @@ def write_exchange(seq: int, cmd3_cmd2_data: str) -> tuple[bytes, bytes]:
     return (report(f"40 {seq:02x} {len(payload):02x} 00 {cmd3_cmd2_data}"), ack(seq))
 
 
+def read_exchange(seq: int, cmd3_cmd2: str, data: str) -> tuple[bytes, bytes]:
+    """A read (flags 0xC0, length 2) and its reply (flags 0x80) carrying ``data``."""
+    n = len(bytes.fromhex(data))
+    return (report(f"c0 {seq:02x} 02 00 {cmd3_cmd2}"), report(f"80 {seq:02x} {n:02x} 00 {data}"))
+
+
+# open() reads power (awake), display mode (video) and main status (sequencer stopped)
+OPEN = [read_exchange(1, "00 02", "00"), read_exchange(2, "1b 1a", "00"),
+        read_exchange(3, "0c 1a", "00")]
+
+
 def one_entry_sequence(**overrides) -> PatternSequence:
     entry = PatternEntry(pattern_number=5, bit_depth=1, leds=Led.GREEN,
                          trigger=TriggerType.EXTERNAL_POSITIVE, buffer_swap=True)
@@ -100,50 +111,54 @@ def test_reply_longer_than_report_is_rejected():
 
 # -- exact exchanges --------------------------------------------------------------------------
 
+CONFIGURE_ONE_ENTRY = [  # configure_sequence(one_entry_sequence()), from sequence number 5
+    write_exchange(5, "22 1a 00"),  # data from the video port
+    write_exchange(6, "23 1a 01"),  # internal / external trigger
+    write_exchange(7, "29 1a 10 27 00 00 1b 41 00 00"),  # 10000 us, 16667 us, LE u32
+    write_exchange(8, "31 1a 00 00 00 00"),  # 1 entry, once, 1 pattern, 1 image (minus 1)
+    write_exchange(9, "33 1a 02"),  # open the pattern LUT mailbox
+    write_exchange(10, "32 1a 00"),  # offset 0
+    write_exchange(11, "34 1a 15 21 04"),  # the entry
+    write_exchange(12, "33 1a 00"),  # close
+]
+
+
+def test_open_reads_power_mode_and_sequencer_state():
+    exchanges = [read_exchange(1, "00 02", "01"), read_exchange(2, "1b 1a", "01"),
+                 read_exchange(3, "0c 1a", "03")]
+    with expected_protocol(LightCrafter4500, exchanges) as dlp:
+        assert dlp.state is SequenceState.RUNNING
+        with pytest.raises(IncompatibleStateError, match="standby"):
+            dlp.configure_sequence(one_entry_sequence())
+
+
 def test_wake_standby_and_display_mode_reports():
-    exchanges = [write_exchange(1, "00 02 00"), write_exchange(2, "1b 1a 01"),
-                 write_exchange(3, "00 02 01")]
-    with expected_usb_protocol(exchanges) as backend:
-        dlp = LightCrafter4500(backend=backend)
-        with dlp:
-            dlp.wake()
-            dlp.set_display_mode(DisplayMode.PATTERN)
-            dlp.standby()
+    exchanges = [*OPEN, write_exchange(4, "00 02 00"), write_exchange(5, "1b 1a 01"),
+                 write_exchange(6, "00 02 01")]
+    with expected_protocol(LightCrafter4500, exchanges) as dlp:
+        dlp.wake()
+        dlp.set_display_mode(DisplayMode.PATTERN)
+        dlp.standby()
 
 
 def test_configure_sequence_reports():
-    exchanges = [
-        write_exchange(1, "1b 1a 01"),  # pattern display mode
-        write_exchange(2, "22 1a 00"),  # data from the video port
-        write_exchange(3, "23 1a 01"),  # internal / external trigger
-        write_exchange(4, "29 1a 10 27 00 00 1b 41 00 00"),  # 10000 us, 16667 us, LE u32
-        write_exchange(5, "31 1a 00 00 00 00"),  # 1 entry, once, 1 pattern, 1 image (minus 1)
-        write_exchange(6, "33 1a 02"),  # open the pattern LUT mailbox
-        write_exchange(7, "32 1a 00"),  # offset 0
-        write_exchange(8, "34 1a 15 21 04"),  # the entry
-        write_exchange(9, "33 1a 00"),  # close
-    ]
-    with expected_usb_protocol(exchanges) as backend:
-        dlp = LightCrafter4500(backend=backend)
-        with dlp:
-            dlp.set_display_mode(DisplayMode.PATTERN)
-            dlp.configure_sequence(one_entry_sequence())
+    exchanges = [*OPEN, write_exchange(4, "1b 1a 01"), *CONFIGURE_ONE_ENTRY]
+    with expected_protocol(LightCrafter4500, exchanges) as dlp:
+        dlp.set_display_mode(DisplayMode.PATTERN)
+        dlp.configure_sequence(one_entry_sequence())
 
 
 def test_validate_polls_until_not_busy_then_start():
     exchanges = [
-        write_exchange(1, "1b 1a 01"),
-        *[write_exchange(k, d) for k, d in enumerate(
-            ["22 1a 00", "23 1a 01", "29 1a 10 27 00 00 1b 41 00 00", "31 1a 00 00 00 00",
-             "33 1a 02", "32 1a 00", "34 1a 15 21 04", "33 1a 00"], start=2)],
-        write_exchange(10, "1a 1a 00"),  # start validation
-        (report("c0 0b 02 00 1a 1a"), report("80 0b 01 00 80")),  # busy
-        (report("c0 0c 02 00 1a 1a"), report("80 0c 01 00 10")),  # done, with a warning bit
-        write_exchange(13, "24 1a 02"),  # start
-        write_exchange(14, "24 1a 01"),  # pause
-        write_exchange(15, "24 1a 00"),  # stop
+        *OPEN, write_exchange(4, "1b 1a 01"), *CONFIGURE_ONE_ENTRY,
+        write_exchange(13, "1a 1a 00"),  # start validation
+        read_exchange(14, "1a 1a", "80"),  # busy
+        read_exchange(15, "1a 1a", "10"),  # done, with a warning bit
+        write_exchange(16, "24 1a 02"),  # start
+        write_exchange(17, "24 1a 01"),  # pause
+        write_exchange(18, "24 1a 00"),  # stop
     ]
-    with expected_usb_protocol(exchanges) as backend, LightCrafter4500(backend=backend) as dlp:
+    with expected_protocol(LightCrafter4500, exchanges) as dlp:
         dlp.set_display_mode(DisplayMode.PATTERN)
         dlp.configure_sequence(one_entry_sequence())
         result = dlp.validate()
@@ -157,9 +172,8 @@ def test_validate_polls_until_not_busy_then_start():
 
 
 def test_status_reads_three_registers():
-    exchanges = [(report("c0 01 02 00 0a 1a"), report("80 01 01 00 41")),
-                 (report("c0 02 02 00 0b 1a"), report("80 02 01 00 01")),
-                 (report("c0 03 02 00 0c 1a"), report("80 03 01 00 02"))]
+    exchanges = [*OPEN, read_exchange(4, "0a 1a", "41"), read_exchange(5, "0b 1a", "01"),
+                 read_exchange(6, "0c 1a", "02")]
     with expected_protocol(LightCrafter4500, exchanges) as dlp:
         status = dlp.status()
     assert status.sequencer_running and not status.parked
@@ -167,31 +181,25 @@ def test_status_reads_three_registers():
 
 
 def test_stale_reply_is_skipped_by_sequence_number():
-    exchanges = [(report("c0 01 02 00 0a 1a"),
-                  report("80 00 01 00 00")),  # an old reply (sequence 0) is read first ...
-                 ]
-    with expected_usb_protocol(exchanges) as backend, LightCrafter4500(backend=backend) as dlp:
-        backend._in_queue.append(report("80 01 01 00 01"))  # ... then the right one
-        assert dlp._read_byte(Command.HARDWARE_STATUS) == 1
+    # the device answers with an old reply (sequence 3) before the one to this request (4)
+    exchanges = [*OPEN, (report("c0 04 02 00 0a 1a"),
+                         report("80 03 01 00 00") + report("80 04 01 00 01")),
+                 read_exchange(5, "0b 1a", "01"), read_exchange(6, "0c 1a", "00")]
+    with expected_protocol(LightCrafter4500, exchanges) as dlp:
+        assert dlp.status().hardware == 0x01
 
 
 def test_error_flag_in_reply_raises_naming_the_command():
-    exchanges = [(report("40 01 03 00 1b 1a 01"), report("20 01 00 00"))]
-    with expected_usb_protocol(exchanges) as backend, LightCrafter4500(backend=backend) as dlp:
+    exchanges = [*OPEN, (report("40 04 03 00 1b 1a 01"), report("20 04 00 00"))]
+    with expected_protocol(LightCrafter4500, exchanges) as dlp:
         with pytest.raises(DlpCommandError, match=r"DISPLAY_MODE \(0x1A1B\)"):
             dlp.set_display_mode(DisplayMode.PATTERN)
 
 
 def test_validation_failure_is_explained():
-    exchanges = [
-        write_exchange(1, "1b 1a 01"),
-        *[write_exchange(k, d) for k, d in enumerate(
-            ["22 1a 00", "23 1a 01", "29 1a 10 27 00 00 1b 41 00 00", "31 1a 00 00 00 00",
-             "33 1a 02", "32 1a 00", "34 1a 15 21 04", "33 1a 00"], start=2)],
-        write_exchange(10, "1a 1a 00"),
-        (report("c0 0b 02 00 1a 1a"), report("80 0b 01 00 03")),
-    ]
-    with expected_usb_protocol(exchanges) as backend, LightCrafter4500(backend=backend) as dlp:
+    exchanges = [*OPEN, write_exchange(4, "1b 1a 01"), *CONFIGURE_ONE_ENTRY,
+                 write_exchange(13, "1a 1a 00"), read_exchange(14, "1a 1a", "03")]
+    with expected_protocol(LightCrafter4500, exchanges) as dlp:
         dlp.set_display_mode(DisplayMode.PATTERN)
         dlp.configure_sequence(one_entry_sequence())
         with pytest.raises(DlpValidationError, match="exposure or frame period.*pattern numbers"):
@@ -322,17 +330,25 @@ def test_exposure_rules_accept_boundaries(depth, exposure, period):
 # -- faults and missing devices ---------------------------------------------------------------
 
 def test_usb_error_is_wrapped_naming_the_command():
-    backend = FakeDlpc350Backend(Dlpc350Faults(usb_error_on={Command.DISPLAY_MODE: errno.EPIPE}))
-    with LightCrafter4500(backend=backend) as dlp:
-        with pytest.raises(DeviceError, match="USB error during write DISPLAY_MODE") as info:
-            dlp.set_display_mode(DisplayMode.PATTERN)
+    faults = Dlpc350Faults(usb_error_on={Command.PATTERN_START_STOP: errno.EPIPE})
+    with LightCrafter4500(backend=FakeDlpc350Backend(faults)) as dlp:
+        with pytest.raises(DeviceError, match="USB error during write PATTERN_START_STOP") as info:
+            dlp.stop()
     assert isinstance(info.value.__cause__, usb.core.USBError)
 
 
+def test_failure_while_opening_closes_again():
+    backend = FakeDlpc350Backend(Dlpc350Faults(usb_error_on={Command.DISPLAY_MODE: errno.EIO}))
+    dlp = LightCrafter4500(backend=backend)
+    with pytest.raises(DeviceError, match="read DISPLAY_MODE"):
+        dlp.open()
+    assert not dlp.is_open and backend.claimed == set() and backend.open_handles == 0
+
+
 def test_unanswered_command_times_out():
-    backend = FakeDlpc350Backend(Dlpc350Faults(timeout_on={Command.MAIN_STATUS}))
+    backend = FakeDlpc350Backend(Dlpc350Faults(timeout_on={Command.HARDWARE_STATUS}))
     with LightCrafter4500(backend=backend, timeout_s=0.01) as dlp:
-        with pytest.raises(DeviceTimeoutError, match="MAIN_STATUS"):
+        with pytest.raises(DeviceTimeoutError, match="HARDWARE_STATUS"):
             dlp.status()
 
 
@@ -355,8 +371,8 @@ def test_controller_refusal_is_reported():
 
 
 def test_device_unplugged_mid_scan():
-    backend = FakeDlpc350Backend(Dlpc350Faults(disappear_after=4))
-    dlp = ready(backend)  # wake + display mode: 2 reports; configuring sends more than 2
+    backend = FakeDlpc350Backend(Dlpc350Faults(disappear_after=7))
+    dlp = ready(backend)  # open (3 reads), wake, display mode: 5 reports; configuring sends more
     with pytest.raises(DeviceNotFoundError, match="disconnected during write"):
         dlp.configure_sequence(valid_sequence())
     dlp.close()
