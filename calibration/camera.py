@@ -77,6 +77,8 @@ class CameraCalibration:
     views_used: tuple[int, ...]       # indices of the views in which the board was found
     rvecs: tuple[np.ndarray, ...] = ()
     tvecs: tuple[np.ndarray, ...] = ()
+    distortion_std: np.ndarray | None = None  # 1-sigma of the distortion coefficients (first fit)
+    distortion_significant: bool = True       # False: no coefficient stood out of its noise, all set to 0
 
     def as_fields(self) -> dict:
         """calibration.json keys (capture-format.md: ``camera_matrix``, ``distortion``)."""
@@ -85,6 +87,7 @@ class CameraCalibration:
             "distortion": self.distortion.ravel().tolist(),
             "camera_image_size": list(self.image_size),
             "reprojection_rms_px": self.rms_px,
+            "distortion_significant": self.distortion_significant,
         }
 
 
@@ -130,6 +133,7 @@ def calibrate_camera(
     board: BoardSpec,
     flags: int = 0,
     min_views: int = MIN_VIEWS,
+    significance: float | None = 2.0,
 ) -> CameraCalibration:
     """Intrinsics and distortion from views of a board (``cv2.calibrateCamera``).
 
@@ -142,6 +146,10 @@ def calibrate_camera(
         ``cv2.CALIB_*`` flags (e.g. ``cv2.CALIB_FIX_K3`` for few views).
     min_views : int
         Fewest views with a detected board.
+    significance : float or None
+        When no distortion coefficient differs from 0 by more than ``significance`` standard
+        deviations (a narrow lens, few views), the camera is refitted without distortion, so that
+        noise is not applied to every capture as a correction. None keeps the first fit.
     """
     if not views:
         raise CalibrationError("camera views: none given")
@@ -163,7 +171,21 @@ def calibrate_camera(
     size = (int(shape[1]), int(shape[0]))
     object_points = [d.object_points.astype(np.float32).reshape(-1, 1, 3) for d in detections]
     image_points = [d.image_points.astype(np.float32).reshape(-1, 1, 2) for d in detections]
-    rms, matrix, distortion, rvecs, tvecs = cv2.calibrateCamera(object_points, image_points, size, None, None, flags=flags)
+    rms, matrix, distortion, rvecs, tvecs, std_intrinsics, _, _ = cv2.calibrateCameraExtended(
+        object_points, image_points, size, None, None, flags=flags
+    )
+    distortion_std = np.asarray(std_intrinsics, dtype=np.float64).ravel()[4 : 4 + np.asarray(distortion).size]
+    coefficients = np.asarray(distortion, dtype=np.float64).ravel()
+    significant = True
+    if significance is not None:
+        free = distortion_std > 0  # fixed coefficients have no deviation
+        significant = bool(np.any(np.abs(coefficients[free]) > significance * distortion_std[free]))
+        if not significant:
+            log.info("camera calibration: no distortion coefficient is significant; refitting without distortion")
+            no_distortion = cv2.CALIB_FIX_K1 | cv2.CALIB_FIX_K2 | cv2.CALIB_FIX_K3 | cv2.CALIB_ZERO_TANGENT_DIST
+            rms, matrix, distortion, rvecs, tvecs = cv2.calibrateCamera(
+                object_points, image_points, size, None, np.zeros(5), flags=flags | no_distortion
+            )
     per_view = []
     for obj, img, rvec, tvec in zip(object_points, image_points, rvecs, tvecs):
         projected, _ = cv2.projectPoints(obj, rvec, tvec, matrix, distortion)
@@ -178,6 +200,8 @@ def calibrate_camera(
         views_used=tuple(used),
         rvecs=tuple(np.asarray(r).ravel() for r in rvecs),
         tvecs=tuple(np.asarray(t).ravel() for t in tvecs),
+        distortion_std=distortion_std,
+        distortion_significant=significant,
     )
 
 

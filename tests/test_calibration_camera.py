@@ -22,7 +22,7 @@ def test_chessboard_recovers_intrinsics_and_distortion(chessboard_views):
     images, _ = chessboard_views
     result = calibrate_camera(images, BoardSpec("chessboard", (9, 7), 30.0))
     assert result.rms_px < 0.15
-    assert len(result.views_used) == 10
+    assert len(result.views_used) == 10 and result.distortion_significant
     matrix = result.camera_matrix
     assert matrix[0, 0] == pytest.approx(300.0, rel=0.01)
     assert matrix[1, 1] == pytest.approx(300.0, rel=0.01)
@@ -34,6 +34,16 @@ def test_chessboard_recovers_intrinsics_and_distortion(chessboard_views):
     assert np.max(np.abs(found - truth)) * 300.0 < 1.5  # in pixels
     fields = result.as_fields()
     assert len(fields["camera_matrix"]) == 3 and len(fields["distortion"]) == 5
+
+
+def test_a_lens_without_distortion_gets_none():
+    straight = PinholeCamera.simple(320, 240, 300.0)
+    images, _ = calibration_views(straight, "chessboard", (9, 7), 30.0, count=8, distance_mm=450.0, seed=4)
+    result = calibrate_camera(images, BoardSpec("chessboard", (9, 7), 30.0))
+    assert not result.distortion_significant and not np.any(result.distortion)
+    assert result.camera_matrix[0, 0] == pytest.approx(300.0, rel=0.01)
+    kept = calibrate_camera(images, BoardSpec("chessboard", (9, 7), 30.0), significance=None)
+    assert np.any(kept.distortion)  # the unconstrained fit has noise in its coefficients
 
 
 def test_charuco_views_calibrate_too():
