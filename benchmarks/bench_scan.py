@@ -73,6 +73,9 @@ def one_scan(rig: SimulatedRig, config: RigConfig, out: Path, background: bool, 
         "projector_s": result.times.show_s,
         "camera_s": clock.seconds,
         "overhead_ms_per_frame": 1e3 * (wall - device) / frames,
+        "trigger_ms_per_frame": 1e3 * (result.times.trigger_s - clock.seconds) / frames,  # protocol, excl. exposure
+        "fetch_ms_per_frame": 1e3 * result.times.fetch_s / frames,
+        "store_ms_per_frame": 1e3 * result.times.store_s / frames,
         "writer_busy_s": result.writer_busy_s,
         "commit_s": result.times.finish_s,
         "frames": frames,
@@ -85,7 +88,9 @@ def summarise(label: str, runs: list[dict[str, float]]) -> dict[str, float]:
         f"{label:<22} wall {med['wall_s']:.3f} s | device {med['device_s']:.3f} s "
         f"(projector {med['projector_s']:.3f}, camera {med['camera_s']:.3f}) | "
         f"overhead {med['overhead_ms_per_frame']:.1f} ms/frame | writer busy {med['writer_busy_s']:.3f} s, "
-        f"commit tail {med['commit_s']:.3f} s"
+        f"commit tail {med['commit_s']:.3f} s\n"
+        f"{'':<22} overhead per frame: trigger round trip {med['trigger_ms_per_frame']:.1f} ms, fetch "
+        f"{med['fetch_ms_per_frame']:.2f} ms, hand-over to writer {med['store_ms_per_frame']:.2f} ms"
     )
     return med
 
