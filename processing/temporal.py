@@ -19,7 +19,8 @@ Methods
 - :func:`unwrap_heterodyne`: beat phases of two or three frequencies down to a unit beat
   (e.g. 64, 58, 53 -> 6, 5 -> 1), then hierarchically back up to the highest frequency.
 - :func:`decode_gray` and :func:`unwrap_gray`: Gray-code stripe index (processing.patterns'
-  convention) and fringe orders from it, plain or complementary (Zhang et al., 2018).
+  convention) and fringe orders from it, plain or complementary (Zhang, Su, Xiang and Sun,
+  Opt. Lasers Eng. 2012).
 """
 
 from __future__ import annotations
@@ -493,7 +494,7 @@ def unwrap_gray(
         False (plain): order ``k = floor(stripes * frequency / 2**bits)`` (2**bits == frequency
         gives one code word per period). Its boundaries fall exactly on the phase wraps, so
         blur or a small misregistration makes off-by-one errors along every period edge.
-        True (complementary Gray code, Zhang et al. 2018): ``2**bits == 2 * frequency``, the
+        True (complementary Gray code, Zhang et al. 2012): ``2**bits == 2 * frequency``, the
         extra finest plane splitting each period in halves. ``K1 = stripes // 2`` (from the
         first bits - 1 planes) changes at period edges, ``K2 = (stripes + 1) // 2`` in the
         middle of periods; each pixel takes the one whose boundaries are far from its phase:
