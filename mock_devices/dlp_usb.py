@@ -212,6 +212,15 @@ class Dlpc350Faults:
     validation_busy_reads: int = 1
     claim_errno: int | None = None
 
+    def __post_init__(self) -> None:
+        for name in ("usb_error_on", "timeout_on", "refuse"):
+            for command in getattr(self, name):
+                try:
+                    Command(command)
+                except ValueError:
+                    raise ValueError(f"Dlpc350Faults.{name}: 0x{command:04X} is not a command "
+                                     "the fake controller knows") from None
+
 
 @dataclass
 class Dlpc350State:

@@ -55,6 +55,21 @@ class TriggerFaults:
     stall: bool | int = False
     disconnect_after: int | None = None
 
+    def __post_init__(self) -> None:
+        for name in ("garble_reply_on", "drop_reply_on"):
+            unknown = set(getattr(self, name)) - set(tp.COMMANDS)
+            if unknown:
+                raise ValueError(f"TriggerFaults.{name}: unknown command(s) {sorted(unknown)}, "
+                                 f"expected some of {', '.join(tp.COMMANDS)}")
+        for name in ("garble_times", "drop_times"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"TriggerFaults.{name} must be >= 1, got {getattr(self, name)}")
+        if self.stall is not True and self.stall is not False and int(self.stall) < 0:
+            raise ValueError(f"TriggerFaults.stall must be a bool or a count >= 0, got {self.stall}")
+        if self.disconnect_after is not None and self.disconnect_after < 0:
+            raise ValueError(f"TriggerFaults.disconnect_after must be >= 0, got "
+                             f"{self.disconnect_after}")
+
     def stall_after(self) -> int | None:
         if self.stall is True:
             return 0

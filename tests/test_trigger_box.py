@@ -249,6 +249,13 @@ def test_box_that_disappears_raises_device_error():
         box.close()
 
 
+def test_fault_requests_are_checked():
+    with pytest.raises(ValueError, match="unknown command"):
+        TriggerFaults(garble_reply_on={"fire"})
+    with pytest.raises(ValueError, match="drop_times"):
+        TriggerFaults(drop_reply_on={"FIRE"}, drop_times=0)
+
+
 def test_version_mismatch_with_fake_box_is_refused():
     with FakeTriggerBox(protocol_version=2) as fake:
         with pytest.raises(UnsupportedFeatureError, match="VERSION box speaks 2"):
