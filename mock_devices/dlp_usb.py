@@ -412,7 +412,6 @@ class FakeDlpc350Backend(VirtualHidBackend):
         s = self.state
         if action == dp.SequenceAction.START:
             if s.standby or s.display_mode != 1 or not s.validated:
-                s.hardware_status |= 0x40  # sequencer abort
                 return False
             s.sequencer = "running"
         elif action == dp.SequenceAction.PAUSE:
