@@ -350,20 +350,19 @@ class FakeTriggerBox:
             with self._lock:
                 if self._gone:
                     return
-                self._emit(self._firmware.tick(time.monotonic()))
-                if not ready:
-                    continue
-                try:
-                    data = os.read(self._master, 1024)
-                except OSError:
-                    continue  # no process holds the slave open (EIO); keep waiting
-                buffer += data
-                while b"\n" in buffer and not self._gone:
-                    line, buffer = buffer.split(b"\n", 1)
-                    self._handle(line + b"\n")
-                if len(buffer) > tp.MAX_LINE_BYTES:  # a line too long: answered as SYNTAX
-                    self._handle(buffer + b"\n")
-                    buffer = b""
+                if ready:
+                    try:
+                        buffer += os.read(self._master, 1024)
+                    except OSError:
+                        pass  # no process holds the slave open (EIO); keep waiting
+                    while b"\n" in buffer and not self._gone:
+                        line, buffer = buffer.split(b"\n", 1)
+                        self._handle(line + b"\n")
+                    if len(buffer) > tp.MAX_LINE_BYTES:  # a line too long: answered as SYNTAX
+                        self._handle(buffer + b"\n")
+                        buffer = b""
+                if not self._gone:  # input first: a late thread must not fire the watchdog
+                    self._emit(self._firmware.tick(time.monotonic()))
 
     def _handle(self, line: bytes) -> None:
         self.received.append(line)

@@ -285,13 +285,13 @@ def test_wait_done_gives_up_with_wait_timeout():
 
 
 def test_watchdog_disarms_a_silent_host_and_heartbeat_prevents_it():
-    with FakeTriggerBox(watchdog_s=0.08) as fake, SerialTriggerBox(fake.port) as box:
+    with FakeTriggerBox(watchdog_s=0.2) as fake, SerialTriggerBox(fake.port) as box:
         box.arm(5, ExposureSource.EXTERNAL_SYNC)
-        for _ in range(8):  # 0.16 s of heartbeats, every 0.02 s
+        for _ in range(15):  # 0.3 s of heartbeats, every 0.02 s
             time.sleep(0.02)
             box.ping()
         assert box.status().state == "ARMED"
-        time.sleep(0.15)
+        time.sleep(0.35)
         assert box.status().state == "IDLE"
         assert "WATCHDOG" in [e.name for e in box.events]
 
