@@ -109,7 +109,7 @@ def correct_rpca_phase(
 
 def correct_auto(
     absolute_phase, wrapped_phase, orders=None, mask=None, frequency=None,
-    tau: float | None = None, k_sigma: float = 3.0, svd: str = "auto",
+    tau: float | None = None, k_sigma: float = 4.0, svd: str = "auto",
 ):
     """The most accurate method measured: ch. 4 RPCA, re-derived orders, measured detail restored.
 

@@ -116,7 +116,8 @@ def robust_noise_sigma(d: np.ndarray, mask: np.ndarray | None = None) -> float:
     """Standard deviation of white noise on a smooth matrix, robust to sparse outliers.
 
     Median absolute deviation of the second differences along rows (which cancel smooth
-    content; their variance is 6 sigma^2), scaled to a Gaussian standard deviation. With
+    content; their variance is 6 sigma^2), scaled to a Gaussian standard deviation. It assumes
+    content that is smooth along rows (phase maps, fringe images); for other data give sigma. With
     ``mask``, only differences of three valid pixels count (filled shadows would bias it low).
     """
     arr = np.asarray(d, dtype=np.float64)
