@@ -11,14 +11,17 @@ result against the simulated truth.
     python benchmarks/bench_pipeline.py [--runs 9] [--frequencies 15 16] [--snr-db 30]
 
 Rows: our path with the processing thread pool (processing._blockwise.THREADS) and with one
-thread, OpenCV, then ours again after asking glibc to keep freed memory (see
+thread (interleaved), OpenCV, then ours again after asking glibc to keep freed memory (see
 ``retain_freed_memory``; it cannot be undone within the process, so those rows come last).
+Wall-clock medians depend on what else runs on the machine: the load average is printed, and
+the CPU time of the process, much less sensitive to it, beside them.
 """
 
 from __future__ import annotations
 
 import argparse
 import ctypes
+import os
 import resource
 import statistics
 import sys
@@ -89,16 +92,20 @@ def opencv_pipeline(stack, frequencies, geometry):
     return low_phase, pattern.unwrapPhaseMap(high_phase, size, shadowMask=high_mask)
 
 
-def timed(funcs: dict, runs: int) -> dict[str, list[float]]:
-    """Wall-clock times of each function, interleaved run by run so load changes hit all alike."""
-    times: dict[str, list[float]] = {name: [] for name in funcs}
+def timed(funcs: dict, runs: int) -> dict[str, list[tuple[float, float]]]:
+    """(wall, CPU) seconds of each function, interleaved run by run so load changes hit all alike.
+
+    CPU time is the process's (all threads): on a machine shared with other jobs it is far
+    less sensitive to their load than the wall clock.
+    """
+    times: dict[str, list[tuple[float, float]]] = {name: [] for name in funcs}
     for func in funcs.values():
         func()  # warm-up: caches, look-up tables, thread pool, first page faults
     for _ in range(runs):
         for name, func in funcs.items():
-            start = time.perf_counter()
+            wall, cpu = time.perf_counter(), time.process_time()
             func()
-            times[name].append(time.perf_counter() - start)
+            times[name].append((time.perf_counter() - wall, time.process_time() - cpu))
     return times
 
 
@@ -165,15 +172,13 @@ def main(argv: list[str] | None = None) -> int:
     rss_before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 
     threads = _blockwise.THREADS
+    load_before = os.getloadavg()[0]
     print(f"timing {args.runs} interleaved runs (the OpenCV path takes about a second each) ...", file=sys.stderr)
-    rows = timed(
-        {
-            f"fpp-rig, {threads} threads": with_threads(threads, ours),
-            "fpp-rig, 1 thread": with_threads(1, ours),
-            "OpenCV PSP 2x computePhaseMap + unwrapPhaseMap": lambda: opencv_pipeline(obj, freqs, geometry),
-        },
-        args.runs,
-    )
+    rows = timed({f"fpp-rig, {threads} threads": with_threads(threads, ours), "fpp-rig, 1 thread": with_threads(1, ours)},
+                 args.runs)
+    # Separately: a second of OpenCV between two of our runs would flush the caches each time.
+    rows.update(timed({"OpenCV PSP 2x computePhaseMap + unwrapPhaseMap": lambda: opencv_pipeline(obj, freqs, geometry)},
+                      args.runs))
     if retain_freed_memory():
         rows.update(
             timed(
@@ -186,13 +191,16 @@ def main(argv: list[str] | None = None) -> int:
         )
     rss_after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 
-    peer = statistics.median(rows["OpenCV PSP 2x computePhaseMap + unwrapPhaseMap"]) * 1e3
+    peer = statistics.median(t[0] for t in rows["OpenCV PSP 2x computePhaseMap + unwrapPhaseMap"]) * 1e3
     print("12 uint8 frames 1024x768 (2 frequencies x 6 steps) -> height map; fpp-rig = wrapped_phase "
           "+ phase_shift + unwrap_two_frequency + shadow_mask + phase_to_height")
-    print(f"{'path':<50} {'median ms':>10} {'min ms':>8} {'runs':>5} {'OpenCV/this':>12}")
+    print(f"load average {load_before:.1f} before, {os.getloadavg()[0]:.1f} after ({os.cpu_count()} CPUs)")
+    print(f"{'path':<50} {'median ms':>10} {'min ms':>8} {'CPU ms':>7} {'runs':>5} {'OpenCV/this':>12}")
     for name, times in rows.items():
-        median = statistics.median(times) * 1e3
-        print(f"{name:<50} {median:>10.1f} {min(times) * 1e3:>8.1f} {len(times):>5} {peer / median:>11.1f}x")
+        median = statistics.median(t[0] for t in times) * 1e3
+        cpu = statistics.median(t[1] for t in times) * 1e3
+        fastest = min(t[0] for t in times) * 1e3
+        print(f"{name:<50} {median:>10.1f} {fastest:>8.1f} {cpu:>7.1f} {len(times):>5} {peer / median:>11.1f}x")
     print(f"peak numpy allocations of one run (tracemalloc): {traced_peak / 2**20:.1f} MiB; "
           f"process maxrss {rss_after / 1024:.0f} MiB (+{(rss_after - rss_before) / 1024:.0f} MiB while timing)")
     print(f"check: {order_errors} wrong fringe orders among {lit.sum()} valid lit pixels, "

@@ -73,7 +73,8 @@ def _fraction(turns: np.ndarray, exact_top: bool = True) -> np.ndarray:
     -tiny - floor(-tiny) rounds to 1.0; ``exact_top`` moves such values just below 1 (skip it
     where 1.0 is harmless, e.g. the index of a pair look-up, which then reads the same order).
     """
-    turns -= np.floor(turns)
+    with np.errstate(invalid="ignore"):  # inf - inf: an infinite input becomes NaN = invalid
+        turns -= np.floor(turns)
     if exact_top:
         top = turns >= 1.0
         if top.any():
@@ -185,7 +186,7 @@ def unwrap_two_frequency(phi1: np.ndarray, phi2: np.ndarray, f1: int, f2: int) -
     Parameters
     ----------
     phi1, phi2 : (H, W) arrays
-        Wrapped phases of frequencies f1 and f2 (any 2 pi representation; NaN = invalid).
+        Wrapped phases of frequencies f1 and f2 (any 2 pi representation; NaN or inf = invalid).
     f1, f2 : int
         Coprime fringe counts across the projector, f1 < f2.
 
@@ -238,7 +239,7 @@ def unwrap_three_frequency(phis: Sequence[np.ndarray], frequencies: Sequence[int
     Parameters
     ----------
     phis : sequence of three (H, W) arrays
-        Wrapped phases at ``frequencies`` (any 2 pi representation; NaN = invalid).
+        Wrapped phases at ``frequencies`` (any 2 pi representation; NaN or inf = invalid).
     frequencies : sequence of three ints
         f1, f2, f3 with f3 the largest and no common divisor > 1 of all three (pairs may share
         one: e.g. 6, 10, 15).
@@ -328,7 +329,7 @@ def unwrap_hierarchical(
     Parameters
     ----------
     phis : sequence of (H, W) arrays
-        Wrapped phases at ``frequencies`` (any 2 pi representation; NaN = invalid).
+        Wrapped phases at ``frequencies`` (any 2 pi representation; NaN or inf = invalid).
     frequencies : sequence of ints, increasing, the first equal to 1
         The unit frequency covers the projector once, so its wrapped phase is absolute; each
         next one is unwrapped with ``k = round((Phi_prev f / f_prev - phi) / 2 pi)``.
@@ -365,7 +366,7 @@ def unwrap_heterodyne(
     Parameters
     ----------
     phis : sequence of two or three (H, W) arrays
-        Wrapped phases at ``frequencies`` (any 2 pi representation; NaN = invalid).
+        Wrapped phases at ``frequencies`` (any 2 pi representation; NaN or inf = invalid).
     frequencies : sequence of two or three distinct ints
         Two: their difference must be 1 (the beat covers the projector once). Three, sorted
         fa > fb > fc: the beats fa - fb and fb - fc must differ by 1 (64, 58, 53 -> 6, 5 -> 1).
@@ -483,7 +484,7 @@ def unwrap_gray(
     ----------
     phi : (H, W) array
         Wrapped phase of the sinusoid with ``frequency`` fringes (any 2 pi representation,
-        periods starting at phase 0 as in capture-format.md; NaN = invalid).
+        periods starting at phase 0 as in capture-format.md; NaN or inf = invalid).
     stripes : (H, W) int array
         Stripe index from :func:`decode_gray` with ``bits`` planes.
     bits : int
