@@ -205,3 +205,42 @@ def compensate_phase(phase: np.ndarray, table: PhaseErrorTable) -> np.ndarray:
     p = np.asarray(phase, dtype=np.float64)
     correction = np.interp(_wrap(p), table.centers, table.error, period=2 * np.pi)
     return p - correction
+
+
+def smooth_plane_phase(phase: np.ndarray, mask: np.ndarray | None = None, degree: int = 3) -> np.ndarray:
+    """A ripple-free stand-in for a flat plane's absolute phase: a 2-D polynomial of ``degree``
+    fitted to it (a plane's phase is smooth, perspective included; the gamma ripple is not)."""
+    p = np.asarray(phase, dtype=np.float64)
+    if p.ndim != 2:
+        raise CalibrationError(f"plane phase: expected a 2-D map, found shape {p.shape}")
+    keep = np.isfinite(p)
+    if mask is not None:
+        keep &= np.asarray(mask, dtype=bool)
+    terms = [(i, j) for i in range(degree + 1) for j in range(degree + 1 - i)]
+    if keep.sum() < 4 * len(terms):
+        raise CalibrationError(f"plane phase: {int(keep.sum())} valid pixels, too few for a degree-{degree} surface")
+    rows, cols = np.indices(p.shape, dtype=np.float64)
+    x = (cols - p.shape[1] / 2.0) / p.shape[1]
+    y = (rows - p.shape[0] / 2.0) / p.shape[0]
+    design = np.stack([x**i * y**j for i, j in terms], axis=-1)
+    coef, *_ = np.linalg.lstsq(design[keep], p[keep], rcond=None)
+    return np.where(keep, design @ coef, np.nan)
+
+
+def ripple_table_from_plane(phase: np.ndarray, mask: np.ndarray | None = None, bins: int = 64) -> tuple[PhaseErrorTable, float]:
+    """Phase-error table of a plane's absolute phase against its smooth fit, and the ripple's RMS (rad)."""
+    smooth = smooth_plane_phase(phase, mask)
+    table = phase_error_table(phase, smooth, mask=mask, bins=bins)
+    return table, float(np.sqrt(np.mean(table.error**2)))
+
+
+def table_from_fields(fields: dict) -> PhaseErrorTable:
+    """Inverse of :meth:`PhaseErrorTable.as_fields` (calibration.json ``phase_error``)."""
+    try:
+        centers = np.asarray(fields["phase_error_centers"], dtype=np.float64)
+        error = np.asarray(fields["phase_error_rad"], dtype=np.float64)
+    except (KeyError, TypeError, ValueError):
+        raise CalibrationError("phase_error: expected phase_error_centers and phase_error_rad lists") from None
+    if centers.shape != error.shape or centers.ndim != 1 or centers.size < 4:
+        raise CalibrationError(f"phase_error: expected two equal lists of >= 4 numbers, found {centers.shape} and {error.shape}")
+    return PhaseErrorTable(centers=centers, error=error)

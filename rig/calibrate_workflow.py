@@ -36,7 +36,7 @@ import numpy as np
 
 from calibration.camera import BoardSpec, CameraCalibration, calibrate_camera, detect_board
 from calibration.errors import CalibrationError
-from calibration.gamma import fit_gamma, inverse_lut, mean_response, ramp_patterns
+from calibration.gamma import compensate_phase, fit_gamma, inverse_lut, mean_response, ramp_patterns, ripple_table_from_plane
 from calibration.geometry import MIN_HEIGHTS, fit_f0, fit_l0_d0, pixel_mm_from_corners
 from calibration.polynomial import POLYNOMIAL, fit_polynomial
 from calibration.reference import REFERENCE_DIR, check_same_patterns
@@ -54,6 +54,11 @@ BOARD_DIR = "board"
 GAMMA_DIR = "gamma"
 GAMMA_LUT_FILE = "gamma-lut.npy"
 STEREO_DIR = "stereo"
+# Reference-plane ripple above which the calibration planes are compensated before the fit: a
+# gamma ripple (0.2 rad for gamma 2.2 under 3 steps) reads as planes that are not flat; the few
+# hundredths of a radian projector pixelation leaves do not move with the fringe phase alone, and
+# compensating them would bias l0.
+RIPPLE_COMPENSATION_RAD = 0.08
 PLANE_LABEL = re.compile(r"plane-at-(-?\d+(?:\.\d+)?)mm")
 MODELS = (REFERENCE_PLANE, POLYNOMIAL, STEREO)
 
@@ -442,16 +447,24 @@ def compute(
     planes = _planes(directory)
     if len(planes) < MIN_HEIGHTS:
         raise CalibrationError(f"{directory / PLANES_DIR}: {len(planes)} plane captures, need at least {MIN_HEIGHTS} heights")
+    f0 = fit_f0(reference, pixel_mm)
+    # the reference plane's phase ripple (projector gamma), for `rig process --correction gamma-table`;
+    # a strong one is taken out of the calibration planes too, or it would read as planes not flat
+    table, ripple_rms = ripple_table_from_plane(reference)
+    extra["phase_error"] = {**table.as_fields(), "frequency": frequency, "ripple_rms_rad": ripple_rms}
+    lines.append(f"phase ripple on the reference plane {ripple_rms:.4f} rad RMS (table for --correction gamma-table)")
+    compensate = ripple_rms > RIPPLE_COMPENSATION_RAD
+    if compensate:
+        reference = compensate_phase(reference, table)
+        extra["planes_ripple_compensated"] = True
+        lines.append("  strong ripple: the planes were fitted with it compensated; pre-correct the projector (--gamma) or process with --correction gamma-table")
     heights, deltas = [], []
     for height, path in planes:
         note(f"calibrate: plane at {height:g} mm")
         phase, plane_frequency, _, plane_patterns = _absolute_phase(path)
         check_same_patterns(patterns, plane_patterns, f"{directory / REFERENCE_DIR}", f"{path}")
         heights.append(height)
-        deltas.append(phase - reference)
-    f0 = fit_f0(reference, pixel_mm)
-    lines.append(f"f0 = {f0.f0_per_mm:.6f} +- {f0.f0_std_per_mm:.2g} /mm at {frequency:g} fringes")
-
+        deltas.append((compensate_phase(phase, table) if compensate else phase) - reference)
     fit = fit_l0_d0(heights, deltas, f0.f0_per_mm, f0_std_per_mm=f0.f0_std_per_mm,
                     flatness_tolerance_mm=plan.flatness_tolerance_mm if plan.model == REFERENCE_PLANE else None)
     lines.append(f"l0 = {fit.l0_mm:.3f} +- {fit.l0_std_mm:.3f} mm, d0 = {fit.d0_mm:.3f} +- {fit.d0_std_mm:.3f} mm")

@@ -13,6 +13,7 @@ import pytest
 from calibration.errors import CalibrationError
 from calibration.gamma import (
     compensate_phase, fit_gamma, inverse_lut, mean_response, phase_error_table, ramp_patterns,
+    ripple_table_from_plane, table_from_fields,
 )
 from drivers.projector import apply_gamma_lut, validate_gamma_lut
 from mock_devices import synth
@@ -103,3 +104,15 @@ def test_bad_ramps_are_refused():
         fit_gamma(np.linspace(0, 2, 5), [10, 40, 120, 200, 250])
     with pytest.raises(CalibrationError, match="phase error table: measured"):
         phase_error_table(np.zeros((10, 10)), np.zeros((10, 11)))
+
+
+def test_ripple_table_learnt_from_the_plane_itself():
+    raw, measured, truth = ripple(None, seed=5)
+    absolute = truth + wrap(measured - truth)        # the plane's absolute phase, ripple included
+    table, ripple_rms = ripple_table_from_plane(absolute)
+    assert ripple_rms == pytest.approx(raw, rel=0.2)  # the table sees the ripple a smooth fit leaves
+    _, measured2, truth2 = ripple(None, seed=6)
+    error = compensate_phase(truth2 + wrap(measured2 - truth2), table_from_fields(table.as_fields())) - truth2
+    assert float(np.sqrt(np.mean((error - error.mean()) ** 2))) < raw / 4
+    with pytest.raises(CalibrationError, match="phase_error: expected"):
+        table_from_fields({"phase_error_centers": [0, 1]})
