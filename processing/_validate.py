@@ -29,10 +29,17 @@ def image(value: object, name: str) -> np.ndarray:
     return real_array(value, name, ndim=2)
 
 
-def phase_map(value: object, name: str, shape: tuple[int, ...] | None = None) -> np.ndarray:
-    """A 2-D float64 phase map; NaN and infinities mark invalid pixels (not scanned for here:
-    the kernels propagate them, which costs nothing, where a check costs a pass)."""
+def phase_map(
+    value: object, name: str, shape: tuple[int, ...] | None = None, refuse_infinity: bool = True
+) -> np.ndarray:
+    """A 2-D float64 phase map; NaN allowed (invalid pixels), infinities refused.
+
+    ``refuse_infinity=False`` skips that scan for callers whose kernels turn infinities into
+    NaN (invalid) anyway: on a megapixel map the scan costs as much as a whole kernel pass.
+    """
     arr = image(value, name).astype(np.float64, copy=False)
+    if refuse_infinity and np.isinf(arr).any():
+        raise ValueError(f"{name}: contains infinity")
     same_shape(arr, shape, name)
     return arr
 
@@ -80,7 +87,7 @@ def frequency_list(values: Sequence[object], name: str, count: int | None = None
     return [positive_int(f, f"{name}[{i}]") for i, f in enumerate(items)]
 
 
-def phase_maps(values: Sequence[object], name: str, count: int) -> list[np.ndarray]:
+def phase_maps(values: Sequence[object], name: str, count: int, refuse_infinity: bool = True) -> list[np.ndarray]:
     """``count`` 2-D float64 phase maps of one shape."""
     try:
         items = list(values)  # type: ignore[call-overload]
@@ -90,7 +97,7 @@ def phase_maps(values: Sequence[object], name: str, count: int) -> list[np.ndarr
         raise ValueError(f"{name}: expected a sequence of {count} phase maps, found one 2-D array")
     if len(items) != count:
         raise ValueError(f"{name}: expected {count} phase maps (one per frequency), found {len(items)}")
-    maps = [phase_map(p, f"{name}[{i}]") for i, p in enumerate(items)]
+    maps = [phase_map(p, f"{name}[{i}]", refuse_infinity=refuse_infinity) for i, p in enumerate(items)]
     for i, p in enumerate(maps[1:], start=1):
         same_shape(p, maps[0].shape, f"{name}[{i}]")
     return maps

@@ -211,8 +211,8 @@ def unwrap_two_frequency(phi1: np.ndarray, phi2: np.ndarray, f1: int, f2: int) -
         raise ValueError(f"f2: expected f1 < f2, found f1 = {f1}, f2 = {f2}")
     if math.gcd(f1, f2) != 1:
         raise ValueError(f"f1, f2: {f1} and {f2} are not coprime (gcd {math.gcd(f1, f2)})")
-    p1 = _validate.phase_map(phi1, "phi1")
-    p2 = _validate.phase_map(phi2, "phi2", p1.shape)
+    p1 = _validate.phase_map(phi1, "phi1", refuse_infinity=False)
+    p2 = _validate.phase_map(phi2, "phi2", p1.shape, refuse_infinity=False)
     table = pair_table(f1, f2)
 
     def kernel(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -264,7 +264,7 @@ def unwrap_three_frequency(phis: Sequence[np.ndarray], frequencies: Sequence[int
     f1, f2, f3 = freqs
     if f3 != max(freqs):
         raise ValueError(f"frequencies: expected the largest last, found {freqs}")
-    maps = _validate.phase_maps(phis, "phis", 3)
+    maps = _validate.phase_maps(phis, "phis", 3, refuse_infinity=False)
     pairs = []
     for fi in (f1, f2):
         t = math.gcd(fi, f3)
@@ -349,7 +349,7 @@ def unwrap_hierarchical(
     if any(b <= a for a, b in zip(freqs, freqs[1:])):
         raise ValueError(f"frequencies: expected increasing values, found {freqs}")
     tolerance = _validate.finite_float(max_residual, "max_residual", minimum=0.0, strict=True)
-    maps = _validate.phase_maps(phis, "phis", len(freqs))
+    maps = _validate.phase_maps(phis, "phis", len(freqs), refuse_infinity=False)
 
     def kernel(*raw: np.ndarray) -> tuple[np.ndarray, ...]:
         turns = [_turns(r) for r in raw]
@@ -391,7 +391,7 @@ def unwrap_heterodyne(
     if len(set(freqs)) != len(freqs):
         raise ValueError(f"frequencies: expected distinct values, found {freqs}")
     tolerance = _validate.finite_float(max_residual, "max_residual", minimum=0.0, strict=True)
-    maps = _validate.phase_maps(phis, "phis", len(freqs))
+    maps = _validate.phase_maps(phis, "phis", len(freqs), refuse_infinity=False)
     order = sorted(range(len(freqs)), key=lambda i: -freqs[i])
     fs = [freqs[i] for i in order]
     if len(fs) == 2 and fs[0] - fs[1] != 1:
@@ -508,7 +508,7 @@ def unwrap_gray(
     """
     bits = _validate.positive_int(bits, "bits")
     frequency = _validate.positive_int(frequency, "frequency")
-    p = _validate.phase_map(phi, "phi")
+    p = _validate.phase_map(phi, "phi", refuse_infinity=False)
     s = np.asarray(stripes)
     if not np.issubdtype(s.dtype, np.integer):
         raise ValueError(f"stripes: expected an integer array, found dtype {s.dtype}")
