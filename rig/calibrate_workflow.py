@@ -145,8 +145,16 @@ class ConsoleOperator(Operator):
     """Asks a person at the console, and waits for Enter (``ask`` replaceable for tests)."""
 
     def __init__(self, ask: Callable[[str], str] = input, stage: "StageCommand | None" = None) -> None:
-        self.ask = ask
+        self._ask = ask
         self.stage = stage
+
+    def ask(self, message: str) -> None:
+        try:
+            self._ask(message)
+        except EOFError:
+            raise ConfigError(
+                "calibration needs an operator at the console (no input); use --stage-command for a motorised stage"
+            ) from None
 
     def plane(self, height_mm: float) -> None:
         if self.stage is not None:

@@ -126,6 +126,12 @@ def test_operator_is_prompted_for_every_step(tmp_path):
     result = compute(tmp_path / "cal", progress=lambda _m: None)
     assert result.calibration.l0_mm == pytest.approx(1000.0, rel=0.02)
 
+    def no_console(_message: str) -> str:
+        raise EOFError
+
+    with pytest.raises(ConfigError, match="needs an operator at the console"):
+        ConsoleOperator(ask=no_console).plane(20.0)
+
 
 def test_stage_command_moves_a_motorised_stage(tmp_path):
     log = tmp_path / "stage.log"

@@ -71,7 +71,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "calibration from board poses with fringes along x and y)")
     parser.add_argument("--degree", type=int, default=None, help="polynomial degree (default 3)")
     parser.add_argument("--board", type=_board, default=None, metavar="KIND:COLSxROWS:SQUARE_MM[:MARKER_MM]",
-                        help="calibration target (default chessboard:9x7:20 for real rigs; 'none' with --pixel-mm)")
+                        help="calibration target (default chessboard:9x7:20; 'none' with --pixel-mm)")
     parser.add_argument("--board-views", type=int, default=None, metavar="N",
                         help="tilted board views for camera intrinsics (default 6; 0: pixel size only)")
     parser.add_argument("--pixel-mm", type=float, default=None, help="pixel size on the plane, instead of measuring it")
