@@ -11,16 +11,13 @@ result against the simulated truth.
     python benchmarks/bench_pipeline.py [--runs 9] [--frequencies 15 16] [--snr-db 30]
 
 Rows: our path with the processing thread pool (processing._blockwise.THREADS) and with one
-thread (interleaved), OpenCV, then ours again after asking glibc to keep freed memory (see
-``retain_freed_memory``; it cannot be undone within the process, so those rows come last).
-Wall-clock medians depend on what else runs on the machine: the load average is printed, and
+thread (interleaved), then OpenCV. Wall-clock medians depend on what else runs on the machine: the load average is printed, and
 the CPU time of the process, much less sensitive to it, beside them.
 """
 
 from __future__ import annotations
 
 import argparse
-import ctypes
 import os
 import resource
 import statistics
@@ -123,22 +120,6 @@ def with_threads(count: int, func):
     return run
 
 
-def retain_freed_memory() -> bool:
-    """Ask glibc to keep freed memory instead of returning it to the kernel (mallopt).
-
-    Every output image is a fresh 6 MB array; by default glibc unmaps or trims such blocks when
-    they are freed, so the next scan pays the page faults again (costly in this VM). A long-running
-    scanner process can opt out the same way (or with MALLOC_TRIM_THRESHOLD_ /
-    MALLOC_MMAP_THRESHOLD_ in its environment).
-    """
-    try:
-        libc = ctypes.CDLL("libc.so.6")
-    except OSError:
-        return False
-    m_trim_threshold, m_mmap_threshold = -1, -3
-    return bool(libc.mallopt(m_mmap_threshold, 32 * 2**20)) and bool(libc.mallopt(m_trim_threshold, 512 * 2**20))
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=9, help="timed runs per path (median reported; >= 7)")
@@ -179,16 +160,6 @@ def main(argv: list[str] | None = None) -> int:
     # Separately: a second of OpenCV between two of our runs would flush the caches each time.
     rows.update(timed({"OpenCV PSP 2x computePhaseMap + unwrapPhaseMap": lambda: opencv_pipeline(obj, freqs, geometry)},
                       args.runs))
-    if retain_freed_memory():
-        rows.update(
-            timed(
-                {
-                    f"fpp-rig, {threads} threads, freed memory retained": with_threads(threads, ours),
-                    "fpp-rig, 1 thread, freed memory retained": with_threads(1, ours),
-                },
-                args.runs,
-            )
-        )
     rss_after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 
     peer = statistics.median(t[0] for t in rows["OpenCV PSP 2x computePhaseMap + unwrapPhaseMap"]) * 1e3
