@@ -231,3 +231,19 @@ def undistort_points(pixels: np.ndarray, camera_matrix: np.ndarray, distortion: 
         pts, np.asarray(camera_matrix, np.float64).reshape(3, 3), np.asarray(distortion, np.float64).ravel(),
         criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 1e-10),
     ).reshape(-1, 2)
+
+
+def undistort_map(values: np.ndarray, camera_matrix: np.ndarray, distortion: np.ndarray) -> np.ndarray:
+    """A smooth per-pixel map (e.g. absolute phase, NaN invalid) resampled as the undistorted frames
+    would give it (same remap as :func:`undistort_stack`; NaN spreads to the neighbours it touches)."""
+    data = np.asarray(values, dtype=np.float32)
+    if data.ndim != 2:
+        raise CalibrationError(f"map: expected (H, W), found shape {data.shape}")
+    return undistort_stack(data, camera_matrix, distortion).astype(np.float64)
+
+
+def undistort_pixels(pixels: np.ndarray, camera_matrix: np.ndarray, distortion: np.ndarray) -> np.ndarray:
+    """Pixel positions (N, 2) where they land in the undistorted image (same camera matrix)."""
+    matrix = np.asarray(camera_matrix, np.float64).reshape(3, 3)
+    normalized = undistort_points(pixels, matrix, distortion)
+    return normalized @ matrix[:2, :2].T + matrix[:2, 2]

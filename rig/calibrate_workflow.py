@@ -34,7 +34,9 @@ from typing import Any
 import cv2
 import numpy as np
 
-from calibration.camera import BoardSpec, CameraCalibration, calibrate_camera, detect_board
+from calibration.camera import (
+    BoardSpec, CameraCalibration, calibrate_camera, detect_board, undistort_map, undistort_pixels,
+)
 from calibration.errors import CalibrationError
 from calibration.gamma import compensate_phase, fit_gamma, inverse_lut, mean_response, ramp_patterns, ripple_table_from_plane
 from calibration.geometry import MIN_HEIGHTS, fit_f0, fit_l0_d0, pixel_mm_from_corners
@@ -430,28 +432,43 @@ def compute(
     pixel_mm = plan.pixel_mm
     if plan.board is not None:
         on_plane, views = _board_images(directory / BOARD_DIR)
-        if pixel_mm is None:
-            if on_plane is None:
-                raise CalibrationError(f"{directory / BOARD_DIR / 'plane'}: missing (the board lying on the reference plane)")
-            found = detect_board(on_plane, plan.board, name="board on the reference plane")
-            if found is None:
-                raise CalibrationError(f"{directory / BOARD_DIR / 'plane'}: the {plan.board.kind} was not found")
-            if plan.board.kind != "chessboard":
-                raise CalibrationError("pixel size: measure it with a chessboard (or give --pixel-mm)")
-            pixel_mm = pixel_mm_from_corners(found.image_points, plan.board.inner_corners, plan.board.square_mm)
-            lines.append(f"pixel size on the plane {pixel_mm:.5f} mm (from the {plan.board.kind})")
         all_views = ([on_plane] if on_plane is not None else []) + views
         if len(views) >= 2:
             # k3 stays 0: a few views of a narrow-angle lens cannot tell it from k1, k2
             camera = calibrate_camera(all_views, plan.board, flags=cv2.CALIB_FIX_K3)
             extra.update(camera.as_fields())
-            lines.append(f"camera: {len(camera.views_used)} views, reprojection RMS {camera.rms_px:.3f} px")
+            lines.append(
+                f"camera: {len(camera.views_used)} views, reprojection RMS {camera.rms_px:.3f} px"
+                + ("" if camera.distortion_significant else ", no significant lens distortion")
+            )
+        if pixel_mm is None:
+            if on_plane is None:
+                raise CalibrationError(f"{directory / BOARD_DIR / 'plane'}: missing (the board lying on the reference plane)")
+            if plan.board.kind != "chessboard":
+                raise CalibrationError("pixel size: measure it with a chessboard (or give --pixel-mm)")
+            found = detect_board(on_plane, plan.board, name="board on the reference plane")
+            if found is None:
+                raise CalibrationError(f"{directory / BOARD_DIR / 'plane'}: the {plan.board.kind} was not found")
+            corners = found.image_points
+            if camera is not None and camera.distortion_significant:
+                corners = undistort_pixels(corners, camera.camera_matrix, camera.distortion)
+            pixel_mm = pixel_mm_from_corners(corners, plan.board.inner_corners, plan.board.square_mm)
+            lines.append(f"pixel size on the plane {pixel_mm:.5f} mm (from the {plan.board.kind})")
     if pixel_mm is None:
         raise CalibrationError("pixel size: no board on the plane and no --pixel-mm")
+    # `rig process` undistorts the frames of scans and reference alike: fit on the same geometry
+    undistort = camera is not None and camera.distortion_significant
+
+    def phase_of(path: Path) -> tuple[np.ndarray, float, str, list[dict[str, Any]]]:
+        phase, frequency, axis, patterns = _absolute_phase(path)
+        if undistort:
+            assert camera is not None
+            phase = undistort_map(phase, camera.camera_matrix, camera.distortion)
+        return phase, frequency, axis, patterns
 
     # reference and planes
     note("calibrate: reference plane")
-    reference, frequency, axis, patterns = _absolute_phase(directory / REFERENCE_DIR)
+    reference, frequency, axis, patterns = phase_of(directory / REFERENCE_DIR)
     planes = _planes(directory)
     if len(planes) < MIN_HEIGHTS:
         raise CalibrationError(f"{directory / PLANES_DIR}: {len(planes)} plane captures, need at least {MIN_HEIGHTS} heights")
@@ -469,7 +486,7 @@ def compute(
     heights, deltas = [], []
     for height, path in planes:
         note(f"calibrate: plane at {height:g} mm")
-        phase, plane_frequency, _, plane_patterns = _absolute_phase(path)
+        phase, plane_frequency, _, plane_patterns = phase_of(path)
         check_same_patterns(patterns, plane_patterns, f"{directory / REFERENCE_DIR}", f"{path}")
         heights.append(height)
         deltas.append((compensate_phase(phase, table) if compensate else phase) - reference)

@@ -6,7 +6,9 @@ import cv2
 import numpy as np
 import pytest
 
-from calibration.camera import BoardSpec, calibrate_camera, detect_board, undistort_points, undistort_stack
+from calibration.camera import (
+    BoardSpec, calibrate_camera, detect_board, undistort_map, undistort_pixels, undistort_points, undistort_stack,
+)
 from calibration.errors import CalibrationError
 from mock_devices.board_synth import PinholeCamera, calibration_views
 
@@ -93,3 +95,18 @@ def test_bad_board_specs_are_refused():
         BoardSpec("circles")
     with pytest.raises(CalibrationError, match="marker must be smaller"):
         BoardSpec("charuco", (5, 5), 20.0, marker_mm=25.0)
+
+
+def test_points_and_maps_undistort_like_the_frames(chessboard_views):
+    images, _ = chessboard_views
+    board = BoardSpec("chessboard", (9, 7), 30.0)
+    found = detect_board(images[1], board)
+    in_corrected = detect_board(undistort_stack(images[1], CAMERA.camera_matrix, CAMERA.distortion), board)
+    moved = undistort_pixels(found.image_points, CAMERA.camera_matrix, CAMERA.distortion)
+    assert np.max(np.linalg.norm(moved - in_corrected.image_points, axis=1)) < 0.1
+    # maps of the column and row index, undistorted, hold at each pixel where it came from
+    rows, columns = np.indices((240, 320), dtype=np.float64)
+    from_x = undistort_map(columns, CAMERA.camera_matrix, CAMERA.distortion)
+    from_y = undistort_map(rows, CAMERA.camera_matrix, CAMERA.distortion)
+    source = np.array([[from_x[100, 250], from_y[100, 250]], [from_x[30, 40], from_y[30, 40]]])
+    assert np.allclose(undistort_pixels(source, CAMERA.camera_matrix, CAMERA.distortion), [[250, 100], [40, 30]], atol=0.01)
