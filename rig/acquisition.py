@@ -3,13 +3,17 @@
 Every pattern gets exactly one frame, and a frame is stored under a pattern only when it is known
 to answer the trigger fired while that pattern was on screen:
 
-- the trigger path says which trigger index the frame must carry (the trigger box's pulse index,
-  or the count of software triggers); a frame that carries an older index is a late frame of an
-  earlier attempt and is discarded, a newer one is a mislabelling and stops the scan;
-- a camera that does not report trigger indices is checked by frame id instead (one frame per
-  trigger since the camera started);
+- the trigger path says which trigger index each trigger's frame carries (the trigger box's pulse
+  index, or the count of software triggers). A pattern owns the window of triggers fired while it
+  was shown (its first attempt to its latest retry): a frame whose index falls in the window shows
+  the pattern, even if it answers an earlier attempt; an older index is a late frame of the
+  previous pattern and is discarded; a newer one cannot happen and stops the scan;
+- a camera that does not report trigger indices is checked by frame id instead: ids count frames
+  since the camera started and a frame never has an id above its trigger's rank, so a frame whose
+  id falls in the pattern's window of trigger ranks was exposed while the pattern was shown;
 - duplicated frames are discarded; a timeout, a dropped or stale frame or a garbled reply makes
-  the loop show the same pattern again and fire a new trigger, ``retries`` times at most;
+  the loop show the same pattern again and fire a new trigger, ``retries`` times at most (a
+  camera without trigger indices is restarted first, so its frame ids match the triggers again);
 - a device that fails for good (unplugged, closed) stops the scan at once with its error.
 
 Frames go to disk through :class:`rig.capture.CaptureWriter` on a writer thread, so encoding and
@@ -87,6 +91,7 @@ class TriggerPath(Protocol):
     """How an exposure is started: the camera's trigger source, and firing one trigger."""
 
     source: TriggerSource
+    indices_restart_with_camera: bool  # trigger indices count from 0 again when the camera restarts
 
     def prepare(self, count: int) -> None:
         """Get ready for at most ``count`` triggers (the camera is already started)."""
@@ -102,21 +107,20 @@ class TriggerPath(Protocol):
 
 
 class SoftwareTrigger:
-    """The camera's own software trigger; indices count triggers since the camera started."""
+    """The camera's own software trigger; indices count the camera's triggers since it started."""
 
     source = TriggerSource.SOFTWARE
+    indices_restart_with_camera = True
 
     def __init__(self, camera: Camera) -> None:
         self.camera = camera
-        self._fired = 0
 
     def prepare(self, count: int) -> None:
-        self._fired = 0
+        pass
 
     def fire(self) -> int:
-        index = self._fired
+        index = self.camera.trigger_count
         self.camera.trigger()
-        self._fired += 1
         return index
 
     def keepalive(self) -> None:
@@ -135,6 +139,7 @@ class BoxTrigger:
     """
 
     source = TriggerSource.HARDWARE_RISING
+    indices_restart_with_camera = False
 
     def __init__(self, box: TriggerBox) -> None:
         self.box = box
@@ -305,22 +310,47 @@ def _pattern_label(index: int, total: int, pattern: Mapping[str, Any]) -> str:
     return f"pattern {index} of {total} ({pattern.get('kind')}{': ' + keys if keys else ''})"
 
 
-class _TriggerCounter:
-    """Triggers fired since the camera started: the frame id a frame without trigger index must have."""
+class _TriggerLog:
+    """Triggers fired since the camera started: their count, and the index the next one will carry."""
 
     def __init__(self) -> None:
-        self.fired = 0
+        self.fired = 0       # rank of the next trigger since the camera started
+        self.next_index = 0  # trigger index after the last one the trigger path reported
+        self.indexed: bool | None = None  # whether the camera's frames carry trigger indices (None: no frame yet)
 
 
-def _classify(frame: Frame, expected_index: int, ordinal: int) -> str:
-    """'ours' if ``frame`` answers the trigger just fired, 'late' for an earlier trigger's, else 'ahead'."""
-    if frame.trigger_index is not None:
-        got, want = int(frame.trigger_index), expected_index
-    else:
-        got, want = int(frame.frame_id), ordinal
-    if got == want:
-        return "ours"
-    return "late" if got < want else "ahead"
+def _restart_camera(camera: Camera, trigger: TriggerPath, triggers: _TriggerLog, label: str) -> None:
+    """Stop and start the camera before a retry: queued frames are dropped and frame ids restart.
+
+    Needed where frames carry no trigger index: a missed trigger uses no frame id, so ids would
+    lag behind the trigger ranks for the rest of the scan; a restart puts them back in step.
+    """
+    log.info("%s: restarting %s so frame ids match triggers again", label, camera.name)
+    camera.stop()
+    camera.start()
+    triggers.fired = 0
+    if trigger.indices_restart_with_camera:
+        triggers.next_index = 0
+
+
+@dataclass(frozen=True)
+class _Window:
+    """Triggers fired while one pattern was shown: indices and ranks, first and last (inclusive)."""
+
+    first_index: int
+    last_index: int
+    first_rank: int
+    last_rank: int
+
+    def classify(self, frame: Frame) -> str:
+        """'ours' if ``frame`` was exposed by one of these triggers, 'late' if by an earlier one, else 'ahead'."""
+        if frame.trigger_index is not None:
+            value, low, high = int(frame.trigger_index), self.first_index, self.last_index
+        else:  # frame ids never exceed their trigger's rank (missed triggers use no id)
+            value, low, high = int(frame.frame_id), self.first_rank, self.last_rank
+        if value < low:
+            return "late"
+        return "ours" if value <= high else "ahead"
 
 
 def acquire_pattern(
@@ -331,30 +361,36 @@ def acquire_pattern(
     camera: Camera,
     trigger: TriggerPath,
     settings: AcquisitionSettings,
-    matcher: _TriggerCounter,
+    triggers: _TriggerLog,
     times: StepTimes,
 ) -> tuple[Frame, int, int]:
     """The frame of one pattern: (frame, attempts used, frames discarded)."""
     label = _pattern_label(index, total, pattern)
+    first_index, first_rank = triggers.next_index, triggers.fired
     discarded = 0
     last_error: Exception | None = None
     for attempt in range(1, settings.retries + 2):
+        if last_error is not None and not triggers.indexed:
+            _restart_camera(camera, trigger, triggers, label)
+            first_index, first_rank = triggers.next_index, triggers.fired
         try:
             started = time.perf_counter()
             projector.show(pattern)
             projector.wait_shown(settings.show_timeout_s)
             shown = time.perf_counter()
-            ordinal = matcher.fired
-            matcher.fired += 1
-            expected = trigger.fire()
+            triggers.fired += 1
+            fired_index = trigger.fire()
+            triggers.next_index = fired_index + 1
             fired = time.perf_counter()
             times.show_s += shown - started
             times.trigger_s += fired - shown
+            window = _Window(first_index, fired_index, first_rank, triggers.fired - 1)
             try:
-                frame, dropped = _fetch_answer(camera, trigger, expected, ordinal, settings, label)
+                frame, dropped = _fetch_answer(camera, trigger, window, settings, label)
             finally:
                 times.fetch_s += time.perf_counter() - fired
             discarded += dropped
+            triggers.indexed = frame.trigger_index is not None
             return frame, attempt, discarded
         except RETRYABLE_ERRORS as exc:
             last_error = exc
@@ -365,26 +401,25 @@ def acquire_pattern(
 
 
 def _fetch_answer(
-    camera: Camera, trigger: TriggerPath, expected: int, ordinal: int, settings: AcquisitionSettings, label: str
+    camera: Camera, trigger: TriggerPath, window: _Window, settings: AcquisitionSettings, label: str
 ) -> tuple[Frame, int]:
-    """Fetch until the frame answering trigger ``expected`` arrives; (frame, frames discarded).
+    """Fetch until a frame exposed by one of the pattern's triggers arrives; (frame, frames discarded).
 
     Waits in slices of ``keepalive_s``, keeping the trigger hardware alive in between.
     """
     timeout_s = settings.fetch_timeout_s
     deadline = time.monotonic() + timeout_s
     discarded = 0
+    timeout_message = f"{camera.name}: no frame for trigger {window.last_index} within {timeout_s:g} s ({label})"
     while True:
         remaining = deadline - time.monotonic()
         if remaining <= 0:
-            raise DeviceTimeoutError(f"{camera.name}: no frame for trigger {expected} within {timeout_s:g} s ({label})")
+            raise DeviceTimeoutError(timeout_message)
         try:
             frame = camera.fetch(min(remaining, settings.keepalive_s))
         except DeviceTimeoutError:
             if deadline - time.monotonic() <= 0:
-                raise DeviceTimeoutError(
-                    f"{camera.name}: no frame for trigger {expected} within {timeout_s:g} s ({label})"
-                ) from None
+                raise DeviceTimeoutError(timeout_message) from None
             trigger.keepalive()
             continue
         except DuplicateFrameError as exc:
@@ -392,17 +427,17 @@ def _fetch_answer(
             discarded += 1
             continue
         except DroppedFrameError as exc:
-            # The gap may be an earlier attempt's frame; keep this one only if it provably answers ours.
-            if exc.frame.trigger_index is None or int(exc.frame.trigger_index) != expected:
+            # The lost frame may be an earlier attempt's; keep this one only if it provably shows the pattern.
+            if window.classify(exc.frame) != "ours":
                 raise
-            log.info("%s: %s (an earlier attempt's frame); frame %d answers this trigger", label, exc, exc.frame.frame_id)
+            log.info("%s: %s; frame %d still shows this pattern", label, exc, exc.frame.frame_id)
             frame = exc.frame
         if frame.sequence_error is not None and not isinstance(frame.sequence_error, DroppedFrameError):
             if isinstance(frame.sequence_error, DuplicateFrameError):
                 discarded += 1
                 continue
             raise frame.sequence_error
-        verdict = _classify(frame, expected, ordinal)
+        verdict = window.classify(frame)
         if verdict == "ours":
             return frame, discarded
         if verdict == "late":
@@ -410,8 +445,8 @@ def _fetch_answer(
             discarded += 1
             continue
         raise ProtocolError(
-            f"{camera.name}: frame {frame.frame_id} carries trigger {frame.trigger_index}, "
-            f"newer than the trigger {expected} just fired ({label})"
+            f"{camera.name}: frame {frame.frame_id} (trigger {frame.trigger_index}) is newer than every trigger "
+            f"fired for {label} ({window})"
         )
 
 
@@ -482,7 +517,7 @@ def run_scan(
     times = StepTimes()
     records: list[dict[str, Any]] = []
     attempts_total = discarded_total = 0
-    matcher = _TriggerCounter()
+    triggers = _TriggerLog()
     with staged_camera(camera, trigger.source, TriggerMode.ONCE, exposure_us, gain):
         camera_info = {"width": camera.width, "height": camera.height, "bit_depth": camera.pixel_format.bit_depth}
         projector_info = {"width": projector.width, "height": projector.height}
@@ -496,7 +531,7 @@ def run_scan(
                 try:
                     for index, pattern in enumerate(patterns):
                         frame, attempts, discarded = acquire_pattern(
-                            index, pattern, len(patterns), projector, camera, trigger, settings, matcher, times
+                            index, pattern, len(patterns), projector, camera, trigger, settings, triggers, times
                         )
                         attempts_total += attempts
                         discarded_total += discarded

@@ -20,16 +20,16 @@ from drivers.camera import TriggerSource
 from drivers.dlp import LightCrafter4500
 from drivers.dlp_protocol import Command
 from drivers.errors import DeviceError, DeviceNotFoundError, DeviceTimeoutError
-from mock_devices.camera import CameraFaults
+from mock_devices.camera import CameraFaults, SimulatedCamera
 from mock_devices.dlp_usb import Dlpc350Faults, FakeDlpc350Backend
 from mock_devices.trigger_box import TriggerFaults
 from processing.patterns import sinusoid_shift
-from rig.acquisition import AcquisitionError, AcquisitionSettings, run_scan
+from rig.acquisition import AcquisitionError, AcquisitionSettings, SoftwareTrigger, run_scan
 from rig.assembly import trigger_path
 from rig.capture import INCOMPLETE_MARK, read_capture
 from rig.dlp_projector import DlpVideoProjector
 from rig.config import CameraConfig, ProjectorConfig, RigConfig, ScanConfig, SimulationConfig, TriggerConfig
-from rig.simulated_rig import SimulatedRig
+from rig.simulated_rig import SimulatedRig, appearance_from_config
 
 STEPS = 8
 FREQUENCY = 2
@@ -126,6 +126,41 @@ def test_several_faults_in_one_scan(tmp_path):
 
 
 @pytest.mark.parametrize("trigger", TRIGGERS)
+class CameraWithoutTriggerIndex(SimulatedCamera):
+    """A camera that cannot tell which trigger exposed a frame (like pylon's emulator): frames carry no index."""
+
+    def _fetch(self, timeout_s: float):
+        frame = super()._fetch(timeout_s)
+        frame.trigger_index = None
+        return frame
+
+
+@pytest.mark.parametrize(
+    ("faults", "attempts"),
+    [
+        # exposure indices count from start(); the loop restarts the camera after each fault
+        (CameraFaults(timeout_on={2}), STEPS + 3),  # missed triggers use no frame id
+        (CameraFaults(drop={3}), STEPS + 2),         # lost frames do
+        (CameraFaults(duplicate={4}), STEPS),
+        (CameraFaults(stale={5}), STEPS + 1),
+    ],
+    ids=["missed-trigger", "dropped", "duplicate", "stale"],
+)
+def test_camera_without_trigger_indices_is_matched_by_frame_id(tmp_path, faults, attempts):
+    config = small_config("software")
+    with SimulatedRig(config, scene="reference") as rig:
+        camera = CameraWithoutTriggerIndex(
+            rig.projector, rig.geometry, rig.height_mm, appearance_from_config(config), faults=faults
+        )
+        with camera:
+            result = run_scan(
+                tmp_path / "capture", config.scan.patterns(), rig.projector, camera, SoftwareTrigger(camera), settings(config)
+            )
+        assert_every_frame_matches_its_pattern(result.path, rig)
+    assert result.attempts == attempts
+    assert all("trigger_index" not in f for f in read_capture(result.path).frames)
+
+
 def test_too_many_timeouts_fail_cleanly_and_leave_no_complete_capture(tmp_path, trigger):
     with pytest.raises(AcquisitionError, match=r"pattern 2 of 8 .* no frame after 2 attempt"):
         scan(tmp_path, trigger, retries=1, camera_faults=CameraFaults(timeout_on={2, 3}))
@@ -176,16 +211,17 @@ class ReplyLostAfterPulse:
         return index
 
 
-def test_frame_of_an_unacknowledged_pulse_is_discarded_not_stored(tmp_path):
+def test_unacknowledged_pulse_leaves_no_extra_frame_for_the_next_pattern(tmp_path):
     # The box pulsed for pattern 3 but the loop never learnt it: it shows pattern 3 again and
-    # fires again; the orphan frame (trigger 3) arrives first and must be discarded.
+    # fires again. Both frames (triggers 3 and 4) show pattern 3: the first one is stored, the
+    # second must be discarded, not stored under pattern 4.
     config = small_config("simulated-serial")
     with SimulatedRig(config, scene="reference") as rig:
         path = trigger_path(rig.camera, ReplyLostAfterPulse(rig.trigger_box, lose=4))
         result = run_scan(tmp_path / "capture", config.scan.patterns(), rig.projector, rig.camera, path, settings(config))
         assert_every_frame_matches_its_pattern(result.path, rig)
     frames = read_capture(result.path).frames
-    assert [f["trigger_index"] for f in frames] == [0, 1, 2, 4, 5, 6, 7, 8]
+    assert [f["trigger_index"] for f in frames] == [0, 1, 2, 3, 5, 6, 7, 8]
     assert result.discarded == 1
 
 
