@@ -179,8 +179,8 @@ def prepare_reference(
     carrier, bandwidth : FTP parameters (:func:`processing.ftp.ftp_phase`); carrier default: detected
         on the reference's fringe part. The band is wide (1.0: 0 .. 2 carrier) because RPCA has
         already removed the speckle, and deformed fringes on steep slopes need the room.
-    tau, rpca_tol, svd : RPCA parameters; ``separate=False`` skips RPCA (speckle = image - fringe
-        is then taken from a smoothed copy), for comparison only.
+    tau, rpca_tol, svd : RPCA parameters; ``separate=False`` skips RPCA: FTP and the correlation
+        then work on the composite image itself, as the thesis' ref. [104] does (for comparison).
     """
     start = time.perf_counter()
     _check_axis(axis)
@@ -248,8 +248,8 @@ def _fill_rows(phase: np.ndarray) -> np.ndarray:
 def _split(image: np.ndarray, tau, rpca_tol, separate: bool, svd: str):
     if separate:
         return separate_fringe_speckle(image, tau=tau, tol=rpca_tol, svd=svd)
-    fringe = cv2.GaussianBlur(image, (0, 0), 2.0)
-    return fringe, (image - fringe).astype(np.float32), None
+    # Without separation both FTP and the correlation see the composite image (as ref. [104]).
+    return image, image, None
 
 
 def _ftp_wrapped(fringe: np.ndarray, carrier: float, bandwidth: float) -> tuple[np.ndarray, np.ndarray]:
