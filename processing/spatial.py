@@ -1,8 +1,9 @@
 """Quality-guided spatial phase unwrapping for single-frequency data.
 
 Quality-guided unwrapping integrates wrapped phase differences along paths that visit the most
-reliable pixels first. Its result equals integration along a maximum-quality spanning tree of
-the 4-neighbour pixel graph, which scipy builds without a Python loop over pixels:
+reliable pixels first. The classic flood fill grows the unwrapped region through the best edge
+next to it, which is Prim's algorithm: it integrates along a maximum-quality spanning tree of
+the 4-neighbour pixel graph. scipy builds that tree without a Python loop over pixels:
 
 1. edges between 4-neighbours inside the mask, weight = 3 - (q_a + q_b) for qualities
    normalised to [0, 1] (a constant added to every edge does not change the tree, and keeps
