@@ -125,7 +125,6 @@ def test_several_faults_in_one_scan(tmp_path):
     assert_every_frame_matches_its_pattern(result.path, rig)
 
 
-@pytest.mark.parametrize("trigger", TRIGGERS)
 class CameraWithoutTriggerIndex(SimulatedCamera):
     """A camera that cannot tell which trigger exposed a frame (like pylon's emulator): frames carry no index."""
 
@@ -161,6 +160,7 @@ def test_camera_without_trigger_indices_is_matched_by_frame_id(tmp_path, faults,
     assert all("trigger_index" not in f for f in read_capture(result.path).frames)
 
 
+@pytest.mark.parametrize("trigger", TRIGGERS)
 def test_too_many_timeouts_fail_cleanly_and_leave_no_complete_capture(tmp_path, trigger):
     with pytest.raises(AcquisitionError, match=r"pattern 2 of 8 .* no frame after 2 attempt"):
         scan(tmp_path, trigger, retries=1, camera_faults=CameraFaults(timeout_on={2, 3}))
