@@ -230,28 +230,6 @@ def triangulate(
     return out
 
 
-def stereo_calibration_fields(
-    camera_matrix: np.ndarray,
-    camera_distortion: Sequence[float],
-    projector_matrix: np.ndarray,
-    projector_distortion: Sequence[float],
-    rotation: np.ndarray,
-    translation_mm: Sequence[float],
-    camera_size: tuple[int, int],
-    projector_size: tuple[int, int],
-) -> dict[str, Any]:
-    """calibration.json keys of a stereo model, validated."""
-    model = StereoModel(
-        np.asarray(camera_matrix, float).reshape(3, 3), np.asarray(camera_distortion, float).ravel(),
-        np.asarray(projector_matrix, float).reshape(3, 3), np.asarray(projector_distortion, float).ravel(),
-        np.asarray(rotation, float).reshape(3, 3), np.asarray(translation_mm, float).ravel(),
-        tuple(int(v) for v in camera_size), tuple(int(v) for v in projector_size),  # type: ignore[arg-type]
-    )
-    fields = {"model": STEREO, **model.as_fields()}
-    StereoModel.from_fields(fields)
-    return fields
-
-
 def fit_plane(points: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
     """Least-squares plane [nx, ny, nz, d] (unit normal) through points (..., 3), oriented so that
     the camera (the origin) is on its positive side: heights n . X + d are positive towards it."""

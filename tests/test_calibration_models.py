@@ -7,7 +7,6 @@ the per-pixel polynomial must absorb it, and the stereo model must not care.
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest
