@@ -162,3 +162,22 @@ def test_real_eye_capture_becomes_a_point_cloud():
     filled = np.where(valid, z, np.nanmedian(z)).astype(np.float32)
     local = np.abs(filled - cv2.medianBlur(filled, 5))[valid]
     assert np.median(local) < 0.5  # 0.22 mm here
+
+
+@pytest.mark.skipif(not EYE.is_dir(), reason="shared real data not present")
+def test_eye_capture_through_the_command_line(tmp_path, capsys):
+    """rig import + rig calibrate --import-opencv + rig process: the real capture becomes points.ply."""
+    import json
+
+    from rig.cli import main
+
+    assert main(["import", str(EYE / "L"), "--patterns", "sin:f=32,steps=12,phase=pi; gray:bits=6",
+                 "--projector-width", "1920", "--projector-height", "1024", "-o", str(tmp_path / "eye")]) == 0
+    assert main(["calibrate", "--import-opencv", str(EYE / "caliInfo.yml"), "--projector-size", "1920x1024",
+                 "--pixel-centre", "0", "-o", str(tmp_path / "cal")]) == 0
+    assert main(["process", str(tmp_path / "eye"), "--calibration", str(tmp_path / "cal"), "-o", str(tmp_path / "out"), "-q"]) == 0
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert report["calibration_model"] == "stereo" and report["points"] > 150_000
+    assert 690 < report["height_mm"]["median"] < 760  # depth of the plaque, mm from the camera
+    header = (tmp_path / "out" / "points.ply").read_bytes()[:300].decode("ascii", "replace")
+    assert header.startswith("ply") and f"element vertex {report['points']}" in header
