@@ -82,6 +82,13 @@ def isolated_objects(height: int, width: int, pixel_mm: float, max_height_mm: fl
     return np.maximum(out, _cap(x, y, 0.0, h / 4, cap_r * 1.5, min(max_height_mm, cap_r)))
 
 
+def gauge_block(height: int, width: int, pixel_mm: float, height_mm: float = 25.0) -> np.ndarray:
+    """A gauge block of known height (default 25.000 mm): a centred rectangle a third of the view wide."""
+    x, y = _grid_mm(height, width, pixel_mm)
+    inside = (np.abs(x) < width * pixel_mm / 6.0) & (np.abs(y) < height * pixel_mm / 6.0)
+    return np.where(inside, float(height_mm), 0.0)
+
+
 SCENES: dict[str, Callable[..., np.ndarray]] = {
     "flat": flat,
     "sphere-cap": sphere_cap,
@@ -89,6 +96,7 @@ SCENES: dict[str, Callable[..., np.ndarray]] = {
     "two-hemispheres": two_hemispheres,
     "steps": steps,
     "isolated": isolated_objects,
+    "gauge-block": gauge_block,
 }
 
 

@@ -235,3 +235,23 @@ def test_gamma_ripple_removed_in_processing(tmp_path, monkeypatch):
         valid = np.isfinite(result.height)
         errors[correction] = float(np.sqrt(np.mean((result.height[valid] - truth[valid]) ** 2)))
     assert errors[gamma_correction.NAME] < errors["none"] / 2
+
+
+def test_gauge_block_measured_through_the_whole_product(session, tmp_path):
+    """rig calibrate (the session above) then rig scan --process of a 25.000 mm gauge block at 30 dB."""
+    root, _ = session
+    config = tmp_path / "rig.toml"
+    config.write_text(RIG.replace('scene = "hemisphere"', 'scene = "gauge-block"')
+                      .replace("[camera]", f'gamma_lut = "{root / "cal" / "gamma-lut.npy"}"\n[camera]'))
+    assert main(["scan", "--config", str(config), "-o", str(tmp_path / "block"), "--calibration", str(root / "cal"),
+                 "--process", "--process-output", str(tmp_path / "out")]) == 0
+    height = np.load(tmp_path / "out" / "height.npy")
+    rig_config = load_config(config)
+    truth = scene_height(rig_config, "object", geometry_from_config(rig_config))
+    from scipy import ndimage
+
+    top = ndimage.binary_erosion(truth == 25.0, iterations=3)  # away from the edges and their shadow
+    assert np.isfinite(height[top]).all()
+    assert abs(float(np.mean(height[top])) - 25.0) < 0.1
+    plane = ndimage.binary_erosion(truth == 0.0, iterations=3) & np.isfinite(height)
+    assert abs(float(np.mean(height[plane]))) < 0.1
