@@ -272,6 +272,8 @@ def acquire(
     if directory.exists() and any(directory.iterdir()):
         if not overwrite:
             raise CaptureError(f"{directory}: already exists and is not empty; choose another -o or pass --overwrite")
+        if not ((directory / SESSION_FILE).is_file() or (directory / "calibration.json").is_file()):
+            raise CaptureError(f"{directory}: not a calibration directory; --overwrite replaces only those")
         import shutil
 
         shutil.rmtree(directory)

@@ -19,7 +19,7 @@ from rig.calibrate_workflow import CalibrationPlan, ConsoleOperator, StageComman
 from rig.capture import read_capture, write_capture
 from rig.cli import main
 from rig.config import load_config
-from rig.errors import ConfigError
+from rig.errors import CaptureError, ConfigError
 from rig.simulated_rig import geometry_from_config, scene_height
 
 RIG = """
@@ -255,3 +255,15 @@ def test_gauge_block_measured_through_the_whole_product(session, tmp_path):
     assert abs(float(np.mean(height[top])) - 25.0) < 0.1
     plane = ndimage.binary_erosion(truth == 0.0, iterations=3) & np.isfinite(height)
     assert abs(float(np.mean(height[plane]))) < 0.1
+
+
+def test_overwrite_replaces_only_calibration_directories(tmp_path):
+    precious = tmp_path / "thesis"
+    precious.mkdir()
+    (precious / "chapter1.tex").write_text("...")
+    plan = CalibrationPlan(board=None, pixel_mm=1.6)
+    with pytest.raises(CaptureError, match="already exists and is not empty"):
+        acquire(load_config(None), plan, precious, show_progress=False)
+    with pytest.raises(CaptureError, match="not a calibration directory"):
+        acquire(load_config(None), plan, precious, show_progress=False, overwrite=True)
+    assert (precious / "chapter1.tex").is_file()
