@@ -370,21 +370,31 @@ def correlate_orders(
     b_src = reference.speckle.astype(np.float32)
     best = np.full((rows, cols), _NO_SCORE, dtype=np.float32)
     best_order = np.full((rows, cols), -1, dtype=np.int64)
+    solve = np.ones((rows, cols), dtype=bool) if mask is None else mask
+    half = patch // 2
     for shift in range(shift_lo, shift_hi + 1):
-        target = psi32 + np.float32(TWO_PI * shift)
-        inside = (target >= row_lo[:, None]) & (target <= row_hi[:, None])
-        map_x = inverse.columns(target, map_y)
-        b = cv2.remap(b_src, map_x, map_y, interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT) * keep
+        order = base_order + shift
+        candidate = solve & (order >= order_lo) & (order <= order_hi)
+        # psi grows along the rows, so a shift is a candidate only in a band of columns: work on
+        # that band (plus half a window, so its windows are whole) instead of the full image.
+        columns = np.flatnonzero(candidate.any(axis=0))
+        if columns.size == 0:
+            continue
+        x0, x1 = max(int(columns[0]) - half, 0), min(int(columns[-1]) + half + 1, cols)
+        band = slice(x0, x1)
+        target = psi32[:, band] + np.float32(TWO_PI * shift)
+        candidate = candidate[:, band] & (target >= row_lo[:, None]) & (target <= row_hi[:, None])
+        map_x = inverse.columns(target, map_y[:, band])
+        b = cv2.remap(b_src, map_x, map_y[:, band], interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
+        b *= keep[:, band]
+        a_band = np.ascontiguousarray(a[:, band])
         mean_b = _box_mean(b, patch)
         var_b = np.maximum(_box_mean(b * b, patch) - mean_b * mean_b, 0.0)
-        cov = _box_mean(a * b, patch) - mean_a * mean_b
-        ncc = cov / np.sqrt(np.maximum(var_a * var_b, 1e-20))
-        order = base_order + shift
-        valid = inside & (order >= order_lo) & (order <= order_hi)
-        ncc = np.where(valid, ncc, _NO_SCORE)
-        better = ncc > best
-        best = np.where(better, ncc, best)
-        best_order = np.where(better, order, best_order)
+        cov = _box_mean(a_band * b, patch) - mean_a[:, band] * mean_b
+        ncc = cov / np.sqrt(np.maximum(var_a[:, band] * var_b, 1e-20))
+        better = candidate & (ncc > best[:, band])
+        best[:, band] = np.where(better, ncc, best[:, band])
+        best_order[:, band] = np.where(better, order[:, band], best_order[:, band])
     if mask is not None:
         best_order = np.where(mask, best_order, -1)
     return best_order, best
