@@ -20,8 +20,8 @@ import numpy as np
 from calibration.errors import CalibrationError
 from calibration.polynomial import POLYNOMIAL, load_polynomial
 from calibration.stereo import STEREO, StereoModel, triangulate
+from calibration.store import REFERENCE_PLANE
 
-REFERENCE_PLANE = "reference-plane"
 MODELS = (REFERENCE_PLANE, POLYNOMIAL, STEREO)
 
 
