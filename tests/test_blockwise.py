@@ -80,3 +80,23 @@ def test_thread_count_from_environment(monkeypatch: pytest.MonkeyPatch) -> None:
         _blockwise._thread_count()
     monkeypatch.delenv("FPP_THREADS")
     assert 1 <= _blockwise._thread_count() <= 4
+
+
+def test_forked_child_gets_a_working_pool(threads) -> None:
+    """multiprocessing's fork start method copies the pool object without its threads."""
+    import multiprocessing
+
+    if "fork" not in multiprocessing.get_all_start_methods():
+        pytest.skip("no fork start method on this platform")
+    threads(2)
+    stack = np.random.default_rng(1).integers(0, 255, (4, 150, 150), dtype=np.uint8)
+    expected = phase_shift(stack).phase  # starts the pool in the parent
+    context = multiprocessing.get_context("fork")
+    with context.Pool(1) as pool:
+        result = pool.apply_async(_child_phase, (stack,))
+        np.testing.assert_array_equal(result.get(timeout=60), expected)
+
+
+def _child_phase(stack: np.ndarray) -> np.ndarray:
+    _blockwise.THREADS = 2
+    return phase_shift(stack).phase
