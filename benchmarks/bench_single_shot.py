@@ -33,8 +33,10 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--size", type=int, default=1000)
     parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--peer-repeats", type=int, default=3)
+    parser.add_argument("--peer-repeats", type=int, default=3, help="runs of the peer (at least 1)")
     args = parser.parse_args()
+    if args.repeats < 1 or args.peer_repeats < 1:
+        parser.error("--repeats and --peer-repeats must be at least 1")
 
     size, f = args.size, SINGLE_SHOT_FREQUENCY
     geometry = RIG.geometry(size)

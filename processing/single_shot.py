@@ -306,6 +306,47 @@ def _inverse_table(ref_abs: np.ndarray) -> _InverseTable:
     return _InverseTable(table=col.astype(np.float32), start=start, step=step)
 
 
+def _consistent_unwrap(
+    wrapped_phase: np.ndarray, ref_abs: np.ndarray, mask: np.ndarray | None, quality: np.ndarray | None
+) -> np.ndarray:
+    """Spatially unwrapped phase psi = phi + 2 pi n, consistent in 2-D, offset to lie near ``ref_abs``.
+
+    Only the indexing of the candidates depends on psi (every order is still tested), but a
+    correlation window must see one hypothesis: psi has to be continuous across the window in
+    both directions, which row-by-row unwrapping is not (a row that slips at a shadow is offset
+    against its neighbours). So: quality-guided unwrapping (:func:`processing.spatial.unwrap_quality_guided`,
+    modulation as quality) on a grid subsampled to ~300 pixels a side, each connected region
+    offset by whole periods towards the reference, interpolated back to full size, and every
+    pixel's n taken as the whole number of periods nearest to it.
+    """
+    from processing.spatial import unwrap_quality_guided
+
+    rows, cols = wrapped_phase.shape
+    valid = np.ones((rows, cols), dtype=bool) if mask is None else mask
+    step = max(1, int(round(min(rows, cols) / 300)))
+    sub_phi = wrapped_phase[::step, ::step]
+    sub_valid = valid[::step, ::step]
+    sub_ref = ref_abs[::step, ::step]
+    fallback = sub_phi + TWO_PI * np.rint((sub_ref - sub_phi) / TWO_PI)
+    if sub_valid.any():
+        sub_quality = None if quality is None else np.asarray(quality, dtype=np.float64)[::step, ::step]
+        coarse = unwrap_quality_guided(sub_phi, quality=sub_quality, mask=sub_valid)
+        count, labels = cv2.connectedComponents(sub_valid.astype(np.uint8), connectivity=4)
+        turns = np.where(sub_valid, (sub_ref - coarse) / TWO_PI, 0.0)
+        sums = np.bincount(labels.ravel(), weights=turns.ravel(), minlength=count)
+        sizes = np.bincount(labels.ravel(), weights=sub_valid.ravel().astype(np.float64), minlength=count)
+        offsets = np.rint(sums / np.maximum(sizes, 1.0))
+        coarse = np.where(sub_valid, coarse + TWO_PI * offsets[labels], fallback)
+    else:
+        coarse = fallback
+    # Back to full size: sample the coarse grid at (y / step, x / step).
+    map_x = np.broadcast_to((np.arange(cols, dtype=np.float32) / step)[None, :], (rows, cols))
+    map_y = np.broadcast_to((np.arange(rows, dtype=np.float32) / step)[:, None], (rows, cols))
+    smooth = cv2.remap(coarse.astype(np.float32), np.ascontiguousarray(map_x), np.ascontiguousarray(map_y),
+                       interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).astype(np.float64)
+    return wrapped_phase + TWO_PI * np.rint((smooth - wrapped_phase) / TWO_PI)
+
+
 def correlate_orders(
     speckle: np.ndarray,
     wrapped_phase: np.ndarray,
@@ -313,6 +354,7 @@ def correlate_orders(
     patch: int = DEFAULT_PATCH,
     mask: np.ndarray | None = None,
     max_shift: int | None = None,
+    quality: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Fringe order of every pixel by speckle NCC against the reference (fringes along x).
 
@@ -331,6 +373,9 @@ def correlate_orders(
     max_shift : int, optional
         Largest |order shift| (in periods, relative to the reference at the same pixel) to test;
         default every order the reference shows.
+    quality : (H, W) array, optional
+        Reliability of the wrapped phase (e.g. FTP amplitude) for the spatial unwrapping that
+        indexes the candidates.
 
     Returns
     -------
@@ -339,14 +384,7 @@ def correlate_orders(
     """
     rows, cols = speckle.shape
     ref_abs = reference.absolute_phase
-    psi = np.unwrap(wrapped_phase, axis=1)
-    # Offset every row by whole periods so that psi lies near the reference's absolute phase.
-    weights = np.ones(psi.shape, dtype=bool) if mask is None else mask
-    turns = np.where(weights, (ref_abs - psi) / TWO_PI, 0.0)
-    counts = weights.sum(axis=1)
-    # The mean is enough: the offset is rounded to whole periods and the height shift is smooth.
-    row_offset = np.round(turns.sum(axis=1) / np.maximum(counts, 1))
-    psi = psi + TWO_PI * row_offset[:, None]
+    psi = _consistent_unwrap(wrapped_phase, ref_abs, mask, quality)
     base_order = np.round((psi - wrapped_phase) / TWO_PI).astype(np.int64)  # n: psi = phi + 2 pi n
 
     order_lo = int(np.floor(np.min(ref_abs) / TWO_PI))
@@ -495,7 +533,9 @@ def single_shot_unwrap(
         valid = user_mask.copy()
 
     t0 = time.perf_counter()
-    corr_orders, score = correlate_orders(speckle, wrapped, reference, patch=patch, mask=valid, max_shift=max_shift)
+    corr_orders, score = correlate_orders(
+        speckle, wrapped, reference, patch=patch, mask=valid, max_shift=max_shift, quality=amplitude
+    )
     valid &= corr_orders >= 0
     timings["correlation"] = time.perf_counter() - t0
 

@@ -42,11 +42,11 @@ def test_recovers_fringe_orders_of_a_hemisphere(hemisphere):
     valid = result.mask & lit
     # Shadows (about 10 % here, the projector is far to the side) are left out, little else.
     assert valid.sum() > 0.8 * lit.sum()
-    # Tolerance: at least 92 % of the valid pixels get the exact absolute phase (within pi of
-    # the truth, i.e. the right fringe order); the rest sit on the steepest slopes and the
-    # shadow borders, where FTP and the 27x27 speckle windows break down.
+    # Tolerance: at least 96 % of the valid pixels get the exact absolute phase (within pi of
+    # the truth, i.e. the right fringe order; 98 % measured over seeds 0-3); the rest sit on the
+    # steepest slopes and the shadow borders, where FTP and the 27x27 speckle windows break down.
     exact = np.abs(result.absolute_phase - truth) < np.pi
-    assert exact[valid].mean() > 0.92
+    assert exact[valid].mean() > 0.96
     # Wrapped phase within 0.1 rad (median) where the order is right.
     err = np.abs(np.angle(np.exp(1j * (result.wrapped_phase - truth))))
     assert np.median(err[valid & exact]) < 0.1
