@@ -1,7 +1,7 @@
 """Abstract camera, in the manner of python-microscope and industrial SDKs.
 
-The base class owns the rules: open / started state, argument checks, logging, and the checks on
-the frame sequence (dropped, duplicated and stale frames). Backends fill in the private hooks.
+The base class owns the rules: open (:class:`~drivers.device.Device`) and started state, argument
+checks, logging, and the checks on the frame sequence (dropped, duplicated and stale frames). Backends fill in the private hooks.
 
 Frame ids count from 0 at each :meth:`Camera.start` (backends normalise their SDK's counter);
 ``Frame.timestamp_s`` is the start of the exposure on the camera's clock, :meth:`Camera.now`.
@@ -16,10 +16,10 @@ import logging
 import math
 import time
 from dataclasses import dataclass
-from types import TracebackType
 
 import numpy as np
 
+from drivers.device import Device, check_timeout_s
 from drivers.errors import DeviceError, IncompatibleStateError, ProtocolError, UnsupportedFeatureError
 
 log = logging.getLogger(__name__)
@@ -104,7 +104,7 @@ class Frame:
 SEQUENCE_POLICIES = ("raise", "flag")
 
 
-class Camera(abc.ABC):
+class Camera(Device):
     """A single-channel camera.
 
     Parameters
@@ -117,12 +117,13 @@ class Camera(abc.ABC):
         ``sequence_error`` set and log a warning.
     """
 
+    family = "camera"
+
     def __init__(self, name: str | None = None, *, on_sequence_error: str = "raise") -> None:
         if on_sequence_error not in SEQUENCE_POLICIES:
             raise ValueError(f"on_sequence_error: expected one of {SEQUENCE_POLICIES}, found {on_sequence_error!r}")
-        self.name = name or type(self).__name__
+        super().__init__(name)
         self.on_sequence_error = on_sequence_error
-        self._is_open = False
         self._is_started = False
         self._exposure_us = 10_000.0
         self._gain = 1.0
@@ -136,51 +137,15 @@ class Camera(abc.ABC):
 
     # -- state ------------------------------------------------------------------------------------
     @property
-    def is_open(self) -> bool:
-        return self._is_open
-
-    @property
     def is_started(self) -> bool:
         return self._is_started
 
-    def open(self) -> None:
-        """Connect to the device and read its settings. Opening an open camera does nothing."""
-        if self._is_open:
-            return
-        log.debug("%s: opening", self.name)
-        self._open()
-        self._is_open = True
-        try:
-            roi = self._read_roi()
-            self._roi = (0, 0, *self.sensor_size) if roi is None else tuple(int(c) for c in roi)
-            self._apply_settings()
-        except BaseException:
-            self.close()
-            raise
-
     def close(self) -> None:
         """Stop if needed and disconnect. Closing a closed camera does nothing."""
-        if not self._is_open:
-            return
-        log.debug("%s: closing", self.name)
         try:
-            if self._is_started:
-                self.stop()
+            self.stop()
         finally:
-            try:
-                self._close()
-            finally:
-                self._is_open = False
-                self._is_started = False
-
-    def __enter__(self) -> "Camera":
-        self.open()
-        return self
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.close()
+            super().close()
 
     # -- settings ---------------------------------------------------------------------------------
     @property
@@ -354,9 +319,7 @@ class Camera(abc.ABC):
         :class:`DuplicateFrameError` or :class:`StaleFrameError`.
         """
         self._require_started("fetch a frame")
-        timeout_s = float(timeout_s)
-        if not (math.isfinite(timeout_s) and timeout_s > 0):
-            raise ValueError(f"timeout_s: expected a finite number of seconds > 0, found {timeout_s}")
+        timeout_s = check_timeout_s(timeout_s)
         frame = self._fetch(timeout_s)
         self._check_image(frame)
         problem = self._check_sequence(frame)
@@ -412,10 +375,6 @@ class Camera(abc.ABC):
             )
         return None
 
-    def _require_open(self, action: str) -> None:
-        if not self._is_open:
-            raise IncompatibleStateError(f"{self.name}: cannot {action}: camera is not open")
-
     def _require_started(self, action: str) -> None:
         self._require_open(action)
         if not self._is_started:
@@ -425,8 +384,10 @@ class Camera(abc.ABC):
         if self._is_started:
             raise IncompatibleStateError(f"{self.name}: cannot {action} while acquiring; stop() first")
 
-    def _apply_settings(self) -> None:
-        """Push pixel format and trigger; exposure and gain if set before open(), else read them."""
+    def _after_open(self) -> None:
+        """Read the ROI, push pixel format and trigger; exposure and gain if set before open(), else read them."""
+        roi = self._read_roi()
+        self._roi = (0, 0, *self.sensor_size) if roi is None else tuple(int(c) for c in roi)
         if self._pixel_format not in self.supported_pixel_formats:
             self._pixel_format = self.supported_pixel_formats[0]
         self._set_pixel_format(self._pixel_format)
@@ -439,15 +400,7 @@ class Camera(abc.ABC):
         self._gain = self._gain if actual is None else float(actual)
         self._set_trigger(self._trigger_source, self._trigger_mode)
 
-    # -- hooks ------------------------------------------------------------------------------------
-    @abc.abstractmethod
-    def _open(self) -> None:
-        """Connect; raise DeviceNotFoundError (from the SDK's error) if the device is absent."""
-
-    @abc.abstractmethod
-    def _close(self) -> None:
-        """Disconnect."""
-
+    # -- hooks (and Device's _open / _close) ------------------------------------------------------
     @abc.abstractmethod
     def _set_trigger(self, source: TriggerSource, mode: TriggerMode) -> None:
         """Configure triggering (and ``burst_length`` in BURST mode); UnsupportedFeatureError if impossible."""

@@ -31,6 +31,7 @@ import usb.core
 import usb.util
 
 from drivers import dlp_protocol as dp
+from drivers.device import Device
 from drivers.dlp_protocol import Command, Led, PatternEntry, TriggerType, Validation
 from drivers.errors import (
     DeviceError,
@@ -225,22 +226,23 @@ def check_exposure(exposure_us: int, frame_period_us: int, bit_depth: int) -> No
             f"at least {dp.MIN_DARK_TIME_US} us shorter")
 
 
-class DlpController(abc.ABC):
-    """Family base of DLP pattern projectors driven over a control link."""
+class DlpController(Device):
+    """Family base of DLP pattern projectors driven over a control link.
 
-    def __init__(self) -> None:
-        self._is_open = False
+    :meth:`open` reads the controller's power, display mode and sequencer state.
+    """
+
+    family = "DLP controller"
+
+    def __init__(self, name: str | None = None) -> None:
+        super().__init__(name)
         self._standby = False
         self._mode: DisplayMode | None = None
         self._sequence: PatternSequence | None = None
         self._validated = False
         self._state = SequenceState.STOPPED
 
-    # -- lifecycle ------------------------------------------------------------------------------
-    @property
-    def is_open(self) -> bool:
-        return self._is_open
-
+    # -- state ----------------------------------------------------------------------------------
     @property
     def sequence(self) -> PatternSequence | None:
         return self._sequence
@@ -249,34 +251,11 @@ class DlpController(abc.ABC):
     def state(self) -> SequenceState:
         return self._state
 
-    def open(self) -> None:
-        """Connect and read the controller's power, display mode and sequencer state."""
-        if self._is_open:
-            return
-        self._do_open()
-        self._is_open = True
-        try:
-            self._standby, self._mode, running = self._do_read_state()
-        except BaseException:
-            self.close()
-            raise
+    def _after_open(self) -> None:
+        self._standby, self._mode, running = self._do_read_state()
         self._state = SequenceState.RUNNING if running else SequenceState.STOPPED
         log.info("%s opened: %s, %s mode, sequence %s", self,
                  "standby" if self._standby else "awake", self._mode.name, self._state.value)
-
-    def close(self) -> None:
-        if not self._is_open:
-            return
-        self._is_open = False
-        self._do_close()
-        log.info("%s closed", self)
-
-    def __enter__(self) -> DlpController:
-        self.open()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
     # -- power and mode -------------------------------------------------------------------------
     def standby(self) -> None:
@@ -419,22 +398,12 @@ class DlpController(abc.ABC):
         return DlpStatus(hardware, system, main, problems)
 
     # -- checks ---------------------------------------------------------------------------------
-    def _require_open(self, what: str) -> None:
-        if not self._is_open:
-            raise IncompatibleStateError(f"{self}: cannot {what}: not open; call open() first")
-
     def _require_awake(self, what: str) -> None:
         self._require_open(what)
         if self._standby:
             raise IncompatibleStateError(f"{self}: cannot {what} in standby; call wake() first")
 
-    # -- hooks ----------------------------------------------------------------------------------
-    @abc.abstractmethod
-    def _do_open(self) -> None: ...
-
-    @abc.abstractmethod
-    def _do_close(self) -> None: ...
-
+    # -- hooks (and Device's _open / _close) ----------------------------------------------------
     @abc.abstractmethod
     def _do_read_state(self) -> tuple[bool, DisplayMode, bool]:
         """(standby, display mode, sequencer running) as the controller reports them."""
@@ -475,14 +444,17 @@ class LightCrafter4500(DlpController):
         Passed to ``usb.core.find``; None lets pyusb pick libusb.
     timeout_s : float
         Deadline of each USB transfer.
+    name : str, optional
+        Used in log lines and error messages.
     """
 
     EP_OUT = 0x01
     EP_IN = 0x81
     INTERFACE = 0
 
-    def __init__(self, backend: object | None = None, timeout_s: float = 1.0) -> None:
-        super().__init__()
+    def __init__(self, backend: object | None = None, timeout_s: float = 1.0,
+                 name: str | None = None) -> None:
+        super().__init__(name or "DLP LightCrafter 4500 (USB 0451:6401)")
         if timeout_s <= 0:
             raise ValueError(f"timeout_s must be > 0, got {timeout_s}")
         self._backend = backend
@@ -490,11 +462,8 @@ class LightCrafter4500(DlpController):
         self._dev = None
         self._seq = 0
 
-    def __str__(self) -> str:
-        return "DLP LightCrafter 4500 (USB 0451:6401)"
-
     # -- hooks ----------------------------------------------------------------------------------
-    def _do_open(self) -> None:
+    def _open(self) -> None:
         try:
             dev = usb.core.find(idVendor=dp.USB_VENDOR_ID, idProduct=dp.USB_PRODUCT_ID,
                                 backend=self._backend)
@@ -523,7 +492,7 @@ class LightCrafter4500(DlpController):
             raise DeviceError(f"{self}: cannot claim its HID interface: {exc}") from exc
         self._dev = dev
 
-    def _do_close(self) -> None:
+    def _close(self) -> None:
         dev, self._dev = self._dev, None
         if dev is None:
             return

@@ -1,8 +1,9 @@
 """Abstract projector: shows capture-format pattern dicts (processing/patterns.py defines them).
 
-The base class owns the rules (open/closed state, argument checks, logging, the gamma LUT's
-meaning); a backend fills in the hooks ``_open``, ``_show``, ``_wait``, ``_close`` and, if it can
-hand back what it rendered, ``_last_frame``.
+The base class owns the rules (open/closed state from :class:`~drivers.device.Device`, argument
+checks, logging, the gamma LUT's meaning); a backend fills in the hooks ``_open``, ``_show``,
+``_wait``, ``_close``, ``_set_gamma_lut`` if it applies the LUT itself and, if it can hand back
+what it rendered, ``_last_frame``.
 
 Gamma pre-correction: a 1-D LUT of N >= 2 entries maps the desired intensity x in [0, 1] to a
 drive level. Entry i is the drive level for x = i / (N - 1); values in between are linearly
@@ -13,13 +14,12 @@ from __future__ import annotations
 
 import abc
 import logging
-import math
 from collections.abc import Mapping
-from types import TracebackType
 from typing import Any
 
 import numpy as np
 
+from drivers.device import Device, check_timeout_s
 from drivers.errors import IncompatibleStateError, WaitTimeoutError
 from processing.patterns import PATTERN_KINDS, pattern_intensity
 
@@ -68,7 +68,7 @@ def validate_pattern(pattern: Mapping[str, Any], size: tuple[int, int]) -> None:
         raise ValueError(f"pattern {kind!r}: invalid value ({exc})") from exc
 
 
-class Projector(abc.ABC):
+class Projector(Device):
     """A projector that shows one pattern at a time.
 
     Parameters
@@ -79,22 +79,19 @@ class Projector(abc.ABC):
         Used in log lines and error messages.
     """
 
+    family = "projector"
+
     def __init__(self, size: tuple[int, int], name: str | None = None) -> None:
         width, height = (int(s) for s in size)
         if width < 1 or height < 1:
             raise ValueError(f"size: expected (width, height) >= 1, found {tuple(size)}")
+        super().__init__(name)
         self.size: tuple[int, int] = (width, height)
-        self.name = name or type(self).__name__
-        self._is_open = False
         self._gamma_lut: np.ndarray | None = None
         self._pattern: Mapping[str, Any] | None = None
         self._shown_count = 0
 
     # -- public API: state checks and logging, then the hook -------------------------------------
-    @property
-    def is_open(self) -> bool:
-        return self._is_open
-
     @property
     def width(self) -> int:
         return self.size[0]
@@ -117,37 +114,6 @@ class Projector(abc.ABC):
     def gamma_lut(self) -> np.ndarray | None:
         return None if self._gamma_lut is None else self._gamma_lut.copy()
 
-    def open(self) -> None:
-        """Acquire the output (context, window, device). Opening an open projector does nothing."""
-        if self._is_open:
-            return
-        log.debug("%s: opening at %dx%d", self.name, *self.size)
-        self._open()
-        self._is_open = True
-        self._pattern = None
-        self._shown_count = 0
-        if self._gamma_lut is not None:
-            self._set_gamma_lut(self._gamma_lut)
-
-    def close(self) -> None:
-        """Release the output. Closing a closed projector does nothing."""
-        if not self._is_open:
-            return
-        log.debug("%s: closing", self.name)
-        try:
-            self._close()
-        finally:
-            self._is_open = False
-
-    def __enter__(self) -> "Projector":
-        self.open()
-        return self
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.close()
-
     def show(self, pattern: Mapping[str, Any]) -> None:
         """Start showing ``pattern`` (a capture-format pattern dict); see :meth:`wait_shown`."""
         self._require_open("show a pattern")
@@ -166,7 +132,7 @@ class Projector(abc.ABC):
         self._require_open("wait for a pattern")
         if self._pattern is None:
             raise IncompatibleStateError(f"{self.name}: wait_shown() before any show()")
-        timeout_s = _check_timeout(timeout_s)
+        timeout_s = check_timeout_s(timeout_s)
         if not self._wait(timeout_s):
             raise WaitTimeoutError(f"{self.name}: pattern not on screen within {timeout_s:g} s")
 
@@ -190,15 +156,13 @@ class Projector(abc.ABC):
         if self._is_open:
             self._set_gamma_lut(lut)
 
-    def _require_open(self, action: str) -> None:
-        if not self._is_open:
-            raise IncompatibleStateError(f"{self.name}: cannot {action}: projector is not open")
+    def _after_open(self) -> None:
+        self._pattern = None
+        self._shown_count = 0
+        if self._gamma_lut is not None:
+            self._set_gamma_lut(self._gamma_lut)
 
-    # -- hooks ------------------------------------------------------------------------------------
-    @abc.abstractmethod
-    def _open(self) -> None:
-        """Acquire the resources; raise DeviceNotFoundError (from the library's error) if absent."""
-
+    # -- hooks (and Device's _open / _close) ------------------------------------------------------
     @abc.abstractmethod
     def _show(self, pattern: Mapping[str, Any]) -> None:
         """Render / load ``pattern`` (already validated) with the current gamma LUT."""
@@ -207,10 +171,6 @@ class Projector(abc.ABC):
     def _wait(self, timeout_s: float) -> bool:
         """Wait until the pattern is on screen; False if ``timeout_s`` ran out."""
 
-    @abc.abstractmethod
-    def _close(self) -> None:
-        """Release the resources."""
-
     def _last_frame(self) -> np.ndarray | None:
         """The rendered drive levels (H, W) float32, or None if the backend cannot read them back."""
         return None
@@ -218,9 +178,3 @@ class Projector(abc.ABC):
     def _set_gamma_lut(self, lut: np.ndarray | None) -> None:
         """Upload a validated LUT (float32 (N,)) or None; default: nothing to upload."""
 
-
-def _check_timeout(timeout_s: float) -> float:
-    timeout_s = float(timeout_s)
-    if not (math.isfinite(timeout_s) and timeout_s > 0):
-        raise ValueError(f"timeout_s: expected a finite number of seconds > 0, found {timeout_s}")
-    return timeout_s

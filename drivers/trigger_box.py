@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import serial
 
 from drivers import trigger_protocol as tp
+from drivers.device import Device
 from drivers.errors import (
     DeviceError,
     DeviceNotFoundError,
@@ -72,41 +73,18 @@ class TriggerBoxStatus:
     source: ExposureSource
 
 
-class TriggerBox(abc.ABC):
-    """Family base: public methods check state and log; backends implement the ``_do_`` hooks."""
+class TriggerBox(Device):
+    """Family base: public methods check state and log; backends implement ``_open``, ``_close``
+    and the ``_do_`` hooks. :meth:`open` negotiates the protocol version (:meth:`hello`)."""
 
-    def __init__(self) -> None:
-        self._is_open = False
+    family = "trigger box"
+
+    def __init__(self, name: str | None = None) -> None:
+        super().__init__(name)
         self._armed_count = 0
 
-    @property
-    def is_open(self) -> bool:
-        return self._is_open
-
-    def open(self) -> None:
-        """Open the connection and negotiate the protocol version; raises on any failure."""
-        if self._is_open:
-            return
-        self._do_open()
-        self._is_open = True
-        try:
-            self.hello()
-        except BaseException:
-            self.close()
-            raise
-
-    def close(self) -> None:
-        if not self._is_open:
-            return
-        self._is_open = False
-        self._do_close()
-
-    def __enter__(self) -> TriggerBox:
-        self.open()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
+    def _after_open(self) -> None:
+        self.hello()
 
     def hello(self) -> int:
         """Negotiate the protocol version; returns the version both sides speak."""
@@ -163,16 +141,7 @@ class TriggerBox(abc.ABC):
         self._do_reset()
         self._armed_count = 0
 
-    def _require_open(self, command: str) -> None:
-        if not self._is_open:
-            raise IncompatibleStateError(f"{self}: {command} on a closed trigger box; open() first")
-
-    @abc.abstractmethod
-    def _do_open(self) -> None: ...
-
-    @abc.abstractmethod
-    def _do_close(self) -> None: ...
-
+    # -- hooks (and Device's _open / _close) ----------------------------------------------------
     @abc.abstractmethod
     def _do_hello(self, version: int) -> int: ...
 
@@ -220,13 +189,16 @@ class SerialTriggerBox(TriggerBox):
     retries : int
         Extra attempts after a missing or garbled reply. A retry resends the same request id,
         which the box answers from its reply cache without acting twice (FIRE never doubles).
+    name : str, optional
+        Used in log lines and error messages; default ``"trigger box on <url>"``.
     """
 
     HELLO_TIMEOUT_S = 2.0
 
     def __init__(self, url: str, baudrate: int = 115200, timeout_s: float = 0.5,
-                 retries: int = 2, command_timeouts: Mapping[str, float] | None = None) -> None:
-        super().__init__()
+                 retries: int = 2, command_timeouts: Mapping[str, float] | None = None,
+                 name: str | None = None) -> None:
+        super().__init__(name or f"trigger box on {url}")
         if timeout_s <= 0:
             raise ValueError(f"timeout_s must be > 0, got {timeout_s}")
         self.command_timeouts = {"HELLO": max(timeout_s, self.HELLO_TIMEOUT_S)}
@@ -246,9 +218,6 @@ class SerialTriggerBox(TriggerBox):
         self._pulse_us = 0
         self.events: collections.deque[tp.Event] = collections.deque(maxlen=4096)
         self.firmware = ""
-
-    def __str__(self) -> str:
-        return f"trigger box on {self.url}"
 
     # -- events ---------------------------------------------------------------------------------
     def wait_done(self, timeout_s: float) -> None:
@@ -272,7 +241,7 @@ class SerialTriggerBox(TriggerBox):
         return [int(e.tokens[0]) for e in self.events if e.name == "PULSE" and e.tokens]
 
     # -- hooks ----------------------------------------------------------------------------------
-    def _do_open(self) -> None:
+    def _open(self) -> None:
         try:
             self._port = serial.serial_for_url(self.url, baudrate=self.baudrate,
                                                timeout=self.timeout_s, write_timeout=self.timeout_s)
@@ -282,7 +251,7 @@ class SerialTriggerBox(TriggerBox):
                 f"cannot open trigger box port {self.url}: {exc}; check the cable, the port name "
                 "and that you may open it (Linux: be in the 'dialout' group)") from exc
 
-    def _do_close(self) -> None:
+    def _close(self) -> None:
         port, self._port = self._port, None
         if port is not None:
             try:
