@@ -1,12 +1,15 @@
 """Pattern rendering with moderngl, and a projector that renders off-screen (headless EGL).
 
 :class:`PatternRenderer` draws any capture-format pattern with the gamma LUT applied in a
-fragment shader (``pattern.frag.glsl``) into whatever framebuffer is bound; it serves both the
-off-screen :class:`GLProjector` here and the on-screen ``WindowProjector``.
+fragment shader (``pattern.frag.glsl``) into whatever framebuffer is bound.
+:class:`RenderedProjector` is the projector side of it (draw, read back, upload the LUT) for both
+the off-screen :class:`GLProjector` here and the on-screen ``WindowProjector``.
 """
 
 from __future__ import annotations
 
+import abc
+import contextlib
 import ctypes
 import logging
 import math
@@ -155,7 +158,44 @@ def read_framebuffer(fbo: Any, size: tuple[int, int], bits: int = 8) -> np.ndarr
     return np.ascontiguousarray(image[::-1])
 
 
-class GLProjector(Projector):
+class RenderedProjector(Projector):
+    """A projector whose frames a :class:`PatternRenderer` draws in an OpenGL context it owns.
+
+    A backend creates ``_ctx`` and ``_renderer`` in ``_open``, says how its context becomes
+    current (:meth:`_current`) and calls :meth:`_draw` from ``_show``; the LUT upload and
+    :meth:`last_frame` are shared.
+    """
+
+    def __init__(self, size: tuple[int, int], name: str | None = None) -> None:
+        super().__init__(size, name)
+        self._ctx: Any = None
+        self._renderer: PatternRenderer | None = None
+        self._frame: np.ndarray | None = None
+
+    @abc.abstractmethod
+    def _current(self) -> contextlib.AbstractContextManager[Any]:
+        """A context manager that makes the OpenGL context current for the calls inside it."""
+
+    def _draw(self, pattern: Mapping[str, Any], fbo: Any, bits: int, readback: bool = True) -> None:
+        """Render ``pattern`` into ``fbo`` (context current) and, if ``readback``, keep it for last_frame."""
+        assert self._renderer is not None
+        self._frame = None
+        fbo.use()
+        self._renderer.render(pattern)
+        if readback:
+            self._frame = read_framebuffer(fbo, self.size, bits)  # waits for the GPU
+
+    def _set_gamma_lut(self, lut: np.ndarray | None) -> None:
+        assert self._renderer is not None
+        with self._current():
+            self._renderer.set_lut(lut)
+
+    def _last_frame(self) -> np.ndarray | None:
+        frame = self._frame
+        return None if frame is None else frame.copy()
+
+
+class GLProjector(RenderedProjector):
     """Renders patterns off-screen at the projector resolution with a headless EGL context.
 
     What it renders is what a display of the given bit depth would show; :meth:`last_frame` hands
@@ -181,10 +221,7 @@ class GLProjector(Projector):
             raise ValueError(f"bits: expected one of {tuple(FRAMEBUFFER_DTYPES)}, found {bits!r}")
         self.bits = bits
         self.backend = backend
-        self._ctx: Any = None
         self._fbo: Any = None
-        self._renderer: PatternRenderer | None = None
-        self._frame: np.ndarray | None = None
 
     def _open(self) -> None:
         kwargs = {"backend": self.backend} if self.backend else {}
@@ -203,27 +240,19 @@ class GLProjector(Projector):
             self._release()
             raise
 
-    # Every GL call runs inside ``with self._ctx``: several projectors (or a window) may be open
-    # in one thread, and a standalone context is not made current by moderngl on its own.
-    def _set_gamma_lut(self, lut: np.ndarray | None) -> None:
-        assert self._renderer is not None
-        with self._ctx:
-            self._renderer.set_lut(lut)
+    def _current(self) -> contextlib.AbstractContextManager[Any]:
+        # Every GL call runs inside ``with self._ctx``: several projectors (or a window) may be
+        # open in one thread, and a standalone context is not made current by moderngl on its own.
+        return self._ctx
 
     def _show(self, pattern: Mapping[str, Any]) -> None:
-        assert self._renderer is not None and self._fbo is not None
+        assert self._fbo is not None
         self._frame = None
-        with self._ctx:
-            self._fbo.use()
-            self._renderer.render(pattern)
-            self._frame = read_framebuffer(self._fbo, self.size, self.bits)  # waits for the GPU
+        with self._current():
+            self._draw(pattern, self._fbo, self.bits)
 
     def _wait(self, timeout_s: float) -> bool:
         return self._frame is not None  # off-screen: shown once drawn and read back
-
-    def _last_frame(self) -> np.ndarray | None:
-        frame = self._frame
-        return None if frame is None else frame.copy()
 
     def _close(self) -> None:
         self._release()
@@ -247,4 +276,4 @@ class GLProjector(Projector):
                 release_egl_thread()
 
 
-__all__ = ["GLProjector", "PatternRenderer", "read_framebuffer"]
+__all__ = ["GLProjector", "PatternRenderer", "RenderedProjector", "read_framebuffer", "release_egl_thread"]

@@ -9,16 +9,15 @@ full screen"): the projector's resolution must be the monitor's mode.
 
 from __future__ import annotations
 
+import contextlib
 import logging
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from typing import Any
 
 import moderngl
-import numpy as np
 
 from drivers.errors import DeviceError, DeviceNotFoundError, UnsupportedFeatureError
-from drivers.projector import Projector
-from drivers.projector_gl import PatternRenderer, read_framebuffer, release_egl_thread
+from drivers.projector_gl import PatternRenderer, RenderedProjector, release_egl_thread
 
 log = logging.getLogger(__name__)
 
@@ -31,7 +30,7 @@ def _glfw() -> Any:
     return glfw
 
 
-class WindowProjector(Projector):
+class WindowProjector(RenderedProjector):
     """Full-screen window on monitor ``monitor`` (glfw's order; 0 is the primary).
 
     Parameters
@@ -60,9 +59,6 @@ class WindowProjector(Projector):
         self.vsync = vsync
         self.readback = readback
         self._window: Any = None
-        self._ctx: Any = None
-        self._renderer: PatternRenderer | None = None
-        self._frame: np.ndarray | None = None
 
     def _open(self) -> None:
         glfw = _glfw()
@@ -116,18 +112,15 @@ class WindowProjector(Projector):
         self._renderer = PatternRenderer(self._ctx, self.size)
         log.info("%s: %s on %s", self.name, self._ctx.info["GL_RENDERER"], glfw.get_monitor_name(monitor))
 
-    def _set_gamma_lut(self, lut: np.ndarray | None) -> None:
-        assert self._renderer is not None
+    @contextlib.contextmanager
+    def _current(self) -> Iterator[None]:
         _glfw().make_context_current(self._window)
-        self._renderer.set_lut(lut)
+        yield
 
     def _show(self, pattern: Mapping[str, Any]) -> None:
         glfw = _glfw()
-        assert self._renderer is not None
-        glfw.make_context_current(self._window)
-        self._ctx.screen.use()
-        self._renderer.render(pattern)
-        self._frame = read_framebuffer(self._ctx.screen, self.size, 8) if self.readback else None
+        with self._current():
+            self._draw(pattern, self._ctx.screen, 8, readback=self.readback)
         glfw.swap_buffers(self._window)
         glfw.poll_events()
         if glfw.window_should_close(self._window):
@@ -136,9 +129,6 @@ class WindowProjector(Projector):
     def _wait(self, timeout_s: float) -> bool:
         self._ctx.finish()  # after the swap: returns once the frame was handed to the display
         return True
-
-    def _last_frame(self) -> np.ndarray | None:
-        return None if self._frame is None else self._frame.copy()
 
     def _close(self) -> None:
         self._release(_glfw())
