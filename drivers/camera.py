@@ -15,6 +15,7 @@ import enum
 import logging
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -166,13 +167,8 @@ class Camera(Device):
         value = float(value)
         if not (math.isfinite(value) and value > 0):
             raise ValueError(f"exposure_us: expected a finite time > 0, found {value}")
-        if self._is_open:
-            actual = self._set_exposure_us(value)
-            value = value if actual is None else float(actual)
-        else:
-            self._set_before_open.add("exposure_us")
-        self._exposure_us = value
-        log.debug("%s: exposure %.1f us", self.name, value)
+        self._exposure_us = self._push_setting("exposure_us", value, self._set_exposure_us)
+        log.debug("%s: exposure %.1f us", self.name, self._exposure_us)
 
     @property
     def gain(self) -> float:
@@ -184,12 +180,7 @@ class Camera(Device):
         value = float(value)
         if not (math.isfinite(value) and value >= 0):
             raise ValueError(f"gain: expected a finite value >= 0, found {value}")
-        if self._is_open:
-            actual = self._set_gain(value)
-            value = value if actual is None else float(actual)
-        else:
-            self._set_before_open.add("gain")
-        self._gain = value
+        self._gain = self._push_setting("gain", value, self._set_gain)
 
     @property
     def roi(self) -> tuple[int, int, int, int]:
@@ -391,14 +382,24 @@ class Camera(Device):
         if self._pixel_format not in self.supported_pixel_formats:
             self._pixel_format = self.supported_pixel_formats[0]
         self._set_pixel_format(self._pixel_format)
-        if "exposure_us" in self._set_before_open:
-            actual = self._set_exposure_us(self._exposure_us)
-        else:
-            actual = self._read_exposure_us()
-        self._exposure_us = self._exposure_us if actual is None else float(actual)
-        actual = self._set_gain(self._gain) if "gain" in self._set_before_open else self._read_gain()
-        self._gain = self._gain if actual is None else float(actual)
+        self._exposure_us = self._sync_setting(
+            "exposure_us", self._exposure_us, self._set_exposure_us, self._read_exposure_us
+        )
+        self._gain = self._sync_setting("gain", self._gain, self._set_gain, self._read_gain)
         self._set_trigger(self._trigger_source, self._trigger_mode)
+
+    def _push_setting(self, setting: str, value: float, push: Callable[[float], float | None]) -> float:
+        """Send ``value`` to an open device and return what it accepted; if closed, note it for open()."""
+        if not self._is_open:
+            self._set_before_open.add(setting)
+            return value
+        return _accepted(value, push(value))
+
+    def _sync_setting(
+        self, setting: str, value: float, push: Callable[[float], float | None], read: Callable[[], float | None]
+    ) -> float:
+        """At open: push ``value`` if it was set before open(), else take the device's own value."""
+        return _accepted(value, push(value) if setting in self._set_before_open else read())
 
     # -- hooks (and Device's _open / _close) ------------------------------------------------------
     @abc.abstractmethod
@@ -448,3 +449,8 @@ class Camera(Device):
 
     def _set_pixel_format(self, value: PixelFormat) -> None:
         """Set the pixel format (already checked against ``supported_pixel_formats``)."""
+
+
+def _accepted(asked: float, actual: float | None) -> float:
+    """What a setting hook reports the device took (``None``: as asked)."""
+    return asked if actual is None else float(actual)
