@@ -29,7 +29,7 @@ import numpy as np
 
 from processing import _validate
 from processing.order_correction import correct_orders_rpca
-from processing.phase_correction import correct_phase_rpca, reorder_from_low_rank, restore_detail
+from processing.phase_correction import accept_if_consistent, correct_phase_rpca, reorder_from_low_rank, restore_detail
 from processing.shadow_fill import valid_mask
 from processing.voting import vote_row_orders
 
@@ -114,14 +114,16 @@ def correct_auto(
     """The most accurate method measured: ch. 4 RPCA, re-derived orders, measured detail restored.
 
     1. L = low-rank part of the phase (stable inexact ALM, thesis ch. 4);
-    2. re-derive every pixel's fringe order from L and the measured wrapped phase;
-    3. keep L (denoised) where the re-derived phase agrees with it within ``k_sigma`` noise
-       standard deviations, the re-derived measured phase where it does not.
+    2. re-derive every pixel's fringe order from L and the measured wrapped phase, and accept a
+       changed order only where the result fits the pixel's neighbours better than the
+       measured phase did (so a poor L, e.g. at steep edges, cannot spoil correct pixels);
+    3. keep L (denoised) where that phase agrees with it within ``k_sigma`` noise standard
+       deviations, the measured phase with its corrected order where it does not.
     """
     start = time.perf_counter()
     phase, wrapped, valid = _inputs(absolute_phase, wrapped_phase, mask)
     low_rank, result = correct_phase_rpca(phase, valid, tau=tau, stable=True, svd=svd)
-    reordered = reorder_from_low_rank(low_rank, wrapped, valid)
+    reordered = accept_if_consistent(reorder_from_low_rank(low_rank, wrapped, valid), phase, valid)
     out = restore_detail(low_rank, reordered, valid, k_sigma=k_sigma)
     changed = valid & (np.abs(reordered - phase) > np.pi)
     parameters = {
@@ -131,7 +133,7 @@ def correct_auto(
     return out, _info(
         "auto", parameters, start, frequency,
         iterations=result.iterations, rank=result.rank, converged=result.converged,
-        steps=["rpca-phase", "reorder", "restore-detail"], orders_changed=int(np.count_nonzero(changed)),
+        steps=["rpca-phase", "reorder-if-consistent", "restore-detail"], orders_changed=int(np.count_nonzero(changed)),
     )
 
 

@@ -20,6 +20,8 @@ than the noise explains (structure the low-rank model missed).
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 from processing import _validate
@@ -102,6 +104,45 @@ def reorder_from_low_rank(
     phi = wrapped[valid]
     out[valid] = phi + TWO_PI * np.rint((estimate[valid] - phi) / TWO_PI)
     return out
+
+
+def neighbour_prediction(phase: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """Each pixel's phase predicted from its neighbours, robust to one wrong neighbour.
+
+    The mean of each opposite pair (left-right, up-down and both diagonals) is exact on a plane,
+    whatever its slope; the prediction is the median of the available pairs. Where no pair is
+    complete (corners of shadows), the median of the valid single neighbours; NaN if none.
+    """
+    padded = np.pad(np.where(valid, phase, np.nan), 1, constant_values=np.nan)
+    rows, cols = phase.shape
+
+    def shifted(dy: int, dx: int) -> np.ndarray:
+        return padded[1 + dy : 1 + dy + rows, 1 + dx : 1 + dx + cols]
+
+    offsets = ((0, 1), (1, 0), (1, 1), (1, -1))
+    pairs = np.stack([(shifted(-dy, -dx) + shifted(dy, dx)) / 2.0 for dy, dx in offsets])
+    usable = np.isfinite(pairs).any(axis=0)
+    out = np.full(phase.shape, np.nan)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns: pixels without valid neighbours
+        out[usable] = np.nanmedian(pairs[:, usable], axis=0)
+        lonely = valid & ~usable
+        if lonely.any():
+            singles = np.stack([shifted(sy * dy, sy * dx) for dy, dx in offsets for sy in (-1, 1)])
+            out[lonely] = np.nanmedian(singles[:, lonely], axis=0)
+    return out
+
+
+def accept_if_consistent(candidate: np.ndarray, original: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """``candidate`` where it fits the neighbours of ``original`` better than ``original`` does.
+
+    Guards order changes proposed by a low-rank estimate: a pixel whose measured phase already
+    agrees with its neighbours keeps it, even where the estimate is off by more than pi (steep
+    edges, fringes too dense for the low-rank model).
+    """
+    prediction = neighbour_prediction(original, valid)
+    better = np.abs(candidate - prediction) < np.abs(original - prediction)
+    return np.where(valid & better, candidate, original)
 
 
 def restore_detail(

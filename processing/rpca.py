@@ -115,21 +115,27 @@ def default_tau(shape: tuple[int, int]) -> float:
 def robust_noise_sigma(d: np.ndarray, mask: np.ndarray | None = None) -> float:
     """Standard deviation of white noise on a smooth matrix, robust to sparse outliers.
 
-    Median absolute deviation of the second differences along rows (which cancel smooth
-    content; their variance is 6 sigma^2), scaled to a Gaussian standard deviation. It assumes
-    content that is smooth along rows (phase maps, fringe images); for other data give sigma. With
-    ``mask``, only differences of three valid pixels count (filled shadows would bias it low).
+    Median absolute deviation of the second differences (which cancel smooth content; their
+    variance is 6 sigma^2), scaled to a Gaussian standard deviation, along rows and along
+    columns; the smaller of the two is kept, since content only adds to it (fringes, for
+    instance, vary along one axis only). It assumes content smooth along at least one axis
+    (phase maps, fringe images); for other data give sigma. With ``mask``, only differences of
+    three valid pixels count (filled shadows would bias it low).
     """
     arr = np.asarray(d, dtype=np.float64)
-    second = arr[:, 2:] - 2.0 * arr[:, 1:-1] + arr[:, :-2]
-    if mask is not None:
-        keep = np.asarray(mask, dtype=bool)
-        second = second[keep[:, 2:] & keep[:, 1:-1] & keep[:, :-2]]
-    second = second[np.isfinite(second)]
-    if second.size == 0:
-        return 0.0
-    mad = float(np.median(np.abs(second - np.median(second))))
-    return 1.4826 * mad / np.sqrt(6.0)
+    keep = None if mask is None else np.asarray(mask, dtype=bool)
+    estimates = []
+    for data, valid in ((arr, keep), (arr.T, None if keep is None else keep.T)):
+        if data.shape[1] < 3:
+            continue
+        second = data[:, 2:] - 2.0 * data[:, 1:-1] + data[:, :-2]
+        if valid is not None:
+            second = second[valid[:, 2:] & valid[:, 1:-1] & valid[:, :-2]]
+        second = second[np.isfinite(second)]
+        if second.size:
+            mad = float(np.median(np.abs(second - np.median(second))))
+            estimates.append(1.4826 * mad / np.sqrt(6.0))
+    return min(estimates) if estimates else 0.0
 
 
 def rpca_ialm(

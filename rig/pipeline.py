@@ -276,7 +276,38 @@ def _denoise_none(frames: np.ndarray, groups: PatternGroups, options: ProcessOpt
     return frames
 
 
-DENOISERS: dict[str, Callable[[np.ndarray, PatternGroups, ProcessOptions], np.ndarray]] = {"none": _denoise_none}
+def _method_params(method: Callable[..., Any], params: Mapping[str, Any]) -> dict[str, Any]:
+    """The ``--param`` entries that ``method`` takes as keyword arguments."""
+    import inspect
+
+    accepted = inspect.signature(method).parameters
+    return {key: value for key, value in params.items() if key in accepted}
+
+
+def _denoise_rpca(frames: np.ndarray, groups: PatternGroups, options: ProcessOptions) -> tuple[np.ndarray, dict[str, Any]]:
+    """Thesis ch. 2.4: each frame's low-rank part (stable inexact ALM RPCA); returns frames and stage info."""
+    from processing.denoise import rpca_denoise_stack
+
+    params = _method_params(rpca_denoise_stack, options.params)
+    start = time.perf_counter()
+    try:
+        denoised, results = rpca_denoise_stack(frames, **params)
+    except ValueError as exc:
+        raise ProcessingError(f"--denoise rpca: {exc}") from None
+    return denoised, {
+        "method": "rpca",
+        "parameters": params,
+        "iterations": [r.iterations for r in results],
+        "rank": [r.rank for r in results],
+        "seconds": round(time.perf_counter() - start, 4),
+    }
+
+
+# A denoiser returns the frames, or (frames, info) to record its parameters and effort.
+DENOISERS: dict[str, Callable[[np.ndarray, PatternGroups, ProcessOptions], Any]] = {
+    "none": _denoise_none,
+    "rpca": _denoise_rpca,
+}
 
 
 def stage_denoise(state: SceneState, options: ProcessOptions) -> None:
@@ -284,8 +315,9 @@ def stage_denoise(state: SceneState, options: ProcessOptions) -> None:
     if options.denoise == "none":
         return
     assert state.frames is not None
-    state.frames = DENOISERS[options.denoise](state.frames, state.groups, options)
-    state.info["denoise"] = options.denoise
+    out = DENOISERS[options.denoise](state.frames, state.groups, options)
+    state.frames, detail = out if isinstance(out, tuple) else (out, None)
+    state.info["denoise"] = detail if detail is not None else options.denoise
 
 
 def stage_wrapped(state: SceneState, options: ProcessOptions) -> None:
@@ -431,15 +463,51 @@ def _correction_none(state: SceneState, options: ProcessOptions) -> None:
     return None
 
 
-CORRECTIONS: dict[str, Callable[[SceneState, ProcessOptions], None]] = {"none": _correction_none}
+def _registered_correction(name: str) -> Callable[[SceneState, ProcessOptions], None]:
+    """Stage adapter for a method of :data:`processing.correction.CORRECTIONS` (thesis chs. 3-4, voting)."""
+
+    def run(state: SceneState, options: ProcessOptions) -> None:
+        from processing.correction import CORRECTIONS as METHODS
+
+        unwrapped = state.unwrapped
+        assert unwrapped is not None
+        if name == "auto" and not unwrapped.absolute:
+            state.info["correction"] = {"method": "auto", "skipped": "relative phase (spatial unwrapping): nothing to correct"}
+            return
+        method = METHODS[name]
+        params = _method_params(method, options.params)
+        wrapped = None
+        if state.wrapped is not None and unwrapped.frequency in state.wrapped.frequencies:
+            wrapped = state.wrapped.phase[state.wrapped.frequencies.index(unwrapped.frequency)]
+        if wrapped is None or not np.isfinite(wrapped[unwrapped.valid]).all():
+            wrapped = np.angle(np.exp(1j * np.nan_to_num(unwrapped.phase)))  # Phi = phi + 2 pi k wraps back to phi
+        try:
+            phase, info = method(unwrapped.phase, wrapped, orders=unwrapped.orders, mask=unwrapped.valid,
+                                 frequency=unwrapped.frequency, **params)
+        except ValueError as exc:
+            raise ProcessingError(f"--correction {name}: {exc}") from None
+        unwrapped.phase = phase
+        if unwrapped.orders is not None:
+            orders = np.rint((np.nan_to_num(phase) - np.mod(wrapped, 2.0 * np.pi)) / (2.0 * np.pi))
+            unwrapped.orders = np.where(unwrapped.valid, orders, unwrapped.orders).astype(unwrapped.orders.dtype)
+        state.info["correction"] = info
+
+    run.__doc__ = f"``--correction {name}`` (processing.correction)."
+    return run
+
+
+CORRECTIONS: dict[str, Callable[[SceneState, ProcessOptions], None]] = {
+    "none": _correction_none,
+    **{name: _registered_correction(name) for name in ("vote", "rpca-orders", "rpca-phase", "auto")},
+}
 
 
 def stage_correction(state: SceneState, options: ProcessOptions) -> None:
-    """Optional correction of the unwrapped phase (``--correction``)."""
+    """Optional correction of the unwrapped phase (``--correction``); methods may record their info."""
     if options.correction == "none":
         return
     CORRECTIONS[options.correction](state, options)
-    state.info["correction"] = options.correction
+    state.info.setdefault("correction", options.correction)
 
 
 SCENE_STAGES: list[tuple[str, Callable[[SceneState, ProcessOptions], None]]] = [

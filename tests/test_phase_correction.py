@@ -119,3 +119,19 @@ def test_info_records_method_parameters_and_effort(case: ProtocolCase) -> None:
 def test_bad_input_names_the_argument(call, name: str) -> None:
     with pytest.raises(ValueError, match=f"^{name}:"):
         call()
+
+
+def test_order_changes_are_accepted_only_where_they_fit_the_neighbours() -> None:
+    from processing.phase_correction import accept_if_consistent
+
+    rng = np.random.default_rng(6)
+    truth = np.add.outer(np.linspace(0.0, 2.0, 40), np.arange(60) * 2.5)  # steep: 2.5 rad per pixel
+    measured = truth + rng.normal(0.0, 0.02, truth.shape)
+    measured[10, 20] += TWO_PI  # a real order error
+    candidate = measured.copy()
+    candidate[10, 20] -= TWO_PI  # its fix
+    candidate[30, 40] += TWO_PI  # a bad proposal where the measurement was right
+    valid = np.ones(truth.shape, dtype=bool)
+    out = accept_if_consistent(candidate, measured, valid)
+    assert abs(out[10, 20] - truth[10, 20]) < 0.1
+    assert abs(out[30, 40] - truth[30, 40]) < 0.1

@@ -29,7 +29,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "frequency 1 is present, two-frequency for 2 coprime, heterodyne or three-frequency for 3)",
     )
     parser.add_argument("--denoise", default="none", choices=sorted(DENOISERS), help="fringe denoising before phase (default none)")
-    parser.add_argument("--correction", default="none", choices=sorted(CORRECTIONS), help="phase / fringe-order correction (default none)")
+    parser.add_argument("--correction", default="auto", choices=sorted(CORRECTIONS), help="phase / fringe-order correction (default auto)")
     parser.add_argument(
         "--min-modulation", type=float, default=0.2, metavar="RATIO",
         help="valid pixels need fringe modulation B >= RATIO x background and x the image's 99th percentile of B (default 0.2)",
