@@ -26,12 +26,13 @@ import logging
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
+from typing import Any
 
 import usb.core
 import usb.util
 
 from drivers import dlp_protocol as dp
-from drivers.device import Device
+from drivers.device import Device, check_timeout_s
 from drivers.dlp_protocol import Command, Led, PatternEntry, TriggerType, Validation
 from drivers.errors import (
     DeviceError,
@@ -142,6 +143,8 @@ class PatternSequence:
 
 @dataclass(frozen=True)
 class ValidationResult:
+    """The controller's verdict on the programmed sequence (:class:`Validation` bits)."""
+
     bits: int
 
     @property
@@ -155,6 +158,8 @@ class ValidationResult:
 
 @dataclass(frozen=True)
 class DlpStatus:
+    """Hardware, system and main status bytes; ``problems`` names each failure they flag."""
+
     hardware: int
     system: int
     main: int
@@ -162,11 +167,11 @@ class DlpStatus:
 
     @property
     def sequencer_running(self) -> bool:
-        return bool(self.main & 0x02)
+        return bool(self.main & dp.MainStatus.SEQUENCER_RUNNING)
 
     @property
     def parked(self) -> bool:
-        return bool(self.main & 0x01)
+        return bool(self.main & dp.MainStatus.PARKED)
 
     @property
     def healthy(self) -> bool:
@@ -268,12 +273,14 @@ class DlpController(Device):
         self._standby = True
 
     def wake(self) -> None:
+        """Return from standby to normal power."""
         self._require_open("wake")
         log.info("%s: normal power", self)
         self._do_set_power(standby=False)
         self._standby = False
 
     def set_display_mode(self, mode: DisplayMode) -> None:
+        """Switch between video and pattern display (stops a running sequence first)."""
         self._require_awake("set display mode")
         if self._state is not SequenceState.STOPPED:
             self.stop()
@@ -312,6 +319,7 @@ class DlpController(Device):
         self._require_awake("validate")
         if self._sequence is None:
             raise IncompatibleStateError(f"{self}: nothing to validate; configure_sequence first")
+        timeout_s = check_timeout_s(timeout_s)
         self._do_start_validation()
         deadline = time.monotonic() + timeout_s
         while True:
@@ -331,6 +339,7 @@ class DlpController(Device):
         return result
 
     def start(self) -> None:
+        """Start the validated sequence."""
         self._require_awake("start")
         if not self._validated:
             raise IncompatibleStateError(f"{self}: start needs a validated sequence; "
@@ -340,6 +349,7 @@ class DlpController(Device):
         self._state = SequenceState.RUNNING
 
     def pause(self) -> None:
+        """Pause the running sequence."""
         self._require_open("pause")
         if self._state is not SequenceState.RUNNING:
             raise IncompatibleStateError(f"{self}: pause needs a running sequence "
@@ -348,6 +358,7 @@ class DlpController(Device):
         self._state = SequenceState.PAUSED
 
     def stop(self) -> None:
+        """Stop the sequencer (whatever its state)."""
         self._require_open("stop")
         log.info("%s: stop sequence", self)
         self._do_sequence(dp.SequenceAction.STOP)
@@ -387,13 +398,13 @@ class DlpController(Device):
                 log.warning("%s: could not %s after the sequence: %s", self, what, exc)
 
     def status(self) -> DlpStatus:
+        """Read the status bytes and name what they report as failed."""
         self._require_open("status")
         hardware, system, main = self._do_read_status()
-        problems = [text for bit, text in dp.HARDWARE_STATUS_BITS.items()
-                    if bit and hardware & (1 << bit)]
-        if not hardware & 0x01:
+        problems = [text for bit, text in dp.HARDWARE_ERROR_BITS.items() if hardware & (1 << bit)]
+        if not hardware & dp.HARDWARE_STATUS_INIT_OK:
             problems.append("internal initialization failed")
-        if not system & 0x01:
+        if not system & dp.SYSTEM_STATUS_MEMORY_OK:
             problems.append("internal memory test failed")
         return DlpStatus(hardware, system, main, problems)
 
@@ -459,7 +470,7 @@ class LightCrafter4500(DlpController):
             raise ValueError(f"timeout_s must be > 0, got {timeout_s}")
         self._backend = backend
         self.timeout_s = float(timeout_s)
-        self._dev = None
+        self._dev: Any = None  # usb.core.Device while open
         self._seq = 0
 
     # -- hooks ----------------------------------------------------------------------------------
@@ -506,7 +517,7 @@ class LightCrafter4500(DlpController):
     def _do_read_state(self) -> tuple[bool, DisplayMode, bool]:
         standby = bool(self._read_byte(Command.POWER_CONTROL) & 0x01)
         mode = DisplayMode(self._read_byte(Command.DISPLAY_MODE) & 0x01)
-        running = bool(self._read_byte(Command.MAIN_STATUS) & 0x02)
+        running = bool(self._read_byte(Command.MAIN_STATUS) & dp.MainStatus.SEQUENCER_RUNNING)
         return standby, mode, running
 
     def _do_set_power(self, standby: bool) -> None:

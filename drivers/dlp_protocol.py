@@ -35,7 +35,6 @@ class Command(enum.IntEnum):
     """USB commands (CMD2 << 8 | CMD3) used by the driver, from DLPU010."""
 
     POWER_CONTROL = 0x0200  # 1 byte: 0 normal, 1 standby
-    FIRMWARE_VERSION = 0x0205  # read
     HARDWARE_STATUS = 0x1A0A  # read, 1 byte
     SYSTEM_STATUS = 0x1A0B  # read, 1 byte
     MAIN_STATUS = 0x1A0C  # read, 1 byte
@@ -263,17 +262,24 @@ def describe_validation(bits: int) -> list[str]:
     return [text for flag, text in VALIDATION_TEXT.items() if bits & flag]
 
 
-HARDWARE_STATUS_BITS = {
-    0: "internal initialization successful",
+#: Hardware status (read of 0x1A0A): bit 0 is set once internal initialization succeeded; these
+#: bits flag errors.
+HARDWARE_STATUS_INIT_OK = 0x01
+HARDWARE_ERROR_BITS = {
     1: "incompatible controller or DMD",
     2: "DMD reset controller error",
     3: "forced swap error",
     6: "sequencer abort",
     7: "sequencer error",
 }
-MAIN_STATUS_BITS = {
-    0: "DMD micromirrors parked",
-    1: "sequencer running",
-    2: "video frozen",
-    3: "external video source locked",
-}
+#: System status (read of 0x1A0B): bit 0 is set when the internal memory test passed.
+SYSTEM_STATUS_MEMORY_OK = 0x01
+
+
+class MainStatus(enum.IntFlag):
+    """Bits of the main status (read of 0x1A0C)."""
+
+    PARKED = 0x01  # DMD micromirrors parked
+    SEQUENCER_RUNNING = 0x02
+    VIDEO_FROZEN = 0x04
+    EXTERNAL_VIDEO_LOCKED = 0x08
