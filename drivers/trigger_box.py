@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import serial
 
 from drivers import trigger_protocol as tp
-from drivers.device import Device
+from drivers.device import Device, check_timeout_s
 from drivers.errors import (
     DeviceError,
     DeviceNotFoundError,
@@ -64,6 +64,8 @@ class TriggerBoxRefusedError(DeviceError, ValueError):
 
 @dataclass(frozen=True)
 class TriggerBoxStatus:
+    """What ``STATUS`` reports."""
+
     state: str  # IDLE, ARMED or DONE
     armed: int  # exposures requested by the last ARM
     fired: int  # exposures fired since the last ARM
@@ -132,6 +134,7 @@ class TriggerBox(Device):
         return index
 
     def status(self) -> TriggerBoxStatus:
+        """The box's state, counters and pulse settings."""
         self._require_open("STATUS")
         return self._do_status()
 
@@ -224,6 +227,7 @@ class SerialTriggerBox(TriggerBox):
         """Wait for ``! DONE`` (all armed exposures fired, e.g. from the sync input), pinging
         the box meanwhile; raises WaitTimeoutError when ``timeout_s`` runs out first."""
         self._require_open("wait for DONE")
+        timeout_s = check_timeout_s(timeout_s)
         deadline = time.monotonic() + timeout_s
         while True:
             if any(e.name == "DONE" for e in self.events):
@@ -344,15 +348,15 @@ class SerialTriggerBox(TriggerBox):
         raise failure
 
     def _error_for(self, command: str, reply: tp.Reply) -> DeviceError:
-        text = f"{self}: {command} refused: {reply.code.name if reply.code else '?'} {reply.text}"
         code = reply.code
+        text = f"{self}: {command} refused: {code.name if code else '?'} {reply.text}".rstrip()
         if code is tp.ErrorCode.BAD_ARGUMENT:
-            return TriggerBoxRefusedError(text.rstrip())
+            return TriggerBoxRefusedError(text)
         if code in (tp.ErrorCode.NOT_ARMED, tp.ErrorCode.STATE, tp.ErrorCode.NO_HELLO):
-            return IncompatibleStateError(text.rstrip())
+            return IncompatibleStateError(text)
         if code is tp.ErrorCode.VERSION:
-            return UnsupportedFeatureError(text.rstrip())
-        return ProtocolError(text.rstrip())
+            return UnsupportedFeatureError(text)
+        return ProtocolError(text)
 
     def _write(self, line: bytes, command: str) -> None:
         assert self._port is not None
