@@ -19,7 +19,7 @@ import logging
 
 import numpy as np
 
-from drivers.camera import Camera, Frame, PixelFormat, TriggerMode, TriggerSource
+from drivers.camera import Camera, Frame, TriggerMode, TriggerSource
 from drivers.errors import DeviceNotFoundError, DeviceTimeoutError, UnsupportedFeatureError
 
 log = logging.getLogger(__name__)
@@ -71,10 +71,6 @@ class OpenCVCamera(Camera):
         if self._size is None:
             raise DeviceNotFoundError(f"{self.name}: frame size unknown until opened")
         return self._size
-
-    @property
-    def supported_pixel_formats(self) -> tuple[PixelFormat, ...]:
-        return (PixelFormat.MONO8,)
 
     def _open(self) -> None:
         import cv2

@@ -170,7 +170,7 @@ class PylonCamera(Camera):
         return float(self._read(self._exposure_node))
 
     def _set_exposure_us(self, value: float) -> float | None:
-        self._write(self._exposure_node, float(value) if self._exposure_node != "ExposureTimeRaw" else int(value))
+        self._write(self._exposure_node, float(value))
         return float(self._read(self._exposure_node))
 
     def _read_gain(self) -> float | None:

@@ -23,6 +23,7 @@ import numpy as np
 from drivers.errors import DeviceNotFoundError
 from drivers.projector import Projector
 from processing.patterns import sinusoid_shift
+from processing.speckle import DEFAULT_DOT_PX, DEFAULT_SEED, DEFAULT_SPECKLE_GAIN, speckle_field
 
 log = logging.getLogger(__name__)
 
@@ -88,8 +89,6 @@ class PatternRenderer:
     def _speckle_texture(self, seed: int, dot_px: int) -> Any:
         key = (seed, dot_px)
         if key not in self._speckle:
-            from processing.speckle import speckle_field
-
             if len(self._speckle) >= self.SPECKLE_CACHE:
                 self._speckle.pop(next(iter(self._speckle))).release()
             self._speckle[key] = self._texture(speckle_field(self.size[0], self.size[1], seed, dot_px))
@@ -108,8 +107,6 @@ class PatternRenderer:
             self._set("amplitude", float(pattern.get("amplitude", 0.5)))
             self._set("phase", math.fmod(phase, 2.0 * math.pi) % (2.0 * math.pi))
         if kind == "speckle-sinusoid":
-            from processing.speckle import DEFAULT_DOT_PX, DEFAULT_SEED, DEFAULT_SPECKLE_GAIN
-
             self._set("speckle_gain", float(pattern.get("speckle_gain", DEFAULT_SPECKLE_GAIN)))
             speckle = self._speckle_texture(int(pattern.get("seed", DEFAULT_SEED)), int(pattern.get("dot_px", DEFAULT_DOT_PX)))
         elif kind == "gray":
@@ -124,6 +121,7 @@ class PatternRenderer:
         self.vao.render(vertices=3)
 
     def release(self) -> None:
+        """Free the program and textures (with the context current)."""
         for tex in self._speckle.values():
             tex.release()
         self._speckle.clear()
