@@ -12,13 +12,14 @@ From one camera image of the object and one of the flat reference plane:
 4. row-wise voting between wrapped-phase jumps (Ding et al., thesis ref. [119]) replaces every
    run's orders by their majority.
 
-How step 3 is vectorised: unwrap the wrapped phase along each row (spatially, only to index the
-candidates) into psi = phi + 2 pi n and offset each row to lie near the reference's absolute
-phase. For an order shift ``s`` the hypothesis "the absolute phase is psi + 2 pi s" maps every
-pixel to the reference pixel of its row with that absolute phase (= the same projector column);
-warping the reference speckle by that map (``cv2.remap``) gives an image that, where the
-hypothesis holds, equals the captured speckle. Box-filter NCC of the two images scores the
-hypothesis at every pixel at once, so there is one pass per shift ``s`` and no loop over pixels.
+How step 3 is vectorised: unwrap the wrapped phase spatially (only to index the candidates;
+quality-guided on a subsampled grid so that it is continuous in 2-D) into psi = phi + 2 pi n,
+offset to lie near the reference's absolute phase. For an order shift ``s`` the hypothesis "the
+absolute phase is psi + 2 pi s" maps every pixel to the reference pixel of its row with that
+absolute phase (= the same projector column); warping the reference speckle by that map
+(``cv2.remap``) gives an image that, where the hypothesis holds, equals the captured speckle.
+Box-filter NCC of the two images scores the hypothesis at every pixel at once, so there is one
+pass per shift ``s`` (over the band of columns where it is a candidate) and no loop over pixels.
 A pixel's candidates are its shifts ``s`` with n + s inside the orders the reference shows.
 """
 
