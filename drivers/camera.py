@@ -160,6 +160,7 @@ class Camera(Device):
 
     @property
     def exposure_us(self) -> float:
+        """Exposure time in microseconds, as the device accepted it once open."""
         return self._exposure_us
 
     @exposure_us.setter

@@ -20,7 +20,7 @@ import logging
 import numpy as np
 
 from drivers.camera import Camera, Frame, TriggerMode, TriggerSource
-from drivers.errors import DeviceNotFoundError, DeviceTimeoutError, UnsupportedFeatureError
+from drivers.errors import DeviceNotFoundError, DeviceTimeoutError, IncompatibleStateError, UnsupportedFeatureError
 
 log = logging.getLogger(__name__)
 
@@ -69,7 +69,7 @@ class OpenCVCamera(Camera):
     @property
     def sensor_size(self) -> tuple[int, int]:
         if self._size is None:
-            raise DeviceNotFoundError(f"{self.name}: frame size unknown until opened")
+            raise IncompatibleStateError(f"{self.name}: frame size unknown until opened")
         return self._size
 
     def _open(self) -> None:

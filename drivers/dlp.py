@@ -133,10 +133,11 @@ class PatternSequence:
 
     @property
     def n_display(self) -> int:
-        return self.patterns_to_display if self.patterns_to_display is not None else len(
-            self.entries)
+        """Patterns the sequencer shows (``patterns_to_display`` or one pass over the entries)."""
+        return len(self.entries) if self.patterns_to_display is None else self.patterns_to_display
 
     def lut_control(self) -> dp.LutControl:
+        """The LUT_CONTROL record that programs this sequence."""
         n_images = len(self.image_indexes) if self.source is PatternSource.FLASH else 1
         return dp.LutControl(len(self.entries), self.repeat, self.n_display, n_images)
 

@@ -124,6 +124,8 @@ class PacketError(ValueError):
 
 @dataclass(frozen=True)
 class Request:
+    """A decoded host request (what the controller, or a fake of it, receives)."""
+
     flags: int
     sequence: int
     command: int
@@ -140,6 +142,8 @@ class Request:
 
 @dataclass(frozen=True)
 class Reply:
+    """A decoded controller reply; ``data`` is the payload its length field covers."""
+
     flags: int
     sequence: int
     data: bytes
@@ -161,6 +165,7 @@ def encode_request(command: int, sequence: int, data: bytes = b"", read: bool = 
 
 
 def decode_request(report: bytes) -> Request:
+    """Parse a request report; ``PacketError`` if its header or length field is inconsistent."""
     if len(report) < HEADER_SIZE + 2:
         raise PacketError(f"request of {len(report)} bytes is shorter than its header")
     flags, sequence, length = struct.unpack_from("<BBH", report)
@@ -171,12 +176,14 @@ def decode_request(report: bytes) -> Request:
 
 
 def encode_reply(sequence: int, data: bytes = b"", error: bool = False, read: bool = True) -> bytes:
+    """One 64-byte reply report answering request ``sequence`` (the controller's side)."""
     flags = (FLAG_READ if read else 0) | (FLAG_ERROR if error else 0)
     header = struct.pack("<BBH", flags, sequence & 0xFF, len(data))
     return (header + bytes(data)).ljust(REPORT_SIZE, b"\x00")
 
 
 def decode_reply(report: bytes) -> Reply:
+    """Parse a reply report; ``PacketError`` if it is shorter than its header or length field."""
     if len(report) < HEADER_SIZE:
         raise PacketError(f"reply of {len(report)} bytes is shorter than its 4-byte header")
     flags, sequence, length = struct.unpack_from("<BBH", report)
@@ -247,10 +254,12 @@ class LutControl:
 
 
 def pack_exposure(exposure_us: int, frame_period_us: int) -> bytes:
+    """Data of EXPOSURE_FRAME_PERIOD: two little-endian u32 in microseconds."""
     return struct.pack("<II", exposure_us, frame_period_us)
 
 
 def unpack_exposure(data: bytes) -> tuple[int, int]:
+    """(exposure_us, frame_period_us) from the data of EXPOSURE_FRAME_PERIOD."""
     if len(data) != 8:
         raise PacketError(f"exposure/frame period has {len(data)} bytes, expected 8")
     exposure, period = struct.unpack("<II", data)

@@ -100,6 +100,8 @@ def unframe(line: bytes) -> str:
 
 @dataclass(frozen=True)
 class Request:
+    """A parsed host request (the box's side)."""
+
     id: int
     command: str
     args: tuple[str, ...]
@@ -107,6 +109,8 @@ class Request:
 
 @dataclass(frozen=True)
 class Reply:
+    """A parsed reply: ``OK`` with its tokens, or ``ERR`` with ``code`` and ``text``."""
+
     id: int
     ok: bool
     tokens: tuple[str, ...]
@@ -116,6 +120,8 @@ class Reply:
 
 @dataclass(frozen=True)
 class Event:
+    """An unsolicited ``!`` line from the box (``PULSE``, ``DONE``, ``WATCHDOG``, ...)."""
+
     name: str
     tokens: tuple[str, ...]
 
@@ -142,12 +148,14 @@ def _parse_id(token: str) -> int:
 
 
 def encode_request(request_id: int, command: str, *args: object) -> bytes:
+    """The framed request line; ``ValueError`` if ``request_id`` is outside 1..MAX_REQUEST_ID."""
     if not 1 <= request_id <= MAX_REQUEST_ID:
         raise ValueError(f"request_id must be in 1..{MAX_REQUEST_ID}, got {request_id}")
     return frame(" ".join([str(request_id), command, *(str(a) for a in args)]))
 
 
 def parse_request(line: bytes) -> Request:
+    """Parse a line sent by the host (the box's side); ``LineError`` if it is not a request."""
     parts = _tokens(unframe(line))
     if len(parts) < 2:
         raise LineError(f"request without command: {parts!r}")
@@ -158,16 +166,19 @@ def parse_request(line: bytes) -> Request:
 
 
 def encode_ok(request_id: int, *tokens: object) -> bytes:
+    """The framed ``OK`` reply line."""
     return frame(" ".join([str(request_id), "OK", *(str(t) for t in tokens)]))
 
 
 def encode_error(request_id: int, code: ErrorCode, text: str = "") -> bytes:
+    """The framed ``ERR`` reply line; ``text`` is reduced to the characters tokens may hold."""
     words = [str(request_id), "ERR", str(int(code)), code.name]
     words += [w for w in re.sub(r"[^A-Za-z0-9_.=:/+-]+", " ", text).split() if w]
     return frame(" ".join(words))
 
 
 def encode_event(name: str, *tokens: object) -> bytes:
+    """The framed ``!`` event line."""
     return frame(" ".join(["!", name, *(str(t) for t in tokens)]))
 
 
