@@ -98,7 +98,7 @@ def _format(value: float, log: bool) -> str:
         return f"1e{int(round(value))}"
     if value == 0:
         return "0"
-    if abs(value) >= 1000 or abs(value) < 0.01:
+    if abs(value) >= 1e5 or abs(value) < 0.01:
         return f"{value:.0e}"
     return f"{value:g}"
 
@@ -116,7 +116,7 @@ def line_plot(
 ) -> np.ndarray:
     """A line plot of several (label, x, y) series; non-finite and (on log axes) non-positive points are skipped."""
     width, height = size
-    left, right, top, bottom = 78, 170, 36, 50
+    left, right, top, bottom = 78, 170, 48, 50
     canvas = np.full((height, width, 3), 255, np.uint8)
     cleaned = []
     for label, xs, ys in series:
@@ -176,9 +176,9 @@ def line_plot(
             text = _format(v, logx)
             cv2.putText(canvas, text, (p[0] - 4 * len(text), top + plot_h + 16), FONT, 0.4, BLACK, 1, cv2.LINE_AA)
     cv2.rectangle(canvas, (left, top), (left + plot_w, top + plot_h), BLACK, 1)
-    cv2.putText(canvas, title, (left, 22), FONT, 0.55, BLACK, 1, cv2.LINE_AA)
+    cv2.putText(canvas, title, (left, 20), FONT, 0.55, BLACK, 1, cv2.LINE_AA)
     cv2.putText(canvas, xlabel, (left + plot_w // 2 - 4 * len(xlabel), height - 12), FONT, 0.45, BLACK, 1, cv2.LINE_AA)
-    cv2.putText(canvas, ylabel, (6, top - 8), FONT, 0.42, BLACK, 1, cv2.LINE_AA)
+    cv2.putText(canvas, ylabel, (6, top - 10), FONT, 0.42, BLACK, 1, cv2.LINE_AA)
     clip = (left, top, plot_w + 1, plot_h + 1)
     for i, (label, x, y) in enumerate(cleaned):
         colour = PALETTE[i % len(PALETTE)]
