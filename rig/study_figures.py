@@ -24,7 +24,7 @@ PALETTE = [
 
 
 def colorize(values: np.ndarray, lo: float | None = None, hi: float | None = None,
-             colormap: int = cv2.COLORMAP_JET, size: int | None = 300) -> np.ndarray:
+             colormap: int = cv2.COLORMAP_JET, size: int | None = 240) -> np.ndarray:
     """BGR image of a 2-D map scaled from ``lo`` to ``hi`` (default the finite range); NaN black."""
     arr = np.asarray(values, dtype=np.float64)
     finite = np.isfinite(arr)
@@ -39,7 +39,7 @@ def colorize(values: np.ndarray, lo: float | None = None, hi: float | None = Non
     return _fit(image, size)
 
 
-def grey_image(values: np.ndarray, size: int | None = 300) -> np.ndarray:
+def grey_image(values: np.ndarray, size: int | None = 240) -> np.ndarray:
     """BGR rendering of an intensity image stretched to its 1st..99th percentiles."""
     arr = np.asarray(values, dtype=np.float64)
     lo, hi = np.percentile(arr, [1, 99])
