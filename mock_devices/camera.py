@@ -141,7 +141,7 @@ class SimulatedCamera(Camera):
             if frame is None and projector.is_open and projector.pattern is not None:
                 frame = apply_gamma_lut(pattern_image(projector.pattern, projector.size), projector.gamma_lut)
         if frame is None:
-            return np.zeros(self.geometry.camera_shape)
+            return np.zeros(self.geometry.camera_shape, dtype=np.float32)
         return sample_projector_image(frame, self.mapping)
 
     def _render(self) -> np.ndarray:
