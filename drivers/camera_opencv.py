@@ -58,7 +58,6 @@ class OpenCVCamera(Camera):
         self._size: tuple[int, int] | None = None
         self._queue: collections.deque[Frame] = collections.deque()
         self._next_id = 0
-        self._triggers = 0
         self._failed_grab: str | None = None
 
     @property
@@ -129,7 +128,6 @@ class OpenCVCamera(Camera):
     def _start(self) -> None:
         self._queue.clear()
         self._next_id = 0
-        self._triggers = 0
         self._failed_grab = None
 
     def _stop(self) -> None:
@@ -139,8 +137,7 @@ class OpenCVCamera(Camera):
         import cv2
 
         count = self._burst_length if self._trigger_mode is TriggerMode.BURST else 1
-        trigger_index = self._triggers
-        self._triggers += 1
+        trigger_index = self.trigger_count - 1  # trigger() notes the trigger before this hook
         x, y, w, h = self.roi
         for _ in range(count):
             started = self.now()
