@@ -77,25 +77,6 @@ def scene_height(config: RigConfig, scene: str, geometry: synth.RigGeometry) -> 
     )
 
 
-def _readback_projector_class() -> type:
-    """GLProjector that reads its frame back when shown, in the thread that drives it.
-
-    An OpenGL context is current in one thread only, and the simulated camera is exposed from the
-    trigger box's serving thread (like a camera on a hardware trigger line); reading the frame back
-    in ``wait_shown`` hands that thread a finished image instead of a read from a foreign context.
-    """
-    from drivers.projector_gl import GLProjector
-
-    class ReadbackGLProjector(GLProjector):
-        def _wait(self, timeout_s: float) -> bool:
-            shown = super()._wait(timeout_s)
-            if shown:
-                self._last_frame()
-            return shown
-
-    return ReadbackGLProjector
-
-
 class SimulatedRig:
     """Opens the simulated rig of ``config`` looking at ``scene``; closes everything on exit.
 
@@ -142,11 +123,13 @@ class SimulatedRig:
 
     def __enter__(self) -> "SimulatedRig":
         from drivers.camera import PixelFormat
+        from drivers.projector_gl import GLProjector
         from mock_devices.camera import SimulatedCamera
 
         try:
-            projector_class = _readback_projector_class()
-            self.projector = self._stack.enter_context(projector_class(self.config.projector.size, name="GLProjector"))
+            # GLProjector reads each frame back when it is shown, in the thread that owns its
+            # OpenGL context: the camera, exposed from the trigger box's thread, never touches GL.
+            self.projector = self._stack.enter_context(GLProjector(self.config.projector.size, name="GLProjector"))
             self.camera = SimulatedCamera(
                 self.projector,
                 self.geometry,
