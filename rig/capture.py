@@ -7,12 +7,20 @@ field, what was expected and what was found.
 
 Writing goes through :class:`CaptureWriter`: frames and a manifest with ``complete: false`` are
 written into a temporary sibling directory ``<name>.incomplete-<random>``; the manifest is
-rewritten after every frame, so an interruption (exception, Ctrl-C, power loss) leaves a
-directory that is visibly incomplete and that ``read_capture(..., salvage=True)`` can still read.
-That directory is deliberately *left for salvage*, never removed: frames from a long scan are
-worth more than the disk space. Only when every pattern has its frame are the files fsynced,
-``complete`` set to true and the directory renamed to its final path. An existing capture is
-never overwritten unless the caller asks for it.
+rewritten (atomically, by rename) after every frame, so an interruption leaves a directory that
+is visibly incomplete and that ``read_capture(..., salvage=True)`` can still read. That directory
+is deliberately *left for salvage*, never removed: frames from a long scan are worth more than
+the disk space. Only when every pattern has its frame is ``complete`` set to true, the manifest
+and directories fsynced and the directory renamed to its final path, so a capture that claims
+to be complete always is, power loss included. An existing capture is never overwritten unless
+the caller asks for it.
+
+Durability of an interrupted capture: each frame file is fsynced as it is written; the
+``complete: false`` manifest is fsynced at most every :attr:`CaptureWriter.manifest_sync_s`
+(1 s) and when the capture is left incomplete, not after every frame (each fsync of it costs
+several milliseconds per frame). An exception or Ctrl-C loses nothing (the operating system
+still writes the files); a power loss or kernel crash in the middle of a scan may leave a
+manifest that lists only the frames of up to its last second, or, within the first second, none.
 """
 
 from __future__ import annotations
@@ -24,6 +32,7 @@ import logging
 import os
 import shutil
 import tempfile
+import time
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from datetime import datetime, timezone
@@ -438,16 +447,21 @@ def write_bytes_durable(path: Path, data: bytes) -> None:
         os.fsync(handle.fileno())
 
 
-def write_json_atomic(path: Path, obj: Any) -> None:
-    """Write JSON through a temporary file in the same directory and rename it into place."""
+def write_json_atomic(path: Path, obj: Any, durable: bool = True) -> None:
+    """Write JSON through a temporary file in the same directory and rename it into place.
+
+    Readers see the old or the new file, never a partial one. ``durable`` fsyncs the new file
+    before the rename (needed to survive a power loss, not a crash of the program).
+    """
     path = Path(path)
     text = json.dumps(obj, indent=2, ensure_ascii=False) + "\n"
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as handle:
             handle.write(text)
-            handle.flush()
-            os.fsync(handle.fileno())
+            if durable:
+                handle.flush()
+                os.fsync(handle.fileno())
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
@@ -477,7 +491,10 @@ class CaptureWriter:
     ``complete: true``. On an exception (or missing frames), the temporary directory
     ``<path>.incomplete-XXXX`` stays, with ``complete: false`` and an ``interrupted`` note, for
     salvage (``read_capture(dir, salvage=True)``); it is never renamed to ``path``.
+    See the module docstring for what survives a power loss.
     """
+
+    manifest_sync_s = 1.0  # longest time between fsyncs of an incomplete capture's manifest
 
     def __init__(
         self,
@@ -510,6 +527,7 @@ class CaptureWriter:
         self.shape = (int(manifest["camera"]["height"]), int(manifest["camera"]["width"]))
         self.temp_path: Path | None = None
         self._done: set[int] = set()
+        self._manifest_synced_at = 0.0  # time.monotonic() of the last fsynced manifest
 
     def __enter__(self) -> "CaptureWriter":
         if self.path.exists() and not self.overwrite:
@@ -517,12 +535,18 @@ class CaptureWriter:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.temp_path = Path(tempfile.mkdtemp(prefix=self.path.name + INCOMPLETE_MARK, dir=self.path.parent))
         (self.temp_path / "frames").mkdir()
-        self._write_manifest()
+        self._manifest_synced_at = time.monotonic()
+        self._write_manifest(durable=False)
         return self
 
-    def _write_manifest(self) -> None:
+    def _write_manifest(self, durable: bool = True) -> None:
+        """Rewrite the manifest; a non-durable rewrite is fsynced anyway once manifest_sync_s has passed."""
         assert self.temp_path is not None
-        write_json_atomic(self.temp_path / MANIFEST, self.manifest)
+        now = time.monotonic()
+        durable = durable or now - self._manifest_synced_at >= self.manifest_sync_s
+        write_json_atomic(self.temp_path / MANIFEST, self.manifest, durable=durable)
+        if durable:
+            self._manifest_synced_at = now
 
     def add_frame(self, pattern: int, image: np.ndarray, **metadata: Any) -> Path:
         """Store the frame of pattern index ``pattern`` (metadata: timestamp_s, exposure_us, ...)."""
@@ -542,7 +566,7 @@ class CaptureWriter:
         entry.update(metadata)
         self.manifest["frames"].append(entry)
         self._done.add(pattern)
-        self._write_manifest()
+        self._write_manifest(durable=False)
         return self.temp_path / relative
 
     def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> bool:
