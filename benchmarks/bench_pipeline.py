@@ -1,7 +1,8 @@
 """Benchmark: 12 uint8 frames (two frequencies x 6 steps, 1024 x 768) -> height map.
 
 Our path: phase shifting of both frequencies, Ding two-frequency unwrapping, shadow mask and
-eq. 1.15 against a reference phase precomputed as calibration would. Peer, in the same run:
+eq. 1.15 against a reference phase precomputed as calibration would; step by step through the
+public functions, and with the first two fused (``unwrap_two_frequency_stacks``). Peer, in the same run:
 OpenCV contrib's ``cv2.structured_light.SinusoidalPattern`` (PSP: three-step phase maps of both
 frequencies from frames 0, 2, 4 of each six-step set, i.e. shifts of 2 pi / 3, then
 ``unwrapPhaseMap`` of the high frequency, its histogram-based spatial unwrapper; it has no
@@ -10,7 +11,7 @@ result against the simulated truth.
 
     python benchmarks/bench_pipeline.py [--runs 9] [--frequencies 15 16] [--snr-db 30]
 
-Rows: our path with the processing thread pool (processing._blockwise.THREADS) and with one
+Rows: our paths with the processing thread pool (processing._blockwise.THREADS) and with one
 thread (interleaved), then OpenCV. Wall-clock medians depend on what else runs on the machine: the load average is printed, and
 the CPU time of the process, much less sensitive to it, beside them.
 """
@@ -34,7 +35,7 @@ from mock_devices import scenes, synth  # noqa: E402
 from processing import _blockwise  # noqa: E402
 from processing.height import phase_to_height  # noqa: E402
 from processing.phase_shift import phase_shift, shadow_mask, wrapped_phase  # noqa: E402
-from processing.temporal import unwrap_two_frequency  # noqa: E402
+from processing.temporal import unwrap_two_frequency, unwrap_two_frequency_stacks  # noqa: E402
 
 STEPS = 6
 
@@ -69,6 +70,18 @@ def our_pipeline(stack, frequencies, reference_phase, geometry) -> np.ndarray:
     valid &= unwrapped.valid
     delta = unwrapped.phase
     delta -= reference_phase  # in place: the unwrapped phase is ours to reuse
+    height = phase_to_height(delta, geometry.l0_mm, geometry.d0_mm, geometry.per_mm(frequencies[1]))
+    height[~valid] = np.nan
+    return height
+
+
+def fused_pipeline(stack, frequencies, reference_phase, geometry) -> np.ndarray:
+    """The same steps with phase shifting and unwrapping fused (unwrap_two_frequency_stacks)."""
+    scan = unwrap_two_frequency_stacks(stack[:STEPS], stack[STEPS:], *frequencies)
+    valid = shadow_mask(scan.modulation, scan.background)
+    valid &= scan.unwrapped.valid
+    delta = scan.unwrapped.phase
+    delta -= reference_phase
     height = phase_to_height(delta, geometry.l0_mm, geometry.d0_mm, geometry.per_mm(frequencies[1]))
     height[~valid] = np.nan
     return height
@@ -137,6 +150,9 @@ def main(argv: list[str] | None = None) -> int:
     def ours():
         return our_pipeline(obj, freqs, reference_phase, geometry)
 
+    def fused():
+        return fused_pipeline(obj, freqs, reference_phase, geometry)
+
     # Check the result against the simulated truth (orders: phase within pi of the truth).
     height = ours()
     unwrapped, _ = absolute_phase(obj, freqs)
@@ -145,26 +161,36 @@ def main(argv: list[str] | None = None) -> int:
     lit = obj_map.lit & valid
     order_errors = int(np.sum(np.abs(unwrapped.phase[lit] - truth_phase[lit]) >= np.pi))
     rms = float(np.sqrt(np.mean((height[lit] - heights[lit]) ** 2)))
+    fused_gap = float(np.max(np.abs(fused()[lit] - height[lit])))
 
-    tracemalloc.start()
-    ours()
-    _, traced_peak = tracemalloc.get_traced_memory()
-    tracemalloc.stop()
+    peaks = []
+    for func in (fused, ours):
+        tracemalloc.start()
+        func()
+        peaks.append(tracemalloc.get_traced_memory()[1] / 2**20)
+        tracemalloc.stop()
     rss_before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 
     threads = _blockwise.THREADS
     load_before = os.getloadavg()[0]
     print(f"timing {args.runs} interleaved runs (the OpenCV path takes about a second each) ...", file=sys.stderr)
-    rows = timed({f"fpp-rig, {threads} threads": with_threads(threads, ours), "fpp-rig, 1 thread": with_threads(1, ours)},
-                 args.runs)
+    rows = timed(
+        {
+            f"fpp-rig fused, {threads} threads": with_threads(threads, fused),
+            "fpp-rig fused, 1 thread": with_threads(1, fused),
+            f"fpp-rig step by step, {threads} threads": with_threads(threads, ours),
+            "fpp-rig step by step, 1 thread": with_threads(1, ours),
+        },
+        args.runs,
+    )
     # Separately: a second of OpenCV between two of our runs would flush the caches each time.
     rows.update(timed({"OpenCV PSP 2x computePhaseMap + unwrapPhaseMap": lambda: opencv_pipeline(obj, freqs, geometry)},
                       args.runs))
     rss_after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 
     peer = statistics.median(t[0] for t in rows["OpenCV PSP 2x computePhaseMap + unwrapPhaseMap"]) * 1e3
-    print("12 uint8 frames 1024x768 (2 frequencies x 6 steps) -> height map; fpp-rig = wrapped_phase "
-          "+ phase_shift + unwrap_two_frequency + shadow_mask + phase_to_height")
+    print("12 uint8 frames 1024x768 (2 frequencies x 6 steps) -> height map. fpp-rig step by step: wrapped_phase "
+          "+ phase_shift + unwrap_two_frequency; fused: unwrap_two_frequency_stacks; both + shadow_mask + phase_to_height")
     print(f"load average {load_before:.1f} before, {os.getloadavg()[0]:.1f} after ({os.cpu_count()} CPUs)")
     print(f"{'path':<50} {'median ms':>10} {'min ms':>8} {'CPU ms':>7} {'runs':>5} {'OpenCV/this':>12}")
     for name, times in rows.items():
@@ -172,10 +198,10 @@ def main(argv: list[str] | None = None) -> int:
         cpu = statistics.median(t[1] for t in times) * 1e3
         fastest = min(t[0] for t in times) * 1e3
         print(f"{name:<50} {median:>10.1f} {fastest:>8.1f} {cpu:>7.1f} {len(times):>5} {peer / median:>11.1f}x")
-    print(f"peak numpy allocations of one run (tracemalloc): {traced_peak / 2**20:.1f} MiB; "
+    print(f"peak numpy allocations of one run (tracemalloc): fused {peaks[0]:.1f} MiB, step by step {peaks[1]:.1f} MiB; "
           f"process maxrss {rss_after / 1024:.0f} MiB (+{(rss_after - rss_before) / 1024:.0f} MiB while timing)")
     print(f"check: {order_errors} wrong fringe orders among {lit.sum()} valid lit pixels, "
-          f"height RMS error {rms:.3f} mm, valid {100 * valid.mean():.1f}%")
+          f"height RMS error {rms:.3f} mm, valid {100 * valid.mean():.1f}%, fused vs step by step {fused_gap:.1e} mm")
     return 0
 
 

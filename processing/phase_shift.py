@@ -87,9 +87,40 @@ def shift_weights(steps: int, shifts: np.ndarray | None = None) -> np.ndarray:
     return weights
 
 
-def _kernel_dtype(stack: np.ndarray) -> type:
-    """float64 for float64 stacks; float32 (exact for 8/16-bit images) for everything else."""
-    return np.float64 if stack.dtype == np.float64 else np.float32
+@dataclass(frozen=True)
+class Demodulator:
+    """Block-level demodulation of one stack, for kernels that go on from the coefficients.
+
+    ``coefficients(frames)`` maps a block of frames (N, P) to (A, B cos phi, B sin phi)
+    (without A when ``full`` is False) in the working dtype: float64 for float64 stacks,
+    float32 (exact for 8- and 16-bit images) for everything else.
+    """
+
+    weights: np.ndarray
+    dtype: type
+    full: bool
+
+    def coefficients(self, frames: np.ndarray) -> np.ndarray:
+        return self.weights @ frames.astype(self.dtype, copy=False)
+
+
+def demodulator(stack: np.ndarray, shifts: np.ndarray | None = None, full: bool = True) -> Demodulator:
+    """Checked (N, H, W) stack -> the :class:`Demodulator` of its shifts (see :func:`shift_weights`)."""
+    weights = shift_weights(stack.shape[0], shifts)
+    dtype = np.float64 if stack.dtype == np.float64 else np.float32
+    return Demodulator(np.ascontiguousarray(weights if full else weights[1:], dtype=dtype), dtype, full)
+
+
+def block_angle(coeffs: np.ndarray) -> np.ndarray:
+    """atan2(B sin phi, B cos phi) of a coefficient block, working dtype, in [-pi, pi]."""
+    return np.arctan2(coeffs[-1], coeffs[-2])
+
+
+def block_modulation(coeffs: np.ndarray) -> np.ndarray:
+    """B = sqrt(c^2 + s^2) of a coefficient block (np.hypot is several times slower)."""
+    squared = coeffs[-2] * coeffs[-2]
+    squared += coeffs[-1] * coeffs[-1]
+    return np.sqrt(squared, out=squared)
 
 
 def _folded(phase: np.ndarray) -> np.ndarray:
@@ -101,27 +132,23 @@ def _folded(phase: np.ndarray) -> np.ndarray:
     return phase
 
 
-def _demodulate(stack: np.ndarray, weights: np.ndarray, full: bool) -> tuple[np.ndarray, ...]:
+def _demodulate(stack: np.ndarray, shifts: np.ndarray | None, full: bool) -> tuple[np.ndarray, ...]:
     """(phase, background, modulation) or (phase,) as flat float64 arrays, block by block."""
-    n = stack.shape[0]
-    dtype = _kernel_dtype(stack)
-    w = np.ascontiguousarray(weights if full else weights[1:], dtype=dtype)
+    demod = demodulator(stack, shifts, full)
 
     def kernel(frames: np.ndarray) -> tuple[np.ndarray, ...]:
-        coeffs = w @ frames.astype(dtype, copy=False)
-        cos_part, sin_part = coeffs[-2], coeffs[-1]
-        phase = _folded(np.arctan2(sin_part, cos_part))
+        coeffs = demod.coefficients(frames)
+        phase = _folded(block_angle(coeffs))
         if not full:
             return (phase,)
-        squared = cos_part * cos_part
-        squared += sin_part * sin_part
-        return phase, coeffs[0], np.sqrt(squared, out=squared)
+        return phase, coeffs[0], block_modulation(coeffs)
 
     dtypes = (np.float64,) * (3 if full else 1)
-    return blockwise(kernel, [stack.reshape(n, -1)], dtypes)
+    return blockwise(kernel, [stack.reshape(stack.shape[0], -1)], dtypes)
 
 
-def _check_stack(stack: np.ndarray) -> np.ndarray:
+def check_stack(stack: np.ndarray) -> np.ndarray:
+    """``stack`` as a real (N, H, W) array with N >= 3, else ValueError naming it."""
     arr = _validate.real_array(stack, "stack", ndim=3)
     if arr.shape[0] < 3:
         raise ValueError(f"stack: expected at least 3 frames (N, H, W), found shape {arr.shape}")
@@ -144,9 +171,9 @@ def phase_shift(stack: np.ndarray, shifts: np.ndarray | None = None) -> PhaseShi
     PhaseShiftResult
         ``phase`` in [-pi, pi), ``background`` A and ``modulation`` B, each (H, W) float64.
     """
-    arr = _check_stack(stack)
-    n, height, width = arr.shape
-    phase, background, modulation = _demodulate(arr, shift_weights(n, shifts), full=True)
+    arr = check_stack(stack)
+    _, height, width = arr.shape
+    phase, background, modulation = _demodulate(arr, shifts, full=True)
     return PhaseShiftResult(
         phase=phase.reshape(height, width),
         background=background.reshape(height, width),
@@ -168,9 +195,9 @@ def wrapped_phase(stack: np.ndarray, shifts: np.ndarray | None = None) -> np.nda
     -------
     phi : (H, W) float64 array in [-pi, pi)
     """
-    arr = _check_stack(stack)
-    n, height, width = arr.shape
-    (phase,) = _demodulate(arr, shift_weights(n, shifts), full=False)
+    arr = check_stack(stack)
+    _, height, width = arr.shape
+    (phase,) = _demodulate(arr, shifts, full=False)
     return phase.reshape(height, width)
 
 

@@ -11,6 +11,8 @@ Methods
 - :func:`unwrap_two_frequency`: Ding's number-theoretic method, coprime f1 < f2,
   ``m = round((f2 phi1 - f1 phi2) / 2 pi) = k2 f1 - k1 f2`` through a look-up table; exact
   while the phase errors stay below ``pi / (f1 + f2)``.
+- :func:`unwrap_two_frequency_stacks`: phase shifting of both stacks and Ding's method fused
+  in one blockwise pass (the fast path of a two-frequency scan).
 - :func:`unwrap_three_frequency`: the same on the pairs (f1, f3), (f2, f3) of three frequencies
   without a common divisor, each pair giving f3's order modulo f3 / gcd; combined by the
   Chinese remainder theorem. Tolerance ``min_i t_i pi / (f_i + f3)``, ``t_i = gcd(f_i, f3)``.
@@ -34,6 +36,7 @@ import numpy as np
 
 from processing import _validate
 from processing._blockwise import blockwise
+from processing.phase_shift import block_angle, block_modulation, check_stack, demodulator
 
 TWO_PI = 2.0 * np.pi
 
@@ -64,9 +67,6 @@ class UnwrapResult:
 # Kernels work on flat blocks of pixels (processing._blockwise) and in turns (phase / 2 pi), so
 # that normalising, rounding and look-ups are a handful of cheap vectorised operations.
 
-_BELOW_ONE = np.nextafter(1.0, 0.0)
-
-
 def _fraction(turns: np.ndarray, exact_top: bool = True) -> np.ndarray:
     """``turns`` taken into [0, 1) in place (NaN stays NaN); no np.mod, which is slow.
 
@@ -78,7 +78,8 @@ def _fraction(turns: np.ndarray, exact_top: bool = True) -> np.ndarray:
     if exact_top:
         top = turns >= 1.0
         if top.any():
-            turns[top] = _BELOW_ONE
+            one = turns.dtype.type(1.0)
+            turns[top] = np.nextafter(one, turns.dtype.type(0.0))
     return turns
 
 
@@ -205,12 +206,7 @@ def unwrap_two_frequency(phi1: np.ndarray, phi2: np.ndarray, f1: int, f2: int) -
     :func:`pair_table` (cached per (f1, f2)) gives (k1, k2). The orders are exact while the
     errors of phi1 and phi2 stay below ``pi / (f1 + f2)``.
     """
-    f1 = _validate.positive_int(f1, "f1")
-    f2 = _validate.positive_int(f2, "f2")
-    if not f1 < f2:
-        raise ValueError(f"f2: expected f1 < f2, found f1 = {f1}, f2 = {f2}")
-    if math.gcd(f1, f2) != 1:
-        raise ValueError(f"f1, f2: {f1} and {f2} are not coprime (gcd {math.gcd(f1, f2)})")
+    f1, f2 = _coprime_pair(f1, f2)
     p1 = _validate.phase_map(phi1, "phi1", refuse_infinity=False)
     p2 = _validate.phase_map(phi2, "phi2", p1.shape, refuse_infinity=False)
     table = pair_table(f1, f2)
@@ -221,6 +217,87 @@ def unwrap_two_frequency(phi1: np.ndarray, phi2: np.ndarray, f1: int, f2: int) -
         return _finish(tb, k2, valid, finite)
 
     return _run(kernel, [p1, p2])
+
+
+def _coprime_pair(f1: object, f2: object) -> tuple[int, int]:
+    f1 = _validate.positive_int(f1, "f1")
+    f2 = _validate.positive_int(f2, "f2")
+    if not f1 < f2:
+        raise ValueError(f"f2: expected f1 < f2, found f1 = {f1}, f2 = {f2}")
+    if math.gcd(f1, f2) != 1:
+        raise ValueError(f"f1, f2: {f1} and {f2} are not coprime (gcd {math.gcd(f1, f2)})")
+    return f1, f2
+
+
+@dataclass
+class TwoFrequencyScan:
+    """Output of :func:`unwrap_two_frequency_stacks`.
+
+    Attributes
+    ----------
+    unwrapped : UnwrapResult
+        Absolute phase, orders and validity at f2, as :func:`unwrap_two_frequency` gives them.
+    background, modulation : (H, W) float64
+        A and B of the f2 stack, for :func:`processing.phase_shift.shadow_mask`.
+    """
+
+    unwrapped: UnwrapResult
+    background: np.ndarray
+    modulation: np.ndarray
+
+
+def unwrap_two_frequency_stacks(
+    stack1: np.ndarray,
+    stack2: np.ndarray,
+    f1: int,
+    f2: int,
+    shifts1: np.ndarray | None = None,
+    shifts2: np.ndarray | None = None,
+) -> TwoFrequencyScan:
+    """Phase shifting of two stacks and Ding's two-frequency unwrapping in one pass.
+
+    The same arithmetic as :func:`processing.phase_shift.phase_shift` on each stack followed
+    by :func:`unwrap_two_frequency`, fused block by block: the wrapped phases never leave the
+    CPU cache and stay in the stacks' working precision (float32 for integer frames), which
+    makes a 1024 x 768 two-frequency scan about a fifth cheaper. The absolute phase then
+    carries float32 rounding of the wrapped turn, below 1e-6 rad.
+
+    Parameters
+    ----------
+    stack1, stack2 : (N1, H, W) and (N2, H, W) arrays
+        Phase-shifted frames of frequencies f1 and f2 (pattern ``phase_rad`` 0), N >= 3.
+    f1, f2 : int
+        Coprime fringe counts across the projector, f1 < f2.
+    shifts1, shifts2 : (N,) arrays, optional
+        Phase shifts of each stack; default 2 pi k / N.
+
+    Returns
+    -------
+    TwoFrequencyScan
+    """
+    f1, f2 = _coprime_pair(f1, f2)
+    s1 = check_stack(stack1)
+    s2 = check_stack(stack2)
+    _validate.same_shape(s2[0], s1.shape[1:], "stack2 frames")
+    low = demodulator(s1, shifts1, full=False)
+    high = demodulator(s2, shifts2, full=True)
+    table = pair_table(f1, f2)
+
+    def kernel(frames1: np.ndarray, frames2: np.ndarray) -> tuple[np.ndarray, ...]:
+        coeffs1, coeffs2 = low.coefficients(frames1), high.coefficients(frames2)
+        turns1 = _fraction(block_angle(coeffs1) * (1.0 / TWO_PI), exact_top=False)
+        turns2 = _fraction(block_angle(coeffs2) * (1.0 / TWO_PI))
+        k2, valid, finite = _pair_lookup(turns1, turns2, table, f1, f2)
+        return (*_finish(turns2, k2, valid, finite), coeffs2[0], block_modulation(coeffs2))
+
+    shape = s1.shape[1:]
+    phase, orders, valid, background, modulation = blockwise(
+        kernel,
+        [s1.reshape(s1.shape[0], -1), s2.reshape(s2.shape[0], -1)],
+        (np.float64, np.int64, np.bool_, np.float64, np.float64),
+    )
+    unwrapped = UnwrapResult(phase=phase.reshape(shape), orders=orders.reshape(shape), valid=valid.reshape(shape))
+    return TwoFrequencyScan(unwrapped, background.reshape(shape), modulation.reshape(shape))
 
 
 @lru_cache(maxsize=64)
