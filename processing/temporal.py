@@ -67,6 +67,7 @@ class UnwrapResult:
 # Kernels work on flat blocks of pixels (processing._blockwise) and in turns (phase / 2 pi), so
 # that normalising, rounding and look-ups are a handful of cheap vectorised operations.
 
+
 def _fraction(turns: np.ndarray, exact_top: bool = True) -> np.ndarray:
     """``turns`` taken into [0, 1) in place (NaN stays NaN); no np.mod, which is slow.
 
