@@ -2,18 +2,19 @@
 
 Our path: phase shifting of both frequencies, Ding two-frequency unwrapping, shadow mask and
 eq. 1.15 against a reference phase precomputed as calibration would; step by step through the
-public functions, and with the first two fused (``unwrap_two_frequency_stacks``). Peer, in the same run:
-OpenCV contrib's ``cv2.structured_light.SinusoidalPattern`` (PSP: three-step phase maps of both
-frequencies from frames 0, 2, 4 of each six-step set, i.e. shifts of 2 pi / 3, then
-``unwrapPhaseMap`` of the high frequency, its histogram-based spatial unwrapper; it has no
+public functions, and with the first two fused (``unwrap_two_frequency_stacks``). Peer, in the
+same run: OpenCV contrib's ``cv2.structured_light.SinusoidalPattern`` (PSP: three-step phase
+maps of both frequencies from frames 0, 2, 4 of each six-step set, i.e. shifts of 2 pi / 3,
+then ``unwrapPhaseMap`` of the high frequency, its histogram-based spatial unwrapper; it has no
 temporal unwrapping and no height). Prints medians, the ratio, peak memory and a check of the
 result against the simulated truth.
 
     python benchmarks/bench_pipeline.py [--runs 9] [--frequencies 15 16] [--snr-db 30]
 
 Rows: our paths with the processing thread pool (processing._blockwise.THREADS) and with one
-thread (interleaved), then OpenCV. Wall-clock medians depend on what else runs on the machine: the load average is printed, and
-the CPU time of the process, much less sensitive to it, beside them.
+thread (interleaved), then OpenCV. Wall-clock medians depend on what else runs on the machine:
+the load average is printed, and the CPU time of the process, much less sensitive to it,
+beside them.
 """
 
 from __future__ import annotations
