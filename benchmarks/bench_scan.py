@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import os
 import shutil
 import statistics
 import sys
@@ -105,6 +106,7 @@ def main() -> int:
     config = dataclasses.replace(
         RigConfig(), camera=CameraConfig(width=width, height=height), trigger=TriggerConfig(backend=args.trigger)
     )
+    load_before = os.getloadavg()[0]
     work = Path(tempfile.mkdtemp(prefix="bench-scan-"))
     results: dict[str, list[dict[str, float]]] = {"writer thread": [], "inline writer (peer)": []}
     try:
@@ -119,6 +121,8 @@ def main() -> int:
             read_capture(work / "warm-up")  # the capture is complete and its checksums hold
         print(f"simulated scan: {len(config.scan.patterns())} frames, camera {width}x{height}, projector "
               f"{config.projector.width}x{config.projector.height}, trigger {args.trigger}, {args.runs} runs (medians)")
+        # Everything here is CPU time on this machine's cores: compare figures taken at a similar load.
+        print(f"load average (1 min) {load_before:.1f} before, {os.getloadavg()[0]:.1f} after, {os.cpu_count()} CPUs")
         ours = summarise("writer thread", results["writer thread"])
         peer = summarise("inline writer (peer)", results["inline writer (peer)"])
         print(f"ratio wall inline / thread: {peer['wall_s'] / ours['wall_s']:.2f}")
