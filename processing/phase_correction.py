@@ -118,8 +118,9 @@ def neighbour_prediction(phase: np.ndarray, valid: np.ndarray) -> np.ndarray:
     """Each pixel's phase predicted from its neighbours, robust to one wrong neighbour.
 
     The mean of each opposite pair (left-right, up-down and both diagonals) is exact on a plane,
-    whatever its slope; the prediction is the median of the available pairs. Where no pair is
-    complete (corners of shadows), the median of the valid single neighbours; NaN if none.
+    whatever its slope; the prediction is the median of the complete pairs. Where fewer than two
+    pairs are complete (image borders, corners of shadows), one wrong neighbour could sway it: the
+    median of the valid single neighbours is used instead; NaN if there is none.
     """
     padded = np.pad(np.where(valid, phase, np.nan), 1, constant_values=np.nan)
     rows, cols = phase.shape
@@ -129,7 +130,7 @@ def neighbour_prediction(phase: np.ndarray, valid: np.ndarray) -> np.ndarray:
 
     offsets = ((0, 1), (1, 0), (1, 1), (1, -1))
     pairs = np.stack([(shifted(-dy, -dx) + shifted(dy, dx)) / 2.0 for dy, dx in offsets])
-    usable = np.isfinite(pairs).any(axis=0)
+    usable = np.isfinite(pairs).sum(axis=0) >= 2
     out = np.full(phase.shape, np.nan)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns: pixels without valid neighbours

@@ -135,3 +135,16 @@ def test_order_changes_are_accepted_only_where_they_fit_the_neighbours() -> None
     out = accept_if_consistent(candidate, measured, valid)
     assert abs(out[10, 20] - truth[10, 20]) < 0.1
     assert abs(out[30, 40] - truth[30, 40]) < 0.1
+
+
+def test_order_fixes_on_the_border_survive_a_wrong_neighbour() -> None:
+    # Regression: at the last column only the up-down pair is complete; with the pixel above also
+    # wrong, that pair alone rejected the right fix (3 pixels left wrong on 1000 x 1000 Table 4.1).
+    from processing.phase_correction import accept_if_consistent
+
+    truth = np.add.outer(np.linspace(0.0, 1.0, 20), np.arange(30) * 0.2)
+    measured = truth.copy()
+    measured[9, -1] -= 5 * TWO_PI
+    measured[10, -1] -= 3 * TWO_PI
+    out = accept_if_consistent(truth, measured, np.ones(truth.shape, dtype=bool))
+    np.testing.assert_allclose(out, truth)
