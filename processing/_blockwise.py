@@ -6,9 +6,11 @@ thousand keeps the temporaries in the CPU cache and in the allocator's small-blo
 outputs are allocated at full size. The loop is over blocks (about fifty per megapixel), never
 over pixels.
 
-numpy releases the GIL inside its loops, so the blocks are shared between the calling thread and
-a small pool: ``FPP_THREADS`` (environment) sets the number of threads, default the CPUs this
-process may use, at most 4; 1 disables the pool.
+numpy releases the GIL inside its loops, so the blocks can be shared between the calling thread
+and a small pool: ``FPP_THREADS`` (environment) sets the number of threads, default 1 (no pool).
+On the shared 2-core development machine a second thread bought nothing: with blocks this small
+the threads mostly wait for each other's GIL hand-over and the other core is seldom idle (see
+benchmarks/bench_pipeline.py, which times both). On a machine with idle cores, try 2-4.
 """
 
 from __future__ import annotations
@@ -25,16 +27,12 @@ BLOCK = 16384  # pixels per block: float64 temporaries of 128 KiB stay in L2
 
 def _thread_count() -> int:
     configured = os.environ.get("FPP_THREADS")
-    if configured is not None:
-        try:
-            return max(1, int(configured))
-        except ValueError:
-            raise ValueError(f"FPP_THREADS: expected a positive integer, found {configured!r}") from None
+    if configured is None:
+        return 1
     try:
-        available = len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        available = os.cpu_count() or 1
-    return max(1, min(4, available))
+        return max(1, int(configured))
+    except ValueError:
+        raise ValueError(f"FPP_THREADS: expected a positive integer, found {configured!r}") from None
 
 
 THREADS = _thread_count()
