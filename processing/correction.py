@@ -119,6 +119,12 @@ def correct_auto(
        measured phase did (so a poor L, e.g. at steep edges, cannot spoil correct pixels);
     3. keep L (denoised) where that phase agrees with it within ``k_sigma`` noise standard
        deviations, the measured phase with its corrected order where it does not.
+
+    Measured (benchmarks/bench_rpca.py, tests): Table 4.1 at 1000 x 1000, NMSE_h 0.00095 against
+    0.00091 for ``rpca-phase`` alone and 0.0129 with the true orders; but where the low-rank
+    model misses structure, ``rpca-phase`` alone loses: isolated objects at 35 dB 0.0026 (auto
+    0.0003, none 0.0041), and 64 fringes over 160 px (2.5 rad per pixel) 1.3 mm RMS against
+    0.12 mm uncorrected (auto 0.056 mm). k_sigma = 4 was best of 3, 4, 5 over six scenes.
     """
     start = time.perf_counter()
     phase, wrapped, valid = _inputs(absolute_phase, wrapped_phase, mask)
