@@ -11,10 +11,9 @@ result against the simulated truth.
 
     python benchmarks/bench_pipeline.py [--runs 9] [--frequencies 15 16] [--snr-db 30]
 
-Rows: our paths on one thread (the default) and on two (processing._blockwise.THREADS, env
-FPP_THREADS), interleaved, then OpenCV. Wall-clock medians depend on what else runs on the machine:
-the load average is printed, and the CPU time of the process, much less sensitive to it,
-beside them.
+Rows: our two paths (interleaved, single-threaded), then OpenCV. Wall-clock medians depend on
+what else runs on the machine: the load average is printed, and the CPU time of the process,
+much less sensitive to it, beside them.
 """
 
 from __future__ import annotations
@@ -33,7 +32,6 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from mock_devices import scenes, synth  # noqa: E402
-from processing import _blockwise  # noqa: E402
 from processing.height import phase_to_height  # noqa: E402
 from processing.phase_shift import phase_shift, shadow_mask, wrapped_phase  # noqa: E402
 from processing.temporal import unwrap_two_frequency, unwrap_two_frequency_stacks  # noqa: E402
@@ -106,32 +104,18 @@ def opencv_pipeline(stack, frequencies, geometry):
 def timed(funcs: dict, runs: int) -> dict[str, list[tuple[float, float]]]:
     """(wall, CPU) seconds of each function, interleaved run by run so load changes hit all alike.
 
-    CPU time is the process's (all threads): on a machine shared with other jobs it is far
-    less sensitive to their load than the wall clock.
+    CPU time is the process's (all threads, OpenCV uses several): on a machine shared with
+    other jobs it is far less sensitive to their load than the wall clock.
     """
     times: dict[str, list[tuple[float, float]]] = {name: [] for name in funcs}
     for func in funcs.values():
-        func()  # warm-up: caches, look-up tables, thread pool, first page faults
+        func()  # warm-up: caches, look-up tables, first page faults
     for _ in range(runs):
         for name, func in funcs.items():
             wall, cpu = time.perf_counter(), time.process_time()
             func()
             times[name].append((time.perf_counter() - wall, time.process_time() - cpu))
     return times
-
-
-def with_threads(count: int, func):
-    """``func`` run with the processing thread count set to ``count``."""
-
-    def run():
-        saved = _blockwise.THREADS
-        _blockwise.THREADS = count
-        try:
-            return func()
-        finally:
-            _blockwise.THREADS = saved
-
-    return run
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -174,15 +158,7 @@ def main(argv: list[str] | None = None) -> int:
 
     load_before = os.getloadavg()[0]
     print(f"timing {args.runs} interleaved runs (the OpenCV path takes about a second each) ...", file=sys.stderr)
-    rows = timed(
-        {
-            "fpp-rig fused, 1 thread": with_threads(1, fused),
-            "fpp-rig fused, 2 threads": with_threads(2, fused),
-            "fpp-rig step by step, 1 thread": with_threads(1, ours),
-            "fpp-rig step by step, 2 threads": with_threads(2, ours),
-        },
-        args.runs,
-    )
+    rows = timed({"fpp-rig fused": fused, "fpp-rig step by step": ours}, args.runs)
     # Separately: a second of OpenCV between two of our runs would flush the caches each time.
     rows.update(timed({"OpenCV PSP 2x computePhaseMap + unwrapPhaseMap": lambda: opencv_pipeline(obj, freqs, geometry)},
                       args.runs))
