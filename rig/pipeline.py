@@ -60,6 +60,9 @@ from rig.errors import CaptureError, ProcessingError
 log = logging.getLogger(__name__)
 
 TWO_PI = 2.0 * np.pi
+# The correction a user gets without asking (rig process, rig scan --process, rig demo): the best
+# measured. ProcessOptions() itself corrects nothing, so calibration fits see the measured phase.
+DEFAULT_CORRECTION = "auto"
 UNWRAP_METHODS = ("auto", "two-frequency", "three-frequency", "hierarchical", "heterodyne", "gray", "spatial", "ftp")
 
 

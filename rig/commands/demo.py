@@ -11,7 +11,7 @@ import numpy as np
 
 from mock_devices.scenes import SCENES
 from rig.errors import ConfigError
-from rig.pipeline import ProcessOptions, process, total_steps, write_outputs
+from rig.pipeline import DEFAULT_CORRECTION, ProcessOptions, process, total_steps, write_outputs
 from rig.progress import Progress
 from rig.simulation import demo_geometry, simulate_scan, write_simulated_scan
 
@@ -68,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
         progress.step("synthesised")
         paths = write_simulated_scan(scan, out / "scan")
         progress.step("captures written")
-        result = process(paths.capture, paths.calibration, ProcessOptions(), progress=progress)
+        result = process(paths.capture, paths.calibration, ProcessOptions(correction=DEFAULT_CORRECTION), progress=progress)
         report = write_outputs(result, out / "processed")
         progress.step("outputs")
     assert result.height is not None

@@ -7,7 +7,7 @@ import json
 import sys
 from pathlib import Path
 
-from rig.pipeline import CORRECTIONS, DENOISERS, UNWRAP_METHODS, ProcessOptions, process, total_steps, write_outputs
+from rig.pipeline import CORRECTIONS, DEFAULT_CORRECTION, DENOISERS, UNWRAP_METHODS, ProcessOptions, process, total_steps, write_outputs
 from rig.errors import ConfigError
 from rig.progress import Progress
 
@@ -29,7 +29,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "frequency 1 is present, two-frequency for 2 coprime, heterodyne or three-frequency for 3)",
     )
     parser.add_argument("--denoise", default="none", choices=sorted(DENOISERS), help="fringe denoising before phase (default none)")
-    parser.add_argument("--correction", default="auto", choices=sorted(CORRECTIONS), help="phase / fringe-order correction (default auto)")
+    parser.add_argument("--correction", default=DEFAULT_CORRECTION, choices=sorted(CORRECTIONS), help=f"phase / fringe-order correction (default {DEFAULT_CORRECTION})")
     parser.add_argument(
         "--min-modulation", type=float, default=0.2, metavar="RATIO",
         help="valid pixels need fringe modulation B >= RATIO x background and x the image's 99th percentile of B (default 0.2)",

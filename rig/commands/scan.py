@@ -99,10 +99,10 @@ def run(args: argparse.Namespace) -> int:
     )
     print(result.path)  # stdout: the capture directory, for scripts (the default name has the time in it)
     if args.process:
-        from rig.pipeline import process_capture, total_steps
+        from rig.pipeline import DEFAULT_CORRECTION, ProcessOptions, process_capture, total_steps
 
         destination = args.process_output or output.with_name(output.name + "-processed")
         with Progress(f"process {output}", total=total_steps(with_reference=True)) as progress:
-            process_capture(output, args.calibration, destination, progress=progress)
+            process_capture(output, args.calibration, destination, ProcessOptions(correction=DEFAULT_CORRECTION), progress=progress)
         print(destination)
     return 0
