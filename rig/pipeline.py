@@ -54,6 +54,7 @@ from calibration.errors import CalibrationError
 from calibration.store import Calibration, read_calibration
 from processing.patterns import sinusoid_shift
 from rig import __version__
+from rig import gamma_correction
 from rig.capture import Capture, check_same_patterns, read_capture
 from rig.errors import CaptureError, ProcessingError
 
@@ -503,6 +504,7 @@ CORRECTIONS: dict[str, Callable[[SceneState, ProcessOptions], None]] = {
     "none": _correction_none,
     **{name: _registered_correction(name) for name in ("vote", "rpca-orders", "rpca-phase", "auto")},
 }
+gamma_correction.register(CORRECTIONS)  # --correction gamma-table: the phase-ripple table of rig calibrate
 
 
 def stage_correction(state: SceneState, options: ProcessOptions) -> None:

@@ -215,12 +215,11 @@ def test_stereo_session_recomputed_from_stored_poses(tmp_path):
         acquire(config, CalibrationPlan(model="stereo", board_views=3), tmp_path / "sim", show_progress=False)
 
 
-def test_gamma_ripple_removed_in_processing(tmp_path, monkeypatch):
+def test_gamma_ripple_removed_in_processing(tmp_path):
     """A gamma-2.2 projector under 3-step phase shifting, not pre-corrected: the ripple table the
     calibration learnt on the reference plane takes the waves out of the object's heights."""
     from rig import gamma_correction, pipeline
 
-    monkeypatch.setitem(pipeline.CORRECTIONS, gamma_correction.NAME, gamma_correction.correct_gamma_ripple)
     config = tmp_path / "rig.toml"
     config.write_text(RIG.replace("steps = 4", "steps = 3").replace("gamma = 1.8", "gamma = 2.2").replace("snr_db = 30", "snr_db = 40"))
     assert main(["calibrate", "--config", str(config), "-o", str(tmp_path / "cal"), "--board", "none",
@@ -235,6 +234,12 @@ def test_gamma_ripple_removed_in_processing(tmp_path, monkeypatch):
         valid = np.isfinite(result.height)
         errors[correction] = float(np.sqrt(np.mean((result.height[valid] - truth[valid]) ** 2)))
     assert errors[gamma_correction.NAME] < errors["none"] / 2
+    # and from the command line
+    assert main(["process", str(tmp_path / "obj"), "--calibration", str(tmp_path / "cal"), "--correction", "gamma-table",
+                 "-o", str(tmp_path / "out"), "-q"]) == 0
+    height = np.load(tmp_path / "out" / "height.npy")
+    valid = np.isfinite(height)
+    assert float(np.sqrt(np.mean((height[valid] - truth[valid]) ** 2))) == pytest.approx(errors[gamma_correction.NAME], rel=1e-6)
 
 
 def test_gauge_block_measured_through_the_whole_product(session, tmp_path):
