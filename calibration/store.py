@@ -9,10 +9,8 @@ so rewriting a file never loses what another tool recorded.
 
 from __future__ import annotations
 
-import json
 import math
 import os
-import tempfile
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
@@ -20,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from calibration.errors import CalibrationError
+from calibration.jsonfile import read_json, write_json_atomic
 
 FORMAT = "fpp-calibration"
 VERSION = 1
@@ -144,16 +143,7 @@ def read_calibration(path: str | os.PathLike[str]) -> Calibration:
         directory, file = path.parent, path
     else:
         directory, file = path, path / FILENAME
-    try:
-        text = file.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise CalibrationError(f"{file}: missing (not a calibration directory?)") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise CalibrationError(f"{file}: cannot read: {exc}") from None
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise CalibrationError(f"{file}: not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}") from None
+    data = read_json(file, CalibrationError, "missing (not a calibration directory?)")
     return Calibration.from_dict(data, path=directory)
 
 
@@ -171,16 +161,6 @@ def write_calibration(path: str | os.PathLike[str], calibration: Calibration) ->
     validate(data, str(directory / FILENAME))
     directory.mkdir(parents=True, exist_ok=True)
     target = directory / FILENAME
-    fd, tmp = tempfile.mkstemp(prefix=f".{FILENAME}.", suffix=".tmp", dir=directory)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            json.dump(data, handle, indent=2, ensure_ascii=False)
-            handle.write("\n")
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(tmp, target)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_json_atomic(target, data)
     calibration.path = directory
     return target

@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import copy
 import hashlib
-import json
 import logging
 import os
 import shutil
@@ -42,6 +41,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from calibration.jsonfile import read_json, write_json_atomic
 from processing.patterns import PATTERN_KINDS
 from rig.errors import CaptureError
 
@@ -370,16 +370,7 @@ def read_capture(path: str | os.PathLike[str], salvage: bool = False, verify: bo
         raise CaptureError(f"{path}: capture directory not found")
     if not path.is_dir():
         raise CaptureError(f"{path}: expected a capture directory, found a file")
-    try:
-        text = manifest_path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise CaptureError(f"{manifest_path}: missing (not a capture directory?)") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise CaptureError(f"{manifest_path}: cannot read: {exc}") from None
-    try:
-        manifest = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise CaptureError(f"{manifest_path}: not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}") from None
+    manifest = read_json(manifest_path, CaptureError, "missing (not a capture directory?)")
     validate_manifest(manifest, str(manifest_path))
     capture = Capture(path=path, manifest=manifest)
     if not capture.complete and not salvage:
@@ -445,27 +436,6 @@ def write_bytes_durable(path: Path, data: bytes) -> None:
         handle.write(data)
         handle.flush()
         os.fsync(handle.fileno())
-
-
-def write_json_atomic(path: Path, obj: Any, durable: bool = True) -> None:
-    """Write JSON through a temporary file in the same directory and rename it into place.
-
-    Readers see the old or the new file, never a partial one. ``durable`` fsyncs the new file
-    before the rename (needed to survive a power loss, not a crash of the program).
-    """
-    path = Path(path)
-    text = json.dumps(obj, indent=2, ensure_ascii=False) + "\n"
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            handle.write(text)
-            if durable:
-                handle.flush()
-                os.fsync(handle.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def encode_image(image: np.ndarray, bit_depth: int) -> tuple[bytes, str]:
