@@ -16,6 +16,7 @@ from pathlib import Path
 
 from calibration.camera import BoardSpec
 from calibration.errors import CalibrationError
+from rig.commands._common import add_command, add_report_options, print_json, split_size
 from rig.errors import ConfigError
 
 
@@ -28,10 +29,9 @@ def _heights(text: str) -> tuple[float, ...]:
 
 def _size(text: str) -> tuple[int, int]:
     try:
-        width, height = (int(v) for v in text.lower().split("x"))
+        return split_size(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, found {text!r}") from None
-    return width, height
 
 
 NO_BOARD = "none"
@@ -54,8 +54,8 @@ def _board(text: str) -> BoardSpec | str:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    parser = subparsers.add_parser(
-        "calibrate",
+    parser = add_command(
+        subparsers, "calibrate", run,
         help="calibrate the rig: reference plane, planes at known heights, board, gamma -> calibration.json",
         description="Walk through a calibration session (the simulated rig runs it unattended) and fit "
         "l0, d0, f0 (reference-plane model) or a per-pixel polynomial; or recompute from a stored "
@@ -88,9 +88,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="for --import-opencv: where projector pixel k sits in the phase convention "
                         "(0.5: this product's patterns; 0: phase 2 pi f k / W at column k, as SLMaster)")
     parser.add_argument("--overwrite", action="store_true", help="replace an existing calibration directory")
-    parser.add_argument("--json", action="store_true", help="print calibration.json on stdout")
-    parser.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
-    parser.set_defaults(func=run)
+    add_report_options(parser, json_help="print calibration.json on stdout")
 
 
 def _import_opencv(args: argparse.Namespace) -> int:
@@ -163,5 +161,5 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {line}", file=sys.stderr)
     print(f"{cal.where}: {cal.model} calibration written", file=sys.stderr)
     if args.json:
-        print(json.dumps(cal.to_dict(), indent=2))
+        print_json(cal.to_dict())
     return 0

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from mock_devices.scenes import SCENES
+from rig.commands._common import add_command, add_report_options, print_json, split_size
 from rig.errors import ConfigError
 from rig.pipeline import DEFAULT_CORRECTION, ProcessOptions, process, total_steps, write_outputs
 from rig.progress import Progress
@@ -17,8 +18,8 @@ from rig.simulation import demo_geometry, simulate_scan, write_simulated_scan
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    parser = subparsers.add_parser(
-        "demo",
+    parser = add_command(
+        subparsers, "demo", run,
         help="simulate a scan of a built-in object, process it and report the height error",
         description="Synthesise an object capture, a reference-plane capture and their calibration "
         "(4-step fringes at 1, 8 and 64 periods), process them like `rig process` and write the height "
@@ -30,14 +31,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--size", default="640x480", metavar="WxH", help="camera size (default 640x480)")
     parser.add_argument("--snr", type=float, default=35.0, metavar="DB", help="camera noise, SNR in dB (default 35)")
     parser.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
-    parser.add_argument("--json", action="store_true", help="print a summary as JSON on stdout")
-    parser.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
-    parser.set_defaults(func=run)
+    add_report_options(parser)
 
 
 def parse_size(text: str) -> tuple[int, int]:
     try:
-        width, height = (int(v) for v in text.lower().split("x"))
+        width, height = split_size(text)
     except ValueError:
         raise ConfigError(f"--size: expected WIDTHxHEIGHT such as 640x480, found {text!r}") from None
     if not (16 <= width <= 8192 and 16 <= height <= 8192):
@@ -91,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
     }
     (out / "demo.json").write_text(json.dumps(summary, indent=2) + "\n")
     if args.json:
-        print(json.dumps(summary, indent=2))
+        print_json(summary)
         return 0
     e = summary["height_error_mm"]
     print(f"demo: {args.scene} {width}x{height}, unwrapped with {summary['unwrap']}, {summary['valid_fraction']:.1%} pixels valid")

@@ -13,6 +13,8 @@ import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from rig.commands._common import add_command
+
 log = logging.getLogger(__name__)
 
 OPENCV_PROBE_INDICES = 4  # probed where the platform does not list video devices
@@ -150,15 +152,14 @@ def format_probe(probe: Probe) -> str:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    parser = subparsers.add_parser(
-        "devices",
+    parser = add_command(
+        subparsers, "devices", run,
         help="list connected cameras, serial ports, DLP projectors and the simulated rig",
         description="List what is connected: OpenCV and Basler cameras, serial ports (trigger box), "
         "TI DLP projectors on USB, whether off-screen rendering works, and the simulated devices. "
         "The first column is the backend name for the rig config file, the second the key that selects the device.",
     )
     parser.add_argument("--no-opencv", action="store_true", help="skip opening OpenCV cameras (slow on some systems)")
-    parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from rig.commands._common import add_command
 from rig.importer import ImportOptions, import_folder, parse_crop
 
 SPEC_HELP = (
@@ -18,8 +19,8 @@ SPEC_HELP = (
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    parser = subparsers.add_parser(
-        "import",
+    parser = add_command(
+        subparsers, "import", run,
         help="turn a folder of fringe images from another rig into a capture",
         description="Match the folder's images (natural order: 2.png before 10.png) with the patterns "
         "of SPEC, convert them to single-channel, and write a verified capture that records where "
@@ -38,7 +39,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--downsample", type=int, default=1, metavar="N", help="average N x N pixel blocks (default 1)")
     parser.add_argument("--scene", default="object", help="scene label of the capture (default object)")
     parser.add_argument("--overwrite", action="store_true", help="replace an existing capture")
-    parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import json
 from collections import Counter
-from pathlib import Path
 from typing import Any
 
 from rig.capture import Capture, read_capture
+from rig.commands._common import add_capture_argument, add_command, print_json
 
 
 def describe_patterns(patterns: list[dict[str, Any]]) -> list[str]:
@@ -34,16 +33,15 @@ def describe_patterns(patterns: list[dict[str, Any]]) -> list[str]:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    parser = subparsers.add_parser(
-        "info",
+    parser = add_command(
+        subparsers, "info", run,
         help="show what a capture holds and verify its frames",
         description="Print a capture's scene, image sizes, patterns and frames, and verify every frame "
         "(sha256, image size, bit depth). Exits non-zero on any problem.",
     )
-    parser.add_argument("capture", type=Path, metavar="CAPTURE", help="capture directory")
+    add_capture_argument(parser)
     parser.add_argument("--salvage", action="store_true", help="inspect an incomplete capture too")
     parser.add_argument("--json", action="store_true", help="print the facts as JSON")
-    parser.set_defaults(func=run)
 
 
 def facts(capture: Capture) -> dict[str, Any]:
@@ -70,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
         capture.load_frame(int(frame["pattern"]))
     info = facts(capture)
     if args.json:
-        print(json.dumps(info, indent=2))
+        print_json(info)
         return 0
     cam, proj = info["camera"], info["projector"]
     print(f"{info['path']}: {info['scene']} capture, {'complete' if info['complete'] else 'INCOMPLETE'}, created {info['created_utc']}")

@@ -8,19 +8,20 @@ import sys
 from pathlib import Path
 
 from rig.pipeline import CORRECTIONS, DEFAULT_CORRECTION, DENOISERS, UNWRAP_METHODS, ProcessOptions, process, total_steps, write_outputs
+from rig.commands._common import add_capture_argument, add_command, add_report_options, print_json
 from rig.errors import ConfigError
 from rig.progress import Progress
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    parser = subparsers.add_parser(
-        "process",
+    parser = add_command(
+        subparsers, "process", run,
         help="turn a capture into absolute phase, a height map and a point cloud",
         description="Process a capture (and the reference-plane capture of its calibration) into "
         "height.npy, phase.npy, mask.npy, points.ply, report.json and preview.png. Without "
         "--calibration only the phase is computed (phase.npy, wrapped.npy, mask.npy, a phase preview).",
     )
-    parser.add_argument("capture", type=Path, metavar="CAPTURE", help="capture directory")
+    add_capture_argument(parser)
     parser.add_argument("--calibration", type=Path, metavar="CAL", help="calibration directory (calibration.json)")
     parser.add_argument("-o", "--output", type=Path, metavar="OUT", help="output directory (default: CAPTURE-processed)")
     parser.add_argument(
@@ -42,9 +43,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--no-undistort", dest="undistort", action="store_false", default=None,
                         help="keep lens distortion (default: removed when the calibration has camera_matrix and distortion)")
     parser.add_argument("--salvage", action="store_true", help="accept an incomplete capture (interrupted scan)")
-    parser.add_argument("--json", action="store_true", help="print a summary as JSON on stdout")
-    parser.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
-    parser.set_defaults(func=run)
+    add_report_options(parser)
 
 
 def summary(report: dict, out: Path) -> dict:
@@ -81,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
         report = write_outputs(result, out)
         progress.step("outputs")
     if args.json:
-        print(json.dumps(summary(report, out), indent=2))
+        print_json(summary(report, out))
     else:
         line = f"{out}: valid {report['valid_fraction']:.1%}, unwrap {report['methods']['unwrap']}"
         if "height_mm" in report:
