@@ -16,13 +16,14 @@ scans. Two cures:
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import numpy as np
 from scipy.interpolate import PchipInterpolator
 from scipy.optimize import curve_fit
 
 from calibration.errors import CalibrationError
+from processing._validate import finite_pixels
 
 MIN_LEVELS = 5
 
@@ -50,14 +51,8 @@ class GammaFit:
         return np.clip(np.asarray(level, dtype=np.float64), 0.0, 1.0) ** self.gamma
 
     def as_fields(self) -> dict:
-        return {
-            "gamma": self.gamma,
-            "offset": self.offset,
-            "gain": self.gain,
-            "levels": list(self.levels),
-            "responses": list(self.responses),
-            "residual_rms": self.residual_rms,
-        }
+        """Every field, as calibration.json stores it (tuples as lists)."""
+        return {key: list(value) if isinstance(value, tuple) else value for key, value in asdict(self).items()}
 
 
 def _power(level: np.ndarray, offset: float, gain: float, gamma: float) -> np.ndarray:
@@ -179,9 +174,7 @@ def phase_error_table(
     r = np.asarray(reference, dtype=np.float64)
     if m.shape != r.shape:
         raise CalibrationError(f"phase error table: measured {m.shape} and reference {r.shape} differ in shape")
-    keep = np.isfinite(m) & np.isfinite(r)
-    if mask is not None:
-        keep &= np.asarray(mask, dtype=bool)
+    keep = finite_pixels(m, r, mask=mask)
     if keep.sum() < 10 * bins:
         raise CalibrationError(f"phase error table: {int(keep.sum())} valid pixels, need at least {10 * bins}")
     wrapped = _wrap(m[keep])

@@ -115,3 +115,11 @@ def finite_float(value: object, name: str, minimum: float | None = None, strict:
         relation = ">" if strict else ">="
         raise ValueError(f"{name}: expected {relation} {minimum}, found {value!r}")
     return as_float
+
+
+def finite_pixels(*arrays: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
+    """Boolean map of the pixels finite in every one of ``arrays`` (of one shape) and set in ``mask``."""
+    keep = np.logical_and.reduce([np.isfinite(a) for a in arrays])
+    if mask is not None:
+        keep &= np.asarray(mask, dtype=bool)
+    return keep

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from processing._validate import finite_pixels
+
 
 def phase_to_height(delta_phase: np.ndarray, l0_mm: float, d0_mm: float, f0_per_mm: float) -> np.ndarray:
     """Height from the phase difference object - reference (thesis eq. 1.15).
@@ -50,9 +52,7 @@ def _masked_pair(estimate: np.ndarray, truth: np.ndarray, mask: np.ndarray | Non
     truth = np.asarray(truth, dtype=np.float64)
     if estimate.shape != truth.shape:
         raise ValueError(f"estimate: shape {estimate.shape} differs from truth {truth.shape}")
-    keep = np.isfinite(estimate) & np.isfinite(truth)
-    if mask is not None:
-        keep &= np.asarray(mask, dtype=bool)
+    keep = finite_pixels(estimate, truth, mask=mask)
     if not keep.any():
         raise ValueError("mask: no valid pixel to compare")
     return estimate[keep], truth[keep]
