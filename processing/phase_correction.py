@@ -101,15 +101,24 @@ def reorder_from_low_rank(
     -------
     (H, W) float64, NaN outside the mask
     """
-    estimate = _validate.phase_map(low_rank_phase, "low_rank_phase")
-    wrapped = _validate.phase_map(wrapped_phase, "wrapped_phase", estimate.shape)
-    valid = valid_mask(estimate, mask, "low_rank_phase")
-    if np.any(valid & ~np.isfinite(wrapped)):
-        raise ValueError("wrapped_phase: NaN at pixels where low_rank_phase is valid")
+    estimate, wrapped, valid = _estimate_and_measurement(low_rank_phase, wrapped_phase, "wrapped_phase", mask)
     out = np.full(estimate.shape, np.nan)
     phi = wrapped[valid]
     out[valid] = phi + TWO_PI * np.rint((estimate[valid] - phi) / TWO_PI)
     return out
+
+
+def _estimate_and_measurement(
+    low_rank_phase: np.ndarray, measured: np.ndarray, name: str, mask: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Validated low-rank estimate, measured map (named ``name``) and valid mask; the measured map
+    must be finite wherever the estimate is valid."""
+    estimate = _validate.phase_map(low_rank_phase, "low_rank_phase")
+    values = _validate.phase_map(measured, name, estimate.shape)
+    valid = valid_mask(estimate, mask, "low_rank_phase")
+    if np.any(valid & ~np.isfinite(values)):
+        raise ValueError(f"{name}: NaN at pixels where low_rank_phase is valid")
+    return estimate, values, valid
 
 
 def neighbour_prediction(phase: np.ndarray, valid: np.ndarray) -> np.ndarray:
@@ -171,11 +180,7 @@ def restore_detail(
     -------
     (H, W) float64, NaN outside the mask
     """
-    estimate = _validate.phase_map(low_rank_phase, "low_rank_phase")
-    measured = _validate.phase_map(measured_phase, "measured_phase", estimate.shape)
-    valid = valid_mask(estimate, mask, "low_rank_phase")
-    if np.any(valid & ~np.isfinite(measured)):
-        raise ValueError("measured_phase: NaN at pixels where low_rank_phase is valid")
+    estimate, measured, valid = _estimate_and_measurement(low_rank_phase, measured_phase, "measured_phase", mask)
     k_sigma = float(k_sigma)
     if not k_sigma > 0:
         raise ValueError(f"k_sigma: expected > 0, found {k_sigma}")
