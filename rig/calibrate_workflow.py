@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 import re
 import shlex
 import subprocess
@@ -40,6 +41,7 @@ from calibration.camera import (
 from calibration.errors import CalibrationError
 from calibration.gamma import compensate_phase, fit_gamma, inverse_lut, mean_response, ramp_patterns, ripple_table_from_plane
 from calibration.geometry import MIN_HEIGHTS, fit_f0, fit_l0_d0, pixel_mm_from_corners
+from calibration.jsonfile import read_json
 from calibration.polynomial import POLYNOMIAL, fit_polynomial
 from calibration.reference import REFERENCE_DIR, check_same_patterns
 from calibration.stereo import STEREO, board_phase_view, calibrate_stereo, fit_plane, triangulate
@@ -122,9 +124,15 @@ class CalibrationPlan:
                 gamma_levels=int(data.get("gamma_levels", 0)),
                 flatness_tolerance_mm=float(data.get("flatness_tolerance_mm", 1.0)),
             )
-        except (TypeError, ValueError, KeyError) as exc:
+        except (AttributeError, TypeError, ValueError, KeyError) as exc:
             raise CalibrationError(f"{where}: not a calibration session: {exc}") from None
         return plan
+
+    @classmethod
+    def load(cls, session: Path) -> "CalibrationPlan":
+        """The plan stored in a session directory's ``session.json``."""
+        data = read_json(session, CalibrationError, "missing (not a calibration session directory?)")
+        return cls.from_json(data, str(session))
 
 
 # --------------------------------------------------------------------------- the operator
@@ -402,17 +410,10 @@ def compute(
     ``plan`` overrides the stored session (e.g. another model); ``output`` writes the calibration
     elsewhere (the reference path then points back into ``directory``).
     """
-    import os
-
     note = progress or (lambda message: print(message, file=sys.stderr))
     session = directory / SESSION_FILE
     if plan is None:
-        if not session.is_file():
-            raise CalibrationError(f"{session}: missing (not a calibration session directory?)")
-        try:
-            plan = CalibrationPlan.from_json(json.loads(session.read_text(encoding="utf-8")), str(session))
-        except json.JSONDecodeError as exc:
-            raise CalibrationError(f"{session}: not valid JSON: {exc.msg}") from None
+        plan = CalibrationPlan.load(session)
     output = output or directory
     lines: list[str] = []
     extra: dict[str, Any] = {}

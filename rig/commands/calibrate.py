@@ -10,7 +10,6 @@ recomputes from the captures a previous session stored (optionally with another 
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -134,10 +133,7 @@ def run(args: argparse.Namespace) -> int:
         session = args.from_dir / "session.json"
         base = None
         if session.is_file():
-            try:
-                base = CalibrationPlan.from_json(json.loads(session.read_text(encoding="utf-8")), str(session))
-            except json.JSONDecodeError as exc:
-                raise CalibrationError(f"{session}: not valid JSON: {exc.msg}") from None
+            base = CalibrationPlan.load(session)
         elif not (args.from_dir / "planes").is_dir():
             raise CalibrationError(f"{args.from_dir}: not a calibration session (no session.json, no planes/)")
         plan = _plan(args, base)
