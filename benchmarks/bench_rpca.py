@@ -59,29 +59,36 @@ def plain_full_ialm_phase(maps) -> tuple[np.ndarray, Any]:
     return np.where(maps.mask, result.low_rank, np.nan), result
 
 
+def time_rows(case: ProtocolCase, rows: list[tuple[str, Callable[[Any], tuple[np.ndarray, Any]], int]]) -> dict[str, float]:
+    """Median seconds of each (label, method, repeats) row on the object map, printed with the
+    solver's iterations and rank and the NMSE of the heights it gives (reference corrected alike)."""
+    medians = {}
+    for label, method, count in rows:
+        median, times, (phase, result) = median_seconds(lambda: method(case.object), count)
+        ref_phase, _ = method(case.reference)
+        medians[label] = median
+        print(
+            f"{label:36s} median {median:7.3f} s  (runs {', '.join(f'{t:.2f}' for t in times)})  "
+            f"iterations {result.iterations:3d}  rank {result.rank:4d}  NMSE_h {case.nmse_h(phase, ref_phase):.6f}"
+        )
+    return medians
+
+
 def bench_ch4(case: ProtocolCase, repeats: int, peer_repeats: int) -> None:
-    obj, ref = case.object, case.reference
+    obj = case.object
     print(f"\n== ch. 4 absolute phase correction, one {obj.absolute.shape[1]}x{obj.absolute.shape[0]} map ==")
     rows = [
         ("ours: stable iALM, partial SVD", lambda m: correct_phase_rpca(m.absolute, m.mask), repeats),
         ("full-SVD reference (same method)", lambda m: correct_phase_rpca(m.absolute, m.mask, svd="full"), peer_repeats),
         ("peer: plain full-SVD iALM (thesis)", plain_full_ialm_phase, peer_repeats),
     ]
-    medians = {}
-    for label, method, count in rows:
-        median, times, (phase, result) = median_seconds(lambda: method(obj), count)
-        ref_phase, _ = method(ref)
-        medians[label] = median
-        print(
-            f"{label:36s} median {median:7.3f} s  (runs {', '.join(f'{t:.2f}' for t in times)})  "
-            f"iterations {result.iterations:3d}  rank {result.rank:4d}  NMSE_h {case.nmse_h(phase, ref_phase):.6f}"
-        )
+    medians = time_rows(case, rows)
     ours = medians[rows[0][0]]
     print(f"ratio peer / ours: {medians[rows[2][0]] / ours:.1f}x;  full-SVD reference / ours: {medians[rows[1][0]] / ours:.1f}x")
 
 
 def bench_ch3(case: ProtocolCase, repeats: int, peer_repeats: int) -> None:
-    obj, ref = case.object, case.reference
+    obj = case.object
     print(f"\n== ch. 3 fringe order correction, one {obj.absolute.shape[1]}x{obj.absolute.shape[0]} order map ==")
 
     def ours(m):
@@ -103,15 +110,7 @@ def bench_ch3(case: ProtocolCase, repeats: int, peer_repeats: int) -> None:
         ("full-SVD reference (float64)", full_reference, peer_repeats),
         ("peer: plain full-SVD iALM (no post)", peer, peer_repeats),
     ]
-    medians = {}
-    for label, method, count in rows:
-        median, times, (phase, result) = median_seconds(lambda: method(obj), count)
-        ref_phase, _ = method(ref)
-        medians[label] = median
-        print(
-            f"{label:36s} median {median:7.3f} s  (runs {', '.join(f'{t:.2f}' for t in times)})  "
-            f"iterations {result.iterations:3d}  rank {result.rank:4d}  NMSE_h {case.nmse_h(phase, ref_phase):.6f}"
-        )
+    medians = time_rows(case, rows)
     print(f"ratio peer / ours: {medians[rows[2][0]] / medians[rows[0][0]]:.1f}x")
     start = time.perf_counter()
     _, _, adm = correct_orders_rpca(orders_of(obj), obj.wrapped, obj.mask, solver="adm")
