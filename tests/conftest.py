@@ -1,7 +1,9 @@
-"""Shared fixtures: a small synthesised scan written as a capture with its calibration."""
+"""Shared fixtures: a small synthesised scan written as a capture with its calibration; the
+simulated rig's config text and its exact calibration for `rig scan` tests."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -24,3 +26,44 @@ def small_scan() -> SimulatedScan:
 def small_capture(tmp_path: Path, small_scan: SimulatedScan) -> SimulatedPaths:
     """``small_scan`` written to ``tmp_path``: object capture, calibration + reference, truth heights."""
     return write_simulated_scan(small_scan, tmp_path / "scan")
+
+
+def _simulated_rig_toml(projector: tuple[int, int], camera: tuple[int, int], snr_db: float, gamma: float | None = None) -> str:
+    text = (
+        f"\n[projector]\nsize = [{projector[0]}, {projector[1]}]\n[camera]\nsize = [{camera[0]}, {camera[1]}]\n"
+        '[scan]\nfrequencies = [1, 8, 32]\nsteps = 4\n[simulation]\nscene = "hemisphere"\n'
+        f"snr_db = {snr_db:g}\n"
+    )
+    return text if gamma is None else text + f"gamma = {gamma:g}\n"
+
+
+@pytest.fixture(scope="session")
+def simulated_rig_toml() -> Callable[..., str]:
+    """Rig config text of the simulated rig: ``(projector WxH, camera WxH, snr_db, gamma=None)``.
+
+    Frequencies 1, 8, 32 with 4 steps, the hemisphere scene; ``[simulation]`` is the last table,
+    so keys appended to the text land there.
+    """
+    return _simulated_rig_toml
+
+
+@pytest.fixture
+def exact_calibration() -> Callable[[Path, Path], Path]:
+    """``(config_path, directory)``: `rig scan` the reference plane into ``directory/reference`` and
+    write the simulated rig's exact geometry as the calibration there (what `rig calibrate` estimates)."""
+    from calibration.store import Calibration, write_calibration
+    from rig.cli import main
+    from rig.config import load_config
+    from rig.simulated_rig import geometry_from_config
+
+    def calibrate(config_path: Path, directory: Path) -> Path:
+        geometry = geometry_from_config(load_config(config_path))
+        assert main(["scan", "--config", str(config_path), "--scene", "reference", "-o", str(directory / "reference")]) == 0
+        write_calibration(
+            directory,
+            Calibration(l0_mm=geometry.l0_mm, d0_mm=geometry.d0_mm, f0_per_mm=geometry.f0_per_mm,
+                        f0_frequency=geometry.f0_frequency, pixel_mm=geometry.pixel_mm, reference="reference"),
+        )
+        return directory
+
+    return calibrate

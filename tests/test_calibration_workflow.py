@@ -22,27 +22,20 @@ from rig.config import load_config
 from rig.errors import CaptureError, ConfigError
 from rig.simulated_rig import geometry_from_config, scene_height
 
-RIG = """
-[projector]
-size = [456, 570]
-[camera]
-size = [256, 192]
-[scan]
-frequencies = [1, 8, 32]
-steps = 4
-[simulation]
-scene = "hemisphere"
-snr_db = 30
-gamma = 1.8
-"""
+@pytest.fixture(scope="module")
+def rig_text(simulated_rig_toml):
+    """The rig these tests calibrate: a gamma-1.8 projector, a 30 dB camera."""
+    return simulated_rig_toml((456, 570), (256, 192), snr_db=30, gamma=1.8)
+
+
 BOARD = "chessboard:7x5:30"
 
 
 @pytest.fixture(scope="module")
-def session(tmp_path_factory):
+def session(tmp_path_factory, rig_text):
     root = tmp_path_factory.mktemp("calibrate")
     config = root / "rig.toml"
-    config.write_text(RIG, encoding="utf-8")
+    config.write_text(rig_text, encoding="utf-8")
     code = main(["calibrate", "--config", str(config), "-o", str(root / "cal"), "--board", BOARD,
                  "--board-views", "4", "--gamma", "9", "-q"])
     assert code == 0
@@ -70,11 +63,11 @@ def test_unattended_session_recovers_the_simulated_geometry(session):
         assert read_capture(root / "cal" / "planes" / label).scene == label
 
 
-def test_scan_then_process_matches_the_virtual_scene(session):
+def test_scan_then_process_matches_the_virtual_scene(session, rig_text):
     root, config = session
     # scans go through the measured LUT, as the calibration captures did
     scan_config = root / "rig-lut.toml"
-    scan_config.write_text(RIG.replace("[camera]", f'gamma_lut = "{root / "cal" / "gamma-lut.npy"}"\n[camera]'), encoding="utf-8")
+    scan_config.write_text(rig_text.replace("[camera]", f'gamma_lut = "{root / "cal" / "gamma-lut.npy"}"\n[camera]'), encoding="utf-8")
     assert main(["scan", "--config", str(scan_config), "-o", str(root / "obj"), "--calibration", str(root / "cal"),
                  "--process", "--process-output", str(root / "out")]) == 0
     height = np.load(root / "out" / "height.npy")
@@ -110,9 +103,9 @@ def test_recompute_from_stored_captures_with_another_model(session, capsys):
     assert again.calibration.l0_mm == pytest.approx(reference.l0_mm, rel=1e-9)
 
 
-def test_operator_is_prompted_for_every_step(tmp_path):
+def test_operator_is_prompted_for_every_step(tmp_path, rig_text):
     config = tmp_path / "rig.toml"
-    config.write_text(RIG, encoding="utf-8")
+    config.write_text(rig_text, encoding="utf-8")
     prompts: list[str] = []
     plan = CalibrationPlan(heights_mm=(20.0, 40.0, 60.0), board=None, pixel_mm=1.6)
     acquire(load_config(config), plan, tmp_path / "cal", ConsoleOperator(ask=prompts.append), show_progress=False)
@@ -215,13 +208,13 @@ def test_stereo_session_recomputed_from_stored_poses(tmp_path):
         acquire(config, CalibrationPlan(model="stereo", board_views=3), tmp_path / "sim", show_progress=False)
 
 
-def test_gamma_ripple_removed_in_processing(tmp_path):
+def test_gamma_ripple_removed_in_processing(tmp_path, rig_text):
     """A gamma-2.2 projector under 3-step phase shifting, not pre-corrected: the ripple table the
     calibration learnt on the reference plane takes the waves out of the object's heights."""
     from rig import gamma_correction, pipeline
 
     config = tmp_path / "rig.toml"
-    config.write_text(RIG.replace("steps = 4", "steps = 3").replace("gamma = 1.8", "gamma = 2.2").replace("snr_db = 30", "snr_db = 40"))
+    config.write_text(rig_text.replace("steps = 4", "steps = 3").replace("gamma = 1.8", "gamma = 2.2").replace("snr_db = 30", "snr_db = 40"))
     assert main(["calibrate", "--config", str(config), "-o", str(tmp_path / "cal"), "--board", "none",
                  "--pixel-mm", "1.6", "-q"]) == 0
     assert read_calibration(tmp_path / "cal").extra["phase_error"]["ripple_rms_rad"] > 0.05
@@ -242,11 +235,11 @@ def test_gamma_ripple_removed_in_processing(tmp_path):
     assert float(np.sqrt(np.mean((height[valid] - truth[valid]) ** 2))) == pytest.approx(errors[gamma_correction.NAME], rel=1e-6)
 
 
-def test_gauge_block_measured_through_the_whole_product(session, tmp_path):
+def test_gauge_block_measured_through_the_whole_product(session, tmp_path, rig_text):
     """rig calibrate (the session above) then rig scan --process of a 25.000 mm gauge block at 30 dB."""
     root, _ = session
     config = tmp_path / "rig.toml"
-    config.write_text(RIG.replace('scene = "hemisphere"', 'scene = "gauge-block"')
+    config.write_text(rig_text.replace('scene = "hemisphere"', 'scene = "gauge-block"')
                       .replace("[camera]", f'gamma_lut = "{root / "cal" / "gamma-lut.npy"}"\n[camera]'))
     assert main(["scan", "--config", str(config), "-o", str(tmp_path / "block"), "--calibration", str(root / "cal"),
                  "--process", "--process-output", str(tmp_path / "out")]) == 0

@@ -13,7 +13,6 @@ import os
 import numpy as np
 import pytest
 
-from calibration.store import Calibration, write_calibration
 from rig.capture import read_capture
 from rig.cli import COMMAND_MODULES, main
 from rig.config import load_config
@@ -22,18 +21,12 @@ from rig.simulated_rig import geometry_from_config, scene_height
 # pylon reads PYLON_CAMEMU when pypylon first loads (see tests/test_camera_pylon.py).
 os.environ.setdefault("PYLON_CAMEMU", "1")
 
-SMALL_RIG = """
-[projector]
-size = [228, 285]
-[camera]
-size = [160, 120]
-[scan]
-frequencies = [1, 8, 32]
-steps = 4
-[simulation]
-scene = "hemisphere"
-snr_db = 35
-"""
+@pytest.fixture
+def small_rig(simulated_rig_toml):
+    """A 160x120 camera at 35 dB and a 228x285 projector: quick, and enough for three frequencies."""
+    return simulated_rig_toml((228, 285), (160, 120), snr_db=35)
+
+
 
 # Expected error from the camera noise alone: at 35 dB the noise is ~2.3 DN against a fringe
 # amplitude of 100 DN, so 4-step phase has sigma ~0.016 rad per scan, 0.023 rad for object minus
@@ -59,25 +52,13 @@ def test_scan_without_arguments_writes_a_complete_capture(tmp_path, monkeypatch)
     assert image.dtype == np.uint8 and image.std() > 10  # fringes, not a blank frame
 
 
-def test_scan_reference_then_object_processes_to_the_scene_heights(tmp_path):
+def test_scan_reference_then_object_processes_to_the_scene_heights(tmp_path, small_rig, exact_calibration):
     config_path = tmp_path / "rig.toml"
-    config_path.write_text(SMALL_RIG)
+    config_path.write_text(small_rig)
     config = load_config(config_path)
     geometry = geometry_from_config(config)
 
-    calibration = tmp_path / "calibration"
-    assert main(["scan", "--config", str(config_path), "--scene", "reference", "-o", str(calibration / "reference")]) == 0
-    write_calibration(
-        calibration,
-        Calibration(
-            l0_mm=geometry.l0_mm,
-            d0_mm=geometry.d0_mm,
-            f0_per_mm=geometry.f0_per_mm,
-            f0_frequency=geometry.f0_frequency,
-            pixel_mm=geometry.pixel_mm,
-            reference="reference",
-        ),
-    )
+    calibration = exact_calibration(config_path, tmp_path / "calibration")
     capture = tmp_path / "object"
     out = tmp_path / "processed"
     assert main([
@@ -103,18 +84,12 @@ def test_scan_reference_then_object_processes_to_the_scene_heights(tmp_path):
 
 
 @pytest.mark.skipif("process" not in COMMAND_MODULES, reason="`rig process` is not registered in rig/cli.py")
-def test_rig_process_reads_what_rig_scan_wrote(tmp_path):
+def test_rig_process_reads_what_rig_scan_wrote(tmp_path, small_rig, exact_calibration):
     config_path = tmp_path / "rig.toml"
-    config_path.write_text(SMALL_RIG.replace('scene = "hemisphere"', 'scene = "steps"'))
+    config_path.write_text(small_rig.replace('scene = "hemisphere"', 'scene = "steps"'))
     config = load_config(config_path)
     geometry = geometry_from_config(config)
-    calibration = tmp_path / "calibration"
-    assert main(["scan", "--config", str(config_path), "--scene", "reference", "-o", str(calibration / "reference")]) == 0
-    write_calibration(
-        calibration,
-        Calibration(l0_mm=geometry.l0_mm, d0_mm=geometry.d0_mm, f0_per_mm=geometry.f0_per_mm,
-                    f0_frequency=geometry.f0_frequency, pixel_mm=geometry.pixel_mm, reference="reference"),
-    )
+    calibration = exact_calibration(config_path, tmp_path / "calibration")
     assert main(["scan", "--config", str(config_path), "-o", str(tmp_path / "object")]) == 0
     assert main(["process", str(tmp_path / "object"), "--calibration", str(calibration), "-o", str(tmp_path / "out")]) == 0
     height = np.load(tmp_path / "out" / "height.npy")
@@ -179,10 +154,10 @@ def test_scan_with_a_real_backend_pylon_emulator(tmp_path):
     assert capture.manifest["devices"]["camera"] != "simulated camera"
 
 
-def test_gamma_lut_from_the_config_linearises_the_projector(tmp_path):
+def test_gamma_lut_from_the_config_linearises_the_projector(tmp_path, small_rig):
     """A projector with gamma 2.2, pre-corrected by the LUT the config names, behaves like a linear one."""
     np.save(tmp_path / "lut.npy", np.linspace(0.0, 1.0, 256) ** (1 / 2.2))
-    linear = SMALL_RIG.replace("snr_db = 35", 'snr_db = "none"').replace("frequencies = [1, 8, 32]", "frequencies = [8]")
+    linear = small_rig.replace("snr_db = 35", 'snr_db = "none"').replace("frequencies = [1, 8, 32]", "frequencies = [8]")
     rigs = {  # [simulation] is the last table: appended keys land there
         "linear": linear,
         "gamma": linear + "gamma = 2.2\n",
