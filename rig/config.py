@@ -27,6 +27,9 @@ PROJECTOR_BACKENDS = ("gl-offscreen", "window", "dlp4500")
 CAMERA_BACKENDS = ("simulated", "opencv", "pylon")
 TRIGGER_BACKENDS = ("software", "serial", "simulated-serial")
 PATTERN_AXES = ("x", "y")
+# [scan] pattern_set: temporal phase shifting (several frames) or the thesis' single-shot
+# speckle-embedded fringe (one frame, ch. 2.3; rig process recognises it by its kind).
+PATTERN_SETS = ("phase-shifting", "speckle")
 
 # The simulated rig's field of view on the reference plane, kept whatever the camera resolution.
 SIMULATED_VIEW_WIDTH_MM = 409.6
@@ -74,13 +77,26 @@ class ScanConfig:
     show_timeout_s: float = 1.0
     fetch_timeout_s: float = 2.0
     retries: int = 2
+    pattern_set: str = "phase-shifting"
+    speckle_frequency: float = 16.0
+    speckle_seed: int = 0
+    speckle_dot_px: int = 3
+    speckle_gain: float = 0.3
 
     def patterns(self) -> list[dict[str, Any]]:
         """The capture-format pattern entries of one scan, in projection order.
 
-        Sinusoids of every frequency (``steps`` shifts each), then, if ``gray_bits`` > 0, the Gray
-        code bit planes with their inverses (for per-pixel thresholding).
+        ``pattern_set = "speckle"``: one ``speckle-sinusoid`` frame (``speckle_frequency`` fringes
+        along ``axis``, speckle field of ``speckle_seed``, ``speckle_dot_px``, ``speckle_gain``).
+        Otherwise sinusoids of every frequency (``steps`` shifts each), then, if ``gray_bits`` > 0,
+        the Gray code bit planes with their inverses (for per-pixel thresholding).
         """
+        if self.pattern_set == "speckle":
+            return [{
+                "kind": "speckle-sinusoid", "axis": self.axis, "frequency": _plain_number(self.speckle_frequency),
+                "steps": 1, "step": 0, "seed": self.speckle_seed, "dot_px": self.speckle_dot_px,
+                "speckle_gain": self.speckle_gain,
+            }]
         out: list[dict[str, Any]] = [
             {"kind": "sinusoid", "axis": self.axis, "frequency": _plain_number(f), "steps": self.steps, "step": j}
             for f in self.frequencies
@@ -164,6 +180,12 @@ def _number(value: Any) -> float:
 def _non_zero_number(value: Any) -> float:
     if not _is_number(value) or value == 0:
         raise _Bad("a non-zero number")
+    return float(value)
+
+
+def _fraction(value: Any) -> float:
+    if not _is_number(value) or not 0 <= value <= 1:
+        raise _Bad("a number in [0, 1]")
     return float(value)
 
 
@@ -254,6 +276,11 @@ _SCHEMA: dict[str, dict[str, Callable[[Any], Any]]] = {
         "show_timeout_s": _positive_number,
         "fetch_timeout_s": _positive_number,
         "retries": _int_range(0, 20),
+        "pattern_set": _choice(PATTERN_SETS),
+        "speckle_frequency": _positive_number,
+        "speckle_seed": _int_range(0),
+        "speckle_dot_px": _int_range(1, 64),
+        "speckle_gain": _fraction,
     },
     "simulation": {
         "scene": _string,
