@@ -210,21 +210,10 @@ class StageCommand:
 
 
 def _scan(config: RigConfig, output: Path, patterns: Sequence[dict[str, Any]], scene: str, show_progress: bool) -> Path:
-    """One capture of ``patterns`` with the rig of ``config`` looking at ``scene``."""
-    from rig.acquisition import AcquisitionSettings, run_scan
-    from rig.assembly import open_rig
-    from rig.progress import Progress
+    """One capture of ``patterns`` with the rig of ``config`` looking at ``scene`` (as `rig scan`)."""
+    from rig.commands.scan import scan
 
-    settings = AcquisitionSettings(
-        show_timeout_s=config.scan.show_timeout_s, fetch_timeout_s=config.scan.fetch_timeout_s, retries=config.scan.retries
-    )
-    with open_rig(config, scene=scene) as devices, Progress(f"calibrate {output}", total=len(patterns), quiet=not show_progress) as progress:
-        extra: dict[str, Any] = {"rig_config": str(config.source) if config.source else "built-in simulated rig"}
-        if devices.simulation is not None:
-            extra["simulation"] = devices.simulation.description()
-        run_scan(output, patterns, devices.projector, devices.camera, devices.trigger, settings, scene=scene,
-                 extra=extra, exposure_us=config.camera.exposure_us, gain=config.camera.gain, progress=progress)
-    return output
+    return scan(config, output, scene=scene, show_progress=show_progress, patterns=patterns, label="calibrate").path
 
 
 def _simulated_board_view(config: RigConfig, board: BoardSpec, index: int) -> np.ndarray:

@@ -10,7 +10,9 @@ import argparse
 import logging
 import sys
 from datetime import datetime, timezone
+from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 from rig.acquisition import AcquisitionSettings, ScanResult, run_scan
 from rig.assembly import open_rig
@@ -49,18 +51,30 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=run)
 
 
-def scan(config: RigConfig, output: Path, scene: str = "object", overwrite: bool = False, show_progress: bool = True) -> ScanResult:
-    """Open the rig of ``config``, scan ``scene`` into ``output`` and close the rig."""
+def scan(
+    config: RigConfig,
+    output: Path,
+    scene: str = "object",
+    overwrite: bool = False,
+    show_progress: bool = True,
+    patterns: Sequence[Mapping[str, Any]] | None = None,
+    label: str = "scan",
+) -> ScanResult:
+    """Open the rig of ``config``, scan ``scene`` into ``output`` and close the rig.
+
+    ``patterns``: the capture-format entries to project (default the config's ``[scan]`` set,
+    :meth:`rig.config.ScanConfig.patterns`); ``label`` starts the progress line.
+    """
     if output.exists() and not overwrite:  # fail before opening any device
         raise CaptureError(f"{output}: already exists; refusing to overwrite (choose another -o or pass --overwrite)")
-    patterns = config.scan.patterns()
+    patterns = config.scan.patterns() if patterns is None else list(patterns)
     settings = AcquisitionSettings(
         show_timeout_s=config.scan.show_timeout_s,
         fetch_timeout_s=config.scan.fetch_timeout_s,
         retries=config.scan.retries,
     )
     log.info("scanning %d patterns into %s (%s)", len(patterns), output, settings)
-    with open_rig(config, scene=scene) as devices, Progress(f"scan {output}", total=len(patterns), quiet=not show_progress) as progress:
+    with open_rig(config, scene=scene) as devices, Progress(f"{label} {output}", total=len(patterns), quiet=not show_progress) as progress:
         extra = {"rig_config": str(config.source) if config.source else "built-in simulated rig"}
         if devices.simulation is not None:
             extra["simulation"] = devices.simulation.description()
