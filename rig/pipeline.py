@@ -39,6 +39,7 @@ plane shows in the region) and says so in the report.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import time
@@ -243,6 +244,7 @@ class SceneState:
     notes: list[str] = field(default_factory=list)
     info: dict[str, Any] = field(default_factory=dict)
     calibration: Calibration | None = None
+    single_shot_reference: Any = None  # processing.single_shot.SingleShotReference of a reference capture
 
 
 def stage_load(state: SceneState, options: ProcessOptions) -> None:
@@ -374,13 +376,135 @@ def _ftp_frame(image: np.ndarray, axis: str, shift: float) -> tuple[np.ndarray, 
     return phase, np.asarray(amplitude, dtype=np.float64), background
 
 
-def _speckle_not_supported(state: SceneState, options: ProcessOptions) -> None:
-    raise ProcessingError(
-        f"{state.capture.manifest_path}: speckle-sinusoid (single-shot) captures are not supported by rig process yet"
+# Arguments of processing.single_shot.single_shot_unwrap that the pipeline supplies itself.
+_SINGLE_SHOT_OWN = ("image", "reference_image", "reference_absolute_phase", "frequency", "axis", "mask")
+
+
+def _single_shot_parameters(options: ProcessOptions) -> tuple[dict[str, Any], dict[str, Any]]:
+    """(``--param`` entries single_shot_unwrap takes, all its settings with defaults) for the report."""
+    import inspect
+
+    from processing.single_shot import single_shot_unwrap
+
+    given = {k: v for k, v in _method_params(single_shot_unwrap, options.params).items() if k not in _SINGLE_SHOT_OWN}
+    defaults = {
+        name: p.default for name, p in inspect.signature(single_shot_unwrap).parameters.items()
+        if p.kind is inspect.Parameter.KEYWORD_ONLY and name not in _SINGLE_SHOT_OWN
+    }
+    return given, {**defaults, **given}
+
+
+def _single_shot_wrapped(
+    fringe: np.ndarray, carrier: float, axis: str, bandwidth: float, min_modulation: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Wrapped phase, FTP amplitude, background and modulation mask of a single-shot fringe part."""
+    import cv2
+
+    from processing.ftp import ftp_phase
+
+    along = 1 if axis == "x" else 0
+    phase, amplitude = ftp_phase(fringe, carrier=carrier, axis=along, bandwidth=bandwidth)
+    amplitude = np.asarray(amplitude, dtype=np.float64)
+    period = max(int(round(1.0 / abs(carrier))), 1) if carrier else 1
+    kernel = (period, 1) if axis == "x" else (1, period)
+    background = cv2.blur(np.asarray(fringe, dtype=np.float64), kernel, borderType=cv2.BORDER_REFLECT)
+    valid = amplitude > min_modulation * float(np.median(amplitude))
+    return np.asarray(phase, dtype=np.float64), amplitude, background, valid
+
+
+def _speckle_single_shot(state: SceneState, options: ProcessOptions) -> None:
+    """``speckle-sinusoid`` captures (thesis ch. 2.3) through :mod:`processing.single_shot`.
+
+    The calibration's reference capture (same pattern, processed first) is separated by RPCA and
+    phased by FTP once (:func:`processing.single_shot.prepare_reference`); its absolute phase is
+    its FTP phase unwrapped along the rows with the smallest fringe order 0: a flat plane has no
+    discontinuity, and the projector column of the reference's first order is fixed only by the
+    rig's geometry, which the reference-plane and polynomial models do not need (they use object
+    minus reference). The object frame then gets its fringe orders from the reference speckle
+    (:func:`processing.single_shot.single_shot_unwrap`), so both phases share that offset. The
+    result fills ``state.wrapped`` / ``state.unwrapped`` for the correction and height stages;
+    method, parameters, RPCA iterations and rank and the time of each step go to the report.
+    """
+    from processing.single_shot import prepare_reference, separate_fringe_speckle, single_shot_unwrap
+
+    group = state.groups.single_shot[0]
+    where = str(state.capture.manifest_path)
+    assert state.frames is not None
+    image = state.frames[group.indices[0]].astype(np.float32)
+    if group.steps > 1 or len(group.indices) > 1:
+        state.notes.append(f"single-shot: {len(group.indices)} speckle-sinusoid frames; used the first (pattern {group.indices[0]})")
+    if options.unwrap != "auto":
+        state.notes.append(f"single-shot capture: --unwrap {options.unwrap} does not apply; fringe orders from the speckle")
+    axis = 1 if state.axis == "x" else 0
+    given, settings = _single_shot_parameters(options)
+    pattern = dict(state.capture.patterns[group.indices[0]])
+    parameters = {"frequency": group.frequency, "fringe_axis": state.axis, **settings,
+                  **{k: pattern[k] for k in ("seed", "dot_px", "speckle_gain") if k in pattern}}
+    start = time.perf_counter()
+    try:
+        if state.reference is None:
+            if state.name != "reference":
+                raise ProcessingError(
+                    f"{where}: a speckle-sinusoid (single-shot) capture needs --calibration with a reference-plane "
+                    "capture under the same pattern: its speckle gives the fringe orders"
+                )
+            prep = {k: v for k, v in given.items() if k in ("carrier", "bandwidth", "tau", "rpca_tol", "svd")}
+            rpca = None
+            if settings["separate"]:
+                # Separate here (not inside prepare_reference) to keep RPCA's iterations and rank for the report.
+                fringe, speckle, rpca = separate_fringe_speckle(image, tau=settings["tau"], tol=settings["rpca_tol"], svd=settings["svd"])
+                prepared = prepare_reference(fringe, None, group.frequency, axis=axis, separate=False,
+                                             **{k: v for k, v in prep.items() if k in ("carrier", "bandwidth")})
+                prepared = dataclasses.replace(prepared, speckle=speckle)
+            else:
+                prepared = prepare_reference(image, None, group.frequency, axis=axis, separate=False,
+                                             **{k: v for k, v in prep.items() if k in ("carrier", "bandwidth")})
+            prepared.seconds = time.perf_counter() - start
+            state.single_shot_reference = prepared
+            wrapped, amplitude, background, valid = _single_shot_wrapped(
+                prepared.fringe, prepared.carrier, state.axis, settings["bandwidth"], settings["min_modulation"]
+            )
+            absolute = prepared.absolute_phase
+            orders = np.where(valid, np.rint((absolute - prepared.wrapped_phase) / TWO_PI), -1).astype(np.int64)
+            timings = {"reference": prepared.seconds}
+        else:
+            prepared = state.reference.single_shot_reference
+            if prepared is None:
+                raise ProcessingError(f"{where}: the reference capture is not a speckle-sinusoid single shot like this capture")
+            result = single_shot_unwrap(image, prepared, None, group.frequency, axis=axis, **given)
+            rpca = result.rpca
+            wrapped, amplitude, background, _ = _single_shot_wrapped(
+                result.fringe, prepared.carrier, state.axis, settings["bandwidth"], settings["min_modulation"]
+            )
+            valid = result.mask & np.isfinite(result.absolute_phase)
+            absolute, orders, timings = result.absolute_phase, result.orders, dict(result.timings)
+            timings.pop("reference", None)  # prepared with the reference capture, reported there
+            state.info["single_shot_correlation_median"] = float(np.median(result.correlation[valid])) if valid.any() else None
+    except ValueError as exc:
+        raise ProcessingError(f"{where}: single-shot: {exc}") from None
+    state.wrapped = WrappedPhase([group.frequency], [wrapped], [amplitude], [background], valid)
+    state.unwrapped = UnwrappedPhase(
+        phase=np.where(valid, absolute, np.nan), valid=valid, frequency=group.frequency, method="single-shot",
+        absolute=True, orders=orders,
     )
+    state.info["valid_after_modulation"] = float(valid.mean())
+    state.info["single_shot"] = {
+        "method": "speckle-embedded single shot (RPCA fringe/speckle separation, FTP, speckle NCC fringe orders, row voting)",
+        "role": "reference" if state.reference is None else "object",
+        "parameters": parameters,
+        "iterations": None if rpca is None else int(rpca.iterations),
+        "rank": None if rpca is None else int(rpca.rank),
+        "seconds": round(time.perf_counter() - start, 4),
+        "timings_s": {k: round(float(v), 4) for k, v in timings.items()},
+    }
+    if state.reference is not None:
+        state.notes.append(
+            "single-shot: the reference plane's absolute phase is its FTP phase unwrapped along the rows with "
+            "smallest fringe order 0; object phases share that offset, which object - reference cancels"
+        )
 
 
-SINGLE_SHOT: dict[str, Callable[[SceneState, ProcessOptions], None]] = {"speckle-sinusoid": _speckle_not_supported}
+SINGLE_SHOT: dict[str, Callable[[SceneState, ProcessOptions], None]] = {"speckle-sinusoid": _speckle_single_shot}
 
 
 def _as_unwrap_parts(result: Any) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:

@@ -252,13 +252,13 @@ def test_calibration_with_unknown_version_or_model(capsys, small_capture) -> Non
     _assert_one_line_error(code, err, "model: expected one of reference-plane, polynomial, stereo, found 'mystery'")
 
 
-def test_speckle_capture_is_not_supported_yet(capsys, tmp_path) -> None:
+def test_speckle_capture_without_calibration_is_one_line(capsys, tmp_path) -> None:
     frames = np.zeros((1, 32, 48), np.uint8)
     pattern = {"kind": "speckle-sinusoid", "axis": "x", "frequency": 8, "steps": 1, "step": 0,
                "seed": 1, "dot_px": 3, "speckle_gain": 0.3}
     write_capture(tmp_path / "c", frames, [pattern], {"width": 96, "height": 64})
     code, _, err = _run(capsys, "process", tmp_path / "c", "-q")
-    _assert_one_line_error(code, err, "speckle-sinusoid (single-shot) captures are not supported")
+    _assert_one_line_error(code, err, "speckle-sinusoid (single-shot) capture needs --calibration with a reference-plane capture")
 
 
 def test_subprocess_error_has_no_traceback(tmp_path) -> None:

@@ -20,7 +20,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from rig.config import RigConfig, load_config, parse_config
+from rig.config import PATTERN_SETS, RigConfig, load_config, parse_config
 from rig.errors import ConfigError
 
 
@@ -48,6 +48,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--snr-db", help="camera noise as signal-to-noise ratio in dB, or 'none'")
     parser.add_argument("--frequencies", type=float, nargs="+", metavar="F", help="sinusoid frequencies (fringes across the projector)")
     parser.add_argument("--steps", type=int, metavar="J", help="phase shifts per frequency")
+    parser.add_argument(
+        "--pattern-set", choices=PATTERN_SETS,
+        help="'phase-shifting' (sinusoids, the default) or 'speckle': one speckle-embedded fringe frame "
+        "(single shot, [scan] speckle_* settings)",
+    )
     parser.add_argument("--patterns", type=Path, metavar="PATTERNS.json", help="a JSON list of capture-format pattern entries (overrides --frequencies/--steps)")
     parser.add_argument("--size", type=_size, metavar="WxH", help="camera size in pixels, field of view kept (default from the config: 1024x768)")
     parser.add_argument("--seed", type=int, help="noise seed")
@@ -71,6 +76,8 @@ def config_with_overrides(config: RigConfig, args: argparse.Namespace) -> RigCon
         overrides["scan"]["frequencies"] = list(args.frequencies)
     if args.steps is not None:
         overrides["scan"]["steps"] = args.steps
+    if getattr(args, "pattern_set", None) is not None:
+        overrides["scan"]["pattern_set"] = args.pattern_set
     if args.size is not None:
         overrides["camera"]["size"] = list(args.size)
     checked = parse_config(overrides, where="command line")
