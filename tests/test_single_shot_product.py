@@ -17,7 +17,6 @@ import json
 import numpy as np
 import pytest
 
-from calibration.store import Calibration, write_calibration
 from mock_devices import synth
 from rig.capture import read_capture, validate_pattern
 from rig.cli import main
@@ -155,17 +154,12 @@ def test_rig_scan_projects_the_speckle_pattern(tmp_path):
     assert np.all((edge_u | edge_v)[diff > 2.0])
 
 
-def test_rig_scan_speckle_then_process(tmp_path):
+def test_rig_scan_speckle_then_process(tmp_path, exact_calibration):
     config_path = tmp_path / "rig.toml"
     config_path.write_text(SPECKLE_RIG)
     config = load_config(config_path)
     geometry = geometry_from_config(config)
-    calibration = tmp_path / "calibration"
-    assert main(["scan", "--config", str(config_path), "--scene", "reference", "-o", str(calibration / "reference")]) == 0
-    write_calibration(calibration, Calibration(
-        l0_mm=geometry.l0_mm, d0_mm=geometry.d0_mm, f0_per_mm=geometry.f0_per_mm,
-        f0_frequency=geometry.f0_frequency, pixel_mm=geometry.pixel_mm, reference="reference",
-    ))
+    calibration = exact_calibration(config_path, tmp_path / "calibration")
     out = tmp_path / "processed"
     assert main(["scan", "--config", str(config_path), "-o", str(tmp_path / "object"),
                  "--calibration", str(calibration), "--process", "--process-output", str(out)]) == 0
