@@ -27,24 +27,21 @@ from typing import Any
 
 import numpy as np
 
-from processing import _validate
 from processing.order_correction import correct_orders_rpca
-from processing.phase_correction import accept_if_consistent, correct_phase_rpca, reorder_from_low_rank, restore_detail
-from processing.shadow_fill import valid_mask
+from processing.phase_correction import accept_if_consistent, correct_phase_rpca, phase_pair, reorder_from_low_rank, restore_detail
+from processing.rpca import RPCAResult
 from processing.voting import vote_row_orders
 
 TWO_PI = 2.0 * np.pi
 
-Correction = Callable[..., tuple[np.ndarray, dict[str, Any]]]
+Result = tuple[np.ndarray, dict[str, Any]]
+Correction = Callable[..., Result]
 
 
-def _inputs(absolute_phase: np.ndarray, wrapped_phase: np.ndarray, mask: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    phase = _validate.phase_map(absolute_phase, "absolute_phase")
-    wrapped = _validate.phase_map(wrapped_phase, "wrapped_phase", phase.shape)
-    valid = valid_mask(phase, mask, "absolute_phase")
-    if np.any(valid & ~np.isfinite(wrapped)):
-        raise ValueError("wrapped_phase: NaN at pixels where absolute_phase is valid")
-    return phase, wrapped, valid
+def _inputs(
+    absolute_phase: np.ndarray, wrapped_phase: np.ndarray, mask: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    return phase_pair(absolute_phase, wrapped_phase, mask, ("absolute_phase", "wrapped_phase"))
 
 
 def _info(method: str, parameters: dict[str, Any], start: float, frequency: float | None, **extra: Any) -> dict[str, Any]:
@@ -61,14 +58,28 @@ def _info(method: str, parameters: dict[str, Any], start: float, frequency: floa
     return info
 
 
-def correct_none(absolute_phase, wrapped_phase, orders=None, mask=None, frequency=None, **params: Any):
+def _solver_info(
+    method: str, parameters: dict[str, Any], start: float, frequency: float | None, result: RPCAResult, **extra: Any
+) -> dict[str, Any]:
+    """:func:`_info` with the RPCA solver's iterations, rank and convergence."""
+    iterations, rank, converged = result.iterations, result.rank, result.converged
+    return _info(method, parameters, start, frequency, iterations=iterations, rank=rank, converged=converged, **extra)
+
+
+def correct_none(
+    absolute_phase: np.ndarray, wrapped_phase: np.ndarray, orders: np.ndarray | None = None, mask: np.ndarray | None = None,
+    frequency: float | None = None, **params: Any,
+) -> Result:
     """No correction: the phase as unwrapped (NaN outside the mask)."""
     start = time.perf_counter()
     phase, _, valid = _inputs(absolute_phase, wrapped_phase, mask)
     return np.where(valid, phase, np.nan), _info("none", {}, start, frequency)
 
 
-def correct_vote(absolute_phase, wrapped_phase, orders=None, mask=None, frequency=None, min_segment: int = 4):
+def correct_vote(
+    absolute_phase: np.ndarray, wrapped_phase: np.ndarray, orders: np.ndarray | None = None, mask: np.ndarray | None = None,
+    frequency: float | None = None, min_segment: int = 4,
+) -> Result:
     """Ding's row-wise voting between wrapped-phase jumps ([119])."""
     start = time.perf_counter()
     phase, wrapped, valid = _inputs(absolute_phase, wrapped_phase, mask)
@@ -77,40 +88,35 @@ def correct_vote(absolute_phase, wrapped_phase, orders=None, mask=None, frequenc
 
 
 def correct_rpca_orders(
-    absolute_phase, wrapped_phase, orders=None, mask=None, frequency=None,
+    absolute_phase: np.ndarray, wrapped_phase: np.ndarray, orders: np.ndarray | None = None, mask: np.ndarray | None = None,
+    frequency: float | None = None,
     t: float = 0.034, beta: float | None = None, postprocess: bool = True, solver: str = "ialm", svd: str = "auto",
-):
+) -> Result:
     """RPCA on the fringe-order map, then the monotonicity pass (thesis ch. 3)."""
     start = time.perf_counter()
     phase, wrapped, valid = _inputs(absolute_phase, wrapped_phase, mask)
     k = np.where(valid, np.rint((phase - np.mod(wrapped, TWO_PI)) / TWO_PI), 0.0)
     out, _, result = correct_orders_rpca(k, wrapped, valid, t=t, beta=beta, postprocess=postprocess, solver=solver, svd=svd)
     parameters = {"t": t, "beta": beta, "postprocess": postprocess, "solver": solver, "svd": svd}
-    return out, _info(
-        "rpca-orders", parameters, start, frequency,
-        iterations=result.iterations, rank=result.rank, converged=result.converged,
-    )
+    return out, _solver_info("rpca-orders", parameters, start, frequency, result)
 
 
 def correct_rpca_phase(
-    absolute_phase, wrapped_phase, orders=None, mask=None, frequency=None,
-    tau: float | None = None, stable: bool = True, svd: str = "auto",
-):
+    absolute_phase: np.ndarray, wrapped_phase: np.ndarray, orders: np.ndarray | None = None, mask: np.ndarray | None = None,
+    frequency: float | None = None, tau: float | None = None, stable: bool = True, svd: str = "auto",
+) -> Result:
     """Low-rank part of the absolute phase by inexact ALM RPCA (thesis ch. 4)."""
     start = time.perf_counter()
     phase, _, valid = _inputs(absolute_phase, wrapped_phase, mask)
     out, result = correct_phase_rpca(phase, valid, tau=tau, stable=stable, svd=svd)
     parameters = {"tau": tau if tau is not None else 1.0 / np.sqrt(max(phase.shape)), "stable": stable, "svd": svd}
-    return out, _info(
-        "rpca-phase", parameters, start, frequency,
-        iterations=result.iterations, rank=result.rank, converged=result.converged,
-    )
+    return out, _solver_info("rpca-phase", parameters, start, frequency, result)
 
 
 def correct_auto(
-    absolute_phase, wrapped_phase, orders=None, mask=None, frequency=None,
-    tau: float | None = None, k_sigma: float = 4.0, svd: str = "auto",
-):
+    absolute_phase: np.ndarray, wrapped_phase: np.ndarray, orders: np.ndarray | None = None, mask: np.ndarray | None = None,
+    frequency: float | None = None, tau: float | None = None, k_sigma: float = 4.0, svd: str = "auto",
+) -> Result:
     """The most accurate method measured: ch. 4 RPCA, re-derived orders, measured detail restored.
 
     1. L = low-rank part of the phase (stable inexact ALM, thesis ch. 4);
@@ -136,9 +142,8 @@ def correct_auto(
         "tau": tau if tau is not None else 1.0 / np.sqrt(max(phase.shape)),
         "stable": True, "k_sigma": k_sigma, "svd": svd,
     }
-    return out, _info(
-        "auto", parameters, start, frequency,
-        iterations=result.iterations, rank=result.rank, converged=result.converged,
+    return out, _solver_info(
+        "auto", parameters, start, frequency, result,
         steps=["rpca-phase", "reorder-if-consistent", "restore-detail"], orders_changed=int(np.count_nonzero(changed)),
     )
 
@@ -152,7 +157,7 @@ CORRECTIONS: dict[str, Correction] = {
 }
 
 
-def correct(name: str, absolute_phase: np.ndarray, wrapped_phase: np.ndarray, **kwargs: Any) -> tuple[np.ndarray, dict[str, Any]]:
+def correct(name: str, absolute_phase: np.ndarray, wrapped_phase: np.ndarray, **kwargs: Any) -> Result:
     """Run the correction ``name`` of :data:`CORRECTIONS`."""
     try:
         method = CORRECTIONS[name]

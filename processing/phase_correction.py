@@ -101,24 +101,27 @@ def reorder_from_low_rank(
     -------
     (H, W) float64, NaN outside the mask
     """
-    estimate, wrapped, valid = _estimate_and_measurement(low_rank_phase, wrapped_phase, "wrapped_phase", mask)
+    estimate, wrapped, valid = phase_pair(low_rank_phase, wrapped_phase, mask, ("low_rank_phase", "wrapped_phase"))
     out = np.full(estimate.shape, np.nan)
     phi = wrapped[valid]
     out[valid] = phi + TWO_PI * np.rint((estimate[valid] - phi) / TWO_PI)
     return out
 
 
-def _estimate_and_measurement(
-    low_rank_phase: np.ndarray, measured: np.ndarray, name: str, mask: np.ndarray | None
+def phase_pair(
+    phase: np.ndarray, other: np.ndarray, mask: np.ndarray | None, names: tuple[str, str]
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Validated low-rank estimate, measured map (named ``name``) and valid mask; the measured map
-    must be finite wherever the estimate is valid."""
-    estimate = _validate.phase_map(low_rank_phase, "low_rank_phase")
-    values = _validate.phase_map(measured, name, estimate.shape)
-    valid = valid_mask(estimate, mask, "low_rank_phase")
-    if np.any(valid & ~np.isfinite(values)):
-        raise ValueError(f"{name}: NaN at pixels where low_rank_phase is valid")
-    return estimate, values, valid
+    """Validate a phase map, a second map of its shape and the mask: ``(phase, other, valid)``.
+
+    ``valid`` is :func:`processing.shadow_fill.valid_mask` of ``phase``; ``other`` must be finite
+    wherever ``phase`` is valid. ``names`` name the two maps in the ``ValueError`` messages.
+    """
+    first = _validate.phase_map(phase, names[0])
+    second = _validate.phase_map(other, names[1], first.shape)
+    valid = valid_mask(first, mask, names[0])
+    if np.any(valid & ~np.isfinite(second)):
+        raise ValueError(f"{names[1]}: NaN at pixels where {names[0]} is valid")
+    return first, second, valid
 
 
 def neighbour_prediction(phase: np.ndarray, valid: np.ndarray) -> np.ndarray:
@@ -180,7 +183,7 @@ def restore_detail(
     -------
     (H, W) float64, NaN outside the mask
     """
-    estimate, measured, valid = _estimate_and_measurement(low_rank_phase, measured_phase, "measured_phase", mask)
+    estimate, measured, valid = phase_pair(low_rank_phase, measured_phase, mask, ("low_rank_phase", "measured_phase"))
     k_sigma = float(k_sigma)
     if not k_sigma > 0:
         raise ValueError(f"k_sigma: expected > 0, found {k_sigma}")
