@@ -168,3 +168,24 @@ def test_rig_scan_speckle_then_process(tmp_path, exact_calibration):
     _assert_heights(np.load(out / "height.npy"), truth, lit)
     report = json.loads((out / "report.json").read_text())
     _assert_single_shot_info(report["stage_info"]["object"], "object")
+
+
+def test_calibrate_then_scan_the_speckle_reference_then_single_shots(tmp_path):
+    # The user path: rig calibrate with phase shifting (l0, d0, f0 are fitted from absolute
+    # phases), then the reference plane again under the speckle pattern into the calibration's
+    # reference capture; single shots are then processed against it with the fitted geometry.
+    speckle = tmp_path / "speckle.toml"
+    speckle.write_text(SPECKLE_RIG)
+    shifting = tmp_path / "shifting.toml"
+    shifting.write_text(SPECKLE_RIG.replace('pattern_set = "speckle"', "frequencies = [1, 8, 32]"))
+    calibration = tmp_path / "calibration"
+    assert main(["calibrate", "--config", str(shifting), "-o", str(calibration), "-q"]) == 0
+    assert main(["scan", "--config", str(speckle), "--scene", "reference", "-o", str(calibration / "reference"), "--overwrite"]) == 0
+    out = tmp_path / "processed"
+    assert main(["scan", "--config", str(speckle), "-o", str(tmp_path / "object"),
+                 "--calibration", str(calibration), "--process", "--process-output", str(out)]) == 0
+    config = load_config(speckle)
+    geometry = geometry_from_config(config)
+    truth = scene_height(config, "object", geometry)
+    lit = synth.projector_coordinates(truth, geometry).lit & synth.projector_coordinates(np.zeros_like(truth), geometry).lit
+    _assert_heights(np.load(out / "height.npy"), truth, lit)
