@@ -433,6 +433,11 @@ def _speckle_single_shot(state: SceneState, options: ProcessOptions) -> None:
     image = state.frames[group.indices[0]].astype(np.float32)
     if group.steps > 1 or len(group.indices) > 1:
         state.notes.append(f"single-shot: {len(group.indices)} speckle-sinusoid frames; used the first (pattern {group.indices[0]})")
+    if options.denoise != "none":
+        raise ProcessingError(
+            f"--denoise {options.denoise}: not for a speckle-sinusoid (single-shot) capture, whose speckle it would "
+            "remove; the single shot separates fringes and speckle by RPCA itself (leave --denoise none)"
+        )
     if options.unwrap != "auto":
         state.notes.append(f"single-shot capture: --unwrap {options.unwrap} does not apply; fringe orders from the speckle")
     axis = 1 if state.axis == "x" else 0
@@ -445,8 +450,9 @@ def _speckle_single_shot(state: SceneState, options: ProcessOptions) -> None:
         if state.reference is None:
             if state.name != "reference":
                 raise ProcessingError(
-                    f"{where}: a speckle-sinusoid (single-shot) capture needs --calibration with a reference-plane "
-                    "capture under the same pattern: its speckle gives the fringe orders"
+                    f"{where}: a speckle-sinusoid (single-shot) capture takes its fringe orders from a reference-plane "
+                    "capture under the same pattern: give a --calibration whose reference capture has it "
+                    "(rig calibrate itself needs phase-shifting patterns)"
                 )
             prep = {k: v for k, v in given.items() if k in ("carrier", "bandwidth", "tau", "rpca_tol", "svd")}
             rpca = None

@@ -258,7 +258,7 @@ def test_speckle_capture_without_calibration_is_one_line(capsys, tmp_path) -> No
                "seed": 1, "dot_px": 3, "speckle_gain": 0.3}
     write_capture(tmp_path / "c", frames, [pattern], {"width": 96, "height": 64})
     code, _, err = _run(capsys, "process", tmp_path / "c", "-q")
-    _assert_one_line_error(code, err, "speckle-sinusoid (single-shot) capture needs --calibration with a reference-plane capture")
+    _assert_one_line_error(code, err, "speckle-sinusoid (single-shot) capture takes its fringe orders from a reference-plane capture")
 
 
 def test_subprocess_error_has_no_traceback(tmp_path) -> None:

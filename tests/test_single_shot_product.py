@@ -110,7 +110,15 @@ def test_single_shot_without_calibration_is_one_line(simulated, tmp_path, capsys
     assert code == 1
     lines = [line for line in err.splitlines() if line.strip() and not line.startswith("process ")]
     assert len(lines) == 1 and "Traceback" not in err
-    assert "speckle-sinusoid" in lines[0] and "reference" in lines[0]
+    assert "speckle-sinusoid" in lines[0] and "--calibration" in lines[0]
+
+
+def test_denoising_a_single_shot_is_refused(simulated, tmp_path, capsys):
+    code = main(["process", str(simulated / "object"), "--calibration", str(simulated / "calibration"),
+                 "-o", str(tmp_path / "out"), "--denoise", "rpca"])
+    err = capsys.readouterr().err
+    assert code == 1 and "Traceback" not in err
+    assert "--denoise rpca: not for a speckle-sinusoid (single-shot) capture" in err
 
 
 def test_config_speckle_pattern_set():
