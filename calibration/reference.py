@@ -12,15 +12,10 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from calibration.errors import CalibrationError
+from processing.patterns import PROJECTION_KEYS
 
 #: Name of the reference-plane capture inside a calibration directory.
 REFERENCE_DIR = "reference"
-
-# Keys that describe what is projected; anything else (comments, timestamps) may differ.
-_PATTERN_KEYS = (
-    "kind", "axis", "frequency", "steps", "step", "offset", "amplitude", "phase_rad", "shift_rad",
-    "bit", "bits", "inverted", "level", "seed", "dot_px", "speckle_gain",
-)
 
 
 def check_same_patterns(
@@ -32,7 +27,7 @@ def check_same_patterns(
             f"{found_name}: {len(found)} patterns but {expected_name} has {len(expected)}; capture both with the same pattern set"
         )
     for index, (a, b) in enumerate(zip(expected, found)):
-        for key in _PATTERN_KEYS:
+        for key in PROJECTION_KEYS:
             if a.get(key) != b.get(key):
                 raise CalibrationError(
                     f"{found_name}: pattern {index} {key} = {b.get(key)!r} but {expected_name} has {a.get(key)!r}; "
@@ -47,14 +42,3 @@ def phase_frequency(patterns: Sequence[Mapping[str, Any]]) -> float:
         raise CalibrationError("patterns: no sinusoid pattern, cannot calibrate a phase-based model")
     return max(frequencies)
 
-
-def phase_axis(patterns: Sequence[Mapping[str, Any]]) -> str:
-    """The axis ("x" or "y") of the highest-frequency sinusoid."""
-    best = max(
-        (p for p in patterns if p.get("kind") in ("sinusoid", "speckle-sinusoid")),
-        key=lambda p: float(p["frequency"]),
-        default=None,
-    )
-    if best is None:
-        raise CalibrationError("patterns: no sinusoid pattern, cannot calibrate a phase-based model")
-    return str(best.get("axis", "x"))

@@ -15,6 +15,13 @@ import numpy as np
 
 PATTERN_KINDS = ("sinusoid", "speckle-sinusoid", "gray", "flat")
 
+# Keys of a pattern entry that change what is projected: two captures are comparable only if
+# these agree pattern by pattern (provenance and other extra keys may differ).
+PROJECTION_KEYS = (
+    "kind", "axis", "frequency", "steps", "step", "offset", "amplitude", "phase_rad", "shift_rad",
+    "bit", "bits", "inverted", "level", "seed", "dot_px", "speckle_gain",
+)
+
 
 def sinusoid_shift(pattern: Mapping[str, Any]) -> float:
     """Phase shift of one sinusoid frame in radians: ``shift_rad`` if given, else 2 pi j / J."""

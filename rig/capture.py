@@ -42,7 +42,7 @@ import cv2
 import numpy as np
 
 from calibration.jsonfile import read_json, write_json_atomic
-from processing.patterns import PATTERN_KINDS
+from processing.patterns import PATTERN_KINDS, PROJECTION_KEYS
 from rig.errors import CaptureError
 
 log = logging.getLogger(__name__)
@@ -51,13 +51,6 @@ FORMAT = "fpp-capture"
 VERSION = 1
 MANIFEST = "capture.json"
 INCOMPLETE_MARK = ".incomplete-"
-
-# Keys of a pattern entry that change what is projected: two captures are comparable only if
-# these agree pattern by pattern (provenance and other extra keys may differ).
-PROJECTION_KEYS = (
-    "kind", "axis", "frequency", "steps", "step", "offset", "amplitude", "phase_rad", "shift_rad",
-    "bit", "bits", "inverted", "level", "seed", "dot_px", "speckle_gain",
-)
 
 
 def utc_now() -> str:
