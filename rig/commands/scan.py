@@ -2,6 +2,9 @@
 
 Without ``--config`` the built-in simulated rig scans its virtual scene. With ``--calibration CAL
 --process`` the new capture is processed into a height map right away (like ``rig process``).
+The config's ``[scan] pattern_set`` picks phase-shifting sinusoids (default) or the one-frame
+speckle single shot (``"speckle"``), which ``rig process`` unwraps against the calibration's
+reference capture of the same pattern.
 """
 
 from __future__ import annotations
