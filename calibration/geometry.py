@@ -234,7 +234,7 @@ def fit_l0_d0(
     if len(masks) != heights.size:
         raise CalibrationError(f"plane masks: {len(masks)} masks for {heights.size} heights")
 
-    means, spreads, maps = [], [], []
+    means, maps = [], []
     for h, dphi, mask in zip(heights, delta_phases, masks):
         dphi = np.asarray(dphi, dtype=np.float64)
         keep = _valid(dphi, mask, f"plane at {h:g} mm")

@@ -478,7 +478,7 @@ def compute(
     heights, deltas = [], []
     for height, path in planes:
         note(f"calibrate: plane at {height:g} mm")
-        phase, plane_frequency, _, plane_patterns = phase_of(path)
+        phase, _, _, plane_patterns = phase_of(path)  # same patterns, so the same frequency and axis
         check_same_patterns(patterns, plane_patterns, f"{directory / REFERENCE_DIR}", f"{path}")
         heights.append(height)
         deltas.append((compensate_phase(phase, table) if compensate else phase) - reference)
