@@ -46,6 +46,7 @@ class BoardSpec:
 
     @property
     def inner_corners(self) -> tuple[int, int]:
+        """Inner corners (columns, rows): one fewer than squares each way, as OpenCV counts them."""
         return (self.squares[0] - 1, self.squares[1] - 1)
 
     def object_points(self) -> np.ndarray:
@@ -55,6 +56,7 @@ class BoardSpec:
         return np.column_stack((gx.ravel(), gy.ravel(), np.zeros(gx.size))).astype(np.float32) * self.square_mm
 
     def charuco_board(self) -> "cv2.aruco.CharucoBoard":
+        """The OpenCV ChArUco board of this spec (markers 0.7 of a square unless ``marker_mm`` is given)."""
         dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, self.dictionary))
         return cv2.aruco.CharucoBoard(tuple(self.squares), self.square_mm, self.marker_mm or 0.7 * self.square_mm, dictionary)
 
@@ -69,6 +71,8 @@ class BoardDetection:
 
 @dataclass(frozen=True)
 class CameraCalibration:
+    """Camera intrinsics and lens distortion fitted to board views, with the fit's quality."""
+
     camera_matrix: np.ndarray
     distortion: np.ndarray
     image_size: tuple[int, int]       # (width, height)

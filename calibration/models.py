@@ -62,6 +62,7 @@ def _delta(object_phase: np.ndarray, reference_phase: np.ndarray | None, calibra
 
 
 def stereo_model(calibration: CalibrationLike) -> StereoModel:
+    """The stereo model held in a ``"stereo"`` calibration's fields."""
     return StereoModel.from_fields(calibration.to_dict(), where=calibration.where)
 
 

@@ -32,6 +32,8 @@ COEFFICIENTS_FILE = "polynomial.npy"
 
 @dataclass(frozen=True)
 class PolynomialModel:
+    """Per-pixel polynomial h = sum_i c_i dPhi^i (no constant term) in the phase difference to the reference."""
+
     coefficients: np.ndarray   # (degree, H, W): c_1 .. c_n, NaN where unfitted
     phase_frequency: float     # the fringe frequency the phase differences are at
     residual_rms_mm: float = float("nan")
@@ -57,6 +59,7 @@ class PolynomialModel:
         return total
 
     def fields(self, file: str = COEFFICIENTS_FILE) -> dict[str, Any]:
+        """The calibration.json keys of this model, its coefficients stored in ``file`` beside it."""
         return {
             "model": POLYNOMIAL,
             "polynomial": {

@@ -50,6 +50,8 @@ def _distortion(data: Mapping[str, Any], key: str, where: str) -> np.ndarray:
 
 @dataclass(frozen=True)
 class StereoModel:
+    """Camera and projector as a calibrated stereo pair: pinhole + distortion each, and the camera -> projector transform."""
+
     camera_matrix: np.ndarray
     camera_distortion: np.ndarray
     projector_matrix: np.ndarray
@@ -301,6 +303,8 @@ def projector_corners(
 
 @dataclass(frozen=True)
 class StereoCalibration:
+    """Result of :func:`calibrate_stereo`: the model and its reprojection errors."""
+
     model: StereoModel
     rms_px: float                 # stereoCalibrate's RMS reprojection error (camera and projector)
     camera_rms_px: float

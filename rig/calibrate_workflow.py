@@ -86,6 +86,7 @@ class CalibrationPlan:
     flatness_tolerance_mm: float = 1.0
 
     def check(self) -> None:
+        """Raise ConfigError naming the option when the plan cannot give a calibration of its model."""
         if self.model not in MODELS:
             raise ConfigError(f"--model: expected one of {', '.join(MODELS)}, found {self.model!r}")
         if self.model == STEREO:
@@ -193,6 +194,7 @@ class StageCommand:
         self.timeout_s = timeout_s
 
     def move(self, height_mm: float) -> None:
+        """Run the command for ``height_mm``; ConfigError if it fails or times out."""
         command = shlex.split(self.template.format(height_mm=height_mm))
         log.info("stage: %s", " ".join(command))
         try:

@@ -35,6 +35,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def parse_size(text: str) -> tuple[int, int]:
+    """``--size WxH``: 16 to 8192 pixels per side."""
     try:
         width, height = split_size(text)
     except ValueError:

@@ -31,6 +31,8 @@ class Found:
 
 @dataclass
 class Probe:
+    """What one kind of device search found."""
+
     title: str
     found: list[Found]
     note: str = ""  # why nothing could be looked for, or a hint
@@ -129,6 +131,7 @@ def probe_offscreen_gl() -> Probe:
 
 
 def simulated() -> Probe:
+    """The devices of the built-in simulated rig (always there)."""
     return Probe(
         "Simulated rig (rig scan without --config)",
         [
@@ -143,6 +146,7 @@ PROBES: tuple[Callable[[], Probe], ...] = (probe_opencv, probe_pylon, probe_seri
 
 
 def format_probe(probe: Probe) -> str:
+    """A probe as printed: its title, one indented line per device, then the note."""
     lines = [probe.title]
     for item in probe.found:
         lines.append(f"  {item.backend:<17} {item.address:<28} {item.description}")
