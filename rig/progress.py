@@ -2,7 +2,8 @@
 
 On a terminal it redraws one line (``label [#####.....] 3/6 unwrap``); when stderr is not a
 terminal (logs, CI, pipes) it prints only a start line and an end line with the elapsed time,
-so captured output stays short. ``quiet=True`` silences it entirely.
+so captured output stays short. ``quiet=True`` silences it entirely. A command that fails before
+its first step (bad input) prints nothing here: its one error line stands alone.
 
 >>> with Progress("process", total=4) as progress:
 ...     progress.step("load")
@@ -30,16 +31,18 @@ class Progress:
         self.done = 0
         self.started = 0.0
         self._width = 0
+        self._announced = False
 
     def __enter__(self) -> "Progress":
         self.started = time.perf_counter()
-        if not self.quiet and not self.tty:
-            self._print(f"{self.label}: started ({self.total} steps)\n")
         self._draw("")
         return self
 
     def step(self, note: str = "", count: int = 1) -> None:
         """Mark ``count`` steps done; ``note`` names what comes next (or what was done)."""
+        if not self._announced and not self.quiet and not self.tty:
+            self._print(f"{self.label}: started ({self.total} steps)\n")
+        self._announced = True
         self.done = min(self.done + count, self.total)
         self._draw(note)
 
@@ -49,6 +52,9 @@ class Progress:
             return False
         if self.tty:
             self._print("\r" + " " * self._width + "\r")
+        failed_before_work = exc_type is not None and exc_type is not KeyboardInterrupt and not self._announced
+        if failed_before_work:
+            return False
         outcome = "done" if exc_type is None else ("interrupted" if exc_type is KeyboardInterrupt else "failed")
         self._print(f"{self.label}: {outcome} in {elapsed:.1f} s\n")
         return False

@@ -39,3 +39,17 @@ def test_failure_and_quiet() -> None:
     with Progress("demo", total=1, stream=quiet, quiet=True) as progress:
         progress.step()
     assert quiet.getvalue() == ""
+
+
+def test_failure_before_the_first_step_leaves_the_error_line_alone() -> None:
+    stream = io.StringIO()
+    with pytest.raises(ValueError):
+        with Progress("process cap", total=3, stream=stream):
+            raise ValueError("bad capture")
+    assert stream.getvalue() == ""
+    stream = io.StringIO()
+    with pytest.raises(ValueError):
+        with Progress("process cap", total=3, stream=stream) as progress:
+            progress.step("load")
+            raise ValueError("corrupt frame")
+    assert stream.getvalue().splitlines()[-1].startswith("process cap: failed in ")
