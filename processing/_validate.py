@@ -24,6 +24,14 @@ def real_array(value: object, name: str, ndim: int | None = None) -> np.ndarray:
     return arr
 
 
+def finite_array(value: object, name: str, ndim: int | None = None) -> np.ndarray:
+    """:func:`real_array` with no NaN or infinity anywhere."""
+    arr = real_array(value, name, ndim)
+    if not np.isfinite(arr).all():
+        raise ValueError(f"{name}: contains NaN or infinity")
+    return arr
+
+
 def image(value: object, name: str) -> np.ndarray:
     """A 2-D real image (dtype kept)."""
     return real_array(value, name, ndim=2)

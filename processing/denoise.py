@@ -52,9 +52,7 @@ def rpca_denoise_frame(
     denoised : (H, W) float64
     result : RPCAResult
     """
-    arr = _validate.image(image, "image")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError("image: contains NaN or infinity")
+    arr = _validate.finite_array(image, "image", ndim=2)
     result = rpca_ialm(arr, tau=tau, tol=tol, svd=svd, dtype=dtype, stable=stable, noise_sigma=noise_sigma)
     return result.low_rank.astype(np.float64), result
 
@@ -74,9 +72,7 @@ def rpca_denoise_stack(
     denoised : (N, H, W) float64
     results : list of N RPCAResult
     """
-    arr = _validate.real_array(stack, "stack", ndim=3)
-    if not np.all(np.isfinite(arr)):
-        raise ValueError("stack: contains NaN or infinity")
+    arr = _validate.finite_array(stack, "stack", ndim=3)
     out = np.empty(arr.shape, dtype=np.float64)
     results: list[RPCAResult] = []
     for index, frame in enumerate(arr):

@@ -37,10 +37,8 @@ def detect_carrier(image: np.ndarray, axis: int = 1) -> float:
     bin is refined by parabolic interpolation of the log magnitude. Frequencies below two cycles
     per line are ignored (the background's slow variations live there).
     """
-    img = _validate.image(image, "image").astype(np.float64, copy=False)
+    img = _validate.finite_array(image, "image", ndim=2).astype(np.float64, copy=False)
     axis = _check_axis(axis)
-    if not np.isfinite(img).all():
-        raise ValueError("image: contains NaN or infinity")
     n = img.shape[axis]
     if n < 8:
         raise ValueError(f"image: expected at least 8 pixels along axis {axis}, found {n}")

@@ -72,11 +72,9 @@ def shift_weights(steps: int, shifts: np.ndarray | None = None) -> np.ndarray:
         weights = _uniform_weights(steps)
         weights.flags.writeable = False
         return weights
-    delta = _validate.real_array(shifts, "shifts", ndim=1).astype(np.float64)
+    delta = _validate.finite_array(shifts, "shifts", ndim=1).astype(np.float64)
     if delta.shape[0] != steps:
         raise ValueError(f"shifts: expected {steps} values (one per frame), found {delta.shape[0]}")
-    if not np.all(np.isfinite(delta)):
-        raise ValueError("shifts: contains NaN or infinity")
     design = np.column_stack([np.ones(steps), np.cos(delta), np.sin(delta)])
     singular = np.linalg.svd(design, compute_uv=False)
     if singular[-1] < 1e-6 * singular[0]:
