@@ -29,7 +29,7 @@ import numpy as np
 
 from processing.order_correction import correct_orders_rpca
 from processing.phase_correction import accept_if_consistent, correct_phase_rpca, phase_pair, reorder_from_low_rank, restore_detail
-from processing.rpca import RPCAResult
+from processing.rpca import RPCAResult, default_tau
 from processing.voting import vote_row_orders
 
 TWO_PI = 2.0 * np.pi
@@ -109,7 +109,7 @@ def correct_rpca_phase(
     start = time.perf_counter()
     phase, _, valid = _inputs(absolute_phase, wrapped_phase, mask)
     out, result = correct_phase_rpca(phase, valid, tau=tau, stable=stable, svd=svd)
-    parameters = {"tau": tau if tau is not None else 1.0 / np.sqrt(max(phase.shape)), "stable": stable, "svd": svd}
+    parameters = {"tau": tau if tau is not None else default_tau(phase.shape), "stable": stable, "svd": svd}
     return out, _solver_info("rpca-phase", parameters, start, frequency, result)
 
 
@@ -139,7 +139,7 @@ def correct_auto(
     out = restore_detail(low_rank, reordered, valid, k_sigma=k_sigma)
     changed = valid & (np.abs(reordered - phase) > np.pi)
     parameters = {
-        "tau": tau if tau is not None else 1.0 / np.sqrt(max(phase.shape)),
+        "tau": tau if tau is not None else default_tau(phase.shape),
         "stable": True, "k_sigma": k_sigma, "svd": svd,
     }
     return out, _solver_info(
