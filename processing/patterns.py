@@ -115,7 +115,3 @@ def pattern_image(pattern: Mapping[str, Any], projector_size: tuple[int, int]) -
     uu, vv = np.meshgrid(u, v)
     return pattern_intensity(pattern, uu, vv, projector_size).astype(np.float32)
 
-
-def absolute_phase_of(u: np.ndarray, frequency: float, extent: float) -> np.ndarray:
-    """The absolute phase the product reports for a sinusoid at projector coordinate u: 2 pi f u / W."""
-    return 2.0 * np.pi * float(frequency) * np.asarray(u, dtype=np.float64) / extent
