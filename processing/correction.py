@@ -28,7 +28,10 @@ from typing import Any
 import numpy as np
 
 from processing.order_correction import correct_orders_rpca
-from processing.phase_correction import accept_if_consistent, correct_phase_rpca, phase_pair, reorder_from_low_rank, restore_detail
+from processing.phase_correction import (
+    accept_if_consistent, correct_phase_rpca, low_rank_misfit, order_breaks, phase_noise_sigma, phase_pair,
+    reorder_from_low_rank, restore_detail, settle_orders,
+)
 from processing.rpca import RPCAResult, default_tau
 from processing.voting import vote_row_orders
 
@@ -119,24 +122,43 @@ def correct_auto(
 ) -> Result:
     """The most accurate method measured: ch. 4 RPCA, re-derived orders, measured detail restored.
 
-    1. L = low-rank part of the phase (stable inexact ALM, thesis ch. 4);
-    2. re-derive every pixel's fringe order from L and the measured wrapped phase, and accept a
-       changed order only where the result fits the pixel's neighbours better than the
-       measured phase did (so a poor L, e.g. at steep edges, cannot spoil correct pixels);
-    3. keep L (denoised) where that phase agrees with it within ``k_sigma`` noise standard
+    1. L = low-rank part of the phase (stable inexact ALM, thesis ch. 4, stopped at the noise
+       level of :func:`~processing.phase_correction.phase_noise_sigma`, blind to order errors);
+    2. re-derive every pixel's fringe order from L and the measured wrapped phase; where L does
+       not fit the wrapped phase (|wrap(phi - L)| > pi / 2 nearby: structure the low-rank model
+       missed), accept a changed order only where it fits the neighbours of a guard map better
+       than the guard does; two guards, the measured phase (safe where fringes are too dense for
+       row segments) and Ding's row vote (far fewer wrong orders at low SNR);
+    3. settle each candidate: every order re-derived twice from its neighbours' phase;
+    4. keep the candidate with fewer order breaks (second differences beyond pi, truth-free);
+    5. keep L (denoised) where that phase agrees with it within ``k_sigma`` noise standard
        deviations, the measured phase with its corrected order where it does not.
 
-    Measured (benchmarks/bench_rpca.py, tests): Table 4.1 at 1000 x 1000, NMSE_h 0.00095 against
-    0.00091 for ``rpca-phase`` alone and 0.0129 with the true orders; but where the low-rank
-    model misses structure, ``rpca-phase`` alone loses: isolated objects at 35 dB 0.0026 (auto
-    0.0003, none 0.0041), and 64 fringes over 160 px (2.5 rad per pixel) 1.3 mm RMS against
-    0.12 mm uncorrected (auto 0.056 mm). k_sigma = 4 was best of 3, 4, 5 over six scenes.
+    Measured (rig study's cases at 500 x 500 and 1000 x 1000, one seed; NMSE_h): Table 4.1 on par
+    with ``rpca-phase`` (7.3e-5 vs 7.1e-5 at 500 px, oracle 1.2e-3); sphere cap at 10 dB 6.8e-4
+    (``rpca-phase`` 2.2e-3, ch. 3 + post-processing 3.8e-3, vote 0.030); isolated objects,
+    f = (18, 25), 18 dB, a quarter of the orders wrong: 0.0074 (``rpca-phase`` 0.062, vote 1.15,
+    ch. 3 + post 0.73, true orders 0.0013); 64 fringes over 160 px (2.5 rad per pixel): 0.056 mm
+    RMS against 0.12 mm uncorrected (vote 81 mm; the vote guard loses on order breaks there).
+    k_sigma = 4 was best of 3, 4, 5 over six scenes; two settling passes beat one and three.
     """
     start = time.perf_counter()
     phase, wrapped, valid = _inputs(absolute_phase, wrapped_phase, mask)
-    low_rank, result = correct_phase_rpca(phase, valid, tau=tau, stable=True, svd=svd)
-    reordered = accept_if_consistent(reorder_from_low_rank(low_rank, wrapped, valid), phase, valid)
-    out = restore_detail(low_rank, reordered, valid, k_sigma=k_sigma)
+    sigma = phase_noise_sigma(phase, valid)
+    low_rank, result = correct_phase_rpca(phase, valid, tau=tau, stable=True, svd=svd, noise_sigma=sigma)
+    proposed = reorder_from_low_rank(low_rank, wrapped, valid)
+    misfit = low_rank_misfit(low_rank, wrapped, valid)
+    # Where L misfits, an order change must fit the neighbours of a guard map: the measured phase
+    # (safe where fringes are too dense for row segments) or the row vote (far fewer order errors
+    # at low SNR). Both candidates are settled and the one with fewer order breaks is kept.
+    candidates = {}
+    for guard_name, guard in (("measured", phase), ("vote", vote_row_orders(phase, wrapped, valid))):
+        guarded = np.where(misfit, accept_if_consistent(proposed, guard, valid), proposed)
+        candidates[guard_name] = settle_orders(guarded, wrapped, valid)
+    breaks = {name: order_breaks(candidate, valid) for name, candidate in candidates.items()}
+    guard_name = min(breaks, key=breaks.__getitem__)  # ties: the measured phase
+    reordered = candidates[guard_name]
+    out = restore_detail(low_rank, reordered, valid, k_sigma=k_sigma, noise_sigma=sigma)
     changed = valid & (np.abs(reordered - phase) > np.pi)
     parameters = {
         "tau": tau if tau is not None else default_tau(phase.shape),
@@ -144,7 +166,9 @@ def correct_auto(
     }
     return out, _solver_info(
         "auto", parameters, start, frequency, result,
-        steps=["rpca-phase", "reorder-if-consistent", "restore-detail"], orders_changed=int(np.count_nonzero(changed)),
+        steps=["rpca-phase", "reorder-if-consistent", "settle-orders", "restore-detail"],
+        orders_changed=int(np.count_nonzero(changed)), misfit_pixels=int(np.count_nonzero(misfit)), guard=guard_name,
+        order_breaks=breaks,
     )
 
 

@@ -15,15 +15,18 @@ Beyond the thesis, :func:`reorder_from_low_rank` keeps the measured phase and on
 each pixel's fringe order from the low-rank estimate, k = round((L - phi) / 2 pi): exact orders
 wherever L is within pi of the truth, and every measured detail kept. :func:`restore_detail`
 combines both: the low-rank phase, except where the re-derived phase departs from it by more
-than the noise explains (structure the low-rank model missed).
+than the noise explains (structure the low-rank model missed). :func:`low_rank_misfit`,
+:func:`settle_orders` and :func:`order_breaks` guard, tidy and rank re-derived order maps without
+the truth (see :func:`processing.correction.correct_auto`).
 """
 
 from __future__ import annotations
 
 import numpy as np
+from scipy import ndimage
 
 from processing import _validate
-from processing.rpca import RPCAResult, robust_noise_sigma, rpca_ialm
+from processing.rpca import RPCAResult, rpca_ialm
 from processing.shadow_fill import fill_shadows, valid_mask
 
 TWO_PI = 2.0 * np.pi
@@ -57,7 +60,7 @@ def correct_phase_rpca(
     svd : {"auto", "partial", "full"}
     tol, max_iter : solver controls, see :func:`processing.rpca.rpca_ialm`.
     noise_sigma : float, optional
-        Phase noise in radians for ``stable``; default estimated from the valid pixels.
+        Phase noise in radians for ``stable``; default :func:`phase_noise_sigma` of the valid pixels.
     dtype : float32 or float64, optional
         Working precision; default float32 for ``stable`` (it stops at the noise level, far above
         float32 rounding: same NMSE_h to 1e-5 relative on Table 4.1, 2.5x faster), else float64.
@@ -71,13 +74,38 @@ def correct_phase_rpca(
     valid = valid_mask(phase, mask, "absolute_phase")
     filled = fill_shadows(phase, valid)
     if stable and noise_sigma is None:
-        noise_sigma = robust_noise_sigma(filled, valid)
+        noise_sigma = phase_noise_sigma(filled, valid)
     if dtype is None:
         dtype = np.float32 if stable else np.float64
     result = rpca_ialm(
         filled, tau=tau, tol=tol, max_iter=max_iter, svd=svd, stable=stable, noise_sigma=noise_sigma, dtype=dtype
     )
     return np.where(valid, result.low_rank.astype(np.float64), np.nan), result
+
+
+def phase_noise_sigma(phase: np.ndarray, mask: np.ndarray | None = None) -> float:
+    """Standard deviation of the noise on a phase map, blind to its 2 pi order errors.
+
+    As :func:`processing.rpca.robust_noise_sigma` (median absolute deviation of the second
+    differences along rows and along columns, the smaller kept), with the differences wrapped into
+    [-pi, pi): a wrong fringe order adds a multiple of 2 pi to them, which the wrapping removes,
+    so the estimate holds however many orders are wrong. Unwrapped, with 14 % of the orders wrong
+    (10 dB) it came out 1.7x the noise and with 25 % wrong (isolated objects, f = 25) 300x, and
+    stable RPCA stopped far too early (NMSE_h 1.6 instead of 0.06).
+    """
+    arr = np.asarray(phase, dtype=np.float64)
+    keep = np.isfinite(arr) if mask is None else np.asarray(mask, dtype=bool) & np.isfinite(arr)
+    estimates = []
+    for data, valid in ((arr, keep), (arr.T, keep.T)):
+        if data.shape[1] < 3:
+            continue
+        second = data[:, 2:] - 2.0 * data[:, 1:-1] + data[:, :-2]
+        second = second[valid[:, 2:] & valid[:, 1:-1] & valid[:, :-2]]
+        if second.size:
+            wrapped = np.mod(second + np.pi, TWO_PI) - np.pi
+            mad = float(np.median(np.abs(wrapped - np.median(wrapped))))
+            estimates.append(1.4826 * mad / np.sqrt(6.0))  # Gaussian sigma; second differences have variance 6 sigma^2
+    return min(estimates) if estimates else 0.0
 
 
 def reorder_from_low_rank(
@@ -170,12 +198,58 @@ def accept_if_consistent(candidate: np.ndarray, original: np.ndarray, valid: np.
     return np.where(valid & better, candidate, original)
 
 
+def low_rank_misfit(
+    low_rank_phase: np.ndarray, wrapped_phase: np.ndarray, valid: np.ndarray, limit: float = np.pi / 2
+) -> np.ndarray:
+    """Pixels near which the low-rank estimate does not fit the measured wrapped phase.
+
+    Where L is within the noise of the truth, phi - L is a multiple of 2 pi plus noise; where the
+    low-rank model missed structure (a steep edge, fringes too dense for it), the wrapped
+    difference |wrap(phi - L)| grows past ``limit``. True at such pixels and their 8 neighbours
+    (a misfit band sweeps through multiples of 2 pi, where single pixels look fine).
+    """
+    residual = np.mod(wrapped_phase - low_rank_phase + np.pi, TWO_PI) - np.pi
+    bad = valid & ~(np.abs(np.nan_to_num(residual, nan=np.pi)) < limit)
+    return valid & ndimage.binary_dilation(bad, structure=np.ones((3, 3), dtype=bool))
+
+
+def settle_orders(phase: np.ndarray, wrapped_phase: np.ndarray, valid: np.ndarray, passes: int = 2) -> np.ndarray:
+    """Re-derive each pixel's order from its neighbours' phase, ``passes`` times.
+
+    k = round((P - phi) / 2 pi) with P the :func:`neighbour_prediction` of the current map: a
+    pixel whose order disagrees with its neighbours (an error the low-rank estimate carried, a
+    blob of them too small to span a neighbourhood) takes theirs; detail is kept, only orders move.
+    """
+    out = phase
+    for _ in range(passes):
+        prediction = neighbour_prediction(out, valid)
+        out = reorder_from_low_rank(np.where(np.isfinite(prediction), prediction, out), wrapped_phase, valid)
+    return out
+
+
+def order_breaks(phase: np.ndarray, valid: np.ndarray) -> int:
+    """Second differences beyond pi along rows and columns: the order errors a map still shows.
+
+    Truth-free: a wrong order puts a +-2 pi spike into the second differences, which a smooth or
+    steep but continuous phase keeps well below pi (real steps also count, equally for all
+    candidates of one map).
+    """
+    count = 0
+    for data, keep in ((phase, valid), (phase.T, valid.T)):
+        second = data[:, 2:] - 2.0 * data[:, 1:-1] + data[:, :-2]
+        triple = keep[:, 2:] & keep[:, 1:-1] & keep[:, :-2]
+        count += int(np.count_nonzero(triple & (np.abs(np.where(triple, second, 0.0)) > np.pi)))
+    return count
+
+
 def restore_detail(
-    low_rank_phase: np.ndarray, measured_phase: np.ndarray, mask: np.ndarray | None = None, k_sigma: float = 3.0
+    low_rank_phase: np.ndarray, measured_phase: np.ndarray, mask: np.ndarray | None = None, k_sigma: float = 3.0,
+    noise_sigma: float | None = None,
 ) -> np.ndarray:
     """Low-rank phase, except where the measured phase departs from it beyond the noise.
 
-    Where |measured - L| > k_sigma sigma (sigma: robust noise estimate of ``measured``), the
+    Where |measured - L| > k_sigma sigma (sigma: ``noise_sigma``, default
+    :func:`phase_noise_sigma` of ``measured``), the
     low-rank model missed structure (an edge, a small feature) and the measured value is kept.
     ``measured_phase`` should be free of order errors, e.g. from :func:`reorder_from_low_rank`.
 
@@ -187,7 +261,7 @@ def restore_detail(
     k_sigma = float(k_sigma)
     if not k_sigma > 0:
         raise ValueError(f"k_sigma: expected > 0, found {k_sigma}")
-    sigma = robust_noise_sigma(np.where(valid, measured, np.nan), valid)
+    sigma = phase_noise_sigma(measured, valid) if noise_sigma is None else float(noise_sigma)
     keep = valid & (np.abs(measured - estimate) > k_sigma * sigma)
     out = np.where(keep, measured, estimate)
     return np.where(valid, out, np.nan)
