@@ -19,8 +19,6 @@ from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from scipy.interpolate import PchipInterpolator
-from scipy.optimize import curve_fit
 
 from calibration.errors import CalibrationError
 from processing._validate import finite_pixels
@@ -91,6 +89,8 @@ def fit_gamma(levels: Sequence[float], responses: Sequence[float], saturation: f
     span = y[-1] - y[0]
     if span <= 0 or np.ptp(y) < 1e-6 * max(1.0, abs(y).max()):
         raise CalibrationError("gamma ramp: the camera intensity does not rise with the level (is the projector on?)")
+    from scipy.optimize import curve_fit  # imported here: scipy.optimize costs ~0.2 s at CLI start-up
+
     try:
         params, _ = curve_fit(_power, x, y, p0=(y[0], span, 2.2), bounds=([-np.inf, 0.0, 0.1], [np.inf, np.inf, 10.0]))
     except (RuntimeError, ValueError) as exc:
@@ -139,6 +139,8 @@ def inverse_lut(fit: GammaFit, size: int = 256, method: str = "model") -> np.nda
     keep = np.concatenate(([True], np.diff(normalized) > 1e-9))
     if keep.sum() < 2:
         raise CalibrationError("gamma ramp: the measured response is flat, cannot invert it")
+    from scipy.interpolate import PchipInterpolator  # imported here, as curve_fit above
+
     inverse = PchipInterpolator(normalized[keep], levels[keep], extrapolate=True)
     return np.clip(inverse(desired), 0.0, 1.0).astype(np.float32)
 

@@ -38,7 +38,6 @@ from datetime import datetime, timezone
 from pathlib import Path, PurePosixPath
 from typing import Any
 
-import cv2
 import numpy as np
 
 from calibration.jsonfile import read_json, write_json_atomic
@@ -226,6 +225,8 @@ def validate_manifest(manifest: Any, where: str) -> None:
 
 def decode_image(data: bytes, where: str) -> np.ndarray:
     """Decode PNG/TIFF bytes unchanged (8/16-bit integer or 32-bit float); CaptureError if corrupt."""
+    import cv2  # imported on first use: OpenCV costs ~0.1 s, which commands that read no image skip
+
     image = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED) if data else None
     if image is None:
         raise CaptureError(f"{where}: corrupt or unreadable image ({len(data)} bytes)")
@@ -436,6 +437,8 @@ def encode_image(image: np.ndarray, bit_depth: int) -> tuple[bytes, str]:
     expected = dtype_for_bit_depth(bit_depth)
     if image.dtype != expected:
         raise ValueError(f"image: expected dtype {expected} for bit_depth {bit_depth}, found {image.dtype}")
+    import cv2  # as in decode_image
+
     suffix = ".tiff" if expected == np.float32 else ".png"
     ok, buffer = cv2.imencode(suffix, np.ascontiguousarray(image))
     if not ok:

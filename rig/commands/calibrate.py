@@ -12,11 +12,14 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from calibration.camera import BoardSpec
 from calibration.errors import CalibrationError
 from rig.commands._common import add_command, add_report_options, print_json, split_size
 from rig.errors import ConfigError
+
+if TYPE_CHECKING:
+    from calibration.camera import BoardSpec
 
 
 def _heights(text: str) -> tuple[float, ...]:
@@ -46,6 +49,8 @@ def _board(text: str) -> BoardSpec | str:
         marker = float(parts[3]) if len(parts) > 3 else None
     except (IndexError, ValueError, argparse.ArgumentTypeError):
         raise argparse.ArgumentTypeError(f"expected KIND:COLSxROWS:SQUARE_MM[:MARKER_MM], found {text!r}") from None
+    from calibration.camera import BoardSpec  # imported here: it loads OpenCV, which `rig --help` does not need
+
     try:
         return BoardSpec(kind, squares, square, marker)
     except CalibrationError as exc:

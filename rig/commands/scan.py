@@ -15,13 +15,14 @@ import sys
 from datetime import datetime, timezone
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from rig.acquisition import AcquisitionSettings, ScanResult, run_scan
-from rig.assembly import open_rig
 from rig.config import RigConfig, load_config
 from rig.errors import CaptureError, ConfigError
 from rig.progress import Progress
+
+if TYPE_CHECKING:
+    from rig.acquisition import ScanResult
 
 log = logging.getLogger(__name__)
 
@@ -68,6 +69,10 @@ def scan(
     ``patterns``: the capture-format entries to project (default the config's ``[scan]`` set,
     :meth:`rig.config.ScanConfig.patterns`); ``label`` starts the progress line.
     """
+    # imported here, not at module level: they pull in the drivers, which `rig --help` does not need
+    from rig.acquisition import AcquisitionSettings, run_scan
+    from rig.assembly import open_rig
+
     if output.exists() and not overwrite:  # fail before opening any device
         raise CaptureError(f"{output}: already exists; refusing to overwrite (choose another -o or pass --overwrite)")
     patterns = config.scan.patterns() if patterns is None else list(patterns)
