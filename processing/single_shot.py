@@ -10,7 +10,15 @@ From one camera image of the object and one of the flat reference plane:
    thesis eq. 2.13). The candidates of a pixel are the reference pixels of its row with the same
    wrapped phase, one per fringe period;
 4. row-wise voting between wrapped-phase jumps (Ding et al., thesis ref. [119]) replaces every
-   run's orders by their majority.
+   run's orders by their majority;
+5. the same vote in 2-D (:func:`vote_fringe_segments`): every connected region that no
+   wrapped-phase jump crosses lies within one fringe and has one order, so its pixels take the
+   NCC-weighted majority of their correlation orders. A row run has one window's worth of
+   (mutually dependent) correlation evidence; a 2-D region has many, which outvotes the patches
+   of wrong orders that fill whole row runs on steep slopes and beside shadows. A region can
+   leak into the next fringe where a slope too steep for the pixel grid hides a jump; each
+   region therefore keeps whichever of its two candidates (region vote, row vote) leaves fewer
+   order breaks (neighbours whose absolute phases differ by more than pi) on and inside it.
 
 How step 3 is vectorised: unwrap the wrapped phase spatially (only to index the candidates;
 quality-guided on a subsampled grid so that it is continuous in 2-D) into psi = phi + 2 pi n,
@@ -86,7 +94,7 @@ class SingleShotResult:
     correlation_orders : int64 orders chosen by speckle correlation alone (before voting)
     correlation : float32 NCC of the chosen candidate
     mask : bool, pixels with fringe modulation (not shadowed)
-    timings : seconds per stage ("rpca", "ftp", "correlation", "voting", "total")
+    timings : seconds per stage ("rpca", "ftp", "correlation", "voting", "segments", "total")
     rpca : the RPCA result of the image (None when separation was switched off)
     """
 
@@ -439,6 +447,97 @@ def correlate_orders(
     return best_order, best
 
 
+def vote_fringe_segments(
+    orders: np.ndarray, score: np.ndarray, wrapped_phase: np.ndarray, valid: np.ndarray, min_size: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Orders replaced by the NCC-weighted majority of their 2-D fringe segment (fringes along x).
+
+    A fringe segment is a 4-connected region of valid pixels that no wrapped-phase jump
+    (``|phi(p) - phi(q)| > pi`` between neighbours) crosses: the phase is continuous inside it
+    and stays within one period, so, like a row run of Ding's vote, it has a single order (the
+    same assumption: no true jump of 2 pi hidden inside). The jump pixels (those with a jump to
+    their right or lower neighbour) are left out so that 4-connectivity cannot cross a jump.
+    Each pixel votes for its correlation order with weight max(NCC, 0): a pixel whose best
+    candidate barely correlates carries no evidence. Neighbouring NCC windows overlap, so a
+    segment smaller than one window (``min_size`` = patch * patch pixels) holds about one
+    independent vote; its pixels and the jump pixels get -1 (the caller keeps the row vote).
+
+    Parameters
+    ----------
+    orders : (H, W) int64
+        Correlation orders (the votes).
+    score : (H, W) float
+        NCC of each pixel's chosen order.
+    wrapped_phase : (H, W) float64
+    valid : (H, W) bool
+    min_size : int
+        Smallest segment whose vote is taken.
+
+    Returns
+    -------
+    winners : (H, W) int64, the segment's order; -1 where no segment vote applies
+    labels : (H, W) int32 labels of the voted segments (0 where ``winners`` is -1)
+    """
+    from scipy import ndimage
+
+    phi = np.where(valid, wrapped_phase, 0.0)
+    jump = np.zeros(valid.shape, dtype=bool)
+    jump[:, :-1] = np.abs(np.diff(phi, axis=1)) > np.pi
+    jump[:-1, :] |= np.abs(np.diff(phi, axis=0)) > np.pi
+    core = valid & ~jump
+    labels, count = ndimage.label(core)
+    winners = np.full(valid.shape, -1, dtype=np.int64)
+    if count == 0:
+        return winners, labels
+    lab = labels[core]
+    votes = orders[core]
+    low = int(votes.min())
+    span = int(votes.max()) - low + 1
+    key = lab.astype(np.int64) * span + (votes - low)
+    weight = np.maximum(score[core], 0.0).astype(np.float64)
+    tally = np.bincount(key, weights=weight, minlength=(count + 1) * span).reshape(count + 1, span)
+    best = np.argmax(tally, axis=1) + low
+    sizes = np.bincount(lab, minlength=count + 1)
+    settled = (sizes >= min_size) & (tally.max(axis=1) > 0)
+    settled[0] = False
+    take = settled[labels] & core
+    winners[take] = best[labels[take]]
+    return winners, np.where(take, labels, 0)
+
+
+def fewer_breaks(
+    wrapped_phase: np.ndarray, valid: np.ndarray, labels: np.ndarray, candidate: np.ndarray, fallback: np.ndarray
+) -> np.ndarray:
+    """Per labelled region, ``candidate`` or ``fallback`` orders: whichever leaves fewer order breaks.
+
+    An order break is a pair of valid 4-neighbours whose absolute phases phi + 2 pi k differ by
+    more than pi. Region ``r`` (``labels == r``, r > 0) is scored on the pairs that touch it,
+    with its own pixels taking either candidate and every other pixel ``candidate`` (its
+    neighbours' choice). Ties keep ``candidate``. Pixels with label 0 keep ``fallback``.
+    """
+    count = int(labels.max()) + 1
+    with_candidate = np.where(labels > 0, candidate, fallback)
+    a = wrapped_phase + TWO_PI * with_candidate
+    b = wrapped_phase + TWO_PI * fallback
+    breaks_a = np.zeros(count)
+    breaks_b = np.zeros(count)
+    for first, second in (((slice(None), slice(None, -1)), (slice(None), slice(1, None))),
+                          ((slice(None, -1), slice(None)), (slice(1, None), slice(None)))):
+        pair = valid[first] & valid[second]
+        lp, lq = labels[first], labels[second]
+        same = lp == lq
+        a0, a1, b0, b1 = a[first], a[second], b[first], b[second]
+        broken = pair & (np.abs(a1 - a0) > np.pi)
+        breaks_a += np.bincount(lp[broken], minlength=count) + np.bincount(lq[broken & ~same], minlength=count)
+        # Fallback inside the region scored, candidate outside it.
+        p_side = pair & np.where(same, np.abs(b1 - b0) > np.pi, np.abs(a1 - b0) > np.pi)
+        q_side = pair & ~same & (np.abs(b1 - a0) > np.pi)
+        breaks_b += np.bincount(lp[p_side], minlength=count) + np.bincount(lq[q_side], minlength=count)
+    keep = breaks_a <= breaks_b
+    keep[0] = False
+    return np.where(keep[labels], with_candidate, fallback)
+
+
 def single_shot_unwrap(
     image: np.ndarray,
     reference_image: np.ndarray | SingleShotReference,
@@ -455,6 +554,7 @@ def single_shot_unwrap(
     rpca_tol: float = DEFAULT_RPCA_TOL,
     separate: bool = True,
     vote: bool = True,
+    segment_vote: bool = True,
     max_shift: int | None = None,
     svd: str = "auto",
 ) -> SingleShotResult:
@@ -482,6 +582,12 @@ def single_shot_unwrap(
     tau, rpca_tol, svd : RPCA parameters; ``separate=False`` skips RPCA (for comparison).
     vote : bool
         Apply the row-wise voting of thesis ref. [119] after correlation.
+    segment_vote : bool
+        Then set every 2-D fringe segment's orders to its NCC-weighted majority
+        (:func:`vote_fringe_segments`) where that leaves fewer order breaks than the row vote
+        (:func:`fewer_breaks`); only with ``vote``. On the ch. 2.3 study (1000 px, 25 dB,
+        f = 16) it takes exact orders from 97.6 to 99.4 % (hemisphere) and from 95.1 to 97.7 %
+        (two hemispheres), NMSE_h from 1.5 - 1.7 to 0.05 and from 4.7 - 4.9 to 0.9 - 1.2.
     max_shift : int, optional
         Largest order shift from the reference to test (default: all orders).
 
@@ -549,6 +655,12 @@ def single_shot_unwrap(
         absolute = np.where(valid, absolute, np.nan)
     timings["voting"] = time.perf_counter() - t0
     orders = np.where(valid, np.round((np.nan_to_num(absolute) - wrapped) / TWO_PI), -1).astype(np.int64)
+    t0 = time.perf_counter()
+    if vote and segment_vote and valid.any():
+        winners, labels = vote_fringe_segments(corr_orders, score, wrapped, valid, patch * patch)
+        orders = np.where(valid, fewer_breaks(wrapped, valid, labels, winners, orders), -1)
+        absolute = np.where(valid, wrapped + TWO_PI * orders, np.nan)
+    timings["segments"] = time.perf_counter() - t0
 
     outputs = [absolute, orders, wrapped, fringe, speckle, corr_orders, score, valid]
     if axis == 0:
