@@ -495,7 +495,7 @@ def _speckle_single_shot(state: SceneState, options: ProcessOptions) -> None:
     )
     state.info["valid_after_modulation"] = float(valid.mean())
     state.info["single_shot"] = {
-        "method": "speckle-embedded single shot (RPCA fringe/speckle separation, FTP, speckle NCC fringe orders, row voting)",
+        "method": "speckle-embedded single shot (RPCA fringe/speckle separation, FTP, speckle NCC fringe orders, row voting, 2-D fringe-segment vote)",
         "role": "reference" if state.reference is None else "object",
         "parameters": parameters,
         "iterations": None if rpca is None else int(rpca.iterations),
