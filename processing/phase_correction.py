@@ -26,7 +26,7 @@ import numpy as np
 from scipy import ndimage
 
 from processing import _validate
-from processing.rpca import RPCAResult, rpca_ialm
+from processing.rpca import RPCAResult, robust_noise_sigma, rpca_ialm, second_differences
 from processing.shadow_fill import fill_shadows, valid_mask
 
 TWO_PI = 2.0 * np.pi
@@ -93,19 +93,7 @@ def phase_noise_sigma(phase: np.ndarray, mask: np.ndarray | None = None) -> floa
     (10 dB) it came out 1.7x the noise and with 25 % wrong (isolated objects, f = 25) 300x, and
     stable RPCA stopped far too early (NMSE_h 1.6 instead of 0.06).
     """
-    arr = np.asarray(phase, dtype=np.float64)
-    keep = np.isfinite(arr) if mask is None else np.asarray(mask, dtype=bool) & np.isfinite(arr)
-    estimates = []
-    for data, valid in ((arr, keep), (arr.T, keep.T)):
-        if data.shape[1] < 3:
-            continue
-        second = data[:, 2:] - 2.0 * data[:, 1:-1] + data[:, :-2]
-        second = second[valid[:, 2:] & valid[:, 1:-1] & valid[:, :-2]]
-        if second.size:
-            wrapped = np.mod(second + np.pi, TWO_PI) - np.pi
-            mad = float(np.median(np.abs(wrapped - np.median(wrapped))))
-            estimates.append(1.4826 * mad / np.sqrt(6.0))  # Gaussian sigma; second differences have variance 6 sigma^2
-    return min(estimates) if estimates else 0.0
+    return robust_noise_sigma(phase, mask, wrap=True)
 
 
 def reorder_from_low_rank(
@@ -234,12 +222,7 @@ def order_breaks(phase: np.ndarray, valid: np.ndarray) -> int:
     steep but continuous phase keeps well below pi (real steps also count, equally for all
     candidates of one map).
     """
-    count = 0
-    for data, keep in ((phase, valid), (phase.T, valid.T)):
-        second = data[:, 2:] - 2.0 * data[:, 1:-1] + data[:, :-2]
-        triple = keep[:, 2:] & keep[:, 1:-1] & keep[:, :-2]
-        count += int(np.count_nonzero(triple & (np.abs(np.where(triple, second, 0.0)) > np.pi)))
-    return count
+    return sum(int(np.count_nonzero(np.abs(second) > np.pi)) for second in second_differences(phase, valid))
 
 
 def restore_detail(

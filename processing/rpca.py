@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -112,7 +113,26 @@ def default_tau(shape: tuple[int, int]) -> float:
     return 1.0 / np.sqrt(max(shape))
 
 
-def robust_noise_sigma(d: np.ndarray, mask: np.ndarray | None = None) -> float:
+def second_differences(d: np.ndarray, mask: np.ndarray | None = None) -> Iterator[np.ndarray]:
+    """The finite second differences along rows, then along columns (two 1-D arrays).
+
+    With ``mask``, only differences of three valid pixels count. An axis shorter than three
+    pixels gives an empty array.
+    """
+    arr = np.asarray(d, dtype=np.float64)
+    keep = None if mask is None else np.asarray(mask, dtype=bool)
+    for data, valid in ((arr, keep), (arr.T, None if keep is None else keep.T)):
+        if data.shape[1] < 3:
+            yield np.empty(0)
+            continue
+        second = data[:, 2:] - 2.0 * data[:, 1:-1] + data[:, :-2]
+        ok = np.isfinite(second)
+        if valid is not None:
+            ok &= valid[:, 2:] & valid[:, 1:-1] & valid[:, :-2]
+        yield second[ok]
+
+
+def robust_noise_sigma(d: np.ndarray, mask: np.ndarray | None = None, wrap: bool = False) -> float:
     """Standard deviation of white noise on a smooth matrix, robust to sparse outliers.
 
     Median absolute deviation of the second differences (which cancel smooth content; their
@@ -120,18 +140,13 @@ def robust_noise_sigma(d: np.ndarray, mask: np.ndarray | None = None) -> float:
     columns; the smaller of the two is kept, since content only adds to it (fringes, for
     instance, vary along one axis only). It assumes content smooth along at least one axis
     (phase maps, fringe images); for other data give sigma. With ``mask``, only differences of
-    three valid pixels count (filled shadows would bias it low).
+    three valid pixels count (filled shadows would bias it low). ``wrap``: wrap the differences
+    into [-pi, pi) first, for phase maps whose 2 pi order errors must not count as noise.
     """
-    arr = np.asarray(d, dtype=np.float64)
-    keep = None if mask is None else np.asarray(mask, dtype=bool)
     estimates = []
-    for data, valid in ((arr, keep), (arr.T, None if keep is None else keep.T)):
-        if data.shape[1] < 3:
-            continue
-        second = data[:, 2:] - 2.0 * data[:, 1:-1] + data[:, :-2]
-        if valid is not None:
-            second = second[valid[:, 2:] & valid[:, 1:-1] & valid[:, :-2]]
-        second = second[np.isfinite(second)]
+    for second in second_differences(d, mask):
+        if wrap:
+            second = np.mod(second + np.pi, 2.0 * np.pi) - np.pi
         if second.size:
             mad = float(np.median(np.abs(second - np.median(second))))
             estimates.append(1.4826 * mad / np.sqrt(6.0))
