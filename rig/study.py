@@ -405,17 +405,15 @@ def single_shot(config: StudyConfig, rows: Rows, progress: Progress) -> dict[str
         ref_map = synth.projector_coordinates(np.zeros((config.size, config.size)), geometry)
         ref_image = synth.render_frame(SPECKLE_PATTERN, ref_map, geometry, look, rng)
         ref_truth = synth.true_absolute_phase(ref_map, geometry, f)
-        reference = prepare_reference(ref_image, ref_truth, f)
+        # the reference is prepared once per seed for each variant: with and without RPCA separation
+        references = {variant: prepare_reference(ref_image, ref_truth, f, separate=variant == "rpca")
+                      for variant in ("rpca", "no-separation")}
         for name, height_mm in scene_maps.items():
             obj_map = synth.projector_coordinates(height_mm, geometry)
             image = synth.render_frame(SPECKLE_PATTERN, obj_map, geometry, look, rng)
             truth = synth.true_absolute_phase(obj_map, geometry, f)
-            for variant in ("rpca", "no-separation"):
-                if variant == "no-separation":
-                    ref_plain = prepare_reference(ref_image, ref_truth, f, separate=False)
-                    result = single_shot_unwrap(image, ref_plain, None, f, separate=False)
-                else:
-                    result = single_shot_unwrap(image, reference, None, f)
+            for variant, reference in references.items():
+                result = single_shot_unwrap(image, reference, None, f, separate=variant == "rpca")
                 lit = np.isfinite(truth)
                 valid = result.mask & lit
                 k_true = np.rint((truth - result.wrapped_phase) / TWO_PI)
