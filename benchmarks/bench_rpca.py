@@ -149,7 +149,7 @@ def denoise_experiments(size: int, exact: bool) -> None:
     from processing.height import nmse, phase_to_height
     from processing.phase_shift import phase_shift
     from processing.temporal import unwrap_two_frequency
-    from rig.simulation import demo_geometry, simulate_scan
+    from rig.hardware.synthesis import demo_geometry, simulate_scan
 
     print(f"\n== thesis ch. 2.4 fringe denoising at {size}x{size}, 15 dB ==")
     geometry = demo_geometry(size, size)

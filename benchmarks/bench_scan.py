@@ -32,11 +32,11 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from mock_devices.camera import SimulatedCamera  # noqa: E402
-from rig.acquisition import AcquisitionSettings, run_scan  # noqa: E402
-from rig.assembly import trigger_path  # noqa: E402
-from rig.capture import read_capture  # noqa: E402
+from rig.acquisition.loop import AcquisitionSettings, run_scan  # noqa: E402
+from rig.hardware.assembly import trigger_path  # noqa: E402
+from rig.store.capture import read_capture  # noqa: E402
 from rig.config import CameraConfig, RigConfig, TriggerConfig  # noqa: E402
-from rig.simulated_rig import SimulatedRig  # noqa: E402
+from rig.hardware.simulated import SimulatedRig  # noqa: E402
 
 
 class CameraClock:

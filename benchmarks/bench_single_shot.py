@@ -26,7 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from mock_devices import scenes, synth  # noqa: E402
 from processing.rpca import rpca_ialm  # noqa: E402
 from processing.single_shot import prepare_reference, single_shot_unwrap  # noqa: E402
-from rig.study import RIG, SINGLE_SHOT_FREQUENCY, SINGLE_SHOT_HEMISPHERE_MM, SPECKLE_PATTERN  # noqa: E402
+from rig.study.experiments import RIG, SINGLE_SHOT_FREQUENCY, SINGLE_SHOT_HEMISPHERE_MM, SPECKLE_PATTERN  # noqa: E402
 
 
 def main() -> int:

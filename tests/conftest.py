@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from rig.simulation import SimulatedPaths, SimulatedScan, demo_geometry, simulate_scan, write_simulated_scan
+from rig.hardware.synthesis import SimulatedPaths, SimulatedScan, demo_geometry, simulate_scan, write_simulated_scan
 
 pytest_plugins = ["conftest_devices"]  # the --device option for hardware contract tests
 
@@ -54,7 +54,7 @@ def exact_calibration() -> Callable[[Path, Path], Path]:
     from calibration.store import Calibration, write_calibration
     from rig.cli import main
     from rig.config import load_config
-    from rig.simulated_rig import geometry_from_config
+    from rig.hardware.simulated import geometry_from_config
 
     def calibrate(config_path: Path, directory: Path) -> Path:
         geometry = geometry_from_config(load_config(config_path))

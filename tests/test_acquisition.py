@@ -24,12 +24,12 @@ from mock_devices.camera import CameraFaults, SimulatedCamera
 from mock_devices.dlp_usb import Dlpc350Faults, FakeDlpc350Backend
 from mock_devices.trigger_box import TriggerFaults
 from processing.patterns import sinusoid_shift
-from rig.acquisition import AcquisitionError, AcquisitionSettings, SoftwareTrigger, run_scan
-from rig.assembly import trigger_path
-from rig.capture import INCOMPLETE_MARK, read_capture
-from rig.dlp_projector import DlpVideoProjector
+from rig.acquisition.loop import AcquisitionError, AcquisitionSettings, SoftwareTrigger, run_scan
+from rig.hardware.assembly import trigger_path
+from rig.store.capture import INCOMPLETE_MARK, read_capture
+from drivers.projector_dlp import DlpVideoProjector
 from rig.config import CameraConfig, ProjectorConfig, RigConfig, ScanConfig, SimulationConfig, TriggerConfig
-from rig.simulated_rig import SimulatedRig, appearance_from_config
+from rig.hardware.simulated import SimulatedRig, appearance_from_config
 
 STEPS = 8
 FREQUENCY = 2

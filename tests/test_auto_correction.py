@@ -9,7 +9,7 @@ from mock_devices import scenes
 from processing.correction import correct
 from processing.height import nmse
 from processing.phase_correction import order_breaks, phase_noise_sigma
-from rig.study import RIG, heights, oracle_phase, two_frequency_capture
+from rig.study.experiments import RIG, heights, oracle_phase, two_frequency_capture
 
 SIZE = 192
 # auto may lose to the better of vote and rpca-phase by at most this factor (measured: it wins on

@@ -15,12 +15,12 @@ import pytest
 from calibration.errors import CalibrationError
 from calibration.models import height_from_phase
 from calibration.store import read_calibration
-from rig.calibrate_workflow import CalibrationPlan, ConsoleOperator, StageCommand, acquire, compute
-from rig.capture import read_capture, write_capture
+from rig.calibrate.session import CalibrationPlan, ConsoleOperator, StageCommand, acquire, compute
+from rig.store.capture import read_capture, write_capture
 from rig.cli import main
 from rig.config import load_config
 from rig.errors import CaptureError, ConfigError
-from rig.simulated_rig import geometry_from_config, scene_height
+from rig.hardware.simulated import geometry_from_config, scene_height
 
 @pytest.fixture(scope="module")
 def rig_text(simulated_rig_toml):
@@ -91,7 +91,7 @@ def test_recompute_from_stored_captures_with_another_model(session, capsys):
     assert poly.reference == "../cal/reference" and (root / "poly" / "polynomial.npy").is_file()
     # same captures, both models: heights of the 100 mm plane agree with it
     reference = read_calibration(root / "cal")
-    from rig.calibrate_workflow import _absolute_phase
+    from rig.calibrate.session import _absolute_phase
 
     plane, frequency, _, _ = _absolute_phase(root / "cal" / "planes" / "plane-at-100mm")
     ref_phase, _, _, _ = _absolute_phase(root / "cal" / "reference")
@@ -174,7 +174,7 @@ def test_stereo_session_recomputed_from_stored_poses(tmp_path):
     reference plane), as a real pinhole rig would leave it, rendered by mock_devices.stereo_synth."""
     from mock_devices import synth
     from mock_devices.stereo_synth import Scene, board_session, demo_rig, demo_scene, trace
-    from rig.calibrate_workflow import stereo_patterns
+    from rig.calibrate.session import stereo_patterns
 
     rig = demo_rig(320, 256)
     projector = {"width": rig.projector.width, "height": rig.projector.height}
@@ -211,7 +211,8 @@ def test_stereo_session_recomputed_from_stored_poses(tmp_path):
 def test_gamma_ripple_removed_in_processing(tmp_path, rig_text):
     """A gamma-2.2 projector under 3-step phase shifting, not pre-corrected: the ripple table the
     calibration learnt on the reference plane takes the waves out of the object's heights."""
-    from rig import gamma_correction, pipeline
+    from rig.pipeline import gamma_correction, run as pipeline
+    from rig.pipeline.plan import ProcessOptions
 
     config = tmp_path / "rig.toml"
     config.write_text(rig_text.replace("steps = 4", "steps = 3").replace("gamma = 1.8", "gamma = 2.2").replace("snr_db = 30", "snr_db = 40"))
@@ -223,7 +224,7 @@ def test_gamma_ripple_removed_in_processing(tmp_path, rig_text):
     truth = scene_height(rig_config, "object", geometry_from_config(rig_config))
     errors = {}
     for correction in ("none", gamma_correction.NAME):
-        result = pipeline.process(tmp_path / "obj", tmp_path / "cal", pipeline.ProcessOptions(correction=correction))
+        result = pipeline.process(tmp_path / "obj", tmp_path / "cal", ProcessOptions(correction=correction))
         valid = np.isfinite(result.height)
         errors[correction] = float(np.sqrt(np.mean((result.height[valid] - truth[valid]) ** 2)))
     assert errors[gamma_correction.NAME] < errors["none"] / 2

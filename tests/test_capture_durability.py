@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rig import capture as capture_module
-from rig.capture import CaptureWriter, read_capture
+from rig.store import capture as capture_module
+from rig.store.capture import CaptureWriter, read_capture
 
 pytestmark = pytest.mark.skipif(not Path("/proc/self/fd").is_dir(), reason="needs /proc/self/fd to name fsynced files")
 

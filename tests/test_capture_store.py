@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 import pytest
 
-from rig.capture import CaptureWriter, check_same_patterns, read_capture, write_capture
+from rig.store.capture import CaptureWriter, check_same_patterns, read_capture, write_capture
 from rig.errors import CaptureError
 
 PROJECTOR = {"width": 64, "height": 32}

@@ -10,9 +10,9 @@ import pytest
 from calibration.store import read_calibration
 from mock_devices.dlp_usb import FakeDlpc350Backend
 from mock_devices.scenes import make_scene
-from rig.capture import read_capture
+from rig.store.capture import read_capture
 from rig.cli import main
-from rig.commands.devices import format_probe, probe_dlp
+from rig.hardware.probes import format_probe, probe_dlp
 
 
 def test_devices_lists_every_family_and_the_simulated_rig(capsys):

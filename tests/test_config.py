@@ -144,7 +144,7 @@ def test_directory_instead_of_file(tmp_path):
     ],
 )
 def test_bad_gamma_lut_file_is_one_line(tmp_path, content, expected):
-    from rig.assembly import load_gamma_lut
+    from rig.hardware.assembly import load_gamma_lut
 
     (tmp_path / "lut.txt").write_text(content)
     config = load_config(write(tmp_path, '[projector]\ngamma_lut = "lut.txt"\n'))

@@ -9,7 +9,7 @@ from mock_devices import synth
 from processing.denoise import rpca_denoise_frame, rpca_denoise_stack
 from processing.height import phase_mse
 from processing.phase_shift import phase_shift
-from rig.simulation import demo_geometry, simulate_scan
+from rig.hardware.synthesis import demo_geometry, simulate_scan
 
 
 @pytest.fixture(scope="module")

@@ -17,8 +17,8 @@ import pytest
 
 from rig.cli import main
 from rig.errors import CaptureError, ConfigError
-from rig.importer import ImportOptions, import_folder, natural_key, parse_angle, parse_spec
-from rig.pipeline import process
+from rig.store.importer import ImportOptions, import_folder, natural_key, parse_angle, parse_spec
+from rig.pipeline.run import process
 
 REAL_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "real-data"
 needs_real_data = pytest.mark.skipif(not REAL_DATA.is_dir(), reason=f"real data not present at {REAL_DATA}")

@@ -13,10 +13,10 @@ import os
 import numpy as np
 import pytest
 
-from rig.capture import read_capture
+from rig.store.capture import read_capture
 from rig.cli import COMMAND_MODULES, main
 from rig.config import load_config
-from rig.simulated_rig import geometry_from_config, scene_height
+from rig.hardware.simulated import geometry_from_config, scene_height
 
 # pylon reads PYLON_CAMEMU when pypylon first loads (see tests/test_camera_pylon.py).
 os.environ.setdefault("PYLON_CAMEMU", "1")

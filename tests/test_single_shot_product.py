@@ -18,11 +18,11 @@ import numpy as np
 import pytest
 
 from mock_devices import synth
-from rig.capture import read_capture, validate_pattern
+from rig.store.capture import read_capture, validate_pattern
 from rig.cli import main
 from rig.config import load_config, parse_config
 from rig.errors import ConfigError
-from rig.simulated_rig import appearance_from_config, geometry_from_config, scene_height
+from rig.hardware.simulated import appearance_from_config, geometry_from_config, scene_height
 
 MEDIAN_ERROR_MM = 0.25
 WITHIN_1MM = 0.75        # share of valid pixels within 1 mm of the truth

@@ -9,7 +9,7 @@ import pytest
 
 from rig.cli import main
 from rig.errors import ConfigError
-from rig.study import METHODS, StudyConfig
+from rig.study.experiments import METHODS, StudyConfig
 
 FIGURES = ["table41_phase_maps.png", "table41_cross_section.png", "t_sweep_mse.png", "t_sweep_errors.png",
            "nmse_vs_snr.png", "denoise_cross_section.png", "denoise_heights.png", "isolated_phase_maps.png",

@@ -49,7 +49,9 @@ def _board(text: str) -> BoardSpec | str:
         marker = float(parts[3]) if len(parts) > 3 else None
     except (IndexError, ValueError, argparse.ArgumentTypeError):
         raise argparse.ArgumentTypeError(f"expected KIND:COLSxROWS:SQUARE_MM[:MARKER_MM], found {text!r}") from None
-    from calibration.camera import BoardSpec  # imported here: it loads OpenCV, which `rig --help` does not need
+    from calibration.camera import (
+        BoardSpec,  # imported here: it loads OpenCV, which `rig --help` does not need
+    )
 
     try:
         return BoardSpec(kind, squares, square, marker)
@@ -112,7 +114,7 @@ def _import_opencv(args: argparse.Namespace) -> int:
 
 
 def _plan(args: argparse.Namespace, base=None):
-    from rig.calibrate_workflow import CalibrationPlan
+    from rig.calibrate.session import CalibrationPlan
 
     plan = base or CalibrationPlan()
     updates = {
@@ -130,7 +132,14 @@ def _plan(args: argparse.Namespace, base=None):
 
 
 def run(args: argparse.Namespace) -> int:
-    from rig.calibrate_workflow import CalibrationPlan, ConsoleOperator, Operator, StageCommand, acquire, compute
+    from rig.calibrate.session import (
+        CalibrationPlan,
+        ConsoleOperator,
+        Operator,
+        StageCommand,
+        acquire,
+        compute,
+    )
 
     if args.import_opencv is not None:
         return _import_opencv(args)

@@ -12,9 +12,11 @@ import numpy as np
 from mock_devices.scenes import SCENES
 from rig.commands._common import add_command, add_report_options, print_json, split_size
 from rig.errors import ConfigError
-from rig.pipeline import DEFAULT_CORRECTION, ProcessOptions, process, total_steps, write_outputs
+from rig.hardware.synthesis import demo_geometry, simulate_scan, write_simulated_scan
+from rig.pipeline.outputs import write_outputs
+from rig.pipeline.plan import DEFAULT_CORRECTION, ProcessOptions
+from rig.pipeline.run import process, total_steps
 from rig.progress import Progress
-from rig.simulation import demo_geometry, simulate_scan, write_simulated_scan
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

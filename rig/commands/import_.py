@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from rig.commands._common import add_command
-from rig.importer import ImportOptions, import_folder, parse_crop
+from rig.store.importer import ImportOptions, import_folder, parse_crop
 
 SPEC_HELP = (
     "what the images show, in file order: groups separated by ';', e.g. "

@@ -6,8 +6,8 @@ import argparse
 from collections import Counter
 from typing import Any
 
-from rig.capture import Capture, read_capture
 from rig.commands._common import add_capture_argument, add_command, print_json
+from rig.store.capture import Capture, read_capture
 
 
 def describe_patterns(patterns: list[dict[str, Any]]) -> list[str]:

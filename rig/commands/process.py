@@ -7,9 +7,17 @@ import json
 import sys
 from pathlib import Path
 
-from rig.pipeline import CORRECTIONS, DEFAULT_CORRECTION, DENOISERS, UNWRAP_METHODS, ProcessOptions, process, total_steps, write_outputs
-from rig.commands._common import add_capture_argument, add_command, add_report_options, print_json
+from rig.commands._common import (
+    add_capture_argument,
+    add_command,
+    add_report_options,
+    print_json,
+)
 from rig.errors import ConfigError
+from rig.pipeline.outputs import write_outputs
+from rig.pipeline.plan import DEFAULT_CORRECTION, UNWRAP_METHODS, ProcessOptions
+from rig.pipeline.run import process, total_steps
+from rig.pipeline.stages import CORRECTIONS, DENOISERS
 from rig.progress import Progress
 
 

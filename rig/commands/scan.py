@@ -12,25 +12,13 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
-from datetime import datetime, timezone
-from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
 
-from rig.config import RigConfig, load_config
-from rig.errors import CaptureError, ConfigError
+from rig.config import load_config
+from rig.errors import ConfigError
 from rig.progress import Progress
 
-if TYPE_CHECKING:
-    from rig.acquisition import ScanResult
-
 log = logging.getLogger(__name__)
-
-
-def default_capture_path(now: datetime | None = None) -> Path:
-    """``capture-YYYYmmdd-HHMMSS`` in the current directory (UTC)."""
-    now = now or datetime.now(timezone.utc)
-    return Path(f"capture-{now.strftime('%Y%m%d-%H%M%S')}")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -55,53 +43,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=run)
 
 
-def scan(
-    config: RigConfig,
-    output: Path,
-    scene: str = "object",
-    overwrite: bool = False,
-    show_progress: bool = True,
-    patterns: Sequence[Mapping[str, Any]] | None = None,
-    label: str = "scan",
-) -> ScanResult:
-    """Open the rig of ``config``, scan ``scene`` into ``output`` and close the rig.
-
-    ``patterns``: the capture-format entries to project (default the config's ``[scan]`` set,
-    :meth:`rig.config.ScanConfig.patterns`); ``label`` starts the progress line.
-    """
-    # imported here, not at module level: they pull in the drivers, which `rig --help` does not need
-    from rig.acquisition import AcquisitionSettings, run_scan
-    from rig.assembly import open_rig
-
-    if output.exists() and not overwrite:  # fail before opening any device
-        raise CaptureError(f"{output}: already exists; refusing to overwrite (choose another -o or pass --overwrite)")
-    patterns = config.scan.patterns() if patterns is None else list(patterns)
-    settings = AcquisitionSettings(
-        show_timeout_s=config.scan.show_timeout_s,
-        fetch_timeout_s=config.scan.fetch_timeout_s,
-        retries=config.scan.retries,
-    )
-    log.info("scanning %d patterns into %s (%s)", len(patterns), output, settings)
-    with open_rig(config, scene=scene) as devices, Progress(f"{label} {output}", total=len(patterns), quiet=not show_progress) as progress:
-        extra = {"rig_config": str(config.source) if config.source else "built-in simulated rig"}
-        if devices.simulation is not None:
-            extra["simulation"] = devices.simulation.description()
-        return run_scan(
-            output,
-            patterns,
-            devices.projector,
-            devices.camera,
-            devices.trigger,
-            settings,
-            scene=scene,
-            extra=extra,
-            exposure_us=config.camera.exposure_us,
-            gain=config.camera.gain,
-            progress=progress,
-            overwrite=overwrite,
-        )
-
-
 def run(args: argparse.Namespace) -> int:
     if args.process and args.calibration is None:
         raise ConfigError("--process needs --calibration CAL (the calibration to turn phase into height)")
@@ -112,6 +53,11 @@ def run(args: argparse.Namespace) -> int:
         from calibration.store import read_calibration
 
         read_calibration(args.calibration)
+    from rig.acquisition.scan import (  # pulls in the drivers: not for `rig --help`
+        default_capture_path,
+        scan,
+    )
+
     output = args.output or default_capture_path()
     result = scan(config, output, scene=args.scene, overwrite=args.overwrite)
     print(
@@ -121,7 +67,8 @@ def run(args: argparse.Namespace) -> int:
     )
     print(result.path)  # stdout: the capture directory, for scripts (the default name has the time in it)
     if args.process:
-        from rig.pipeline import DEFAULT_CORRECTION, ProcessOptions, process_capture, total_steps
+        from rig.pipeline.plan import DEFAULT_CORRECTION, ProcessOptions
+        from rig.pipeline.run import process_capture, total_steps
 
         destination = args.process_output or output.with_name(output.name + "-processed")
         with Progress(f"process {output}", total=total_steps(with_reference=True)) as progress:

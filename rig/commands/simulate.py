@@ -91,7 +91,7 @@ def config_with_overrides(config: RigConfig, args: argparse.Namespace) -> RigCon
 
 def load_patterns(path: Path) -> list[dict[str, Any]]:
     """Pattern entries from a JSON file: a list, or an object with a ``patterns`` list (a capture.json)."""
-    from rig.capture import validate_pattern
+    from rig.store.capture import validate_pattern
 
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
@@ -111,9 +111,13 @@ def load_patterns(path: Path) -> list[dict[str, Any]]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from rig.hardware.simulated import (
+        appearance_from_config,
+        geometry_from_config,
+        scene_height,
+    )
+    from rig.hardware.synthesis import simulate_scan, write_simulated_scan
     from rig.progress import Progress
-    from rig.simulated_rig import appearance_from_config, geometry_from_config, scene_height
-    from rig.simulation import simulate_scan, write_simulated_scan
 
     config = config_with_overrides(load_config(args.config), args)
     patterns = load_patterns(args.patterns) if args.patterns is not None else config.scan.patterns()

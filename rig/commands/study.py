@@ -34,7 +34,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from rig.study import StudyConfig, run_study, stderr_progress
+    from rig.study.experiments import StudyConfig, run_study, stderr_progress
 
     if args.quick:
         config = StudyConfig.quick_config(seeds=args.seeds or 2)

@@ -40,7 +40,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from rig.capture import CaptureWriter, bit_depth_of, read_capture, utc_now, validate_pattern
+from rig.store.capture import CaptureWriter, bit_depth_of, read_capture, utc_now, validate_pattern
 from rig.errors import CaptureError, ConfigError
 
 IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp", ".pgm", ".ppm")

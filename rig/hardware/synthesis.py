@@ -25,7 +25,7 @@ import numpy as np
 
 from calibration.store import Calibration, write_calibration
 from mock_devices import scenes, synth
-from rig.capture import write_capture
+from rig.store.capture import write_capture
 
 DEFAULT_FREQUENCIES = (1, 8, 64)
 DEFAULT_STEPS = 4

@@ -41,7 +41,7 @@ from processing.shadow_fill import fill_shadows
 from processing.single_shot import prepare_reference, single_shot_unwrap
 from processing.temporal import unwrap_two_frequency
 from processing.voting import vote_row_orders
-from rig import study_figures as fig
+from rig.study import figures as fig
 from rig.errors import ConfigError
 
 log = logging.getLogger(__name__)

@@ -16,7 +16,7 @@ to answer the trigger fired while that pattern was on screen:
   camera without trigger indices is restarted first, so its frame ids match the triggers again);
 - a device that fails for good (unplugged, closed) stops the scan at once with its error.
 
-Frames go to disk through :class:`rig.capture.CaptureWriter` on a writer thread, so encoding and
+Frames go to disk through :class:`rig.store.capture.CaptureWriter` on a writer thread, so encoding and
 fsync overlap the next exposure; the capture becomes complete only when every pattern has its
 frame. An error or Ctrl-C leaves the temporary ``*.incomplete-*`` directory, never a capture
 that claims to be complete. Camera settings changed for the scan are restored afterwards.
@@ -45,11 +45,16 @@ from drivers.camera import (
     TriggerMode,
     TriggerSource,
 )
-from drivers.errors import DeviceError, DeviceTimeoutError, ProtocolError, WaitTimeoutError
+from drivers.errors import (
+    DeviceError,
+    DeviceTimeoutError,
+    ProtocolError,
+    WaitTimeoutError,
+)
 from drivers.projector import Projector
 from drivers.trigger_box import TriggerBox
-from rig.capture import CaptureWriter
 from rig.errors import CaptureError
+from rig.store.capture import CaptureWriter
 
 log = logging.getLogger(__name__)
 

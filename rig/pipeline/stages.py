@@ -1,206 +1,32 @@
-"""Capture (+ calibration) -> absolute phase, height map, point cloud: the stages of `rig process`.
-
-Each capture (the object, and the calibration's reference plane) goes through the same stages::
-
-    load -> undistort -> denoise -> wrapped -> unwrap -> correction
-
-then the two meet in ``height`` (:mod:`calibration.models`: thesis eq. 1.15 on Phi_object -
-Phi_reference for the reference-plane model) and ``outputs``.
-Every stage is a plain function of a :class:`SceneState` and the :class:`ProcessOptions`; its
-wall-clock time goes into report.json. Methods plug in through registries, so a new denoiser or
-phase correction is one entry, not a new code path:
-
-- :data:`DENOISERS` ``name -> f(frames, groups, options) -> frames`` (``--denoise``);
-- :data:`CORRECTIONS` ``name -> f(state, options) -> None`` adjusting ``state.unwrapped``
-  (``--correction``); a correction may read ``state.reference`` (processed first);
-- :data:`SINGLE_SHOT` ``pattern kind -> f(state, options) -> None`` filling ``state.unwrapped``
-  for single-shot patterns (``speckle-sinusoid``);
-- heights and points come from :mod:`calibration.models` (reference-plane, polynomial, stereo),
-  whatever the calibration's model; the reference plane is processed when the model needs it.
-
-Automatic choice of the unwrapping method (``--unwrap auto``), from the sinusoid frequencies
-along the fringe axis (the axis of the first sinusoid pattern):
-
-1. one frequency: ``gray`` if Gray-code planes along that axis are present, else ``spatial``
-   (quality-guided); a single frame per frequency: ``ftp`` (Fourier transform profilometry,
-   then spatial unwrapping);
-2. the lowest frequency is 1: ``hierarchical``;
-3. two coprime frequencies: ``two-frequency`` (number-theoretic, Ding);
-4. three close frequencies (highest < 2 x lowest) whose beats differ by 1 (64, 58, 53 -> 6, 5
-   -> 1): ``heterodyne``; otherwise, three frequencies without a common divisor:
-   ``three-frequency``;
-5. anything else: an error asking for ``--unwrap``.
-
-Methods that use fewer frequencies than captured take the highest ones. Spatial unwrapping gives
-phase up to a constant 2 pi k per connected region: the height stage then removes from each region
-the multiple of 2 pi nearest its median object-reference difference (right when the reference
-plane shows in the region) and says so in the report.
-"""
+"""The stages each capture goes through (load, undistort, denoise, wrapped, unwrap, correction) and height."""
 
 from __future__ import annotations
 
 import dataclasses
 import logging
-import math
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from calibration import models as calibration_models
 from calibration.errors import CalibrationError
-from calibration.store import Calibration, read_calibration
-from processing.patterns import sinusoid_shift
-from rig import __version__
-from rig import gamma_correction
-from rig.capture import Capture, check_same_patterns, read_capture
-from rig.errors import CaptureError, ProcessingError
+from calibration.store import Calibration
+from rig.errors import ProcessingError
+from rig.pipeline import gamma_correction
+from rig.pipeline.plan import (
+    TWO_PI,
+    UNWRAP_METHODS,
+    PatternGroups,
+    ProcessOptions,
+    _all_integers,
+    choose_unwrap,
+)
+from rig.store.capture import Capture
 
 log = logging.getLogger(__name__)
-
-TWO_PI = 2.0 * np.pi
-# The correction a user gets without asking (rig process, rig scan --process, rig demo): the best
-# measured. ProcessOptions() itself corrects nothing, so calibration fits see the measured phase.
-DEFAULT_CORRECTION = "auto"
-UNWRAP_METHODS = ("auto", "two-frequency", "three-frequency", "hierarchical", "heterodyne", "gray", "spatial", "ftp")
-
-
-# --------------------------------------------------------------------------- options and pattern groups
-
-
-@dataclass
-class ProcessOptions:
-    """What `rig process` was asked to do.
-
-    ``params`` carries method-specific settings of plug-in stages (e.g. RPCA's tau) by name.
-    """
-
-    unwrap: str = "auto"
-    undistort: bool | None = None  # None: when the calibration has camera_matrix + distortion
-    denoise: str = "none"
-    correction: str = "none"
-    min_modulation_ratio: float = 0.2
-    axis: str | None = None
-    params: dict[str, Any] = field(default_factory=dict)
-
-
-@dataclass
-class SinusoidGroup:
-    """The frames of one (axis, frequency): ``shifts`` include each pattern's ``phase_rad``.
-
-    With I_j = A + B cos(2 pi f u / W + phase_rad_j + shift_j), phase shifting with
-    delta_j = phase_rad_j + shift_j returns 2 pi f u / W directly (the reported convention).
-    """
-
-    axis: str
-    frequency: float
-    indices: list[int]
-    shifts: list[float]
-    kind: str = "sinusoid"
-
-    @property
-    def steps(self) -> int:
-        return len(self.indices)
-
-
-@dataclass
-class GrayGroup:
-    """Gray-code bit planes along one axis: pattern index of each bit (0 = most significant)."""
-
-    axis: str
-    bits: int
-    planes: dict[int, int] = field(default_factory=dict)
-    inverted: dict[int, int] = field(default_factory=dict)
-
-
-@dataclass
-class PatternGroups:
-    """A capture's patterns grouped for processing."""
-
-    sinusoids: list[SinusoidGroup]
-    gray: dict[str, GrayGroup]
-    flats: list[tuple[int, float]]
-    single_shot: list[SinusoidGroup]
-
-    def along(self, axis: str) -> list[SinusoidGroup]:
-        """Sinusoid groups along ``axis``, lowest frequency first."""
-        return sorted((g for g in self.sinusoids if g.axis == axis), key=lambda g: g.frequency)
-
-
-def group_patterns(patterns: Sequence[Mapping[str, Any]], where: str = "capture.json") -> PatternGroups:
-    """Group pattern entries by kind: sinusoids per (axis, frequency), Gray planes per axis, flats."""
-    sinusoids: dict[tuple[str, float], SinusoidGroup] = {}
-    single: dict[tuple[str, float], SinusoidGroup] = {}
-    gray: dict[str, GrayGroup] = {}
-    flats: list[tuple[int, float]] = []
-    for index, pattern in enumerate(patterns):
-        kind = pattern["kind"]
-        axis = pattern.get("axis", "x")
-        if kind in ("sinusoid", "speckle-sinusoid"):
-            table = sinusoids if kind == "sinusoid" else single
-            key = (axis, float(pattern["frequency"]))
-            group = table.setdefault(key, SinusoidGroup(axis, key[1], [], [], kind))
-            group.indices.append(index)
-            group.shifts.append(sinusoid_shift(pattern) + float(pattern.get("phase_rad", 0.0)))
-        elif kind == "gray":
-            bits = int(pattern["bits"])
-            group = gray.setdefault(axis, GrayGroup(axis, bits))
-            if group.bits != bits:
-                raise CaptureError(f"{where}: patterns[{index}].bits: expected {group.bits} like the other Gray planes, found {bits}")
-            table = group.inverted if pattern.get("inverted", False) else group.planes
-            table[int(pattern["bit"])] = index
-        elif kind == "flat":
-            flats.append((index, float(pattern["level"])))
-    for group in gray.values():
-        missing = [b for b in range(group.bits) if b not in group.planes]
-        if missing:
-            raise CaptureError(f"{where}: Gray code along {group.axis}: expected bits 0..{group.bits - 1}, missing {missing}")
-        if group.inverted and sorted(group.inverted) != sorted(group.planes):
-            raise CaptureError(f"{where}: Gray code along {group.axis}: inverted planes must cover the same bits as the normal ones")
-    return PatternGroups(list(sinusoids.values()), gray, flats, list(single.values()))
-
-
-def _beat_chain_ends_at_one(frequencies: Sequence[float]) -> bool:
-    values = sorted(frequencies, reverse=True)
-    while len(values) > 1:
-        values = sorted({abs(a - b) for a, b in zip(values, values[1:])}, reverse=True)
-    return bool(values) and values[0] == 1
-
-
-def _all_integers(frequencies: Sequence[float]) -> bool:
-    return all(float(f).is_integer() for f in frequencies)
-
-
-def choose_unwrap(groups: PatternGroups, axis: str) -> str:
-    """The unwrapping method the pattern set allows (see the module docstring for the rule)."""
-    along = groups.along(axis)
-    freqs = [g.frequency for g in along]
-    if not freqs:
-        raise ProcessingError(f"no sinusoid pattern along {axis}: nothing to unwrap")
-    if len(freqs) == 1:
-        if along[0].steps < 3:
-            return "ftp"
-        return "gray" if axis in groups.gray else "spatial"
-    if not _all_integers(freqs):
-        raise ProcessingError(f"frequencies {freqs}: temporal unwrapping needs whole fringe counts; choose --unwrap spatial")
-    ints = [int(f) for f in freqs]
-    if ints[0] == 1:
-        return "hierarchical"
-    if len(ints) == 2 and math.gcd(*ints) == 1:
-        return "two-frequency"
-    if len(ints) == 3:
-        if ints[2] < 2 * ints[0] and _beat_chain_ends_at_one(ints):
-            return "heterodyne"
-        if math.gcd(*ints) == 1:
-            return "three-frequency"
-    raise ProcessingError(
-        f"frequencies {ints}: no automatic unwrapping method fits; choose one with --unwrap "
-        f"({', '.join(UNWRAP_METHODS[1:])})"
-    )
-
 
 # --------------------------------------------------------------------------- per-capture state
 
@@ -425,7 +251,11 @@ def _speckle_single_shot(state: SceneState, options: ProcessOptions) -> None:
     result fills ``state.wrapped`` / ``state.unwrapped`` for the correction and height stages;
     method, parameters, RPCA iterations and rank and the time of each step go to the report.
     """
-    from processing.single_shot import prepare_reference, separate_fringe_speckle, single_shot_unwrap
+    from processing.single_shot import (
+        prepare_reference,
+        separate_fringe_speckle,
+        single_shot_unwrap,
+    )
 
     group = state.groups.single_shot[0]
     where = str(state.capture.manifest_path)
@@ -706,254 +536,3 @@ def _remove_region_offsets(delta: np.ndarray) -> np.ndarray:
 
 
 
-# --------------------------------------------------------------------------- the whole run
-
-
-@dataclass
-class ProcessResult:
-    """Everything `rig process` computed, ready to be written."""
-
-    object: SceneState
-    reference: SceneState | None
-    calibration: Calibration | None
-    options: ProcessOptions
-    height: np.ndarray | None
-    mask: np.ndarray
-    timings: dict[str, Any]
-    notes: list[str]
-    points: np.ndarray | None = None  # (H, W, 3) mm, NaN where invalid
-
-    @property
-    def phase(self) -> np.ndarray:
-        assert self.object.unwrapped is not None
-        return self.object.unwrapped.phase
-
-
-def _fringe_axis(groups: PatternGroups, options: ProcessOptions, where: str) -> str:
-    if options.axis is not None:
-        return options.axis
-    candidates = groups.sinusoids or groups.single_shot
-    if not candidates:
-        raise ProcessingError(f"{where}: no sinusoid pattern: nothing to compute a phase from")
-    return candidates[0].axis
-
-
-def _scene(name: str, capture: Capture, options: ProcessOptions) -> SceneState:
-    groups = group_patterns(capture.patterns, str(capture.manifest_path))
-    return SceneState(name=name, capture=capture, groups=groups, axis=_fringe_axis(groups, options, str(capture.manifest_path)))
-
-
-def total_steps(with_reference: bool) -> int:
-    """Progress steps of :func:`process` (stages of each capture, then height)."""
-    return len(SCENE_STAGES) * (2 if with_reference else 1) + 1
-
-
-def load_calibration_for(capture: Capture, calibration_path: str | Path) -> tuple[Calibration, Capture | None]:
-    """Read a calibration and (when its model needs one) its reference capture, checked against ``capture``."""
-    calibration = read_calibration(calibration_path)
-    if calibration.model not in calibration_models.MODELS:
-        raise CalibrationError(
-            f"{calibration.where}: model: expected one of {', '.join(calibration_models.MODELS)}, found {calibration.model!r}"
-        )
-    if not calibration_models.needs_reference(calibration):
-        return calibration, None
-    ref_path = calibration.reference_path
-    if ref_path is None:
-        raise CalibrationError(f"{calibration.where}: reference: missing (the reference-plane capture)")
-    if not (ref_path / "capture.json").is_file():
-        raise CalibrationError(f"{calibration.where}: reference: no capture at {ref_path}")
-    reference = read_capture(ref_path, verify=False)  # verified when loaded
-    try:
-        check_same_patterns(reference, capture)
-    except CaptureError as exc:
-        raise CalibrationError(f"{calibration.where}: the reference capture does not fit this capture: {exc}") from None
-    return calibration, reference
-
-
-def process(
-    capture_path: str | Path,
-    calibration_path: str | Path | None = None,
-    options: ProcessOptions | None = None,
-    progress: Any = None,
-    salvage: bool = False,
-) -> ProcessResult:
-    """Run the stages on a capture and, with a calibration, on its reference plane; compute heights.
-
-    ``progress`` is an object with ``step(note)`` (see :class:`rig.progress.Progress`) or None.
-    """
-    options = ProcessOptions() if options is None else options
-    _check_options(options)
-    started = time.perf_counter()
-    capture = read_capture(capture_path, salvage=salvage, verify=False)  # the load stage checks every frame
-    calibration, reference_capture = (None, None)
-    if calibration_path is not None:
-        calibration, reference_capture = load_calibration_for(capture, calibration_path)
-    obj = _scene("object", capture, options)
-    ref = _scene("reference", reference_capture, options) if reference_capture is not None else None
-    for state in (obj, ref):
-        if state is not None:
-            state.calibration = calibration
-    if ref is not None:
-        ref.axis = obj.axis
-        obj.reference = ref
-    for state in ([ref] if ref is not None else []) + [obj]:
-        for name, stage in SCENE_STAGES:
-            t0 = time.perf_counter()
-            stage(state, options)
-            state.timings[name] = time.perf_counter() - t0
-            if progress is not None:
-                progress.step(f"{state.name}: {name}")
-        state.frames = None  # the frames are not needed any more; free them early
-    notes: list[str] = []
-    assert obj.unwrapped is not None
-    height = points = None
-    mask = obj.unwrapped.valid.copy()
-    t0 = time.perf_counter()
-    if calibration is not None:
-        points, height = stage_height(obj, ref, calibration, notes)
-        if ref is not None:
-            assert ref.unwrapped is not None
-            mask &= ref.unwrapped.valid
-        mask &= np.isfinite(height)
-        height = np.where(mask, height, np.nan).astype(np.float32)
-    else:
-        notes.append("no calibration: height, points and height preview skipped; phase, mask and wrapped phase written")
-    height_time = time.perf_counter() - t0
-    if progress is not None:
-        progress.step("height")
-    if not mask.any():
-        raise ProcessingError(f"{capture.manifest_path}: no valid pixel (all in shadow or too little fringe modulation)")
-    timings: dict[str, Any] = {"object": dict(obj.timings)}
-    if ref is not None:
-        timings["reference"] = dict(ref.timings)
-    timings["height"] = height_time
-    timings["total"] = time.perf_counter() - started
-    return ProcessResult(obj, ref, calibration, options, height, mask, timings, notes + obj.notes, points)
-
-
-def _check_options(options: ProcessOptions) -> None:
-    if options.unwrap not in UNWRAP_METHODS:
-        raise ProcessingError(f"--unwrap: expected one of {', '.join(UNWRAP_METHODS)}, found {options.unwrap!r}")
-    if options.denoise not in DENOISERS:
-        raise ProcessingError(f"--denoise: expected one of {', '.join(DENOISERS)}, found {options.denoise!r}")
-    if options.correction not in CORRECTIONS:
-        raise ProcessingError(f"--correction: expected one of {', '.join(CORRECTIONS)}, found {options.correction!r}")
-    if options.axis not in (None, "x", "y"):
-        raise ProcessingError(f"--axis: expected x or y, found {options.axis!r}")
-    if not 0 < options.min_modulation_ratio <= 1:
-        raise ProcessingError(f"--min-modulation: expected a fraction in (0, 1], found {options.min_modulation_ratio}")
-
-
-# --------------------------------------------------------------------------- outputs
-
-
-def _texture(state: SceneState) -> np.ndarray | None:
-    if state.wrapped is None or not state.wrapped.background:
-        return None
-    background = state.wrapped.background[-1] + state.wrapped.modulation[-1]
-    top = float(np.percentile(background, 99.5)) or 1.0
-    return np.clip(background / top * 255.0, 0, 255).astype(np.uint8)
-
-
-OUTPUT_FILES = ("height.npy", "phase.npy", "mask.npy", "wrapped.npy", "points.ply", "report.json", "preview.png")
-
-
-def write_outputs(result: ProcessResult, out_dir: str | Path) -> dict[str, Any]:
-    """Write the outputs of capture-format.md into ``out_dir``; returns the report (also in report.json)."""
-    from rig import outputs
-
-    t0 = time.perf_counter()
-    out = Path(out_dir)
-    if (out / "capture.json").exists() or (out / "calibration.json").exists():
-        raise ProcessingError(f"{out}: is a capture or calibration directory; choose another output directory")
-    out.mkdir(parents=True, exist_ok=True)
-    for name in OUTPUT_FILES:  # an earlier run's files must not pass for this run's
-        (out / name).unlink(missing_ok=True)
-    obj = result.object
-    assert obj.unwrapped is not None and obj.wrapped is not None
-    files: dict[str, str] = {}
-    phase = np.where(result.mask, obj.unwrapped.phase, np.nan)
-    files["phase"] = outputs.write_array(out / "phase.npy", phase.astype(np.float64)).name
-    files["mask"] = outputs.write_array(out / "mask.npy", result.mask.astype(bool)).name
-    report: dict[str, Any] = {
-        "program": f"fpp-rig {__version__}",
-        "capture": str(obj.capture.path),
-        "calibration": str(result.calibration.path) if result.calibration is not None else None,
-        "reference": str(result.reference.capture.path) if result.reference is not None else None,
-        "methods": {
-            "wrapped_phase": "phase-shifting" if obj.groups.sinusoids else "single-shot",
-            "unwrap": obj.unwrapped.method,
-            "unwrap_requested": result.options.unwrap,
-            "absolute_phase": obj.unwrapped.absolute,
-            "denoise": result.options.denoise,
-            "correction": result.options.correction,
-            "undistorted": bool(obj.info.get("undistorted", False)),
-            "fringe_axis": obj.axis,
-            "frequencies": obj.wrapped.frequencies,
-            "phase_frequency": obj.unwrapped.frequency,
-            "min_modulation_ratio": result.options.min_modulation_ratio,
-            "params": result.options.params,
-        },
-        "image": {"width": obj.capture.width, "height": obj.capture.height},
-        "valid_fraction": float(result.mask.mean()),
-        "notes": list(result.notes),
-    }
-    if result.height is None:
-        wrapped = np.stack(obj.wrapped.phase) if obj.wrapped.phase else np.empty((0, *obj.capture.shape))
-        files["wrapped"] = outputs.write_array(out / "wrapped.npy", wrapped).name
-        report["wrapped_frequencies"] = obj.wrapped.frequencies
-        low, high = outputs.write_preview(out / "preview.png", phase, "rad", "absolute phase" if obj.unwrapped.absolute else "phase")
-        report["preview"] = {"shows": "phase", "unit": "rad", "range": [low, high]}
-    else:
-        cal = result.calibration
-        assert cal is not None
-        files["height"] = outputs.write_array(out / "height.npy", result.height.astype(np.float32)).name
-        assert result.points is not None
-        points = result.points[result.mask]
-        texture = _texture(obj)
-        colours = None
-        if texture is not None:
-            grey = texture[result.mask]
-            colours = np.column_stack([grey, grey, grey])
-        files["points"] = outputs.write_ply(out / "points.ply", points, colours).name
-        low, high = outputs.write_preview(out / "preview.png", result.height, "mm", "height")
-        valid_h = result.height[result.mask]
-        report["height_mm"] = {
-            "min": float(np.min(valid_h)), "max": float(np.max(valid_h)), "median": float(np.median(valid_h)),
-        }
-        report["points"] = int(len(points))
-        report["calibration_model"] = cal.model
-        report["preview"] = {"shows": "height", "unit": "mm", "range": [low, high]}
-    files["preview"] = "preview.png"
-    files["report"] = "report.json"
-    report["files"] = files
-    timings = dict(result.timings)
-    timings["outputs"] = time.perf_counter() - t0
-    report["timings_s"] = timings
-    report["stage_info"] = {"object": obj.info, **({"reference": result.reference.info} if result.reference else {})}
-    report["versions"] = _versions()
-    outputs.write_report(out / "report.json", report)
-    return report
-
-
-def _versions() -> dict[str, str]:
-    import platform
-
-    import cv2
-    import scipy
-
-    return {"fpp-rig": __version__, "python": platform.python_version(), "numpy": np.__version__,
-            "scipy": scipy.__version__, "opencv": cv2.__version__}
-
-
-def process_capture(
-    capture_path: str | Path,
-    calibration_path: str | Path | None,
-    out_dir: str | Path,
-    options: ProcessOptions | None = None,
-    progress: Any = None,
-    salvage: bool = False,
-) -> dict[str, Any]:
-    """:func:`process` then :func:`write_outputs`; returns the report."""
-    result = process(capture_path, calibration_path, options, progress=progress, salvage=salvage)
-    return write_outputs(result, out_dir)

@@ -46,7 +46,7 @@ from calibration.polynomial import POLYNOMIAL, fit_polynomial
 from calibration.reference import REFERENCE_DIR, check_same_patterns
 from calibration.stereo import STEREO, board_phase_view, calibrate_stereo, fit_plane, triangulate
 from calibration.store import REFERENCE_PLANE, Calibration, write_calibration
-from rig.capture import read_capture, write_capture
+from rig.store.capture import read_capture, write_capture
 from rig.config import RigConfig
 from rig.errors import CaptureError, ConfigError
 
@@ -213,7 +213,7 @@ class StageCommand:
 
 def _scan(config: RigConfig, output: Path, patterns: Sequence[dict[str, Any]], scene: str, show_progress: bool) -> Path:
     """One capture of ``patterns`` with the rig of ``config`` looking at ``scene`` (as `rig scan`)."""
-    from rig.commands.scan import scan
+    from rig.acquisition.scan import scan
 
     return scan(config, output, scene=scene, show_progress=show_progress, patterns=patterns, label="calibrate").path
 
@@ -225,7 +225,7 @@ def _simulated_board_view(config: RigConfig, board: BoardSpec, index: int) -> np
     pinhole of focal l0 / pixel_mm without distortion.
     """
     from mock_devices import board_synth
-    from rig.simulated_rig import geometry_from_config
+    from rig.hardware.simulated import geometry_from_config
 
     g = geometry_from_config(config)
     camera = board_synth.PinholeCamera.simple(g.camera_width, g.camera_height, g.l0_mm / g.pixel_mm)
@@ -339,7 +339,7 @@ class CalibrationReport:
 
 def _absolute_phase(path: Path) -> tuple[np.ndarray, float, str, list[dict[str, Any]]]:
     """Absolute phase (NaN invalid), its frequency, fringe axis and the patterns of a capture."""
-    from rig.pipeline import process
+    from rig.pipeline.run import process
 
     result = process(path)
     unwrapped = result.object.unwrapped

@@ -3,13 +3,27 @@
 from __future__ import annotations
 
 import json
+import logging
 import os
+import time
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import cv2
 import numpy as np
+
+from rig import __version__
+from rig.errors import ProcessingError
+
+if TYPE_CHECKING:
+    from rig.pipeline.run import ProcessResult
+    from rig.pipeline.stages import SceneState
+
+log = logging.getLogger(__name__)
+
+
+
 
 PREVIEW_BAR_PX = 90  # width of the scale bar panel at the right of the preview
 
@@ -130,3 +144,105 @@ def write_report(path: Path, report: Mapping[str, Any]) -> Path:
     tmp.write_text(text, encoding="utf-8")
     os.replace(tmp, path)
     return path
+
+
+# --------------------------------------------------------------------------- outputs
+
+
+def _texture(state: SceneState) -> np.ndarray | None:
+    if state.wrapped is None or not state.wrapped.background:
+        return None
+    background = state.wrapped.background[-1] + state.wrapped.modulation[-1]
+    top = float(np.percentile(background, 99.5)) or 1.0
+    return np.clip(background / top * 255.0, 0, 255).astype(np.uint8)
+
+
+OUTPUT_FILES = ("height.npy", "phase.npy", "mask.npy", "wrapped.npy", "points.ply", "report.json", "preview.png")
+
+
+def write_outputs(result: ProcessResult, out_dir: str | Path) -> dict[str, Any]:
+    """Write the outputs of capture-format.md into ``out_dir``; returns the report (also in report.json)."""
+    t0 = time.perf_counter()
+    out = Path(out_dir)
+    if (out / "capture.json").exists() or (out / "calibration.json").exists():
+        raise ProcessingError(f"{out}: is a capture or calibration directory; choose another output directory")
+    out.mkdir(parents=True, exist_ok=True)
+    for name in OUTPUT_FILES:  # an earlier run's files must not pass for this run's
+        (out / name).unlink(missing_ok=True)
+    obj = result.object
+    assert obj.unwrapped is not None and obj.wrapped is not None
+    files: dict[str, str] = {}
+    phase = np.where(result.mask, obj.unwrapped.phase, np.nan)
+    files["phase"] = write_array(out / "phase.npy", phase.astype(np.float64)).name
+    files["mask"] = write_array(out / "mask.npy", result.mask.astype(bool)).name
+    report: dict[str, Any] = {
+        "program": f"fpp-rig {__version__}",
+        "capture": str(obj.capture.path),
+        "calibration": str(result.calibration.path) if result.calibration is not None else None,
+        "reference": str(result.reference.capture.path) if result.reference is not None else None,
+        "methods": {
+            "wrapped_phase": "phase-shifting" if obj.groups.sinusoids else "single-shot",
+            "unwrap": obj.unwrapped.method,
+            "unwrap_requested": result.options.unwrap,
+            "absolute_phase": obj.unwrapped.absolute,
+            "denoise": result.options.denoise,
+            "correction": result.options.correction,
+            "undistorted": bool(obj.info.get("undistorted", False)),
+            "fringe_axis": obj.axis,
+            "frequencies": obj.wrapped.frequencies,
+            "phase_frequency": obj.unwrapped.frequency,
+            "min_modulation_ratio": result.options.min_modulation_ratio,
+            "params": result.options.params,
+        },
+        "image": {"width": obj.capture.width, "height": obj.capture.height},
+        "valid_fraction": float(result.mask.mean()),
+        "notes": list(result.notes),
+    }
+    if result.height is None:
+        wrapped = np.stack(obj.wrapped.phase) if obj.wrapped.phase else np.empty((0, *obj.capture.shape))
+        files["wrapped"] = write_array(out / "wrapped.npy", wrapped).name
+        report["wrapped_frequencies"] = obj.wrapped.frequencies
+        low, high = write_preview(out / "preview.png", phase, "rad", "absolute phase" if obj.unwrapped.absolute else "phase")
+        report["preview"] = {"shows": "phase", "unit": "rad", "range": [low, high]}
+    else:
+        cal = result.calibration
+        assert cal is not None
+        files["height"] = write_array(out / "height.npy", result.height.astype(np.float32)).name
+        assert result.points is not None
+        points = result.points[result.mask]
+        texture = _texture(obj)
+        colours = None
+        if texture is not None:
+            grey = texture[result.mask]
+            colours = np.column_stack([grey, grey, grey])
+        files["points"] = write_ply(out / "points.ply", points, colours).name
+        low, high = write_preview(out / "preview.png", result.height, "mm", "height")
+        valid_h = result.height[result.mask]
+        report["height_mm"] = {
+            "min": float(np.min(valid_h)), "max": float(np.max(valid_h)), "median": float(np.median(valid_h)),
+        }
+        report["points"] = int(len(points))
+        report["calibration_model"] = cal.model
+        report["preview"] = {"shows": "height", "unit": "mm", "range": [low, high]}
+    files["preview"] = "preview.png"
+    files["report"] = "report.json"
+    report["files"] = files
+    timings = dict(result.timings)
+    timings["outputs"] = time.perf_counter() - t0
+    report["timings_s"] = timings
+    report["stage_info"] = {"object": obj.info, **({"reference": result.reference.info} if result.reference else {})}
+    report["versions"] = _versions()
+    write_report(out / "report.json", report)
+    return report
+
+
+def _versions() -> dict[str, str]:
+    import platform
+
+    import cv2
+    import scipy
+
+    return {"fpp-rig": __version__, "python": platform.python_version(), "numpy": np.__version__,
+            "scipy": scipy.__version__, "opencv": cv2.__version__}
+
+

@@ -17,7 +17,7 @@ import numpy as np
 
 from drivers.camera import Camera
 from drivers.projector import Projector
-from rig.acquisition import BoxTrigger, SoftwareTrigger
+from rig.acquisition.loop import BoxTrigger, SoftwareTrigger
 from rig.config import RigConfig
 from rig.errors import ConfigError
 
@@ -26,13 +26,13 @@ log = logging.getLogger(__name__)
 
 @dataclass
 class RigDevices:
-    """Opened devices of one rig, ready for :func:`rig.acquisition.run_scan`."""
+    """Opened devices of one rig, ready for :func:`rig.acquisition.loop.run_scan`."""
 
     projector: Projector
     camera: Camera
     trigger: SoftwareTrigger | BoxTrigger
     config: RigConfig
-    simulation: Any = None  # rig.simulated_rig.SimulatedRig when the camera is simulated
+    simulation: Any = None  # rig.hardware.simulated.SimulatedRig when the camera is simulated
 
 
 def load_gamma_lut(config: RigConfig) -> np.ndarray | None:
@@ -67,8 +67,8 @@ def build_projector(config: RigConfig) -> Projector:
         return WindowProjector(size, monitor=config.projector.monitor)
     if backend == "dlp4500":
         from drivers.dlp import LightCrafter4500
+        from drivers.projector_dlp import DlpVideoProjector
         from drivers.projector_window import WindowProjector
-        from rig.dlp_projector import DlpVideoProjector
 
         return DlpVideoProjector(WindowProjector(size, monitor=config.projector.monitor), LightCrafter4500())
     raise ConfigError(f"[projector] backend: unknown {backend!r}")
@@ -109,7 +109,7 @@ def open_rig(config: RigConfig, scene: str = "object") -> Iterator[RigDevices]:
     """Open every device of ``config``; ``scene`` chooses what a simulated camera looks at."""
     with contextlib.ExitStack() as stack:
         if config.simulated:
-            from rig.simulated_rig import SimulatedRig
+            from rig.hardware.simulated import SimulatedRig
 
             simulation = stack.enter_context(SimulatedRig(config, scene=scene))
             projector, camera, box = simulation.projector, simulation.camera, simulation.trigger_box

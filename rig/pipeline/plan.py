@@ -1,0 +1,195 @@
+"""Capture (+ calibration) -> absolute phase, height map, point cloud: the stages of `rig process`.
+
+Each capture (the object, and the calibration's reference plane) goes through the same stages::
+
+    load -> undistort -> denoise -> wrapped -> unwrap -> correction
+
+then the two meet in ``height`` (:mod:`calibration.models`: thesis eq. 1.15 on Phi_object -
+Phi_reference for the reference-plane model) and ``outputs``.
+Every stage is a plain function of a :class:`SceneState` and the :class:`ProcessOptions`; its
+wall-clock time goes into report.json. Methods plug in through registries, so a new denoiser or
+phase correction is one entry, not a new code path:
+
+- :data:`DENOISERS` ``name -> f(frames, groups, options) -> frames`` (``--denoise``);
+- :data:`CORRECTIONS` ``name -> f(state, options) -> None`` adjusting ``state.unwrapped``
+  (``--correction``); a correction may read ``state.reference`` (processed first);
+- :data:`SINGLE_SHOT` ``pattern kind -> f(state, options) -> None`` filling ``state.unwrapped``
+  for single-shot patterns (``speckle-sinusoid``);
+- heights and points come from :mod:`calibration.models` (reference-plane, polynomial, stereo),
+  whatever the calibration's model; the reference plane is processed when the model needs it.
+
+Automatic choice of the unwrapping method (``--unwrap auto``), from the sinusoid frequencies
+along the fringe axis (the axis of the first sinusoid pattern):
+
+1. one frequency: ``gray`` if Gray-code planes along that axis are present, else ``spatial``
+   (quality-guided); a single frame per frequency: ``ftp`` (Fourier transform profilometry,
+   then spatial unwrapping);
+2. the lowest frequency is 1: ``hierarchical``;
+3. two coprime frequencies: ``two-frequency`` (number-theoretic, Ding);
+4. three close frequencies (highest < 2 x lowest) whose beats differ by 1 (64, 58, 53 -> 6, 5
+   -> 1): ``heterodyne``; otherwise, three frequencies without a common divisor:
+   ``three-frequency``;
+5. anything else: an error asking for ``--unwrap``.
+
+Methods that use fewer frequencies than captured take the highest ones. Spatial unwrapping gives
+phase up to a constant 2 pi k per connected region: the height stage then removes from each region
+the multiple of 2 pi nearest its median object-reference difference (right when the reference
+plane shows in the region) and says so in the report.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from processing.patterns import sinusoid_shift
+from rig.errors import CaptureError, ProcessingError
+
+log = logging.getLogger(__name__)
+
+TWO_PI = 2.0 * np.pi
+# The correction a user gets without asking (rig process, rig scan --process, rig demo): the best
+# measured. ProcessOptions() itself corrects nothing, so calibration fits see the measured phase.
+DEFAULT_CORRECTION = "auto"
+UNWRAP_METHODS = ("auto", "two-frequency", "three-frequency", "hierarchical", "heterodyne", "gray", "spatial", "ftp")
+
+
+# --------------------------------------------------------------------------- options and pattern groups
+
+
+@dataclass
+class ProcessOptions:
+    """What `rig process` was asked to do.
+
+    ``params`` carries method-specific settings of plug-in stages (e.g. RPCA's tau) by name.
+    """
+
+    unwrap: str = "auto"
+    undistort: bool | None = None  # None: when the calibration has camera_matrix + distortion
+    denoise: str = "none"
+    correction: str = "none"
+    min_modulation_ratio: float = 0.2
+    axis: str | None = None
+    params: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class SinusoidGroup:
+    """The frames of one (axis, frequency): ``shifts`` include each pattern's ``phase_rad``.
+
+    With I_j = A + B cos(2 pi f u / W + phase_rad_j + shift_j), phase shifting with
+    delta_j = phase_rad_j + shift_j returns 2 pi f u / W directly (the reported convention).
+    """
+
+    axis: str
+    frequency: float
+    indices: list[int]
+    shifts: list[float]
+    kind: str = "sinusoid"
+
+    @property
+    def steps(self) -> int:
+        return len(self.indices)
+
+
+@dataclass
+class GrayGroup:
+    """Gray-code bit planes along one axis: pattern index of each bit (0 = most significant)."""
+
+    axis: str
+    bits: int
+    planes: dict[int, int] = field(default_factory=dict)
+    inverted: dict[int, int] = field(default_factory=dict)
+
+
+@dataclass
+class PatternGroups:
+    """A capture's patterns grouped for processing."""
+
+    sinusoids: list[SinusoidGroup]
+    gray: dict[str, GrayGroup]
+    flats: list[tuple[int, float]]
+    single_shot: list[SinusoidGroup]
+
+    def along(self, axis: str) -> list[SinusoidGroup]:
+        """Sinusoid groups along ``axis``, lowest frequency first."""
+        return sorted((g for g in self.sinusoids if g.axis == axis), key=lambda g: g.frequency)
+
+
+def group_patterns(patterns: Sequence[Mapping[str, Any]], where: str = "capture.json") -> PatternGroups:
+    """Group pattern entries by kind: sinusoids per (axis, frequency), Gray planes per axis, flats."""
+    sinusoids: dict[tuple[str, float], SinusoidGroup] = {}
+    single: dict[tuple[str, float], SinusoidGroup] = {}
+    gray: dict[str, GrayGroup] = {}
+    flats: list[tuple[int, float]] = []
+    for index, pattern in enumerate(patterns):
+        kind = pattern["kind"]
+        axis = pattern.get("axis", "x")
+        if kind in ("sinusoid", "speckle-sinusoid"):
+            table = sinusoids if kind == "sinusoid" else single
+            key = (axis, float(pattern["frequency"]))
+            group = table.setdefault(key, SinusoidGroup(axis, key[1], [], [], kind))
+            group.indices.append(index)
+            group.shifts.append(sinusoid_shift(pattern) + float(pattern.get("phase_rad", 0.0)))
+        elif kind == "gray":
+            bits = int(pattern["bits"])
+            group = gray.setdefault(axis, GrayGroup(axis, bits))
+            if group.bits != bits:
+                raise CaptureError(f"{where}: patterns[{index}].bits: expected {group.bits} like the other Gray planes, found {bits}")
+            table = group.inverted if pattern.get("inverted", False) else group.planes
+            table[int(pattern["bit"])] = index
+        elif kind == "flat":
+            flats.append((index, float(pattern["level"])))
+    for group in gray.values():
+        missing = [b for b in range(group.bits) if b not in group.planes]
+        if missing:
+            raise CaptureError(f"{where}: Gray code along {group.axis}: expected bits 0..{group.bits - 1}, missing {missing}")
+        if group.inverted and sorted(group.inverted) != sorted(group.planes):
+            raise CaptureError(f"{where}: Gray code along {group.axis}: inverted planes must cover the same bits as the normal ones")
+    return PatternGroups(list(sinusoids.values()), gray, flats, list(single.values()))
+
+
+def _beat_chain_ends_at_one(frequencies: Sequence[float]) -> bool:
+    values = sorted(frequencies, reverse=True)
+    while len(values) > 1:
+        values = sorted({abs(a - b) for a, b in zip(values, values[1:])}, reverse=True)
+    return bool(values) and values[0] == 1
+
+
+def _all_integers(frequencies: Sequence[float]) -> bool:
+    return all(float(f).is_integer() for f in frequencies)
+
+
+def choose_unwrap(groups: PatternGroups, axis: str) -> str:
+    """The unwrapping method the pattern set allows (see the module docstring for the rule)."""
+    along = groups.along(axis)
+    freqs = [g.frequency for g in along]
+    if not freqs:
+        raise ProcessingError(f"no sinusoid pattern along {axis}: nothing to unwrap")
+    if len(freqs) == 1:
+        if along[0].steps < 3:
+            return "ftp"
+        return "gray" if axis in groups.gray else "spatial"
+    if not _all_integers(freqs):
+        raise ProcessingError(f"frequencies {freqs}: temporal unwrapping needs whole fringe counts; choose --unwrap spatial")
+    ints = [int(f) for f in freqs]
+    if ints[0] == 1:
+        return "hierarchical"
+    if len(ints) == 2 and math.gcd(*ints) == 1:
+        return "two-frequency"
+    if len(ints) == 3:
+        if ints[2] < 2 * ints[0] and _beat_chain_ends_at_one(ints):
+            return "heterodyne"
+        if math.gcd(*ints) == 1:
+            return "three-frequency"
+    raise ProcessingError(
+        f"frequencies {ints}: no automatic unwrapping method fits; choose one with --unwrap "
+        f"({', '.join(UNWRAP_METHODS[1:])})"
+    )
+
+

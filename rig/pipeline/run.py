@@ -1,0 +1,185 @@
+"""One processing run: a capture (and its calibration's reference plane) through the stages to heights."""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from calibration import models as calibration_models
+from calibration.errors import CalibrationError
+from calibration.store import Calibration, read_calibration
+from rig.errors import CaptureError, ProcessingError
+from rig.pipeline.outputs import write_outputs
+from rig.pipeline.plan import (
+    UNWRAP_METHODS,
+    PatternGroups,
+    ProcessOptions,
+    group_patterns,
+)
+from rig.pipeline.stages import (
+    CORRECTIONS,
+    DENOISERS,
+    SCENE_STAGES,
+    SceneState,
+    stage_height,
+)
+from rig.store.capture import Capture, check_same_patterns, read_capture
+
+log = logging.getLogger(__name__)
+
+# --------------------------------------------------------------------------- the whole run
+
+
+@dataclass
+class ProcessResult:
+    """Everything `rig process` computed, ready to be written."""
+
+    object: SceneState
+    reference: SceneState | None
+    calibration: Calibration | None
+    options: ProcessOptions
+    height: np.ndarray | None
+    mask: np.ndarray
+    timings: dict[str, Any]
+    notes: list[str]
+    points: np.ndarray | None = None  # (H, W, 3) mm, NaN where invalid
+
+    @property
+    def phase(self) -> np.ndarray:
+        assert self.object.unwrapped is not None
+        return self.object.unwrapped.phase
+
+
+def _fringe_axis(groups: PatternGroups, options: ProcessOptions, where: str) -> str:
+    if options.axis is not None:
+        return options.axis
+    candidates = groups.sinusoids or groups.single_shot
+    if not candidates:
+        raise ProcessingError(f"{where}: no sinusoid pattern: nothing to compute a phase from")
+    return candidates[0].axis
+
+
+def _scene(name: str, capture: Capture, options: ProcessOptions) -> SceneState:
+    groups = group_patterns(capture.patterns, str(capture.manifest_path))
+    return SceneState(name=name, capture=capture, groups=groups, axis=_fringe_axis(groups, options, str(capture.manifest_path)))
+
+
+def total_steps(with_reference: bool) -> int:
+    """Progress steps of :func:`process` (stages of each capture, then height)."""
+    return len(SCENE_STAGES) * (2 if with_reference else 1) + 1
+
+
+def load_calibration_for(capture: Capture, calibration_path: str | Path) -> tuple[Calibration, Capture | None]:
+    """Read a calibration and (when its model needs one) its reference capture, checked against ``capture``."""
+    calibration = read_calibration(calibration_path)
+    if calibration.model not in calibration_models.MODELS:
+        raise CalibrationError(
+            f"{calibration.where}: model: expected one of {', '.join(calibration_models.MODELS)}, found {calibration.model!r}"
+        )
+    if not calibration_models.needs_reference(calibration):
+        return calibration, None
+    ref_path = calibration.reference_path
+    if ref_path is None:
+        raise CalibrationError(f"{calibration.where}: reference: missing (the reference-plane capture)")
+    if not (ref_path / "capture.json").is_file():
+        raise CalibrationError(f"{calibration.where}: reference: no capture at {ref_path}")
+    reference = read_capture(ref_path, verify=False)  # verified when loaded
+    try:
+        check_same_patterns(reference, capture)
+    except CaptureError as exc:
+        raise CalibrationError(f"{calibration.where}: the reference capture does not fit this capture: {exc}") from None
+    return calibration, reference
+
+
+def process(
+    capture_path: str | Path,
+    calibration_path: str | Path | None = None,
+    options: ProcessOptions | None = None,
+    progress: Any = None,
+    salvage: bool = False,
+) -> ProcessResult:
+    """Run the stages on a capture and, with a calibration, on its reference plane; compute heights.
+
+    ``progress`` is an object with ``step(note)`` (see :class:`rig.progress.Progress`) or None.
+    """
+    options = ProcessOptions() if options is None else options
+    _check_options(options)
+    started = time.perf_counter()
+    capture = read_capture(capture_path, salvage=salvage, verify=False)  # the load stage checks every frame
+    calibration, reference_capture = (None, None)
+    if calibration_path is not None:
+        calibration, reference_capture = load_calibration_for(capture, calibration_path)
+    obj = _scene("object", capture, options)
+    ref = _scene("reference", reference_capture, options) if reference_capture is not None else None
+    for state in (obj, ref):
+        if state is not None:
+            state.calibration = calibration
+    if ref is not None:
+        ref.axis = obj.axis
+        obj.reference = ref
+    for state in ([ref] if ref is not None else []) + [obj]:
+        for name, stage in SCENE_STAGES:
+            t0 = time.perf_counter()
+            stage(state, options)
+            state.timings[name] = time.perf_counter() - t0
+            if progress is not None:
+                progress.step(f"{state.name}: {name}")
+        state.frames = None  # the frames are not needed any more; free them early
+    notes: list[str] = []
+    assert obj.unwrapped is not None
+    height = points = None
+    mask = obj.unwrapped.valid.copy()
+    t0 = time.perf_counter()
+    if calibration is not None:
+        points, height = stage_height(obj, ref, calibration, notes)
+        if ref is not None:
+            assert ref.unwrapped is not None
+            mask &= ref.unwrapped.valid
+        mask &= np.isfinite(height)
+        height = np.where(mask, height, np.nan).astype(np.float32)
+    else:
+        notes.append("no calibration: height, points and height preview skipped; phase, mask and wrapped phase written")
+    height_time = time.perf_counter() - t0
+    if progress is not None:
+        progress.step("height")
+    if not mask.any():
+        raise ProcessingError(f"{capture.manifest_path}: no valid pixel (all in shadow or too little fringe modulation)")
+    timings: dict[str, Any] = {"object": dict(obj.timings)}
+    if ref is not None:
+        timings["reference"] = dict(ref.timings)
+    timings["height"] = height_time
+    timings["total"] = time.perf_counter() - started
+    return ProcessResult(obj, ref, calibration, options, height, mask, timings, notes + obj.notes, points)
+
+
+def _check_options(options: ProcessOptions) -> None:
+    if options.unwrap not in UNWRAP_METHODS:
+        raise ProcessingError(f"--unwrap: expected one of {', '.join(UNWRAP_METHODS)}, found {options.unwrap!r}")
+    if options.denoise not in DENOISERS:
+        raise ProcessingError(f"--denoise: expected one of {', '.join(DENOISERS)}, found {options.denoise!r}")
+    if options.correction not in CORRECTIONS:
+        raise ProcessingError(f"--correction: expected one of {', '.join(CORRECTIONS)}, found {options.correction!r}")
+    if options.axis not in (None, "x", "y"):
+        raise ProcessingError(f"--axis: expected x or y, found {options.axis!r}")
+    if not 0 < options.min_modulation_ratio <= 1:
+        raise ProcessingError(f"--min-modulation: expected a fraction in (0, 1], found {options.min_modulation_ratio}")
+
+
+
+
+def process_capture(
+    capture_path: str | Path,
+    calibration_path: str | Path | None,
+    out_dir: str | Path,
+    options: ProcessOptions | None = None,
+    progress: Any = None,
+    salvage: bool = False,
+) -> dict[str, Any]:
+    """:func:`process` then :func:`write_outputs`; returns the report."""
+    result = process(capture_path, calibration_path, options, progress=progress, salvage=salvage)
+    return write_outputs(result, out_dir)
