@@ -113,7 +113,8 @@ class PatternSequence:
 
     entries: the pattern LUT, in display order (1..128 entries).
     exposure_us, frame_period_us: per pattern; exposure <= period, and a shorter exposure must
-        leave at least 230 us of dark time; exposure at least the minimum for the deepest entry.
+        leave at least 230 us of dark time; exposure at least the minimum for the deepest entry;
+        a flash sequence of more than two images needs 200 ms of dark time to load each image.
     patterns_to_display: 1..256 (default: one pass over the entries).
     image_indexes: flash images to use, in order, one per buffer swap (FLASH source only).
     """
@@ -135,6 +136,12 @@ class PatternSequence:
     def n_display(self) -> int:
         """Patterns the sequencer shows (``patterns_to_display`` or one pass over the entries)."""
         return len(self.entries) if self.patterns_to_display is None else self.patterns_to_display
+
+    @property
+    def loads_flash_images(self) -> bool:
+        """True when the sequence cycles through more flash images than the frame buffers hold,
+        so that each buffer swap waits for an image load (about 200 ms)."""
+        return self.source is PatternSource.FLASH and len(self.image_indexes) > dp.FRAME_BUFFERS
 
     def lut_control(self) -> dp.LutControl:
         """The LUT_CONTROL record that programs this sequence."""
@@ -175,6 +182,11 @@ class DlpStatus:
         return bool(self.main & dp.MainStatus.PARKED)
 
     @property
+    def gamma_correction(self) -> bool:
+        """Video-mode gamma correction enabled (main status bit 3 on the DLPC350)."""
+        return bool(self.main & dp.MainStatus.GAMMA_CORRECTION)
+
+    @property
     def healthy(self) -> bool:
         return not self.problems
 
@@ -193,10 +205,12 @@ def check_sequence(sequence: PatternSequence) -> None:
         if entry.bit_depth not in dp.PATTERNS_PER_IMAGE:
             raise DlpLimitError(f"entry {k}: bit_depth must be 1..8, got {entry.bit_depth}")
         limit = dp.PATTERNS_PER_IMAGE[entry.bit_depth]
-        if not 0 <= entry.pattern_number < limit:
+        black_fill = entry.bit_depth == 1 and entry.pattern_number == dp.BLACK_FILL_PATTERN
+        if not (0 <= entry.pattern_number < limit or black_fill):
             raise DlpLimitError(
                 f"entry {k}: pattern_number {entry.pattern_number} invalid for "
-                f"{entry.bit_depth}-bit patterns (a 24-bit image holds {limit}: 0..{limit - 1})")
+                f"{entry.bit_depth}-bit patterns (a 24-bit image holds {limit}: 0..{limit - 1}"
+                + (f"; {dp.BLACK_FILL_PATTERN} is the black fill)" if entry.bit_depth == 1 else ")"))
         if entry.insert_black and entry.trigger_out_prev:
             raise DlpLimitError(f"entry {k}: insert_black cannot be combined with "
                                 "trigger_out_prev")
@@ -213,6 +227,16 @@ def check_sequence(sequence: PatternSequence) -> None:
                                 f"{list(sequence.image_indexes)}")
     check_exposure(sequence.exposure_us, sequence.frame_period_us,
                    max(e.bit_depth for e in entries))
+    if sequence.loads_flash_images:
+        dark_us = sequence.frame_period_us - sequence.exposure_us
+        if dark_us < dp.FLASH_IMAGE_LOAD_US:
+            raise ExposureError(
+                f"{len(sequence.image_indexes)} flash images do not fit the controller's "
+                f"{dp.FRAME_BUFFERS} frame buffers: each buffer swap must load an image from "
+                f"flash, so the frame period must exceed the exposure by at least "
+                f"{dp.FLASH_IMAGE_LOAD_US} us (got {dark_us} us); use a frame period of at "
+                f"least {sequence.exposure_us + dp.FLASH_IMAGE_LOAD_US} us or at most "
+                f"{dp.FRAME_BUFFERS} images")
 
 
 def check_exposure(exposure_us: int, frame_period_us: int, bit_depth: int) -> None:
@@ -424,7 +448,8 @@ class DlpController(Device):
     def _do_set_power(self, standby: bool) -> None: ...
 
     @abc.abstractmethod
-    def _do_set_display_mode(self, mode: DisplayMode) -> None: ...
+    def _do_set_display_mode(self, mode: DisplayMode) -> None:
+        """Switch, and return once the controller reports ``mode`` (a switch is not instant)."""
 
     @abc.abstractmethod
     def _do_write_sequence(self, sequence: PatternSequence) -> None: ...
@@ -436,10 +461,16 @@ class DlpController(Device):
     def _do_read_validation(self) -> int: ...
 
     @abc.abstractmethod
-    def _do_sequence(self, action: dp.SequenceAction) -> None: ...
+    def _do_sequence(self, action: dp.SequenceAction) -> None:
+        """Start, pause or stop, and return once the sequencer reports the new state."""
 
     @abc.abstractmethod
     def _do_read_status(self) -> tuple[int, int, int]: ...
+
+
+def _action_name(value: int) -> str:
+    names = {action.value: action.name for action in dp.SequenceAction}
+    return names.get(value, f"0x{value:02X}")
 
 
 _UDEV_HINT = ('add a udev rule, e.g. /etc/udev/rules.d/70-lightcrafter.rules: '
@@ -456,8 +487,17 @@ class LightCrafter4500(DlpController):
         Passed to ``usb.core.find``; None lets pyusb pick libusb.
     timeout_s : float
         Deadline of each USB transfer.
+    settle_s : float
+        Wait after a display-mode switch or a start / pause / stop before reading the state
+        back, and between read-backs (TI's hosts wait 100-200 ms; the controller refuses or
+        ignores commands while it switches).
+    settle_timeout_s : float
+        Deadline for the state to read back as requested (the action is re-sent meanwhile).
     name : str, optional
         Used in log lines and error messages.
+
+    Replies are matched on the sequence byte only once the controller has been seen to echo
+    it; a DLPC350 that answers with sequence 0 (TI's host never checks it) is read in order.
     """
 
     EP_OUT = 0x01
@@ -465,14 +505,21 @@ class LightCrafter4500(DlpController):
     INTERFACE = 0
 
     def __init__(self, backend: object | None = None, timeout_s: float = 1.0,
+                 settle_s: float = 0.1, settle_timeout_s: float = 2.0,
                  name: str | None = None) -> None:
         super().__init__(name or "DLP LightCrafter 4500 (USB 0451:6401)")
         if timeout_s <= 0:
             raise ValueError(f"timeout_s must be > 0, got {timeout_s}")
+        if settle_s < 0 or settle_timeout_s <= 0:
+            raise ValueError(f"settle_s must be >= 0 and settle_timeout_s > 0, got {settle_s}, "
+                             f"{settle_timeout_s}")
         self._backend = backend
         self.timeout_s = float(timeout_s)
+        self.settle_s = float(settle_s)
+        self.settle_timeout_s = float(settle_timeout_s)
         self._dev: Any = None  # usb.core.Device while open
         self._seq = 0
+        self._echoes: bool | None = None  # does the controller echo sequence bytes? (unknown)
 
     # -- hooks ----------------------------------------------------------------------------------
     def _open(self) -> None:
@@ -505,6 +552,7 @@ class LightCrafter4500(DlpController):
         self._dev = dev
 
     def _close(self) -> None:
+        self._echoes = None
         dev, self._dev = self._dev, None
         if dev is None:
             return
@@ -525,7 +573,8 @@ class LightCrafter4500(DlpController):
         self._write(Command.POWER_CONTROL, bytes([int(standby)]))
 
     def _do_set_display_mode(self, mode: DisplayMode) -> None:
-        self._write(Command.DISPLAY_MODE, bytes([int(mode)]))
+        self._write_and_confirm(Command.DISPLAY_MODE, int(mode), "display mode",
+                                lambda value: DisplayMode(value & 0x01).name, resend=False)
 
     def _do_write_sequence(self, sequence: PatternSequence) -> None:
         self._write(Command.PATTERN_SOURCE, bytes([int(sequence.source)]))
@@ -533,17 +582,19 @@ class LightCrafter4500(DlpController):
         self._write(Command.EXPOSURE_FRAME_PERIOD,
                     dp.pack_exposure(sequence.exposure_us, sequence.frame_period_us))
         self._write(Command.LUT_CONTROL, sequence.lut_control().pack())
+        # as TI's host: each LUT in one message from mailbox offset 0 (long ones continue in
+        # headerless reports)
+        self._write_mailbox(dp.Mailbox.PATTERN_LUT, b"".join(e.pack() for e in sequence.entries))
         if sequence.source is PatternSource.FLASH:
-            self._write(Command.MAILBOX_CONTROL, bytes([dp.Mailbox.IMAGE_INDEX]))
             indexes = bytes(sequence.image_indexes)
-            for offset in range(0, len(indexes), dp.MAX_DATA_IN_REQUEST):
-                self._write(Command.MAILBOX_ADDRESS, bytes([offset]))
-                self._write(Command.MAILBOX_DATA, indexes[offset:offset + dp.MAX_DATA_IN_REQUEST])
-            self._write(Command.MAILBOX_CONTROL, bytes([dp.Mailbox.CLOSED]))
-        self._write(Command.MAILBOX_CONTROL, bytes([dp.Mailbox.PATTERN_LUT]))
-        for address, entry in enumerate(sequence.entries):
-            self._write(Command.MAILBOX_ADDRESS, bytes([address]))
-            self._write(Command.MAILBOX_DATA, entry.pack())
+            if len(indexes) == 2:  # the firmware plays a two-entry image LUT swapped
+                indexes = indexes[::-1]
+            self._write_mailbox(dp.Mailbox.IMAGE_INDEX, indexes)
+
+    def _write_mailbox(self, mailbox: dp.Mailbox, data: bytes) -> None:
+        self._write(Command.MAILBOX_CONTROL, bytes([mailbox]))
+        self._write(Command.MAILBOX_ADDRESS, b"\x00")
+        self._write(Command.MAILBOX_DATA, data)
         self._write(Command.MAILBOX_CONTROL, bytes([dp.Mailbox.CLOSED]))
 
     def _do_start_validation(self) -> None:
@@ -553,7 +604,33 @@ class LightCrafter4500(DlpController):
         return self._read_byte(Command.LUT_VALIDATE)
 
     def _do_sequence(self, action: dp.SequenceAction) -> None:
-        self._write(Command.PATTERN_START_STOP, bytes([int(action)]))
+        # TI's hosts re-send stop until the sequencer reads stopped; pycrafter sends start twice
+        # after leaving video mode (the first one may be dropped)
+        self._write_and_confirm(Command.PATTERN_START_STOP, int(action), "sequencer",
+                                _action_name, resend=True)
+
+    def _write_and_confirm(self, command: Command, value: int, what: str,
+                           name: Callable[[int], str], resend: bool) -> None:
+        """Write ``value``, then read ``command`` back (after ``settle_s``) until it reads
+        ``value``; re-send meanwhile if ``resend``. A re-send the controller refuses while it
+        is still busy is not an error; the deadline is."""
+        self._write(command, bytes([value]))
+        deadline = time.monotonic() + self.settle_timeout_s
+        while True:
+            time.sleep(self.settle_s)
+            found = self._read_byte(command)
+            if found == value:
+                return
+            if time.monotonic() > deadline:
+                raise DeviceTimeoutError(
+                    f"{self}: {what} still reads {name(found)} {self.settle_timeout_s:.3g} s after "
+                    f"setting {name(value)}")
+            if resend:
+                log.info("%s: %s reads %s, sending %s again", self, what, name(found), name(value))
+                try:
+                    self._write(command, bytes([value]))
+                except DlpCommandError as exc:
+                    log.info("%s: %s", self, exc)
 
     def _do_read_status(self) -> tuple[int, int, int]:
         return (self._read_byte(Command.HARDWARE_STATUS), self._read_byte(Command.SYSTEM_STATUS),
@@ -570,25 +647,31 @@ class LightCrafter4500(DlpController):
         return data[0]
 
     def _transact(self, command: Command, data: bytes, read: bool) -> bytes:
-        """Send one request (reply requested) and return the data of its reply."""
+        """Send one request (reply requested; several reports if long) and return the data of
+        its reply."""
         if self._dev is None:
             raise IncompatibleStateError(f"{self}: not open")
-        self._seq = (self._seq + 1) & 0xFF
+        self._seq = self._seq % 0xFF + 1  # 1..255: a reply with 0 never looks echoed
         sequence = self._seq
-        report = dp.encode_request(command, sequence, data, read=read, reply=True)
+        reports = dp.encode_message(command, sequence, data, read=read, reply=True)
         timeout_ms = max(1, int(self.timeout_s * 1000))
         what = f"{'read' if read else 'write'} {command.name} (0x{int(command):04X})"
         try:
-            written = self._dev.write(self.EP_OUT, report, timeout_ms)
-            if written != len(report):
-                raise ProtocolError(f"{self}: {what}: wrote {written} of {len(report)} bytes")
+            for report in reports:
+                written = self._dev.write(self.EP_OUT, report, timeout_ms)
+                if written != len(report):
+                    raise ProtocolError(f"{self}: {what}: wrote {written} of {len(report)} bytes")
             for _ in range(4):  # skip at most a few stale replies to earlier requests
                 raw = bytes(self._dev.read(self.EP_IN, dp.REPORT_SIZE, timeout_ms))
                 try:
                     reply = dp.decode_reply(raw)
                 except dp.PacketError as exc:
                     raise ProtocolError(f"{self}: {what}: malformed reply: {exc}") from exc
-                if reply.sequence == sequence:
+                if self._echoes is None:  # the first reply tells whether sequences are echoed
+                    self._echoes = reply.sequence == sequence
+                    log.info("%s: the controller %s sequence bytes", self,
+                             "echoes" if self._echoes else "does not echo")
+                if not self._echoes or reply.sequence == sequence:
                     break
                 log.info("%s: dropping reply with sequence %d while waiting for %d", self,
                          reply.sequence, sequence)

@@ -11,6 +11,11 @@ One HID report is 64 bytes (report ID 0 is implicit on the interrupt endpoints):
 - length: bytes after the 4-byte header: 2 command bytes + data for a request, data for a reply.
 - the 16-bit USB command ``0xCMD2CMD3`` travels LSB first (CMD3 then CMD2); multi-byte fields
   in the data are little-endian.
+- a request longer than one report (more than 58 data bytes, e.g. a whole pattern LUT) goes on
+  in further 64-byte reports that carry the rest of the message and no header, as TI's host API
+  sends it; the controller answers once, after the last report.
+- sequence: TI's host numbers writes and sends reads with sequence 0; echoing the sequence in the
+  reply is documented for the DLPC900 only, so a host must not rely on it.
 """
 
 from __future__ import annotations
@@ -24,6 +29,8 @@ USB_PRODUCT_ID = 0x6401
 REPORT_SIZE = 64
 HEADER_SIZE = 4
 MAX_DATA_IN_REQUEST = REPORT_SIZE - HEADER_SIZE - 2
+#: Data bytes of the longest message the driver sends (a full 128-entry pattern LUT).
+MAX_MESSAGE_DATA = 3 * 128
 
 FLAG_READ = 0x80
 FLAG_REPLY = 0x40
@@ -106,6 +113,13 @@ VALIDATION_ERRORS = Validation.EXPOSURE_OR_PERIOD_INVALID | Validation.PATTERN_N
 
 #: Limits of the DLPC350 pattern sequencer (DLPU010).
 MAX_LUT_ENTRIES = 128
+#: 1-bit pattern number 24 is no bit plane but a black fill (TI's host API accepts 0..24).
+BLACK_FILL_PATTERN = 24
+#: The controller holds two 24-bit images in its frame buffers; a flash sequence cycling through
+#: more images loads each from flash at its buffer swap, which takes up to ~200 ms (TI's
+#: LightCrafter hosts, e.g. SLStudio, add this to the frame period beyond two images).
+FRAME_BUFFERS = 2
+FLASH_IMAGE_LOAD_US = 200_000
 MAX_PATTERNS_TO_DISPLAY = 256
 MAX_IMAGE_INDEXES = 64
 MAX_PATTERNS_PER_IMAGE = 24  # 1-bit patterns in one 24-bit image
@@ -155,17 +169,38 @@ class Reply:
 
 def encode_request(command: int, sequence: int, data: bytes = b"", read: bool = False,
                    reply: bool = True) -> bytes:
-    """One 64-byte report carrying ``command`` with ``data``."""
+    """One 64-byte report carrying ``command`` with ``data`` (at most 58 bytes)."""
     if len(data) > MAX_DATA_IN_REQUEST:
         raise PacketError(f"{len(data)} data bytes do not fit one report "
-                          f"(at most {MAX_DATA_IN_REQUEST})")
+                          f"(at most {MAX_DATA_IN_REQUEST}); use encode_message")
+    return encode_message(command, sequence, data, read=read, reply=reply)[0]
+
+
+def encode_message(command: int, sequence: int, data: bytes = b"", read: bool = False,
+                   reply: bool = True) -> list[bytes]:
+    """The 64-byte reports carrying ``command`` with ``data``: the first has the header, the
+    command and up to 58 data bytes; continuation reports carry the next 64 bytes each."""
+    if len(data) > MAX_MESSAGE_DATA:
+        raise PacketError(f"{len(data)} data bytes exceed the longest message "
+                          f"({MAX_MESSAGE_DATA})")
     flags = (FLAG_READ if read else 0) | (FLAG_REPLY if reply else 0) | DESTINATION_MAIN
-    header = struct.pack("<BBH", flags, sequence & 0xFF, len(data) + 2)
-    return (header + struct.pack("<H", command) + bytes(data)).ljust(REPORT_SIZE, b"\x00")
+    message = struct.pack("<BBHH", flags, sequence & 0xFF, len(data) + 2, command) + bytes(data)
+    return [message[k:k + REPORT_SIZE].ljust(REPORT_SIZE, b"\x00")
+            for k in range(0, len(message), REPORT_SIZE)]
+
+
+def message_size(first_report: bytes) -> int:
+    """Bytes of the whole message (header included) that ``first_report`` starts; reports
+    needed: ``ceil(message_size / 64)``."""
+    if len(first_report) < HEADER_SIZE:
+        raise PacketError(f"request of {len(first_report)} bytes is shorter than its header")
+    (length,) = struct.unpack_from("<H", first_report, 2)
+    return HEADER_SIZE + length
 
 
 def decode_request(report: bytes) -> Request:
-    """Parse a request report; ``PacketError`` if its header or length field is inconsistent."""
+    """Parse a request (one report, or a first report and its continuations joined);
+    ``PacketError`` if its header or length field is inconsistent."""
     if len(report) < HEADER_SIZE + 2:
         raise PacketError(f"request of {len(report)} bytes is shorter than its header")
     flags, sequence, length = struct.unpack_from("<BBH", report)
@@ -197,7 +232,8 @@ class PatternEntry:
     """One entry of the pattern LUT (3 bytes in mailbox 2).
 
     ``pattern_number`` selects bit planes of the current 24-bit image: for bit depth b it is in
-    ``0 .. PATTERNS_PER_IMAGE[b] - 1`` (G planes first, then R, then B). ``buffer_swap`` moves to
+    ``0 .. PATTERNS_PER_IMAGE[b] - 1`` (G planes first, then R, then B); 1-bit pattern 24 is a
+    black fill (``BLACK_FILL_PATTERN``), white when inverted. ``buffer_swap`` moves to
     the next 24-bit image (video frame or flash image) before this pattern.
     """
 
@@ -291,4 +327,4 @@ class MainStatus(enum.IntFlag):
     PARKED = 0x01  # DMD micromirrors parked
     SEQUENCER_RUNNING = 0x02
     VIDEO_FROZEN = 0x04
-    EXTERNAL_VIDEO_LOCKED = 0x08
+    GAMMA_CORRECTION = 0x08  # gamma correction enabled (bit 3 means "interface locked" on a DLPC900)

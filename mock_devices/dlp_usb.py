@@ -7,6 +7,19 @@ device, configuration, interface and two interrupt endpoints) in the manner of p
 keeps the controller state (power, display mode, pattern LUT, exposure, validation, sequencer) and
 replies to reads. Faults on request: ``Dlpc350Faults``.
 
+What the model does like the real controller, beyond the packet format (TI's host API in
+SLStudio's ``dlpc350_api.cpp`` / ``ProjectorLC4500.cpp`` and pycrafter4500 work around each):
+
+- a long request continues in headerless 64-byte reports and is answered once, after the last;
+- replies carry sequence 0 unless ``echo_sequence`` (echoing is documented for the DLPC900 only);
+- a display-mode switch or a start / pause / stop takes ``busy_s`` to take effect: until then
+  reads report the old state and writes are refused with the error flag;
+- the first START after leaving video mode is acknowledged and ignored (pycrafter sends it twice);
+- an image-index LUT of exactly two entries is stored swapped (TI's ``SendImageLut`` swaps them
+  back); image-index data is accepted at mailbox offset 0 only;
+- a running flash sequence cycling through more than two images without 200 ms of dark time for
+  each image load raises the "forced swap error" hardware status bit.
+
 Usage::
 
     backend = FakeDlpc350Backend()
@@ -18,7 +31,9 @@ from __future__ import annotations
 import errno
 import logging
 import os
+import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from types import SimpleNamespace
 
@@ -256,13 +271,22 @@ _DATA_LENGTH = {
 class FakeDlpc350Backend(VirtualHidBackend):
     """pyusb backend emulating a LightCrafter 4500's DLPC350 controller."""
 
-    def __init__(self, faults: Dlpc350Faults | None = None) -> None:
+    def __init__(self, faults: Dlpc350Faults | None = None, *, echo_sequence: bool = False,
+                 busy_s: float = 0.1, clock: Callable[[], float] = time.monotonic) -> None:
         super().__init__()
         self.faults = faults or Dlpc350Faults()
+        self.echo_sequence = echo_sequence
+        self.busy_s = busy_s
+        self._clock = clock
         self.state = Dlpc350State()
         self.requests: list[dp.Request] = []  # every request parsed, in order
+        self.refused_while_busy = 0
         self._out_reports = 0
         self._busy_reads_left = 0
+        self._partial = b""  # reports of a long request received so far
+        self._busy_until = 0.0
+        self._pending: Callable[[], None] | None = None  # the switch that takes effect then
+        self._ignore_next_start = False
 
     def _before_transfer(self, direction: str) -> None:
         limit = self.faults.disappear_after
@@ -290,14 +314,26 @@ class FakeDlpc350Backend(VirtualHidBackend):
 
     # -- the controller -------------------------------------------------------------------------
     def _on_out_report(self, report: bytes) -> bytes | None:
+        message = self._partial + report
         try:
-            request = dp.decode_request(report)
+            size = dp.message_size(message)
+        except dp.PacketError as exc:
+            log.warning("fake DLPC350 ignores a malformed report: %s", exc)
+            self._partial = b""
+            return None
+        if size > len(message):  # continuation reports follow
+            self._partial = message
+            return None
+        self._partial = b""
+        try:
+            request = dp.decode_request(message)
         except dp.PacketError as exc:
             log.warning("fake DLPC350 ignores a malformed report: %s", exc)
             return None
         self.requests.append(request)
         if request.command in self.faults.timeout_on:
             return None
+        self._settle()
         try:
             command = Command(request.command)
         except ValueError:
@@ -306,11 +342,27 @@ class FakeDlpc350Backend(VirtualHidBackend):
             data, ok = b"", False
         elif request.is_read:
             data, ok = self._read(command)
+        elif self._pending is not None:  # still switching: refuse, change nothing
+            self.refused_while_busy += 1
+            data, ok = b"", False
         else:
             data, ok = b"", self._write(command, request.data)
         if not request.wants_reply:
             return None
-        return dp.encode_reply(request.sequence, data, error=not ok, read=request.is_read)
+        sequence = request.sequence if self.echo_sequence else 0
+        return dp.encode_reply(sequence, data, error=not ok, read=request.is_read)
+
+    def _settle(self) -> None:
+        """Apply a pending switch once its busy time is over."""
+        if self._pending is not None and self._clock() >= self._busy_until:
+            pending, self._pending = self._pending, None
+            pending()
+
+    def _after_busy(self, effect: Callable[[], None]) -> None:
+        if self.busy_s <= 0:
+            effect()
+        else:
+            self._pending, self._busy_until = effect, self._clock() + self.busy_s
 
     def _read(self, command: Command) -> tuple[bytes, bool]:
         s = self.state
@@ -362,7 +414,9 @@ class FakeDlpc350Backend(VirtualHidBackend):
         if command is Command.DISPLAY_MODE:
             if data[0] not in (0, 1):
                 return False
-            s.display_mode = data[0]
+            if s.display_mode == 0 and data[0] == 1:
+                self._ignore_next_start = True
+            self._after_busy(lambda: setattr(s, "display_mode", data[0]))
         elif command is Command.PATTERN_SOURCE:
             if data[0] not in (0, 3):
                 return False
@@ -396,13 +450,16 @@ class FakeDlpc350Backend(VirtualHidBackend):
     def _mailbox_data(self, data: bytes) -> bool:
         s = self.state
         if s.mailbox == dp.Mailbox.PATTERN_LUT:
-            if len(data) != 3:
+            if not data or len(data) % 3 or s.mailbox_address + len(data) // 3 > dp.MAX_LUT_ENTRIES:
                 return False
-            s.pattern_lut[s.mailbox_address] = dp.PatternEntry.unpack(data)
-            s.mailbox_address = (s.mailbox_address + 1) % dp.MAX_LUT_ENTRIES
+            for k in range(0, len(data), 3):
+                s.pattern_lut[s.mailbox_address] = dp.PatternEntry.unpack(data[k:k + 3])
+                s.mailbox_address = (s.mailbox_address + 1) % dp.MAX_LUT_ENTRIES
         elif s.mailbox == dp.Mailbox.IMAGE_INDEX:
-            for k, index in enumerate(data):
-                s.image_lut[s.mailbox_address + k] = index
+            if s.mailbox_address != 0 or not 1 <= len(data) <= dp.MAX_IMAGE_INDEXES:
+                return False
+            played = data[::-1] if len(data) == 2 else data  # the firmware swaps two entries
+            s.image_lut = dict(enumerate(played))
         else:
             return False  # mailbox closed
         s.validated = False
@@ -413,16 +470,27 @@ class FakeDlpc350Backend(VirtualHidBackend):
         if action == dp.SequenceAction.START:
             if s.standby or s.display_mode != 1 or not s.validated:
                 return False
-            s.sequencer = "running"
+            if self._ignore_next_start:  # acknowledged, but the sequencer does not start
+                self._ignore_next_start = False
+                return True
+            self._after_busy(self._run)
         elif action == dp.SequenceAction.PAUSE:
             if s.sequencer != "running":
                 return False
-            s.sequencer = "paused"
+            self._after_busy(lambda: setattr(s, "sequencer", "paused"))
         elif action == dp.SequenceAction.STOP:
-            s.sequencer = "stopped"
+            self._after_busy(lambda: setattr(s, "sequencer", "stopped"))
         else:
             return False
         return True
+
+    def _run(self) -> None:
+        s = self.state
+        s.sequencer = "running"
+        loads_images = (s.pattern_source == 3
+                        and s.lut_control.image_indexes > dp.FRAME_BUFFERS)
+        if loads_images and s.frame_period_us - s.exposure_us < dp.FLASH_IMAGE_LOAD_US:
+            s.hardware_status |= 0x08  # forced swap error: the next image was not loaded in time
 
     def _validation_bits(self) -> int:
         """The controller's checks of the programmed sequence (DLPU010, validate command)."""
@@ -432,7 +500,7 @@ class FakeDlpc350Backend(VirtualHidBackend):
         if any(e is None for e in entries):
             return int(dp.Validation.PATTERN_NUMBER_INVALID)
         for e in entries:
-            limit = dp.PATTERNS_PER_IMAGE.get(e.bit_depth, 0)
+            limit = dp.PATTERNS_PER_IMAGE.get(e.bit_depth, 0) + (e.bit_depth == 1)  # black fill
             if not 0 <= e.pattern_number < limit:
                 bits |= dp.Validation.PATTERN_NUMBER_INVALID
         depths = [e.bit_depth for e in entries if e.bit_depth in dp.MIN_EXPOSURE_US]

@@ -111,15 +111,18 @@ def test_reply_longer_than_report_is_rejected():
 
 # -- exact exchanges --------------------------------------------------------------------------
 
-CONFIGURE_ONE_ENTRY = [  # configure_sequence(one_entry_sequence()), from sequence number 5
-    write_exchange(5, "22 1a 00"),  # data from the video port
-    write_exchange(6, "23 1a 01"),  # internal / external trigger
-    write_exchange(7, "29 1a 10 27 00 00 1b 41 00 00"),  # 10000 us, 16667 us, LE u32
-    write_exchange(8, "31 1a 00 00 00 00"),  # 1 entry, once, 1 pattern, 1 image (minus 1)
-    write_exchange(9, "33 1a 02"),  # open the pattern LUT mailbox
-    write_exchange(10, "32 1a 00"),  # offset 0
-    write_exchange(11, "34 1a 15 21 04"),  # the entry
-    write_exchange(12, "33 1a 00"),  # close
+# set_display_mode(PATTERN) from sequence number 4: write, then read the mode back
+TO_PATTERN = [write_exchange(4, "1b 1a 01"), read_exchange(5, "1b 1a", "01")]
+
+CONFIGURE_ONE_ENTRY = [  # configure_sequence(one_entry_sequence()), from sequence number 6
+    write_exchange(6, "22 1a 00"),  # data from the video port
+    write_exchange(7, "23 1a 01"),  # internal / external trigger
+    write_exchange(8, "29 1a 10 27 00 00 1b 41 00 00"),  # 10000 us, 16667 us, LE u32
+    write_exchange(9, "31 1a 00 00 00 00"),  # 1 entry, once, 1 pattern, 1 image (minus 1)
+    write_exchange(10, "33 1a 02"),  # open the pattern LUT mailbox
+    write_exchange(11, "32 1a 00"),  # offset 0
+    write_exchange(12, "34 1a 15 21 04"),  # the whole LUT in one message: one entry
+    write_exchange(13, "33 1a 00"),  # close
 ]
 
 
@@ -134,31 +137,35 @@ def test_open_reads_power_mode_and_sequencer_state():
 
 def test_wake_standby_and_display_mode_reports():
     exchanges = [*OPEN, write_exchange(4, "00 02 00"), write_exchange(5, "1b 1a 01"),
-                 write_exchange(6, "00 02 01")]
-    with expected_protocol(LightCrafter4500, exchanges) as dlp:
+                 read_exchange(6, "1b 1a", "00"),  # still switching: read again
+                 read_exchange(7, "1b 1a", "01"), write_exchange(8, "00 02 01")]
+    with expected_protocol(LightCrafter4500, exchanges, settle_s=0) as dlp:
         dlp.wake()
         dlp.set_display_mode(DisplayMode.PATTERN)
         dlp.standby()
 
 
 def test_configure_sequence_reports():
-    exchanges = [*OPEN, write_exchange(4, "1b 1a 01"), *CONFIGURE_ONE_ENTRY]
-    with expected_protocol(LightCrafter4500, exchanges) as dlp:
+    exchanges = [*OPEN, *TO_PATTERN, *CONFIGURE_ONE_ENTRY]
+    with expected_protocol(LightCrafter4500, exchanges, settle_s=0) as dlp:
         dlp.set_display_mode(DisplayMode.PATTERN)
         dlp.configure_sequence(one_entry_sequence())
 
 
 def test_validate_polls_until_not_busy_then_start():
     exchanges = [
-        *OPEN, write_exchange(4, "1b 1a 01"), *CONFIGURE_ONE_ENTRY,
-        write_exchange(13, "1a 1a 00"),  # start validation
-        read_exchange(14, "1a 1a", "80"),  # busy
-        read_exchange(15, "1a 1a", "10"),  # done, with a warning bit
-        write_exchange(16, "24 1a 02"),  # start
-        write_exchange(17, "24 1a 01"),  # pause
-        write_exchange(18, "24 1a 00"),  # stop
+        *OPEN, *TO_PATTERN, *CONFIGURE_ONE_ENTRY,
+        write_exchange(14, "1a 1a 00"),  # start validation
+        read_exchange(15, "1a 1a", "80"),  # busy
+        read_exchange(16, "1a 1a", "10"),  # done, with a warning bit
+        write_exchange(17, "24 1a 02"),  # start
+        read_exchange(18, "24 1a", "00"),  # ignored (first start after video mode)
+        write_exchange(19, "24 1a 02"),  # start again
+        read_exchange(20, "24 1a", "02"),  # running
+        write_exchange(21, "24 1a 01"), read_exchange(22, "24 1a", "01"),  # pause
+        write_exchange(23, "24 1a 00"), read_exchange(24, "24 1a", "00"),  # stop
     ]
-    with expected_protocol(LightCrafter4500, exchanges) as dlp:
+    with expected_protocol(LightCrafter4500, exchanges, settle_s=0) as dlp:
         dlp.set_display_mode(DisplayMode.PATTERN)
         dlp.configure_sequence(one_entry_sequence())
         result = dlp.validate()
@@ -197,9 +204,9 @@ def test_error_flag_in_reply_raises_naming_the_command():
 
 
 def test_validation_failure_is_explained():
-    exchanges = [*OPEN, write_exchange(4, "1b 1a 01"), *CONFIGURE_ONE_ENTRY,
-                 write_exchange(13, "1a 1a 00"), read_exchange(14, "1a 1a", "03")]
-    with expected_protocol(LightCrafter4500, exchanges) as dlp:
+    exchanges = [*OPEN, *TO_PATTERN, *CONFIGURE_ONE_ENTRY,
+                 write_exchange(14, "1a 1a 00"), read_exchange(15, "1a 1a", "03")]
+    with expected_protocol(LightCrafter4500, exchanges, settle_s=0) as dlp:
         dlp.set_display_mode(DisplayMode.PATTERN)
         dlp.configure_sequence(one_entry_sequence())
         with pytest.raises(DlpValidationError, match="exposure or frame period.*pattern numbers"):
@@ -287,7 +294,8 @@ def test_state_rules_refuse_without_traffic():
 
 @pytest.mark.parametrize("sequence, message", [
     (PatternSequence([PatternEntry(0)] * 129, 235, 235), "1..128 entries"),
-    (PatternSequence([PatternEntry(24, bit_depth=1)], 235, 235), r"holds 24: 0\.\.23"),
+    (PatternSequence([PatternEntry(25, bit_depth=1)], 235, 235),
+     r"holds 24: 0\.\.23; 24 is the black fill"),
     (PatternSequence([PatternEntry(3, bit_depth=8)], 8333, 8333), r"holds 3: 0\.\.2"),
     (PatternSequence([PatternEntry(k % 24) for k in range(25)], 235, 235),
      "more than 24 patterns from one 24-bit image"),
@@ -477,3 +485,148 @@ def test_running_rolls_back_when_start_is_refused():
             with dlp.running(valid_sequence()):
                 pytest.fail("the block must not run")
         assert backend.state.display_mode == DisplayMode.VIDEO  # restored despite the failure
+
+
+# -- what a real DLPC350 does that an instant, echoing controller would not (issue 15) ---------
+
+def test_two_image_indexes_play_in_the_order_given():
+    # TI's SendImageLut swaps a two-entry image LUT because the firmware plays it swapped
+    backend = FakeDlpc350Backend()
+    sequence = PatternSequence(
+        entries=[PatternEntry(k % 3, bit_depth=8, buffer_swap=(k % 3 == 0)) for k in range(6)],
+        exposure_us=9000, frame_period_us=9000, image_indexes=(4, 5))
+    with ready(backend) as dlp:
+        dlp.configure_sequence(sequence)
+        assert backend.state.image_lut == {0: 4, 1: 5}
+
+
+def test_mode_switch_waits_for_the_controller_and_reads_the_mode_back():
+    backend = FakeDlpc350Backend(busy_s=0.05)
+    with LightCrafter4500(backend=backend) as dlp:
+        dlp.wake()
+        dlp.set_display_mode(DisplayMode.PATTERN)
+        assert backend.state.display_mode == DisplayMode.PATTERN  # took effect before returning
+        dlp.configure_sequence(valid_sequence())  # not refused as "busy"
+        assert backend.refused_while_busy == 0
+        reads = [r for r in backend.requests if r.command == Command.DISPLAY_MODE and r.is_read]
+        assert len(reads) >= 2  # open, and at least one read back after the switch
+
+
+def test_start_after_leaving_video_mode_is_repeated_until_running():
+    # the first START after a video -> pattern switch is acknowledged and ignored
+    backend = FakeDlpc350Backend(busy_s=0.02)
+    with LightCrafter4500(backend=backend) as dlp:
+        dlp.wake()
+        dlp.set_display_mode(DisplayMode.PATTERN)
+        dlp.configure_sequence(valid_sequence())
+        dlp.validate()
+        dlp.start()
+        assert backend.state.sequencer == "running"
+        assert dlp.status().sequencer_running
+        dlp.pause()
+        assert backend.state.sequencer == "paused"
+        dlp.stop()
+        assert backend.state.sequencer == "stopped"
+        assert backend.refused_while_busy == 0
+
+
+def test_switch_that_never_takes_effect_times_out():
+    backend = FakeDlpc350Backend(busy_s=10.0)
+    with LightCrafter4500(backend=backend, settle_s=0.01, settle_timeout_s=0.05) as dlp:
+        dlp.wake()
+        with pytest.raises(DeviceTimeoutError, match="display mode still reads VIDEO"):
+            dlp.set_display_mode(DisplayMode.PATTERN)
+
+
+@pytest.mark.parametrize("echo", [False, True])
+def test_replies_with_or_without_the_sequence_echoed(echo):
+    backend = FakeDlpc350Backend(echo_sequence=echo)
+    with ready(backend) as dlp:
+        dlp.configure_sequence(valid_sequence())
+        assert dlp.validate().ok
+        dlp.start()
+        assert dlp.status().sequencer_running
+
+
+def test_controller_that_does_not_echo_is_read_without_matching():
+    # reply sequence 0 to every request (as TI's host expects: it sends reads with sequence 0)
+    exchanges = [(report("c0 01 02 00 00 02"), report("80 00 01 00 00")),
+                 (report("c0 02 02 00 1b 1a"), report("80 00 01 00 01")),
+                 (report("c0 03 02 00 0c 1a"), report("80 00 01 00 00")),
+                 (report("c0 04 02 00 0a 1a"), report("80 00 01 00 41"))]
+    with expected_protocol(LightCrafter4500, exchanges) as dlp:
+        assert dlp._read_byte(Command.HARDWARE_STATUS) == 0x41
+
+
+def test_long_message_continues_in_headerless_reports():
+    data = bytes(range(100))
+    reports = dp.encode_message(Command.MAILBOX_DATA, 9, data)
+    # first: header (length 102 = 0x66), CMD3 CMD2, 58 data bytes; then 42 bytes, zero padded
+    assert reports == [bytes.fromhex("40 09 66 00 34 1a") + data[:58],
+                       data[58:].ljust(64, b"\x00")]
+    with pytest.raises(dp.PacketError, match="use encode_message"):
+        dp.encode_request(Command.MAILBOX_DATA, 9, data)
+
+
+def test_full_lut_and_64_image_indexes_reach_the_controller():
+    backend = FakeDlpc350Backend()
+    entries = [PatternEntry(k % 3, bit_depth=8, buffer_swap=(k % 2 == 0)) for k in range(128)]
+    sequence = PatternSequence(entries=entries, exposure_us=9000, frame_period_us=209_000,
+                               image_indexes=tuple(range(64)))
+    with ready(backend) as dlp:
+        dlp.configure_sequence(sequence)
+        assert [backend.state.pattern_lut[k] for k in range(128)] == entries
+        assert backend.state.image_lut == dict(enumerate(range(64)))
+        assert dlp.validate().ok
+
+
+def test_flash_sequence_beyond_two_images_needs_time_to_load_each():
+    entries = [PatternEntry(k % 3, bit_depth=8, buffer_swap=(k % 3 == 0)) for k in range(9)]
+    short = PatternSequence(entries=entries, exposure_us=9000, frame_period_us=9000,
+                            image_indexes=(0, 1, 2))
+    backend = FakeDlpc350Backend()
+    with ready(backend) as dlp:
+        sent = len(backend.requests)
+        with pytest.raises(ExposureError, match=r"load an image from flash.*200000 us"):
+            dlp.configure_sequence(short)
+        assert len(backend.requests) == sent
+        loaded = PatternSequence(entries=entries, exposure_us=9000, frame_period_us=209_000,
+                                 image_indexes=(0, 1, 2))
+        dlp.configure_sequence(loaded)
+        dlp.validate()
+        dlp.start()
+        assert dlp.status().healthy
+    # two images fit the frame buffers: no load time needed
+    two = PatternSequence(entries=entries[:6], exposure_us=9000, frame_period_us=9000,
+                          image_indexes=(0, 1))
+    with ready(FakeDlpc350Backend()) as dlp, dlp.running(two):
+        assert dlp.status().healthy
+
+
+def test_fake_flags_a_forced_swap_when_images_load_too_slowly():
+    # what the controller reports if the rule above is broken (e.g. changed from TI's GUI)
+    backend = FakeDlpc350Backend(busy_s=0)
+    entries = [PatternEntry(k % 3, bit_depth=8, buffer_swap=(k % 3 == 0)) for k in range(9)]
+    with ready(backend) as dlp:
+        dlp.configure_sequence(PatternSequence(entries=entries, exposure_us=9000,
+                                               frame_period_us=209_000, image_indexes=(0, 1, 2)))
+        backend.state.frame_period_us = 9000
+        dlp.validate()
+        dlp.start()
+        assert "forced swap error" in dlp.status().problems
+
+
+def test_one_bit_black_fill_pattern_24_is_accepted():
+    sequence = PatternSequence([PatternEntry(23), PatternEntry(dp.BLACK_FILL_PATTERN)], 235, 235)
+    with ready(FakeDlpc350Backend()) as dlp:
+        dlp.configure_sequence(sequence)
+        assert dlp.validate().ok
+
+
+def test_main_status_bit_3_is_gamma_correction_on_the_dlpc350():
+    assert dp.MainStatus.GAMMA_CORRECTION == 0x08
+    exchanges = [*OPEN, read_exchange(4, "0a 1a", "01"), read_exchange(5, "0b 1a", "01"),
+                 read_exchange(6, "0c 1a", "08")]
+    with expected_protocol(LightCrafter4500, exchanges) as dlp:
+        status = dlp.status()
+    assert status.gamma_correction and status.healthy
