@@ -38,6 +38,10 @@ class Progress:
         self._draw("")
         return self
 
+    def begin(self, total: int, note: str = "") -> None:
+        """Services announce their steps; the bar keeps the larger count (a command may run several)."""
+        self.total = max(self.total, int(total), 1)
+
     def step(self, note: str = "", count: int = 1) -> None:
         """Mark ``count`` steps done; ``note`` names what comes next (or what was done)."""
         if not self._announced and not self.quiet and not self.tty:

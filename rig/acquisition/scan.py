@@ -13,10 +13,10 @@ from typing import TYPE_CHECKING, Any
 
 from rig.config import RigConfig
 from rig.errors import CaptureError
-from rig.progress import Progress
 
 if TYPE_CHECKING:
     from rig.acquisition.loop import ScanResult
+    from rig.events import Reporter
 
 log = logging.getLogger(__name__)
 
@@ -32,14 +32,15 @@ def scan(
     output: Path,
     scene: str = "object",
     overwrite: bool = False,
-    show_progress: bool = True,
     patterns: Sequence[Mapping[str, Any]] | None = None,
-    label: str = "scan",
+    progress: Reporter | None = None,
 ) -> ScanResult:
     """Open the rig of ``config``, scan ``scene`` into ``output`` and close the rig.
 
     ``patterns``: the capture-format entries to project (default the config's ``[scan]`` set,
-    :meth:`rig.config.ScanConfig.patterns`); ``label`` starts the progress line.
+    :meth:`rig.config.ScanConfig.patterns`). ``progress`` gets ``begin(frames)`` then one step per
+    stored frame; cancelling its token stops the scan at the next frame, leaving the capture
+    visibly incomplete.
     """
     from rig.acquisition.loop import AcquisitionSettings, run_scan
     from rig.hardware.assembly import open_rig
@@ -53,7 +54,9 @@ def scan(
         retries=config.scan.retries,
     )
     log.info("scanning %d patterns into %s (%s)", len(patterns), output, settings)
-    with open_rig(config, scene=scene) as devices, Progress(f"{label} {output}", total=len(patterns), quiet=not show_progress) as progress:
+    if progress is not None:
+        progress.begin(len(patterns), f"scan {output}")
+    with open_rig(config, scene=scene) as devices:
         extra = {"rig_config": str(config.source) if config.source else "built-in simulated rig"}
         if devices.simulation is not None:
             extra["simulation"] = devices.simulation.description()

@@ -36,19 +36,37 @@ import cv2
 import numpy as np
 
 from calibration.camera import (
-    BoardSpec, CameraCalibration, calibrate_camera, detect_board, undistort_map, undistort_pixels,
+    BoardSpec,
+    CameraCalibration,
+    calibrate_camera,
+    detect_board,
+    undistort_map,
+    undistort_pixels,
 )
 from calibration.errors import CalibrationError
-from calibration.gamma import compensate_phase, fit_gamma, inverse_lut, mean_response, ramp_patterns, ripple_table_from_plane
+from calibration.gamma import (
+    compensate_phase,
+    fit_gamma,
+    inverse_lut,
+    mean_response,
+    ramp_patterns,
+    ripple_table_from_plane,
+)
 from calibration.geometry import MIN_HEIGHTS, fit_f0, fit_l0_d0, pixel_mm_from_corners
 from calibration.jsonfile import read_json
 from calibration.polynomial import POLYNOMIAL, fit_polynomial
 from calibration.reference import REFERENCE_DIR, check_same_patterns
-from calibration.stereo import STEREO, board_phase_view, calibrate_stereo, fit_plane, triangulate
+from calibration.stereo import (
+    STEREO,
+    board_phase_view,
+    calibrate_stereo,
+    fit_plane,
+    triangulate,
+)
 from calibration.store import REFERENCE_PLANE, Calibration, write_calibration
-from rig.store.capture import read_capture, write_capture
 from rig.config import RigConfig
 from rig.errors import CaptureError, ConfigError
+from rig.store.capture import read_capture, write_capture
 
 log = logging.getLogger(__name__)
 
@@ -214,8 +232,10 @@ class StageCommand:
 def _scan(config: RigConfig, output: Path, patterns: Sequence[dict[str, Any]], scene: str, show_progress: bool) -> Path:
     """One capture of ``patterns`` with the rig of ``config`` looking at ``scene`` (as `rig scan`)."""
     from rig.acquisition.scan import scan
+    from rig.progress import Progress
 
-    return scan(config, output, scene=scene, show_progress=show_progress, patterns=patterns, label="calibrate").path
+    with Progress(f"calibrate {output}", total=len(patterns), quiet=not show_progress) as progress:
+        return scan(config, output, scene=scene, patterns=patterns, progress=progress).path
 
 
 def _simulated_board_view(config: RigConfig, board: BoardSpec, index: int) -> np.ndarray:

@@ -59,7 +59,8 @@ def run(args: argparse.Namespace) -> int:
     )
 
     output = args.output or default_capture_path()
-    result = scan(config, output, scene=args.scene, overwrite=args.overwrite)
+    with Progress(f"scan {output}", total=len(config.scan.patterns())) as progress:
+        result = scan(config, output, scene=args.scene, overwrite=args.overwrite, progress=progress)
     print(
         f"{result.path}: {len(result.frames)} frames in {result.wall_s:.2f} s"
         + (f" ({result.attempts - len(result.frames)} retried, {result.discarded} discarded)" if result.attempts > len(result.frames) or result.discarded else ""),

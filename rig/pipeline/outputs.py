@@ -160,21 +160,10 @@ def _texture(state: SceneState) -> np.ndarray | None:
 OUTPUT_FILES = ("height.npy", "phase.npy", "mask.npy", "wrapped.npy", "points.ply", "report.json", "preview.png")
 
 
-def write_outputs(result: ProcessResult, out_dir: str | Path) -> dict[str, Any]:
-    """Write the outputs of capture-format.md into ``out_dir``; returns the report (also in report.json)."""
-    t0 = time.perf_counter()
-    out = Path(out_dir)
-    if (out / "capture.json").exists() or (out / "calibration.json").exists():
-        raise ProcessingError(f"{out}: is a capture or calibration directory; choose another output directory")
-    out.mkdir(parents=True, exist_ok=True)
-    for name in OUTPUT_FILES:  # an earlier run's files must not pass for this run's
-        (out / name).unlink(missing_ok=True)
+def build_report(result: ProcessResult) -> dict[str, Any]:
+    """The report of a processing run (report.json without its ``files`` and output timing)."""
     obj = result.object
     assert obj.unwrapped is not None and obj.wrapped is not None
-    files: dict[str, str] = {}
-    phase = np.where(result.mask, obj.unwrapped.phase, np.nan)
-    files["phase"] = write_array(out / "phase.npy", phase.astype(np.float64)).name
-    files["mask"] = write_array(out / "mask.npy", result.mask.astype(bool)).name
     report: dict[str, Any] = {
         "program": f"fpp-rig {__version__}",
         "capture": str(obj.capture.path),
@@ -199,14 +188,43 @@ def write_outputs(result: ProcessResult, out_dir: str | Path) -> dict[str, Any]:
         "notes": list(result.notes),
     }
     if result.height is None:
+        report["wrapped_frequencies"] = obj.wrapped.frequencies
+    else:
+        assert result.calibration is not None
+        valid_h = result.height[result.mask]
+        report["height_mm"] = {
+            "min": float(np.min(valid_h)), "max": float(np.max(valid_h)), "median": float(np.median(valid_h)),
+        }
+        report["points"] = int(np.count_nonzero(result.mask))
+        report["calibration_model"] = result.calibration.model
+    report["timings_s"] = dict(result.timings)
+    report["stage_info"] = {"object": obj.info, **({"reference": result.reference.info} if result.reference else {})}
+    report["versions"] = _versions()
+    return report
+
+
+def write_outputs(result: ProcessResult, out_dir: str | Path) -> dict[str, Any]:
+    """Write the outputs of capture-format.md into ``out_dir``; returns the report (also in report.json)."""
+    t0 = time.perf_counter()
+    out = Path(out_dir)
+    if (out / "capture.json").exists() or (out / "calibration.json").exists():
+        raise ProcessingError(f"{out}: is a capture or calibration directory; choose another output directory")
+    out.mkdir(parents=True, exist_ok=True)
+    for name in OUTPUT_FILES:  # an earlier run's files must not pass for this run's
+        (out / name).unlink(missing_ok=True)
+    obj = result.object
+    assert obj.unwrapped is not None and obj.wrapped is not None
+    report = build_report(result)
+    files: dict[str, str] = {}
+    phase = np.where(result.mask, obj.unwrapped.phase, np.nan)
+    files["phase"] = write_array(out / "phase.npy", phase.astype(np.float64)).name
+    files["mask"] = write_array(out / "mask.npy", result.mask.astype(bool)).name
+    if result.height is None:
         wrapped = np.stack(obj.wrapped.phase) if obj.wrapped.phase else np.empty((0, *obj.capture.shape))
         files["wrapped"] = write_array(out / "wrapped.npy", wrapped).name
-        report["wrapped_frequencies"] = obj.wrapped.frequencies
         low, high = write_preview(out / "preview.png", phase, "rad", "absolute phase" if obj.unwrapped.absolute else "phase")
         report["preview"] = {"shows": "phase", "unit": "rad", "range": [low, high]}
     else:
-        cal = result.calibration
-        assert cal is not None
         files["height"] = write_array(out / "height.npy", result.height.astype(np.float32)).name
         assert result.points is not None
         points = result.points[result.mask]
@@ -217,21 +235,11 @@ def write_outputs(result: ProcessResult, out_dir: str | Path) -> dict[str, Any]:
             colours = np.column_stack([grey, grey, grey])
         files["points"] = write_ply(out / "points.ply", points, colours).name
         low, high = write_preview(out / "preview.png", result.height, "mm", "height")
-        valid_h = result.height[result.mask]
-        report["height_mm"] = {
-            "min": float(np.min(valid_h)), "max": float(np.max(valid_h)), "median": float(np.median(valid_h)),
-        }
-        report["points"] = int(len(points))
-        report["calibration_model"] = cal.model
         report["preview"] = {"shows": "height", "unit": "mm", "range": [low, high]}
     files["preview"] = "preview.png"
     files["report"] = "report.json"
     report["files"] = files
-    timings = dict(result.timings)
-    timings["outputs"] = time.perf_counter() - t0
-    report["timings_s"] = timings
-    report["stage_info"] = {"object": obj.info, **({"reference": result.reference.info} if result.reference else {})}
-    report["versions"] = _versions()
+    report["timings_s"]["outputs"] = time.perf_counter() - t0
     write_report(out / "report.json", report)
     return report
 

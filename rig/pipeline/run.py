@@ -50,6 +50,13 @@ class ProcessResult:
     points: np.ndarray | None = None  # (H, W, 3) mm, NaN where invalid
 
     @property
+    def report(self) -> dict[str, Any]:
+        """report.json's content (without the files, which only :func:`write_outputs` knows)."""
+        from rig.pipeline.outputs import build_report
+
+        return build_report(self)
+
+    @property
     def phase(self) -> np.ndarray:
         assert self.object.unwrapped is not None
         return self.object.unwrapped.phase
@@ -105,7 +112,8 @@ def process(
 ) -> ProcessResult:
     """Run the stages on a capture and, with a calibration, on its reference plane; compute heights.
 
-    ``progress`` is an object with ``step(note)`` (see :class:`rig.progress.Progress`) or None.
+    ``progress`` (a :class:`rig.events.Reporter` or the CLI's :class:`rig.progress.Progress`) gets
+    ``begin(total)`` and one ``step`` per stage; a cancelled reporter stops the run between stages.
     """
     options = ProcessOptions() if options is None else options
     _check_options(options)
@@ -122,6 +130,8 @@ def process(
     if ref is not None:
         ref.axis = obj.axis
         obj.reference = ref
+    if progress is not None:
+        progress.begin(total_steps(ref is not None))
     for state in ([ref] if ref is not None else []) + [obj]:
         for name, stage in SCENE_STAGES:
             t0 = time.perf_counter()

@@ -40,8 +40,14 @@ from typing import Any
 import cv2
 import numpy as np
 
-from rig.store.capture import CaptureWriter, bit_depth_of, read_capture, utc_now, validate_pattern
 from rig.errors import CaptureError, ConfigError
+from rig.store.capture import (
+    CaptureWriter,
+    bit_depth_of,
+    read_capture,
+    utc_now,
+    validate_pattern,
+)
 
 IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp", ".pgm", ".ppm")
 

@@ -41,8 +41,8 @@ from processing.shadow_fill import fill_shadows
 from processing.single_shot import prepare_reference, single_shot_unwrap
 from processing.temporal import unwrap_two_frequency
 from processing.voting import vote_row_orders
-from rig.study import figures as fig
 from rig.errors import ConfigError
+from rig.study import figures as fig
 
 log = logging.getLogger(__name__)
 
