@@ -16,7 +16,8 @@ from rig.errors import CaptureError
 
 if TYPE_CHECKING:
     from rig.acquisition.loop import ScanResult
-    from rig.events import Reporter
+    from rig.events import ProgressSink, Reporter
+    from rig.hardware.assembly import RigDevices
 
 log = logging.getLogger(__name__)
 
@@ -42,10 +43,34 @@ def scan(
     stored frame; cancelling its token stops the scan at the next frame, leaving the capture
     visibly incomplete.
     """
-    from rig.acquisition.loop import AcquisitionSettings, run_scan
     from rig.hardware.assembly import open_rig
 
     if output.exists() and not overwrite:  # fail before opening any device
+        raise CaptureError(f"{output}: already exists; refusing to overwrite (choose another -o or pass --overwrite)")
+    patterns = config.scan.patterns() if patterns is None else list(patterns)
+    if progress is not None:
+        progress.begin(len(patterns), f"scan {output}")
+    with open_rig(config, scene=scene) as devices:
+        return scan_with(devices, output, patterns, scene=scene, overwrite=overwrite, progress=progress)
+
+
+def scan_with(
+    devices: RigDevices,
+    output: Path,
+    patterns: Sequence[Mapping[str, Any]] | None = None,
+    scene: str = "object",
+    overwrite: bool = False,
+    progress: ProgressSink | None = None,
+) -> ScanResult:
+    """Scan with devices that are already open (a console or a calibration session holds them).
+
+    ``scene`` is the label capture.json records; what is really in front of the rig is whatever
+    the operator (or the simulated world) put there. ``progress`` is stepped once per frame.
+    """
+    from rig.acquisition.loop import AcquisitionSettings, run_scan
+
+    config = devices.config
+    if output.exists() and not overwrite:
         raise CaptureError(f"{output}: already exists; refusing to overwrite (choose another -o or pass --overwrite)")
     patterns = config.scan.patterns() if patterns is None else list(patterns)
     settings = AcquisitionSettings(
@@ -54,23 +79,20 @@ def scan(
         retries=config.scan.retries,
     )
     log.info("scanning %d patterns into %s (%s)", len(patterns), output, settings)
-    if progress is not None:
-        progress.begin(len(patterns), f"scan {output}")
-    with open_rig(config, scene=scene) as devices:
-        extra = {"rig_config": str(config.source) if config.source else "built-in simulated rig"}
-        if devices.simulation is not None:
-            extra["simulation"] = devices.simulation.description()
-        return run_scan(
-            output,
-            patterns,
-            devices.projector,
-            devices.camera,
-            devices.trigger,
-            settings,
-            scene=scene,
-            extra=extra,
-            exposure_us=config.camera.exposure_us,
-            gain=config.camera.gain,
-            progress=progress,
-            overwrite=overwrite,
-        )
+    extra: dict[str, Any] = {"rig_config": str(config.source) if config.source else "built-in simulated rig"}
+    if devices.simulation is not None:
+        extra["simulation"] = devices.simulation.description()
+    return run_scan(
+        output,
+        patterns,
+        devices.projector,
+        devices.camera,
+        devices.trigger,
+        settings,
+        scene=scene,
+        extra=extra,
+        exposure_us=config.camera.exposure_us,
+        gain=config.camera.gain,
+        progress=progress,
+        overwrite=overwrite,
+    )
