@@ -26,6 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from mock_devices import scenes, synth  # noqa: E402
 from processing.rpca import rpca_ialm  # noqa: E402
 from processing.single_shot import prepare_reference, single_shot_unwrap  # noqa: E402
+from rig.blas import rpca_blas  # noqa: E402
 from rig.study.experiments import RIG, SINGLE_SHOT_FREQUENCY, SINGLE_SHOT_HEMISPHERE_MM, SPECKLE_PATTERN  # noqa: E402
 
 
@@ -92,4 +93,6 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    with rpca_blas():  # as the pipeline runs the single shot
+        status = main()
+    sys.exit(status)

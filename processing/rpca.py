@@ -9,6 +9,10 @@ Two solvers of principal component pursuit, min ||L||_* + tau ||S||_1 s.t. L + S
 
 Both spend their time in singular value thresholding; ``svd="full"`` is the plain reference
 implementation, ``"auto"``/``"partial"`` the fast partial SVD of :mod:`processing.svd`.
+
+The many small QR/SVD calls run faster with single-threaded BLAS on a busy machine; this module
+leaves the process's BLAS threads alone, the application sets the limit around the solves
+(``rig.blas``, through threadpoolctl).
 """
 
 from __future__ import annotations
@@ -20,7 +24,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from processing._blas import blas_threads
 from processing.svd import SubspaceState, check_svd_method, singular_value_threshold
 
 log = logging.getLogger(__name__)
@@ -163,7 +166,6 @@ def rpca_ialm(
     dtype: np.dtype | type | None = None,
     stable: bool = False,
     noise_sigma: float | None = None,
-    threads: int | None = 1,
 ) -> RPCAResult:
     """RPCA by the inexact augmented Lagrange multiplier method (thesis eqs. 4.3-4.9).
 
@@ -193,9 +195,6 @@ def rpca_ialm(
         ||D - L - S||_F <= sqrt(M N) sigma instead of at exact equality.
     noise_sigma : float, optional
         sigma for ``stable``; default a robust estimate from D (:func:`robust_noise_sigma`).
-    threads : int or None
-        BLAS threads during the solve (:func:`processing._blas.blas_threads`); 1 by default,
-        since the many small QR/SVD calls run faster single-threaded; None leaves BLAS alone.
 
     Returns
     -------
@@ -242,23 +241,22 @@ def rpca_ialm(
     iteration = 0
     target = np.empty_like(d)
     gap = np.empty_like(d)
-    with blas_threads(threads):
-        for iteration in range(1, int(max_iter) + 1):
-            inv_mu = 1.0 / mu
-            np.multiply(y, inv_mu, out=target)
-            target += d  # D + Y / mu, shared by both updates
-            low_rank, rank = singular_value_threshold(target - sparse, inv_mu, state, svd)
-            target -= low_rank
-            sparse = _shrink_into(target, tau * inv_mu, sparse)
-            np.subtract(d, low_rank, out=gap)
-            gap -= sparse
-            residual_abs = float(np.sqrt(np.vdot(gap, gap)))
-            residual = residual_abs / norm_fro
-            if residual_abs < stop_abs:
-                converged = True
-                break
-            y += mu * gap
-            mu = min(mu * rho, mu_max)
+    for iteration in range(1, int(max_iter) + 1):
+        inv_mu = 1.0 / mu
+        np.multiply(y, inv_mu, out=target)
+        target += d  # D + Y / mu, shared by both updates
+        low_rank, rank = singular_value_threshold(target - sparse, inv_mu, state, svd)
+        target -= low_rank
+        sparse = _shrink_into(target, tau * inv_mu, sparse)
+        np.subtract(d, low_rank, out=gap)
+        gap -= sparse
+        residual_abs = float(np.sqrt(np.vdot(gap, gap)))
+        residual = residual_abs / norm_fro
+        if residual_abs < stop_abs:
+            converged = True
+            break
+        y += mu * gap
+        mu = min(mu * rho, mu_max)
     seconds = time.perf_counter() - start
     log.debug(
         "rpca_ialm %dx%d: %d iterations, rank %d, residual %.2e, %.3f s (%d partial, %d full SVDs)",
@@ -292,7 +290,6 @@ def rpca_adm(
     max_iter: int = 1000,
     t: float | None = None,
     svd: str = "auto",
-    threads: int | None = 1,
 ) -> RPCAResult:
     """RPCA by the alternating direction method with a fixed penalty (thesis eq. 2.11).
 
@@ -313,8 +310,6 @@ def rpca_adm(
     t : float in (0, 1), optional
         The ch. 3 weighting; overrides ``tau``.
     svd : {"auto", "partial", "full"}
-    threads : int or None
-        BLAS threads during the solve, as in :func:`rpca_ialm`.
 
     Returns
     -------
@@ -350,19 +345,18 @@ def rpca_adm(
     change = np.inf
     converged = False
     iteration = 0
-    with blas_threads(threads):
-        for iteration in range(1, int(max_iter) + 1):
-            previous_norm = np.sqrt(float(np.vdot(low_rank, low_rank)) + float(np.vdot(sparse, sparse)))
-            new_sparse = shrink(inv_beta * h - low_rank + d, weight_sparse * inv_beta)
-            new_low, rank = singular_value_threshold(d - new_sparse + inv_beta * h, weight_low * inv_beta, state, svd)
-            delta_s = new_sparse - sparse
-            delta_l = new_low - low_rank
-            change = np.sqrt(float(np.vdot(delta_s, delta_s)) + float(np.vdot(delta_l, delta_l))) / (previous_norm + 1.0)
-            sparse, low_rank = new_sparse, new_low
-            h -= beta * (sparse + low_rank - d)
-            if change < tol:
-                converged = True
-                break
+    for iteration in range(1, int(max_iter) + 1):
+        previous_norm = np.sqrt(float(np.vdot(low_rank, low_rank)) + float(np.vdot(sparse, sparse)))
+        new_sparse = shrink(inv_beta * h - low_rank + d, weight_sparse * inv_beta)
+        new_low, rank = singular_value_threshold(d - new_sparse + inv_beta * h, weight_low * inv_beta, state, svd)
+        delta_s = new_sparse - sparse
+        delta_l = new_low - low_rank
+        change = np.sqrt(float(np.vdot(delta_s, delta_s)) + float(np.vdot(delta_l, delta_l))) / (previous_norm + 1.0)
+        sparse, low_rank = new_sparse, new_low
+        h -= beta * (sparse + low_rank - d)
+        if change < tol:
+            converged = True
+            break
     residual = float(np.linalg.norm(d - low_rank - sparse) / np.linalg.norm(d))
     seconds = time.perf_counter() - start
     log.debug(

@@ -369,12 +369,9 @@ def _check_consistency(config: RigConfig, where: str) -> None:
             f"{config.camera.backend!r} ('simulated-serial' pulses the simulated camera only), found 'simulated-serial'"
         )
     if config.simulated:
-        from mock_devices.scenes import SCENES
+        from rig.hardware.scenes import check_scene_name  # the simulation's scenes are the hardware layer's
 
-        if config.simulation.scene not in SCENES:
-            raise ConfigError(
-                f"{where}: [simulation] scene: expected one of {', '.join(SCENES)}, found {config.simulation.scene!r}"
-            )
+        check_scene_name(config.simulation.scene, where)
         if config.trigger.backend == "serial":
             raise ConfigError(
                 f"{where}: [trigger] backend: expected 'simulated-serial' or 'software' with the simulated camera "

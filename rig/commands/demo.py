@@ -9,10 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
-from mock_devices.scenes import SCENES
 from rig.commands._common import add_command, add_report_options, print_json, split_size
 from rig.errors import ConfigError
-from rig.hardware.synthesis import demo_geometry, simulate_scan, write_simulated_scan
+from rig.hardware.scenes import scene_names
+from rig.hardware.synthesis import demo_appearance, demo_geometry, simulate_scan, write_simulated_scan
 from rig.pipeline.outputs import write_outputs
 from rig.pipeline.plan import DEFAULT_CORRECTION, ProcessOptions
 from rig.pipeline.run import process, total_steps
@@ -29,7 +29,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("-o", "--output", type=Path, default=Path("demo-output"), metavar="DIR",
                         help="output directory (default ./demo-output; replaced if it holds an earlier demo)")
-    parser.add_argument("--scene", default="hemisphere", choices=sorted(SCENES), help="object to scan (default hemisphere)")
+    parser.add_argument("--scene", default="hemisphere", choices=sorted(scene_names()), help="object to scan (default hemisphere)")
     parser.add_argument("--size", default="640x480", metavar="WxH", help="camera size (default 640x480)")
     parser.add_argument("--snr", type=float, default=35.0, metavar="DB", help="camera noise, SNR in dB (default 35)")
     parser.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
@@ -57,15 +57,13 @@ def _prepare(out: Path) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from mock_devices.synth import Appearance
-
     width, height = parse_size(args.size)
     out: Path = args.output
     _prepare(out)
     with Progress("demo", total=2 + total_steps(True) + 1, quiet=args.quiet) as progress:
         scan = simulate_scan(
             args.scene, geometry=demo_geometry(width, height), seed=args.seed,
-            appearance=Appearance(ambient=0.1, gain=200.0, snr_db=args.snr),
+            appearance=demo_appearance(args.snr),
         )
         progress.step("synthesised")
         paths = write_simulated_scan(scan, out / "scan")

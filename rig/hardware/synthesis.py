@@ -31,6 +31,11 @@ DEFAULT_FREQUENCIES = (1, 8, 64)
 DEFAULT_STEPS = 4
 
 
+def demo_appearance(snr_db: float | None = 35.0) -> synth.Appearance:
+    """How the demo's simulated camera sees the scene: ambient 0.1, gain 200, noise at ``snr_db``."""
+    return synth.Appearance(ambient=0.1, gain=200.0, snr_db=snr_db)
+
+
 def demo_geometry(width: int = 640, height: int = 480) -> synth.RigGeometry:
     """The synthesiser's default rig with a ``width`` x ``height`` camera and the same field of view."""
     base = synth.RigGeometry()
@@ -107,7 +112,7 @@ def simulate_scan(
     """
     geometry = demo_geometry() if geometry is None else geometry
     patterns = [dict(p) for p in (patterns or synth.sinusoid_patterns(DEFAULT_FREQUENCIES, DEFAULT_STEPS))]
-    appearance = synth.Appearance(ambient=0.1, gain=200.0, snr_db=35.0) if appearance is None else appearance
+    appearance = demo_appearance() if appearance is None else appearance
     if isinstance(scene, str):
         name = scene
         height = scenes.make_scene(scene, geometry.camera_height, geometry.camera_width, geometry.pixel_mm, **(scene_params or {}))

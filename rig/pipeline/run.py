@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import time
 from dataclasses import dataclass
@@ -13,6 +14,7 @@ import numpy as np
 from calibration import models as calibration_models
 from calibration.errors import CalibrationError
 from calibration.store import Calibration, read_calibration
+from rig.blas import rpca_blas
 from rig.errors import CaptureError, ProcessingError
 from rig.pipeline.outputs import write_outputs
 from rig.pipeline.plan import (
@@ -31,6 +33,10 @@ from rig.pipeline.stages import (
 from rig.store.capture import Capture, check_same_patterns, read_capture
 
 log = logging.getLogger(__name__)
+
+# Stages that may solve RPCA problems (denoising, the single shot's separation, the corrections):
+# they run with single-threaded BLAS (rig.blas); the others keep the process's BLAS threads.
+RPCA_STAGES = frozenset({"denoise", "unwrap", "correction"})
 
 # --------------------------------------------------------------------------- the whole run
 
@@ -135,7 +141,8 @@ def process(
     for state in ([ref] if ref is not None else []) + [obj]:
         for name, stage in SCENE_STAGES:
             t0 = time.perf_counter()
-            stage(state, options)
+            with rpca_blas() if name in RPCA_STAGES else contextlib.nullcontext():
+                stage(state, options)
             state.timings[name] = time.perf_counter() - t0
             if progress is not None:
                 progress.step(f"{state.name}: {name}")

@@ -1,0 +1,37 @@
+"""BLAS thread limits for the application's numeric work, through threadpoolctl.
+
+The RPCA solvers (denoising, single shot, the phase and fringe-order corrections) make many
+small LAPACK calls (QR and SVD of tall, thin matrices). Multi-threaded OpenBLAS synchronises its
+threads at every call; on a machine whose cores are busy with other work, that made a 768 x 64 QR
+80x slower than single-threaded (0.27 s against 3 ms, measured on the 2-core development machine
+under load), and a whole RPCA solve 5-10x slower. ``processing`` never changes the process-wide
+thread count itself: the pipeline, the study and the benchmarks set it here, around the stages
+that solve RPCA problems, and restore it afterwards.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterator
+
+# BLAS threads for RPCA-heavy work (see the module docstring).
+RPCA_BLAS_THREADS = 1
+
+
+@contextlib.contextmanager
+def blas_threads(count: int | None) -> Iterator[None]:
+    """Limit BLAS to ``count`` threads inside the block (None: leave as is); restores afterwards."""
+    if count is None:
+        yield
+        return
+    if isinstance(count, bool) or int(count) != count or count < 1:
+        raise ValueError(f"count: expected a positive number of threads or None, found {count!r}")
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=int(count), user_api="blas"):
+        yield
+
+
+def rpca_blas() -> contextlib.AbstractContextManager[None]:
+    """The BLAS limit for RPCA solves (:data:`RPCA_BLAS_THREADS` threads)."""
+    return blas_threads(RPCA_BLAS_THREADS)
