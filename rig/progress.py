@@ -63,6 +63,29 @@ class Progress:
         self._print(f"{self.label}: {outcome} in {elapsed:.1f} s\n")
         return False
 
+    def say(self, text: str) -> None:
+        """A line for the operator (a service's message) between redraws of the bar."""
+        if self.quiet:
+            return
+        if self.tty:
+            self._print("\r" + " " * self._width + "\r")
+            self._width = 0
+        self._print(text + "\n")
+
+    def reporter(self, cancel: Any = None) -> Any:
+        """A :class:`rig.events.Reporter` drawing its steps on this bar and printing its messages."""
+        from rig.events import Event, Reporter
+
+        def sink(event: Event) -> None:
+            if event.kind == "begin":
+                self.begin(event.total)
+            elif event.kind == "step":
+                self.step(event.note)
+            else:
+                self.say(event.note)
+
+        return Reporter(self.label, sink, cancel)
+
     def _draw(self, note: str) -> None:
         if self.quiet or not self.tty:
             return

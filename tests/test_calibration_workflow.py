@@ -15,7 +15,8 @@ import pytest
 from calibration.errors import CalibrationError
 from calibration.models import height_from_phase
 from calibration.store import read_calibration
-from rig.calibrate.session import CalibrationPlan, ConsoleOperator, StageCommand, acquire, compute
+from rig.calibrate.operator import ConsoleOperator, StageCommand
+from rig.calibrate.session import CalibrationPlan, acquire, compute
 from rig.store.capture import read_capture, write_capture
 from rig.cli import main
 from rig.config import load_config
@@ -63,6 +64,20 @@ def test_unattended_session_recovers_the_simulated_geometry(session):
         assert read_capture(root / "cal" / "planes" / label).scene == label
 
 
+def test_simulated_board_views_are_acquired_through_the_drivers(session):
+    """Issue 9: the board views come through projector, trigger and camera like any scan (the
+    simulated camera sees the board's albedo under the projector's white), not written directly."""
+    root, _ = session
+    for name in ("plane", "view-01", "view-04"):
+        capture = read_capture(root / "cal" / "board" / name)
+        assert capture.complete and capture.patterns == [{"kind": "flat", "level": 1.0}]
+        manifest = json.loads(capture.manifest_path.read_text())
+        assert manifest["devices"]["camera"] == "simulated camera" and "simulation" in manifest
+        image = capture.load_frame(0).astype(np.float64)
+        # a printed board under white light: dark squares near the ambient floor, white ones near full scale
+        assert np.percentile(image, 5) < 0.3 * np.percentile(image, 95)
+
+
 def test_scan_then_process_matches_the_virtual_scene(session, rig_text):
     root, config = session
     # scans go through the measured LUT, as the calibration captures did
@@ -108,14 +123,14 @@ def test_operator_is_prompted_for_every_step(tmp_path, rig_text):
     config.write_text(rig_text, encoding="utf-8")
     prompts: list[str] = []
     plan = CalibrationPlan(heights_mm=(20.0, 40.0, 60.0), board=None, pixel_mm=1.6)
-    acquire(load_config(config), plan, tmp_path / "cal", ConsoleOperator(ask=prompts.append), show_progress=False)
+    acquire(load_config(config), plan, tmp_path / "cal", ConsoleOperator(ask=prompts.append))
     assert prompts == [
         "move the plane to the reference position (0 mm), press Enter ",
         "move the plane to 20 mm, press Enter ",
         "move the plane to 40 mm, press Enter ",
         "move the plane to 60 mm, press Enter ",
     ]
-    result = compute(tmp_path / "cal", progress=lambda _m: None)
+    result = compute(tmp_path / "cal")
     assert result.calibration.l0_mm == pytest.approx(1000.0, rel=0.02)
 
     def no_console(_message: str) -> str:
@@ -163,7 +178,7 @@ def test_bad_sessions_give_one_line_errors(session, tmp_path, capsys):
     shutil.rmtree(plane)
     write_capture(plane, frames, capture.patterns, {"width": 456, "height": 570}, scene="some-plane")
     with pytest.raises(CalibrationError, match="scene 'some-plane': expected 'plane-at-<height>mm'"):
-        compute(broken, progress=lambda _m: None)
+        compute(broken)
     assert main(["calibrate", "--import-opencv", str(tmp_path / "none.yml"), "--projector-size", "1920x1080",
                  "-o", str(tmp_path / "st")]) == 1
     assert "none.yml: missing" in capsys.readouterr().err
@@ -205,7 +220,7 @@ def test_stereo_session_recomputed_from_stored_poses(tmp_path):
     assert float(np.sqrt(np.mean((height[on] - (600.0 - truth[..., 2])[on]) ** 2))) < 0.3
     # the simulated rig cannot run a stereo session itself: it says why
     with pytest.raises(ConfigError, match="not a\npinhole|not a pinhole"):
-        acquire(config, CalibrationPlan(model="stereo", board_views=3), tmp_path / "sim", show_progress=False)
+        acquire(config, CalibrationPlan(model="stereo", board_views=3), tmp_path / "sim")
 
 
 def test_gamma_ripple_removed_in_processing(tmp_path, rig_text):
@@ -262,7 +277,7 @@ def test_overwrite_replaces_only_calibration_directories(tmp_path):
     (precious / "chapter1.tex").write_text("...")
     plan = CalibrationPlan(board=None, pixel_mm=1.6)
     with pytest.raises(CaptureError, match="already exists and is not empty"):
-        acquire(load_config(None), plan, precious, show_progress=False)
+        acquire(load_config(None), plan, precious)
     with pytest.raises(CaptureError, match="not a calibration directory"):
-        acquire(load_config(None), plan, precious, show_progress=False, overwrite=True)
+        acquire(load_config(None), plan, precious, overwrite=True)
     assert (precious / "chapter1.tex").is_file()

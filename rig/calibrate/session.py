@@ -24,13 +24,11 @@ import json
 import logging
 import os
 import re
-import shlex
-import subprocess
 import sys
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import cv2
 import numpy as np
@@ -66,7 +64,12 @@ from calibration.stereo import (
 from calibration.store import REFERENCE_PLANE, Calibration, write_calibration
 from rig.config import RigConfig
 from rig.errors import CaptureError, ConfigError
-from rig.store.capture import read_capture, write_capture
+from rig.store.capture import read_capture
+
+if TYPE_CHECKING:
+    from rig.calibrate.operator import Operator
+    from rig.events import Reporter
+    from rig.hardware.assembly import RigDevices
 
 log = logging.getLogger(__name__)
 
@@ -154,127 +157,36 @@ class CalibrationPlan:
         return cls.from_json(data, str(session))
 
 
-# --------------------------------------------------------------------------- the operator
-
-
-class Operator:
-    """Sets up each step of the session. The base does nothing (the simulated rig needs nothing)."""
-
-    def plane(self, height_mm: float) -> None:
-        """Put the flat plane at ``height_mm`` above the reference plane (0: the reference itself)."""
-
-    def board(self, index: int, on_plane: bool) -> None:
-        """Put the calibration board in view: flat on the reference plane, or tilted (view ``index``)."""
-
-    def clear(self) -> None:
-        """Clear the view down to the bare reference plane (for the gamma ramp)."""
-
-
-class ConsoleOperator(Operator):
-    """Asks a person at the console, and waits for Enter (``ask`` replaceable for tests)."""
-
-    def __init__(self, ask: Callable[[str], str] = input, stage: "StageCommand | None" = None) -> None:
-        self._ask = ask
-        self.stage = stage
-
-    def ask(self, message: str) -> None:
-        try:
-            self._ask(message)
-        except EOFError:
-            raise ConfigError(
-                "calibration needs an operator at the console (no input); use --stage-command for a motorised stage"
-            ) from None
-
-    def plane(self, height_mm: float) -> None:
-        if self.stage is not None:
-            self.stage.move(height_mm)
-            return
-        where = "the reference position (0 mm)" if height_mm == 0 else f"{height_mm:g} mm"
-        self.ask(f"move the plane to {where}, press Enter ")
-
-    def board(self, index: int, on_plane: bool) -> None:
-        if on_plane:
-            self.ask("lay the board flat on the reference plane, press Enter ")
-        else:
-            self.ask(f"hold the board tilted in view (view {index}), press Enter ")
-
-    def clear(self) -> None:
-        self.ask("clear the view down to the bare reference plane, press Enter ")
-
-
-class StageCommand:
-    """A motorised stage moved by a shell command template, e.g. ``"stage-move --mm {height_mm}"``."""
-
-    def __init__(self, template: str, timeout_s: float = 120.0) -> None:
-        if "{height_mm" not in template:
-            raise ConfigError(f"--stage-command: expected a '{{height_mm}}' placeholder, found {template!r}")
-        self.template = template
-        self.timeout_s = timeout_s
-
-    def move(self, height_mm: float) -> None:
-        """Run the command for ``height_mm``; ConfigError if it fails or times out."""
-        command = shlex.split(self.template.format(height_mm=height_mm))
-        log.info("stage: %s", " ".join(command))
-        try:
-            done = subprocess.run(command, capture_output=True, text=True, timeout=self.timeout_s, check=False)
-        except FileNotFoundError:
-            raise ConfigError(f"--stage-command: {command[0]}: not found") from None
-        except subprocess.TimeoutExpired:
-            raise ConfigError(f"--stage-command: moving to {height_mm:g} mm took over {self.timeout_s:g} s") from None
-        if done.returncode != 0:
-            tail = (done.stderr or done.stdout).strip().splitlines()[-1:] or [""]
-            raise ConfigError(f"--stage-command: moving to {height_mm:g} mm failed (exit {done.returncode}): {tail[0]}")
-
-
 # --------------------------------------------------------------------------- acquisition
 
 
-def _scan(config: RigConfig, output: Path, patterns: Sequence[dict[str, Any]], scene: str, show_progress: bool) -> Path:
-    """One capture of ``patterns`` with the rig of ``config`` looking at ``scene`` (as `rig scan`)."""
-    from rig.acquisition.scan import scan
-    from rig.progress import Progress
+class _Acquisition:
+    """One session's open rig, the hands that set up each scene, and where progress goes."""
 
-    with Progress(f"calibrate {output}", total=len(patterns), quiet=not show_progress) as progress:
-        return scan(config, output, scene=scene, patterns=patterns, progress=progress).path
+    def __init__(self, devices: RigDevices, directory: Path, hands: list[Operator], progress: Reporter | None) -> None:
+        self.devices = devices
+        self.directory = directory
+        self.hands = hands
+        self.progress = progress
 
+    def setup(self, step: str, action: Callable[[Operator], None]) -> None:
+        """Tell the front-end which step comes, then have every operator set it up."""
+        if self.progress is not None:
+            self.progress.message(step, step=step)
+        for hand in self.hands:
+            action(hand)
 
-def _simulated_board_view(config: RigConfig, board: BoardSpec, index: int) -> np.ndarray:
-    """What the simulated rig's camera sees of a board: flat on the plane (index 0) or tilted.
+    def capture(self, output: Path, patterns: Sequence[dict[str, Any]], scene: str) -> Path:
+        from rig.acquisition.scan import scan_with
 
-    The simulated camera looks straight down at l0 with ``pixel_mm`` per pixel on the plane: a
-    pinhole of focal l0 / pixel_mm without distortion.
-    """
-    from mock_devices import board_synth
-    from rig.hardware.simulated import geometry_from_config
-
-    g = geometry_from_config(config)
-    camera = board_synth.PinholeCamera.simple(g.camera_width, g.camera_height, g.l0_mm / g.pixel_mm)
-    size = (board.squares[0] * board.square_mm, board.squares[1] * board.square_mm)
-    rng = np.random.default_rng([config.simulation.seed, index])
-    if index == 0:
-        rvec, tvec = board_synth.board_pose(0.0, 0.0, 2.0, (0.0, 0.0, g.l0_mm), size)
-    else:
-        tilt = rng.uniform(-30, 30, size=2)
-        shift = rng.uniform(-0.15, 0.15, size=2) * g.camera_width * g.pixel_mm
-        rvec, tvec = board_synth.board_pose(tilt[0], tilt[1], rng.uniform(-10, 10), (shift[0], shift[1] * 0.7, g.l0_mm * rng.uniform(0.8, 0.95)), size)
-    px_per_mm = max(2.0, 2.0 / g.pixel_mm)
-    if board.kind == "chessboard":
-        texture = board_synth.chessboard_texture(board.squares, board.square_mm, px_per_mm, board.square_mm)
-    else:
-        texture = board_synth.charuco_texture(board.squares, board.square_mm, board.marker_mm or 0.7 * board.square_mm,
-                                              px_per_mm, board.square_mm, board.dictionary)
-    return board_synth.render_board_view(texture, px_per_mm, board.square_mm, camera, rvec, tvec, rng=rng)
+        return scan_with(self.devices, output, patterns, scene=scene, progress=self.progress).path
 
 
-def _board_capture(config: RigConfig, output: Path, board: BoardSpec, index: int, show_progress: bool) -> None:
-    scene = "board-on-reference" if index == 0 else f"board-view-{index}"
-    white = [{"kind": "flat", "level": 1.0}]
-    if config.simulated:
-        image = _simulated_board_view(config, board, index)
-        write_capture(output, [image], white, {"width": config.projector.width, "height": config.projector.height},
-                      scene=scene, bit_depth=8, extra={"simulation": "board view rendered by mock_devices.board_synth"})
-    else:
-        _scan(config, output, white, scene, show_progress)
+def _frames_planned(config: RigConfig, plan: CalibrationPlan) -> int:
+    if plan.model == STEREO:
+        return plan.board_views * len(stereo_patterns(config)) + len(config.scan.patterns())
+    frames = plan.gamma_levels + len(config.scan.patterns()) * (1 + len(plan.heights_mm))
+    return frames + (plan.board_views + 1 if plan.board is not None else 0)
 
 
 def acquire(
@@ -282,12 +194,18 @@ def acquire(
     plan: CalibrationPlan,
     directory: Path,
     operator: Operator | None = None,
-    show_progress: bool = True,
+    progress: Reporter | None = None,
     overwrite: bool = False,
 ) -> None:
-    """Capture everything ``plan`` needs into ``directory`` (see the module docstring)."""
+    """Capture everything ``plan`` needs into ``directory`` (see the module docstring).
+
+    The rig is opened once for the session. Before each capture ``operator`` (a person, a stage)
+    and, on the simulated rig, the simulated world set up the scene; a session with neither is
+    refused. ``progress`` gets one step per frame and a message naming each step.
+    """
+    from rig.hardware.assembly import open_rig, world_operator
+
     plan.check()
-    operator = operator or Operator()
     if directory.exists() and any(directory.iterdir()):
         if not overwrite:
             raise CaptureError(f"{directory}: already exists and is not empty; choose another -o or pass --overwrite")
@@ -296,32 +214,46 @@ def acquire(
         import shutil
 
         shutil.rmtree(directory)
-    directory.mkdir(parents=True, exist_ok=True)
-    (directory / SESSION_FILE).write_text(json.dumps(plan.to_json(), indent=2) + "\n", encoding="utf-8")
-    patterns = config.scan.patterns()
-    if plan.model == STEREO:
-        _acquire_stereo(config, plan, directory, operator, show_progress)
-        return
+    if progress is not None:
+        progress.begin(_frames_planned(config, plan), f"calibrate {directory}")
+    with open_rig(config, scene="reference") as devices:
+        world = world_operator(devices, plan.board)
+        hands = [hand for hand in (operator, world) if hand is not None]
+        if not hands:
+            raise ConfigError("calibration needs an operator: a person at the console or --stage-command")
+        directory.mkdir(parents=True, exist_ok=True)
+        (directory / SESSION_FILE).write_text(json.dumps(plan.to_json(), indent=2) + "\n", encoding="utf-8")
+        session = _Acquisition(devices, directory, hands, progress)
+        if plan.model == STEREO:
+            _acquire_stereo(session, plan)
+        else:
+            _acquire_planes(session, plan)
+
+
+def _acquire_planes(session: _Acquisition, plan: CalibrationPlan) -> None:
+    directory, patterns = session.directory, session.devices.config.scan.patterns()
     if plan.gamma_levels:
-        operator.clear()
-        _scan(config, directory / GAMMA_DIR, ramp_patterns(plan.gamma_levels), "plane-at-0mm" if config.simulated else "gamma-ramp", show_progress)
+        session.setup("gamma ramp on the bare reference plane", lambda hand: hand.clear())
+        session.capture(directory / GAMMA_DIR, ramp_patterns(plan.gamma_levels), "gamma-ramp")
         lut = _gamma_from(directory / GAMMA_DIR)[1]
         np.save(directory / GAMMA_LUT_FILE, lut)
-        # every later capture goes through the new LUT, as the scans will
-        config = replace(config, projector=replace(config.projector, gamma_lut=directory / GAMMA_LUT_FILE))
+        session.devices.projector.set_gamma_lut(lut)  # every later capture goes through the new LUT
     if plan.board is not None:
         (directory / BOARD_DIR).mkdir(exist_ok=True)
+        white = [{"kind": "flat", "level": 1.0}]
         for index in range(plan.board_views + 1):
-            operator.board(index, on_plane=index == 0)
-            name = "plane" if index == 0 else f"view-{index:02d}"
-            _board_capture(config, directory / BOARD_DIR / name, plan.board, index, show_progress)
-    operator.plane(0.0)
-    _scan(config, directory / REFERENCE_DIR, patterns, "reference", show_progress)
+            on_plane = index == 0
+            step = "board flat on the reference plane" if on_plane else f"board view {index} of {plan.board_views}"
+            session.setup(step, lambda hand: hand.board(index, on_plane))
+            name, scene = ("plane", "board-on-reference") if on_plane else (f"view-{index:02d}", f"board-view-{index}")
+            session.capture(directory / BOARD_DIR / name, white, scene)
+    session.setup("reference plane", lambda hand: hand.plane(0.0))
+    session.capture(directory / REFERENCE_DIR, patterns, "reference")
     (directory / PLANES_DIR).mkdir(exist_ok=True)
     for height in plan.heights_mm:
-        operator.plane(float(height))
         label = plane_label(float(height))
-        _scan(config, directory / PLANES_DIR / label, patterns, label, show_progress)
+        session.setup(f"plane at {float(height):g} mm", lambda hand: hand.plane(float(height)))
+        session.capture(directory / PLANES_DIR / label, patterns, label)
 
 
 def stereo_patterns(config: RigConfig) -> list[dict[str, Any]]:
@@ -330,20 +262,16 @@ def stereo_patterns(config: RigConfig) -> list[dict[str, Any]]:
     return [{"kind": "flat", "level": 1.0}, *along[0], *along[1]]
 
 
-def _acquire_stereo(config: RigConfig, plan: CalibrationPlan, directory: Path, operator: Operator, show_progress: bool) -> None:
-    if config.simulated:
-        raise ConfigError(
-            "--model stereo: the built-in simulated rig's camera follows the reference-plane geometry, not a "
-            "pinhole; a stereo session needs a real rig (or --from a stored session)"
-        )
+def _acquire_stereo(session: _Acquisition, plan: CalibrationPlan) -> None:
+    config, directory = session.devices.config, session.directory
     if min(config.scan.frequencies) != 1:
         raise ConfigError("--model stereo: the scan frequencies must start at 1 (hierarchical unwrapping on the board)")
     (directory / STEREO_DIR).mkdir(exist_ok=True)
     for index in range(1, plan.board_views + 1):
-        operator.board(index, on_plane=False)
-        _scan(config, directory / STEREO_DIR / f"pose-{index:02d}", stereo_patterns(config), f"board-pose-{index}", show_progress)
-    operator.plane(0.0)
-    _scan(config, directory / REFERENCE_DIR, config.scan.patterns(), "reference", show_progress)
+        session.setup(f"board pose {index} of {plan.board_views}", lambda hand: hand.pose(index))
+        session.capture(directory / STEREO_DIR / f"pose-{index:02d}", stereo_patterns(config), f"board-pose-{index}")
+    session.setup("reference plane", lambda hand: hand.plane(0.0))
+    session.capture(directory / REFERENCE_DIR, config.scan.patterns(), "reference")
 
 
 # --------------------------------------------------------------------------- computation
@@ -414,14 +342,16 @@ def compute(
     directory: Path,
     plan: CalibrationPlan | None = None,
     output: Path | None = None,
-    progress: Callable[[str], None] | None = None,
+    progress: Reporter | None = None,
 ) -> CalibrationReport:
     """Compute and write ``calibration.json`` from the captures in ``directory``.
 
     ``plan`` overrides the stored session (e.g. another model); ``output`` writes the calibration
     elsewhere (the reference path then points back into ``directory``).
     """
-    note = progress or (lambda message: print(message, file=sys.stderr))
+    def note(message: str) -> None:
+        if progress is not None:
+            progress.message(message)
     session = directory / SESSION_FILE
     if plan is None:
         plan = CalibrationPlan.load(session)

@@ -132,14 +132,9 @@ def _plan(args: argparse.Namespace, base=None):
 
 
 def run(args: argparse.Namespace) -> int:
-    from rig.calibrate.session import (
-        CalibrationPlan,
-        ConsoleOperator,
-        Operator,
-        StageCommand,
-        acquire,
-        compute,
-    )
+    from rig.calibrate.operator import ConsoleOperator, StageCommand
+    from rig.calibrate.session import CalibrationPlan, acquire, compute
+    from rig.progress import Progress
 
     if args.import_opencv is not None:
         return _import_opencv(args)
@@ -152,20 +147,23 @@ def run(args: argparse.Namespace) -> int:
             raise CalibrationError(f"{args.from_dir}: not a calibration session (no session.json, no planes/)")
         plan = _plan(args, base)
         plan.check()
-        report = compute(args.from_dir, plan, output=args.output, progress=None if not args.quiet else (lambda _m: None))
+        with Progress(f"calibrate --from {args.from_dir}", total=1, quiet=args.quiet) as bar:
+            report = compute(args.from_dir, plan, output=args.output, progress=bar.reporter())
     else:
         from rig.config import load_config
 
         config = load_config(args.config)
         plan = _plan(args)
         output = args.output or Path("calibration")
-        if config.simulated:
-            operator: Operator = Operator()
-        else:
+        from rig.hardware.assembly import rig_sets_up_scenes
+
+        operator = None
+        if not rig_sets_up_scenes(config):  # the simulated rig runs unattended
             stage = StageCommand(args.stage_command) if args.stage_command else None
             operator = ConsoleOperator(stage=stage)
-        acquire(config, plan, output, operator, show_progress=not args.quiet, overwrite=args.overwrite)
-        report = compute(output, plan, progress=None if not args.quiet else (lambda _m: None))
+        with Progress(f"calibrate {output}", total=1, quiet=args.quiet) as bar:
+            acquire(config, plan, output, operator, progress=bar.reporter(), overwrite=args.overwrite)
+            report = compute(output, plan, progress=bar.reporter())
     cal = report.calibration
     for line in report.lines:
         print(f"  {line}", file=sys.stderr)

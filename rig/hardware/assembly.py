@@ -11,7 +11,7 @@ import contextlib
 import logging
 from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -20,6 +20,9 @@ from drivers.projector import Projector
 from rig.acquisition.loop import BoxTrigger, SoftwareTrigger
 from rig.config import RigConfig
 from rig.errors import ConfigError
+
+if TYPE_CHECKING:
+    from calibration.camera import BoardSpec
 
 log = logging.getLogger(__name__)
 
@@ -102,6 +105,20 @@ def _configure_camera(camera: Camera, config: RigConfig) -> None:
 def trigger_path(camera: Camera, box: Any | None) -> SoftwareTrigger | BoxTrigger:
     """The camera's software trigger, or the trigger box pulsing its hardware line."""
     return SoftwareTrigger(camera) if box is None else BoxTrigger(box)
+
+
+def rig_sets_up_scenes(config: RigConfig) -> bool:
+    """True when the rig places its own calibration scenes (the simulated rig): no person needed."""
+    return config.simulated
+
+
+def world_operator(devices: RigDevices, board: BoardSpec | None = None) -> Any:
+    """The operator that places calibration scenes by itself (simulated rig), or None on a real rig."""
+    if devices.simulation is None:
+        return None
+    from rig.hardware.simulated import WorldOperator
+
+    return WorldOperator(devices.simulation, board)
 
 
 @contextlib.contextmanager

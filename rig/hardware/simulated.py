@@ -15,7 +15,8 @@ from __future__ import annotations
 import contextlib
 import re
 import zlib
-from typing import Any
+from dataclasses import replace
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -23,7 +24,11 @@ from mock_devices import scenes, synth
 from rig.config import RigConfig
 from rig.errors import ConfigError
 
+if TYPE_CHECKING:
+    from calibration.camera import BoardSpec
+
 PLANE_SCENE = re.compile(r"plane-at-(-?\d+(?:\.\d+)?)mm")
+BOARD_SCENE = re.compile(r"board-on-reference|board-view-(\d+)")
 
 
 def geometry_from_config(config: RigConfig) -> synth.RigGeometry:
@@ -148,6 +153,26 @@ class SimulatedRig:
             raise
         return self
 
+    def place(self, scene: str, board: BoardSpec | None = None) -> None:
+        """Put ``scene`` in front of the open rig, as an operator would between two scans.
+
+        Plane and object labels as for :func:`scene_height`; ``board-on-reference`` and
+        ``board-view-N`` lay ``board`` flat on the reference plane or hold it tilted (view N), as
+        a printed target whose albedo the camera sees under the projector's light.
+        """
+        reflectivity: float | np.ndarray = appearance_from_config(self.config).reflectivity
+        match = BOARD_SCENE.fullmatch(scene)
+        if match:
+            if board is None:
+                raise ConfigError(f"scene {scene!r}: the simulated rig needs the board's layout to show it")
+            height = np.zeros(self.geometry.camera_shape)
+            reflectivity = board_albedo(self.config, board, int(match.group(1) or 0))
+        else:
+            height = scene_height(self.config, scene, self.geometry)
+        self.camera.set_scene(height)
+        self.camera.appearance = replace(self.camera.appearance, reflectivity=reflectivity)
+        self.scene, self.height_mm = scene, height
+
     def _open_trigger_box(self) -> None:
         from drivers.trigger_box import SerialTriggerBox
         from mock_devices.trigger_box import FakeTriggerBox
@@ -159,3 +184,60 @@ class SimulatedRig:
 
     def __exit__(self, *exc: object) -> None:
         self._stack.close()
+
+
+def board_albedo(config: RigConfig, board: BoardSpec, index: int) -> np.ndarray:
+    """Albedo (0..1) the simulated camera sees of a board: flat on the plane (index 0) or tilted.
+
+    The simulated camera looks straight down at l0 with ``pixel_mm`` per pixel on the plane: a
+    pinhole of focal l0 / pixel_mm without distortion. Poses are seeded by the config and index.
+    """
+    from mock_devices import board_synth
+
+    g = geometry_from_config(config)
+    camera = board_synth.PinholeCamera.simple(g.camera_width, g.camera_height, g.l0_mm / g.pixel_mm)
+    size = (board.squares[0] * board.square_mm, board.squares[1] * board.square_mm)
+    rng = np.random.default_rng([config.simulation.seed, index])
+    if index == 0:
+        rvec, tvec = board_synth.board_pose(0.0, 0.0, 2.0, (0.0, 0.0, g.l0_mm), size)
+    else:
+        tilt = rng.uniform(-30, 30, size=2)
+        shift = rng.uniform(-0.15, 0.15, size=2) * g.camera_width * g.pixel_mm
+        centre = (shift[0], shift[1] * 0.7, g.l0_mm * rng.uniform(0.8, 0.95))
+        rvec, tvec = board_synth.board_pose(tilt[0], tilt[1], rng.uniform(-10, 10), centre, size)
+    px_per_mm = max(2.0, 2.0 / g.pixel_mm)
+    if board.kind == "chessboard":
+        texture = board_synth.chessboard_texture(board.squares, board.square_mm, px_per_mm, board.square_mm)
+    else:
+        texture = board_synth.charuco_texture(board.squares, board.square_mm, board.marker_mm or 0.7 * board.square_mm,
+                                              px_per_mm, board.square_mm, board.dictionary)
+    image = board_synth.render_board_view(texture, px_per_mm, board.square_mm, camera, rvec, tvec,
+                                          gain=255.0, offset=0.0, noise_dn=0.0)
+    return image.astype(np.float64) / 255.0
+
+
+class WorldOperator:
+    """The simulated rig's hands in a calibration session: it places planes and boards itself.
+
+    Implements the calibration :class:`rig.calibrate.operator.Operator` protocol, so a session on
+    the simulated rig runs unattended through the same acquisition code as on a real rig.
+    """
+
+    def __init__(self, rig: SimulatedRig, board: BoardSpec | None = None) -> None:
+        self.rig = rig
+        self.board_spec = board
+
+    def plane(self, height_mm: float) -> None:
+        self.rig.place("reference" if height_mm == 0 else f"plane-at-{height_mm:g}mm")
+
+    def board(self, index: int, on_plane: bool) -> None:
+        self.rig.place("board-on-reference" if on_plane else f"board-view-{index}", self.board_spec)
+
+    def pose(self, index: int) -> None:
+        raise ConfigError(
+            "--model stereo: the built-in simulated rig's camera follows the reference-plane geometry, not a "
+            "pinhole; a stereo session needs a real rig (or --from a stored session)"
+        )
+
+    def clear(self) -> None:
+        self.rig.place("reference")
