@@ -1,30 +1,42 @@
-"""Benchmark: 12 uint8 frames (two frequencies x 6 steps, 1024 x 768) -> height map.
+"""Benchmark: 12 uint8 frames (two frequencies x 6 steps, 1024 x 768) -> height map, in memory.
 
-Our path: phase shifting of both frequencies, Ding two-frequency unwrapping, shadow mask and
-eq. 1.15 against a reference phase precomputed as calibration would; step by step through the
-public functions, and with the first two fused (``unwrap_two_frequency_stacks``). Peer, in the
-same run: OpenCV contrib's ``cv2.structured_light.SinusoidalPattern`` (PSP: three-step phase
-maps of both frequencies from frames 0, 2, 4 of each six-step set, i.e. shifts of 2 pi / 3,
-then ``unwrapPhaseMap`` of the high frequency, its histogram-based spatial unwrapper; it has no
-temporal unwrapping and no height). Prints medians, the ratio, peak memory and a check of the
-result against the simulated truth.
+Rows, timed in the same interleaved runs (run i times every row once, in turn, so a change of
+load hits all rows alike):
 
-    python benchmarks/bench_pipeline.py [--runs 9] [--frequencies 15 16] [--snr-db 30]
+- ``fused``: :func:`processing.fringe_pass.fringe_pass` (phase shifting of both frequencies,
+  modulation mask and Ding's two-frequency unwrapping in one float32 pass, OpenCV's angle and
+  look-up kernels) then eq. 1.15 in float32 against a reference phase precomputed as the
+  calibration would; what ``rig process --correction none`` computes;
+- ``fused, numpy kernels``: the same with ``opencv=False`` (numpy's arctan2);
+- ``stage functions``: the float64 public functions one after the other (``phase_shift`` per
+  frequency, ``shadow_mask``, ``unwrap_two_frequency``, ``phase_to_height``);
+- the peer, OpenCV contrib's ``cv2.structured_light.SinusoidalPattern`` (PSP): three-step phase
+  maps of both frequencies from frames 0, 2, 4 of each six-step set (shifts of 2 pi / 3) with
+  ``computePhaseMap``, then ``unwrapPhaseMap`` of the high frequency (its histogram-based spatial
+  unwrapper; it has no temporal unwrapping and no height).
 
-Rows: our two paths (interleaved, single-threaded), then OpenCV. Wall-clock medians depend on
-what else runs on the machine: the load average is printed, and the CPU time of the process,
-much less sensitive to it, beside them.
+Per row: median wall time, its spread over the runs (min - max), the median CPU time of the
+process, and ``peer / this``: the median over runs of the peer's time divided by the row's time
+in the same run (with its min - max). The header gives the CPU model, its SIMD level as numpy and
+OpenCV see it, and the load average before and after. A check against the simulated truth ends
+the report.
+
+    python benchmarks/bench_pipeline.py [--runs 11] [--frequencies 15 16] [--snr-db 30]
+
+To see a CPU without AVX-512 on one that has it (numpy's arctan2 and others get 5-10x slower):
+``NPY_DISABLE_CPU_FEATURES="AVX512F AVX512CD AVX512_SKX AVX512_CLX AVX512_CNL AVX512_ICL
+AVX512_SPR" python benchmarks/bench_pipeline.py``.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
-import resource
+import platform
 import statistics
 import sys
 import time
-import tracemalloc
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -32,11 +44,13 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from mock_devices import scenes, synth  # noqa: E402
+from processing.fringe_pass import fringe_pass  # noqa: E402
 from processing.height import phase_to_height  # noqa: E402
-from processing.phase_shift import phase_shift, shadow_mask, wrapped_phase  # noqa: E402
-from processing.temporal import unwrap_two_frequency, unwrap_two_frequency_stacks  # noqa: E402
+from processing.phase_shift import phase_shift, shadow_mask  # noqa: E402
+from processing.temporal import unwrap_two_frequency  # noqa: E402
 
 STEPS = 6
+PEER = "OpenCV PSP 2x computePhaseMap + unwrapPhaseMap"
 
 
 def simulate(frequencies: tuple[int, int], snr_db: float, seed: int = 0):
@@ -53,37 +67,30 @@ def simulate(frequencies: tuple[int, int], snr_db: float, seed: int = 0):
     return geometry, heights, obj_map, obj, ref
 
 
-def absolute_phase(stack: np.ndarray, frequencies: tuple[int, int]):
-    """The timed core: phase shifting both frequencies (background and modulation of the high
-    one only, for the mask), then Ding's two-frequency method."""
+GROUPS = [list(range(STEPS)), list(range(STEPS, 2 * STEPS))]
+
+
+def fused_pipeline(stack, frequencies, reference_phase, geometry, opencv: bool = True) -> np.ndarray:
+    """fringe_pass + eq. 1.15 in float32; NaN where the mask or the unwrapping failed."""
+    scan = fringe_pass(stack, GROUPS, frequencies, "two-frequency", opencv=opencv)
+    delta = scan.phase  # NaN where not valid, which eq. 1.15 carries through
+    delta -= reference_phase
+    return phase_to_height(delta, geometry.l0_mm, geometry.d0_mm, geometry.per_mm(frequencies[1]), dtype=np.float32)
+
+
+def stage_pipeline(stack, frequencies, reference_phase, geometry) -> np.ndarray:
+    """The float64 public functions one after the other (rig process's former path)."""
     f1, f2 = frequencies
-    low = wrapped_phase(stack[:STEPS])
-    high = phase_shift(stack[STEPS:])
-    unwrapped = unwrap_two_frequency(low, high.phase, f1, f2)
-    return unwrapped, high
-
-
-def our_pipeline(stack, frequencies, reference_phase, geometry) -> np.ndarray:
-    unwrapped, high = absolute_phase(stack, frequencies)
-    valid = shadow_mask(high.modulation, high.background)
+    low, high = phase_shift(stack[:STEPS]), phase_shift(stack[STEPS:])
+    unwrapped = unwrap_two_frequency(low.phase, high.phase, f1, f2)
+    valid = shadow_mask(low.modulation, low.background)
+    valid &= shadow_mask(high.modulation, high.background)
     valid &= unwrapped.valid
     delta = unwrapped.phase
-    delta -= reference_phase  # in place: the unwrapped phase is ours to reuse
-    height = phase_to_height(delta, geometry.l0_mm, geometry.d0_mm, geometry.per_mm(frequencies[1]))
-    height[~valid] = np.nan
-    return height
-
-
-def fused_pipeline(stack, frequencies, reference_phase, geometry) -> np.ndarray:
-    """The same steps with phase shifting and unwrapping fused (unwrap_two_frequency_stacks)."""
-    scan = unwrap_two_frequency_stacks(stack[:STEPS], stack[STEPS:], *frequencies)
-    valid = shadow_mask(scan.modulation, scan.background)
-    valid &= scan.unwrapped.valid
-    delta = scan.unwrapped.phase
     delta -= reference_phase
-    height = phase_to_height(delta, geometry.l0_mm, geometry.d0_mm, geometry.per_mm(frequencies[1]))
+    height = phase_to_height(delta, geometry.l0_mm, geometry.d0_mm, geometry.per_mm(f2))
     height[~valid] = np.nan
-    return height
+    return height.astype(np.float32)
 
 
 def opencv_pipeline(stack, frequencies, geometry):
@@ -101,15 +108,11 @@ def opencv_pipeline(stack, frequencies, geometry):
     return low_phase, pattern.unwrapPhaseMap(high_phase, size, shadowMask=high_mask)
 
 
-def timed(funcs: dict, runs: int) -> dict[str, list[tuple[float, float]]]:
-    """(wall, CPU) seconds of each function, interleaved run by run so load changes hit all alike.
-
-    CPU time is the process's (all threads, OpenCV uses several): on a machine shared with
-    other jobs it is far less sensitive to their load than the wall clock.
-    """
+def timed(funcs: dict[str, Callable[[], object]], runs: int) -> dict[str, list[tuple[float, float]]]:
+    """(wall, CPU) seconds of each function, interleaved run by run so load changes hit all alike."""
     times: dict[str, list[tuple[float, float]]] = {name: [] for name in funcs}
     for func in funcs.values():
-        func()  # warm-up: caches, look-up tables, first page faults
+        func()  # warm-up: caches, look-up tables, first page faults, lazy imports
     for _ in range(runs):
         for name, func in funcs.items():
             wall, cpu = time.perf_counter(), time.process_time()
@@ -118,66 +121,97 @@ def timed(funcs: dict, runs: int) -> dict[str, list[tuple[float, float]]]:
     return times
 
 
+def cpu_description() -> list[str]:
+    """CPU model and SIMD level, as the OS, numpy and OpenCV see them."""
+    model, flags = platform.processor() or "unknown", set()
+    try:
+        with open("/proc/cpuinfo", encoding="ascii", errors="replace") as info:
+            for line in info:
+                if line.startswith("model name") and model in ("unknown", platform.processor()):
+                    model = line.split(":", 1)[1].strip()
+                elif line.startswith("flags"):
+                    flags = set(line.split(":", 1)[1].split())
+    except OSError:
+        pass
+    simd = [f for f in ("sse4_2", "avx", "avx2", "fma", "avx512f", "avx512bw", "avx512_fp16") if f in flags]
+    from numpy._core._multiarray_umath import __cpu_features__ as npy_features  # type: ignore[import-not-found]
+
+    numpy_simd = [f for f in ("AVX2", "FMA3", "AVX512F", "AVX512_SKX", "AVX512_SPR") if npy_features.get(f)]
+    lines = [
+        f"CPU: {model}, {os.cpu_count()} logical CPUs; flags: {' '.join(simd) or 'none of interest'}",
+        f"numpy {np.__version__} dispatches to: {' '.join(numpy_simd) or 'baseline only'}",
+    ]
+    try:
+        import cv2
+
+        lines.append(f"OpenCV {cv2.__version__}: {cv2.getCPUFeaturesLine()}")
+    except ImportError:
+        lines.append("OpenCV: not installed")
+    return lines
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--runs", type=int, default=9, help="timed runs per path (median reported; >= 7)")
+    parser.add_argument("--runs", type=int, default=11, help="interleaved timed runs (median reported; >= 5)")
     parser.add_argument("--frequencies", type=int, nargs=2, default=(15, 16), metavar=("F1", "F2"))
     parser.add_argument("--snr-db", type=float, default=30.0)
     args = parser.parse_args(argv)
-    if args.runs < 7:
-        parser.error("--runs: expected at least 7")
+    if args.runs < 5:
+        parser.error("--runs: expected at least 5")
     freqs = tuple(args.frequencies)
     print(f"simulating 1024x768, frequencies {freqs}, {STEPS} steps, SNR {args.snr_db} dB ...", file=sys.stderr)
     geometry, heights, obj_map, obj, ref = simulate(freqs, args.snr_db)
-    reference, _ = absolute_phase(ref, freqs)  # calibration's job, done once
-    reference_phase = reference.phase
+    reference_phase = fringe_pass(ref, GROUPS, freqs, "two-frequency").phase  # the calibration's job, done once
+    reference_phase64 = reference_phase.astype(np.float64)
 
-    def ours():
-        return our_pipeline(obj, freqs, reference_phase, geometry)
+    rows: dict[str, Callable[[], object]] = {
+        "fpp-rig fused (fringe_pass + eq. 1.15)": lambda: fused_pipeline(obj, freqs, reference_phase, geometry),
+        "fpp-rig fused, numpy kernels": lambda: fused_pipeline(obj, freqs, reference_phase, geometry, opencv=False),
+        "fpp-rig float64 stage functions": lambda: stage_pipeline(obj, freqs, reference_phase64, geometry),
+        PEER: lambda: opencv_pipeline(obj, freqs, geometry),
+    }
 
-    def fused():
-        return fused_pipeline(obj, freqs, reference_phase, geometry)
-
-    # Check the result against the simulated truth (orders: phase within pi of the truth).
-    height = ours()
-    unwrapped, _ = absolute_phase(obj, freqs)
+    # Check against the simulated truth: right fringe orders (phase within pi) and height error.
+    height = fused_pipeline(obj, freqs, reference_phase, geometry)
+    scan = fringe_pass(obj, GROUPS, freqs, "two-frequency")
     truth_phase = synth.true_absolute_phase(obj_map, geometry, freqs[1])
     valid = np.isfinite(height)
     lit = obj_map.lit & valid
-    order_errors = int(np.sum(np.abs(unwrapped.phase[lit] - truth_phase[lit]) >= np.pi))
+    order_errors = int(np.sum(np.abs(scan.phase[lit] - truth_phase[lit]) >= np.pi))
     rms = float(np.sqrt(np.mean((height[lit] - heights[lit]) ** 2)))
-    fused_gap = float(np.max(np.abs(fused()[lit] - height[lit])))
+    stage_gap = float(np.nanmax(np.abs(stage_pipeline(obj, freqs, reference_phase64, geometry) - height)))
 
-    peaks = []
-    for func in (fused, ours):
-        tracemalloc.start()
-        func()
-        peaks.append(tracemalloc.get_traced_memory()[1] / 2**20)
-        tracemalloc.stop()
-    rss_before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    load_before = os.getloadavg()
+    print(
+        f"timing {args.runs} interleaved runs of {len(rows)} rows (the OpenCV peer takes ~0.3-1 s each) ...",
+        file=sys.stderr,
+    )
+    times = timed(rows, args.runs)
+    load_after = os.getloadavg()
 
-    load_before = os.getloadavg()[0]
-    print(f"timing {args.runs} interleaved runs (the OpenCV path takes about a second each) ...", file=sys.stderr)
-    rows = timed({"fpp-rig fused": fused, "fpp-rig step by step": ours}, args.runs)
-    # Separately: a second of OpenCV between two of our runs would flush the caches each time.
-    rows.update(timed({"OpenCV PSP 2x computePhaseMap + unwrapPhaseMap": lambda: opencv_pipeline(obj, freqs, geometry)},
-                      args.runs))
-    rss_after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-
-    peer = statistics.median(t[0] for t in rows["OpenCV PSP 2x computePhaseMap + unwrapPhaseMap"]) * 1e3
-    print("12 uint8 frames 1024x768 (2 frequencies x 6 steps) -> height map. fpp-rig step by step: wrapped_phase "
-          "+ phase_shift + unwrap_two_frequency; fused: unwrap_two_frequency_stacks; both + shadow_mask + phase_to_height")
-    print(f"load average {load_before:.1f} before, {os.getloadavg()[0]:.1f} after ({os.cpu_count()} CPUs)")
-    print(f"{'path':<50} {'median ms':>10} {'min ms':>8} {'CPU ms':>7} {'runs':>5} {'OpenCV/this':>12}")
-    for name, times in rows.items():
-        median = statistics.median(t[0] for t in times) * 1e3
-        cpu = statistics.median(t[1] for t in times) * 1e3
-        fastest = min(t[0] for t in times) * 1e3
-        print(f"{name:<50} {median:>10.1f} {fastest:>8.1f} {cpu:>7.1f} {len(times):>5} {peer / median:>11.1f}x")
-    print(f"peak numpy allocations of one run (tracemalloc): fused {peaks[0]:.1f} MiB, step by step {peaks[1]:.1f} MiB; "
-          f"process maxrss {rss_after / 1024:.0f} MiB (+{(rss_after - rss_before) / 1024:.0f} MiB while timing)")
-    print(f"check: {order_errors} wrong fringe orders among {lit.sum()} valid lit pixels, "
-          f"height RMS error {rms:.3f} mm, valid {100 * valid.mean():.1f}%, fused vs step by step {fused_gap:.1e} mm")
+    print("12 uint8 frames 1024x768 (2 frequencies x 6 steps) -> height map, in memory, single process")
+    for line in cpu_description():
+        print(line)
+    print(
+        f"load average (1/5/15 min): {' '.join(f'{x:.2f}' for x in load_before)} before, "
+        f"{' '.join(f'{x:.2f}' for x in load_after)} after"
+    )
+    peer_walls = [t[0] for t in times[PEER]]
+    header = f"{'row':<48} {'median ms':>10} {'min-max ms':>15} {'CPU ms':>7} {'peer/this (min-max)':>22}"
+    print(header)
+    for name, samples in times.items():
+        walls = [t[0] for t in samples]
+        ratios = [p / w for p, w in zip(peer_walls, walls)]
+        spread = f"{min(walls) * 1e3:.1f}-{max(walls) * 1e3:.1f}"
+        ratio = f"{statistics.median(ratios):.1f}x ({min(ratios):.1f}-{max(ratios):.1f})"
+        print(
+            f"{name:<48} {statistics.median(walls) * 1e3:>10.1f} {spread:>15} "
+            f"{statistics.median(t[1] for t in samples) * 1e3:>7.1f} {ratio:>22}"
+        )
+    print(
+        f"runs: {args.runs} interleaved; check: {order_errors} wrong fringe orders among {lit.sum()} valid lit pixels, "
+        f"height RMS error {rms:.3f} mm, valid {100 * valid.mean():.1f}%, fused vs float64 stages {stage_gap:.1e} mm"
+    )
     return 0
 
 

@@ -252,19 +252,34 @@ def shadow_mask(
     return valid.reshape(b.shape)
 
 
-def _robust_high(modulation: np.ndarray, samples: int = 1 << 14) -> float:
-    """99th percentile of the finite modulation, from a regular subsample of ~``samples`` pixels."""
-    flat = modulation.reshape(-1)
-    stride = max(1, flat.size // samples)
-    while math.gcd(stride, modulation.shape[-1]) != 1:  # visit every column, not a few
+MODULATION_SAMPLES = 1 << 14  # pixels of the regular subsample behind the automatic threshold
+
+
+def sample_stride(shape: tuple[int, ...], samples: int = MODULATION_SAMPLES) -> int:
+    """Stride of the regular subsample ``flat[::stride]`` of ~``samples`` pixels of an (H, W) map.
+
+    The stride is coprime with the width, so the subsample visits every column, not a few.
+    """
+    stride = max(1, math.prod(shape) // samples)
+    while math.gcd(stride, shape[-1]) != 1:
         stride += 1
-    sub = flat[::stride]
-    sub = sub[np.isfinite(sub)]
+    return stride
+
+
+def robust_high(sample: np.ndarray, fallback: np.ndarray | None = None) -> float:
+    """99th percentile of the finite values of a modulation ``sample`` (else of ``fallback``'s)."""
+    sub = sample[np.isfinite(sample)]
+    if sub.size == 0 and fallback is not None:
+        sub = fallback[np.isfinite(fallback)]
     if sub.size == 0:
-        sub = flat[np.isfinite(flat)]
-        if sub.size == 0:
-            raise ValueError("modulation: no finite value to derive a threshold from")
+        raise ValueError("modulation: no finite value to derive a threshold from")
     return float(np.percentile(sub, 99.0))
+
+
+def _robust_high(modulation: np.ndarray) -> float:
+    """99th percentile of the finite modulation, from a regular subsample of ~16k pixels."""
+    flat = modulation.reshape(-1)
+    return robust_high(flat[:: sample_stride(modulation.shape)], flat)
 
 
 def quality_map(modulation: np.ndarray, background: np.ndarray) -> np.ndarray:

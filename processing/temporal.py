@@ -39,6 +39,9 @@ from processing._blockwise import blockwise
 from processing.phase_shift import block_angle, block_modulation, check_stack, demodulator
 
 TWO_PI = 2.0 * np.pi
+# A method on normalised wrapped turns (phi / 2 pi in [0, 1)) of one block, one array per frequency in
+# the order its public function takes them -> (absolute phase, orders, valid) of that block.
+TurnKernel = Callable[[Sequence[np.ndarray]], tuple[np.ndarray, ...]]
 
 
 @dataclass
@@ -210,14 +213,23 @@ def unwrap_two_frequency(phi1: np.ndarray, phi2: np.ndarray, f1: int, f2: int) -
     f1, f2 = _coprime_pair(f1, f2)
     p1 = _validate.phase_map(phi1, "phi1", refuse_infinity=False)
     p2 = _validate.phase_map(phi2, "phi2", p1.shape, refuse_infinity=False)
-    table = pair_table(f1, f2)
+    on_turns = _two_frequency_turns(f1, f2)
 
     def kernel(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, ...]:
-        tb = _turns(b)
-        k2, valid, finite = _pair_lookup(_turns(a, exact_top=False), tb, table, f1, f2)
-        return _finish(tb, k2, valid, finite)
+        return on_turns([_turns(a, exact_top=False), _turns(b)])
 
     return _run(kernel, [p1, p2])
+
+
+def _two_frequency_turns(f1: int, f2: int) -> TurnKernel:
+    """Ding's look-up on normalised turns [t1, t2] of the coprime pair f1 < f2 (checked)."""
+    table = pair_table(f1, f2)
+
+    def on_turns(turns: Sequence[np.ndarray]) -> tuple[np.ndarray, ...]:
+        k2, valid, finite = _pair_lookup(turns[0], turns[1], table, f1, f2)
+        return _finish(turns[1], k2, valid, finite)
+
+    return on_turns
 
 
 def _coprime_pair(f1: object, f2: object) -> tuple[int, int]:
@@ -335,6 +347,17 @@ def unwrap_three_frequency(phis: Sequence[np.ndarray], frequencies: Sequence[int
     while every phase error is below ``min_i t_i pi / (f_i + f3)``. Errors beyond it give other
     valid-looking orders; ``valid`` is False only where an input is NaN.
     """
+    on_turns = _three_frequency_turns(frequencies)
+    maps = _validate.phase_maps(phis, "phis", 3, refuse_infinity=False)
+
+    def kernel(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, ...]:
+        return on_turns([_turns(a), _turns(b), _turns(c)])
+
+    return _run(kernel, maps)
+
+
+def _three_frequency_turns(frequencies: Sequence[int]) -> TurnKernel:
+    """Ding's three-frequency method on normalised turns [t1, t2, t3]; checks ``frequencies``."""
     freqs = _validate.frequency_list(frequencies, "frequencies", count=3)
     if len(set(freqs)) != 3:
         raise ValueError(f"frequencies: expected three distinct values, found {freqs}")
@@ -342,7 +365,6 @@ def unwrap_three_frequency(phis: Sequence[np.ndarray], frequencies: Sequence[int
     f1, f2, f3 = freqs
     if f3 != max(freqs):
         raise ValueError(f"frequencies: expected the largest last, found {freqs}")
-    maps = _validate.phase_maps(phis, "phis", 3, refuse_infinity=False)
     pairs = []
     for fi in (f1, f2):
         t = math.gcd(fi, f3)
@@ -351,12 +373,12 @@ def unwrap_three_frequency(phis: Sequence[np.ndarray], frequencies: Sequence[int
         pairs.append((pair_table(fi // t, f3 // t), fi // t, f3 // t))
     crt = _crt_table(pairs[0][2], pairs[1][2], f3)
 
-    def kernel(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, ...]:
-        tc = _turns(c)
+    def on_turns(turns: Sequence[np.ndarray]) -> tuple[np.ndarray, ...]:
+        ta, tb, tc = turns
         # The reduced pairs' boundaries coincide at multiples of 1 / t inside the projector,
         # where noise legitimately produces their edge values of m: reachability says nothing.
-        r1, _, finite = _pair_lookup(_turns(a), tc, *pairs[0])
-        r2, _, finite_b = _pair_lookup(_turns(b), tc, *pairs[1])
+        r1, _, finite = _pair_lookup(ta, tc, *pairs[0])
+        r2, _, finite_b = _pair_lookup(tb, tc, *pairs[1])
         finite &= finite_b
         valid = np.ones(tc.shape, dtype=bool)
         k3 = crt[r1, r2]
@@ -364,7 +386,7 @@ def unwrap_three_frequency(phis: Sequence[np.ndarray], frequencies: Sequence[int
         np.maximum(k3, 0, out=k3)
         return _finish(tc, k3, valid, finite)
 
-    return _run(kernel, maps)
+    return on_turns
 
 
 def _check_frequencies_coprime(frequencies: Sequence[int], name: str) -> None:
@@ -421,19 +443,28 @@ def unwrap_hierarchical(
         Absolute phase and orders at the last (highest) frequency. Noise at the two ends of the
         projector can leave the phase a little below 0 or above 2 pi f (orders -1 or f there).
     """
+    on_turns, count = _hierarchical_turns(frequencies, max_residual)
+    maps = _validate.phase_maps(phis, "phis", count, refuse_infinity=False)
+
+    def kernel(*raw: np.ndarray) -> tuple[np.ndarray, ...]:
+        return on_turns([_turns(r) for r in raw])
+
+    return _run(kernel, maps)
+
+
+def _hierarchical_turns(frequencies: Sequence[int], max_residual: float) -> tuple[TurnKernel, int]:
+    """Hierarchical unwrapping on normalised turns, one per frequency, and their count; checks the arguments."""
     freqs = _validate.frequency_list(frequencies, "frequencies", minimum_count=2)
     if freqs[0] != 1:
         raise ValueError(f"frequencies: expected the unit frequency 1 first, found {freqs[0]}")
     if any(b <= a for a, b in zip(freqs, freqs[1:])):
         raise ValueError(f"frequencies: expected increasing values, found {freqs}")
     tolerance = _validate.finite_float(max_residual, "max_residual", minimum=0.0, strict=True)
-    maps = _validate.phase_maps(phis, "phis", len(freqs), refuse_infinity=False)
 
-    def kernel(*raw: np.ndarray) -> tuple[np.ndarray, ...]:
-        turns = [_turns(r) for r in raw]
+    def on_turns(turns: Sequence[np.ndarray]) -> tuple[np.ndarray, ...]:
         return _hierarchy(turns[0], list(zip(turns[1:], freqs[1:])), tolerance)
 
-    return _run(kernel, maps)
+    return on_turns, len(freqs)
 
 
 def unwrap_heterodyne(
@@ -463,13 +494,23 @@ def unwrap_heterodyne(
     then the largest beat and finally fa are unwrapped hierarchically. Beat phases add the
     noise of their terms, so the tolerance is far below that of the individual phases.
     """
+    on_turns, count = _heterodyne_turns(frequencies, max_residual)
+    maps = _validate.phase_maps(phis, "phis", count, refuse_infinity=False)
+
+    def kernel(*raw: np.ndarray) -> tuple[np.ndarray, ...]:
+        return on_turns([_turns(r) for r in raw])
+
+    return _run(kernel, maps)
+
+
+def _heterodyne_turns(frequencies: Sequence[int], max_residual: float) -> tuple[TurnKernel, int]:
+    """Heterodyne unwrapping on normalised turns, one per frequency, and their count; checks the arguments."""
     freqs = _validate.frequency_list(frequencies, "frequencies")
     if len(freqs) not in (2, 3):
         raise ValueError(f"frequencies: expected two or three frequencies, found {len(freqs)}")
     if len(set(freqs)) != len(freqs):
         raise ValueError(f"frequencies: expected distinct values, found {freqs}")
     tolerance = _validate.finite_float(max_residual, "max_residual", minimum=0.0, strict=True)
-    maps = _validate.phase_maps(phis, "phis", len(freqs), refuse_infinity=False)
     order = sorted(range(len(freqs)), key=lambda i: -freqs[i])
     fs = [freqs[i] for i in order]
     if len(fs) == 2 and fs[0] - fs[1] != 1:
@@ -480,8 +521,8 @@ def unwrap_heterodyne(
             "must differ by 1"
         )
 
-    def kernel(*raw: np.ndarray) -> tuple[np.ndarray, ...]:
-        turns = [_turns(raw[i]) for i in order]
+    def on_turns(given: Sequence[np.ndarray]) -> tuple[np.ndarray, ...]:
+        turns = [given[i] for i in order]
         if len(fs) == 2:
             return _hierarchy(_fraction(turns[0] - turns[1]), [(turns[0], fs[0])], tolerance)
         beat_ab, beat_bc = fs[0] - fs[1], fs[1] - fs[2]
@@ -492,7 +533,52 @@ def unwrap_heterodyne(
             unit, wide = _fraction(turns_bc - turns_ab), (turns_bc, beat_bc)
         return _hierarchy(unit, [wide, (turns[0], fs[0])], tolerance)
 
-    return _run(kernel, maps)
+    return on_turns, len(freqs)
+
+
+TEMPORAL_METHODS = ("two-frequency", "three-frequency", "hierarchical", "heterodyne")
+
+
+def turn_kernel(
+    method: str, frequencies: Sequence[int], max_residual: float = np.pi / 2
+) -> tuple[TurnKernel, list[int]]:
+    """A temporal method as a kernel on normalised turns, for passes that fuse it with phase shifting.
+
+    Parameters
+    ----------
+    method : str
+        One of :data:`TEMPORAL_METHODS`, with the arithmetic of :func:`unwrap_two_frequency`,
+        :func:`unwrap_three_frequency`, :func:`unwrap_hierarchical`, :func:`unwrap_heterodyne`.
+    frequencies : sequence of ints
+        Every captured frequency, lowest first. As ``rig process`` does, the two- and
+        three-frequency methods take the two / three highest, the others all of them.
+    max_residual : float
+        Residual bound of the hierarchical and heterodyne methods (radians).
+
+    Returns
+    -------
+    kernel : callable
+        ``kernel(turns) -> (phase, orders, valid)`` of one block, ``turns`` a list of arrays of
+        wrapped phase / 2 pi in [0, 1), one per used frequency in the order of ``used``.
+    used : list of int
+        Indices into ``frequencies`` of the frequencies the method reads; the last is the one
+        whose absolute phase it returns.
+    """
+    freqs = _validate.frequency_list(frequencies, "frequencies")
+    if method == "two-frequency":
+        if len(freqs) < 2:
+            raise ValueError(f"frequencies: two-frequency unwrapping needs two, found {freqs}")
+        used = [len(freqs) - 2, len(freqs) - 1]
+        return _two_frequency_turns(*_coprime_pair(freqs[-2], freqs[-1])), used
+    if method == "three-frequency":
+        used = list(range(len(freqs) - 3, len(freqs))) if len(freqs) >= 3 else list(range(len(freqs)))
+        return _three_frequency_turns([freqs[i] for i in used]), used
+    if method == "hierarchical":
+        return _hierarchical_turns(freqs, max_residual)[0], list(range(len(freqs)))
+    if method == "heterodyne":
+        kernel, _ = _heterodyne_turns(freqs, max_residual)
+        return kernel, list(range(len(freqs)))
+    raise ValueError(f"method: expected one of {', '.join(TEMPORAL_METHODS)}, found {method!r}")
 
 
 # --------------------------------------------------------------------------- Gray code

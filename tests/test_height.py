@@ -39,6 +39,17 @@ def test_round_trip() -> None:
     np.testing.assert_allclose(back, heights, atol=1e-9)
 
 
+def test_float32_round_trip_within_its_rounding() -> None:
+    heights = np.linspace(-200.0, 900.0, 1001).reshape(7, 143)
+    dphi = height_to_phase(heights, L0, D0, F0)
+    back = phase_to_height(dphi.astype(np.float32), L0, D0, F0, dtype=np.float32)
+    assert back.dtype == np.float32
+    # float32 dPhi (relative 6e-8) and arithmetic: a few 1e-7 of the height and of l0.
+    np.testing.assert_allclose(back, heights, rtol=1e-6, atol=1e-6 * L0)
+    with pytest.raises(ValueError, match="dtype"):
+        phase_to_height(dphi, L0, D0, F0, dtype=np.int32)
+
+
 def test_simulated_plane_recovered_from_true_phases() -> None:
     """The synthesiser's projector coordinates of a 20 mm plane give 20 mm through eq. 1.15."""
     base = synth.RigGeometry()

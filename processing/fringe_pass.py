@@ -1,0 +1,492 @@
+"""One pass over a phase-shifted capture: wrapped phases, modulation, shadow mask and temporal
+unwrapping, fused block by block in float32.
+
+Done stage by stage (:func:`processing.phase_shift.phase_shift` per frequency, then
+:func:`processing.phase_shift.shadow_mask` and :mod:`processing.temporal`), a two-frequency
+six-step 1024 x 768 capture writes float64 phase, background and modulation maps of every
+frequency to memory and reads them back several times. Here each block of pixels (16k, a few
+hundred KiB of float32 temporaries that stay in the CPU cache) goes from the raw frames to its
+absolute phase in one visit::
+
+    frames (N_i, P) --weights (3, N_i)--> A, B cos phi, B sin phi      one small product per frequency
+    -> wrapped phase phi in [0, 2 pi), modulation B, the modulation mask of each frequency
+    -> fringe orders and absolute phase of the highest frequency       (processing.temporal's methods)
+
+Angles and magnitudes come from OpenCV (``cv2.phase``, ``cv2.magnitude``, imported on first use)
+when it is installed: numpy's arctan2 costs about 20 ms per megapixel on CPUs without AVX-512,
+``cv2.phase`` well under 1 ms, with at most 1.7e-4 rad error (bounded by
+:data:`ANGLE_TOLERANCE`, tested), far below the phase noise of an 8-bit capture. Ding's
+two-frequency look-up then runs as OpenCV look-up tables on the rounded index. Without OpenCV
+(or with ``opencv=False``) numpy's exact arctan2 and the numpy look-up are used.
+
+The automatic thresholds of the shadow mask (a fraction of the 99th percentile of the modulation,
+as :func:`processing.phase_shift.shadow_mask` derives them) come from the same regular subsample
+of about 16k pixels, demodulated before the pass, so the mask is known inside it.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from functools import lru_cache
+from typing import Any
+
+import numpy as np
+
+from processing import _validate
+from processing.phase_shift import robust_high, sample_stride, shift_weights
+from processing.temporal import TEMPORAL_METHODS, pair_table, turn_kernel
+
+TWO_PI = 2.0 * np.pi
+BLOCK = 16384  # pixels per block: each float32 temporary is 64 KiB
+ANGLE_TOLERANCE = 2.0e-4  # rad: bound on |angle - exact angle| of the OpenCV path (measured max 1.7e-4)
+_TOP = np.nextafter(np.float32(TWO_PI), np.float32(0.0))  # largest float32 below 2 pi: angles in [0, 2 pi)
+_BELOW_ONE = np.nextafter(np.float32(1.0), np.float32(0.0))
+_LUT_SIZE = 256  # OpenCV look-up tables index 8-bit images
+
+
+@lru_cache(maxsize=1)
+def _opencv() -> Any | None:
+    """The cv2 module, or None when OpenCV is not installed (imported once, on first use)."""
+    try:
+        import cv2
+    except ImportError:
+        return None
+    return cv2
+
+
+def _backend(opencv: bool) -> Any | None:
+    return _opencv() if opencv else None
+
+
+def _angle_into(
+    cos_part: np.ndarray, sin_part: np.ndarray, out: np.ndarray, cv2: Any | None, below_two_pi: bool = True
+) -> np.ndarray:
+    """atan2(sin, cos) of float32 vectors into ``out`` in [0, 2 pi]; NaN stays NaN.
+
+    ``below_two_pi`` moves 2 pi itself (float32 rounding of tiny negative angles) just below it,
+    so that the angle is a wrapped phase in [0, 2 pi); a look-up index does not need it.
+    """
+    if cv2 is not None:
+        cv2.phase(cos_part, sin_part, angle=out)
+    else:
+        np.arctan2(sin_part, cos_part, out=out)
+        np.add(out, np.float32(TWO_PI), out=out, where=out < 0)
+    return np.minimum(out, _TOP, out=out) if below_two_pi else out
+
+
+def _magnitude_into(cos_part: np.ndarray, sin_part: np.ndarray, out: np.ndarray, cv2: Any | None) -> np.ndarray:
+    """sqrt(cos^2 + sin^2) of float32 vectors into ``out``."""
+    if cv2 is not None:
+        cv2.magnitude(cos_part, sin_part, magnitude=out)
+        return out
+    np.multiply(cos_part, cos_part, out=out)
+    out += sin_part * sin_part
+    return np.sqrt(out, out=out)
+
+
+def wrapped_angle(cos_part: np.ndarray, sin_part: np.ndarray, opencv: bool = True) -> np.ndarray:
+    """The fast angle of the pass: atan2(sin_part, cos_part) in [0, 2 pi) as float32.
+
+    Parameters
+    ----------
+    cos_part, sin_part : arrays of one shape
+        B cos phi and B sin phi (any real dtype; computed in float32).
+    opencv : bool
+        Use ``cv2.phase`` when OpenCV is installed (error at most :data:`ANGLE_TOLERANCE`
+        radians); else numpy's arctan2 in float32.
+
+    Returns
+    -------
+    angle : float32 array of the inputs' shape, in [0, 2 pi); NaN where an input is NaN.
+    """
+    c = np.ascontiguousarray(_validate.real_array(cos_part, "cos_part"), dtype=np.float32)
+    s = np.ascontiguousarray(_validate.real_array(sin_part, "sin_part"), dtype=np.float32)
+    _validate.same_shape(s, c.shape, "sin_part")
+    out = np.empty(c.size, dtype=np.float32)
+    _angle_into(c.reshape(-1), s.reshape(-1), out, _backend(opencv))
+    return out.reshape(c.shape)
+
+
+@dataclass
+class FringePass:
+    """Output of :func:`fringe_pass`; maps are (H, W).
+
+    Attributes
+    ----------
+    frequencies : list of float
+        Frequency of each group, as given (lowest first).
+    method : str or None
+        The temporal method applied, None for wrapped phases only.
+    phase : float32 map or None
+        Absolute phase at ``phase_frequency`` (= 2 pi (orders + wrapped / 2 pi)), NaN where not
+        ``valid``; None without a method.
+    orders : int32 map or None
+        Fringe orders of ``phase_frequency`` (wrapped phase taken in [0, 2 pi)).
+    valid : bool map
+        Lit and modulated in every group (:func:`processing.phase_shift.shadow_mask`'s test with
+        ``thresholds``) and, with a method, consistent for it (see processing.temporal).
+    kept : list of int
+        Groups whose ``wrapped``, ``modulation`` and ``background`` maps were kept (in order).
+    wrapped, modulation, background : lists of float32 maps, one per kept group
+        Wrapped phase in [0, 2 pi), fringe amplitude B and mean intensity A.
+    thresholds : list of float
+        Minimum modulation of each group's mask.
+    phase_frequency : float
+        The frequency of ``phase`` (the highest one the method reads).
+    """
+
+    frequencies: list[float]
+    method: str | None
+    phase: np.ndarray | None
+    orders: np.ndarray | None
+    valid: np.ndarray
+    kept: list[int]
+    wrapped: list[np.ndarray]
+    modulation: list[np.ndarray]
+    background: list[np.ndarray]
+    thresholds: list[float]
+    phase_frequency: float
+
+
+@dataclass(frozen=True)
+class _Group:
+    rows: slice | np.ndarray  # frame indices into the flat stack
+    weights: np.ndarray  # (3, N) float32
+
+
+def _rows(indices: Sequence[int]) -> slice | np.ndarray:
+    """Frame indices as a slice when they are evenly spaced (a view, not a copy, per block)."""
+    if len(indices) > 1:
+        step = indices[1] - indices[0]
+        if step > 0 and all(b - a == step for a, b in itertools.pairwise(indices)):
+            return slice(indices[0], indices[-1] + 1, step)
+    return np.asarray(indices, dtype=np.intp)
+
+
+def _check_groups(groups: Sequence[Sequence[int]], frames: int) -> list[list[int]]:
+    try:
+        lists = [[_validate.positive_int(i, "groups", minimum=0) for i in g] for g in groups]
+    except TypeError:
+        raise ValueError("groups: expected a sequence of frame index sequences") from None
+    if not lists:
+        raise ValueError("groups: expected at least one group of frames")
+    for k, indices in enumerate(lists):
+        if len(indices) < 3:
+            raise ValueError(f"groups[{k}]: expected at least 3 phase-shifted frames, found {len(indices)}")
+        if max(indices) >= frames:
+            raise ValueError(f"groups[{k}]: frame index {max(indices)} outside the stack of {frames} frames")
+    return lists
+
+
+@dataclass(frozen=True)
+class _DingTables:
+    """Ding's look-up for (f1, f2) as 256-entry tables of 2 pi k, k and reachability (OpenCV path)."""
+
+    f1: int
+    f2: int
+    phase: np.ndarray
+    orders: np.ndarray
+    reach: np.ndarray
+
+
+def _ding_tables(frequencies: Sequence[int], used: Sequence[int]) -> _DingTables | None:
+    """The tables of the pair that ``used`` picks, or None when m + f1 can exceed an 8-bit index."""
+    f1, f2 = (int(frequencies[i]) for i in used)
+    if f1 + f2 >= _LUT_SIZE:
+        return None
+    table = pair_table(f1, f2)
+    size = table.kb.shape[0]
+    phase = np.zeros(_LUT_SIZE, dtype=np.float32)
+    phase[:size] = table.kb * TWO_PI
+    orders = np.zeros(_LUT_SIZE, dtype=np.int32)
+    orders[:size] = table.kb
+    reach = np.zeros(_LUT_SIZE, dtype=np.uint8)
+    reach[:size] = table.reachable
+    return _DingTables(f1, f2, phase, orders, reach)
+
+
+def fringe_pass(
+    frames: np.ndarray,
+    groups: Sequence[Sequence[int]],
+    frequencies: Sequence[float],
+    method: str | None = None,
+    shifts: Sequence[np.ndarray | None] | None = None,
+    min_ratio: float = 0.2,
+    max_residual: float = np.pi / 2,
+    keep_all: bool = False,
+    opencv: bool = True,
+    threads: int = 1,
+) -> FringePass:
+    """Wrapped phases, modulation mask and (optionally) temporal unwrapping in one pass.
+
+    Parameters
+    ----------
+    frames : (N, H, W) array, any integer or float dtype
+        Every frame of the capture; computed in float32 (exact for 8- and 16-bit images).
+    groups : sequence of sequences of int
+        Frame indices of each frequency's phase-shifted set (>= 3 each), lowest frequency first.
+    frequencies : sequence of float
+        Fringes across the projector of each group (whole numbers for a temporal method).
+    method : str, optional
+        One of :data:`processing.temporal.TEMPORAL_METHODS`; the two- and three-frequency
+        methods read the two / three highest frequencies (see
+        :func:`processing.temporal.turn_kernel`). None: wrapped phases and mask only.
+    shifts : sequence of (N_i,) arrays or None, optional
+        Phase shifts of each group in radians (including the patterns' ``phase_rad``); None
+        for 2 pi k / N_i.
+    min_ratio : float in (0, 1]
+        Modulation mask of each group as :func:`processing.phase_shift.shadow_mask` with its
+        automatic threshold: B >= min_ratio x 99th percentile of B, B >= min_ratio x A, A > 0.
+    max_residual : float
+        Residual bound of the hierarchical and heterodyne methods (radians).
+    keep_all : bool
+        Keep the wrapped phase, modulation and background of every group; default only the
+        highest frequency's (what height, texture and corrections read).
+    opencv : bool
+        Use OpenCV's angle, magnitude and look-up kernels when installed (angles within
+        :data:`ANGLE_TOLERANCE` of exact); False: numpy only.
+    threads : int
+        Threads sharing the blocks (numpy and OpenCV release the GIL in their loops).
+
+    Returns
+    -------
+    FringePass
+        Within ``ANGLE_TOLERANCE`` (OpenCV) or float32 rounding (numpy) of the float64 stage
+        functions; fringe orders equal theirs except where the unwrapping index sits on a
+        rounding boundary (phase errors at the method's tolerance).
+    """
+    stack = _validate.real_array(frames, "frames", ndim=3)
+    count, height, width = stack.shape
+    lists = _check_groups(groups, count)
+    freqs = [
+        _validate.finite_float(f, f"frequencies[{i}]", minimum=0.0, strict=True) for i, f in enumerate(frequencies)
+    ]
+    if len(freqs) != len(lists):
+        raise ValueError(f"frequencies: expected {len(lists)} (one per group), found {len(freqs)}")
+    if shifts is not None and len(shifts) != len(lists):
+        raise ValueError(
+            f"shifts: expected {len(lists)} entries (one per group, None for uniform), found {len(shifts)}"
+        )
+    ratio = _validate.finite_float(min_ratio, "min_ratio", minimum=0.0, strict=True)
+    if ratio > 1.0:
+        raise ValueError(f"min_ratio: expected a fraction in (0, 1], found {min_ratio!r}")
+    threads = _validate.positive_int(threads, "threads")
+    cv2 = _backend(opencv)
+    kernel: Callable[[Sequence[np.ndarray]], tuple[np.ndarray, ...]] | None = None
+    used: list[int] = []
+    tables: _DingTables | None = None
+    if method is not None:
+        if method not in TEMPORAL_METHODS:
+            raise ValueError(f"method: expected one of {', '.join(TEMPORAL_METHODS)} or None, found {method!r}")
+        whole = [f for f in freqs if float(f).is_integer()]
+        if len(whole) != len(freqs):
+            raise ValueError(f"frequencies: temporal unwrapping needs whole fringe counts, found {freqs}")
+        kernel, used = turn_kernel(method, [int(f) for f in freqs], max_residual)
+        if method == "two-frequency" and cv2 is not None:
+            tables = _ding_tables([int(f) for f in freqs], used)
+    specs = [
+        _Group(_rows(g), shift_weights(len(g), None if shifts is None else shifts[k]).astype(np.float32))
+        for k, g in enumerate(lists)
+    ]
+    flat = stack.reshape(count, -1)
+    pixels = flat.shape[1]
+    thresholds = [
+        max(ratio * _sampled_high(flat, spec, (height, width), cv2), float(np.finfo(np.float32).tiny)) for spec in specs
+    ]
+    kept = list(range(len(lists))) if keep_all else [len(lists) - 1]
+    out = _Outputs.allocate(pixels, len(kept), method is not None)
+    nonnegative = np.issubdtype(stack.dtype, np.unsignedinteger) and all((s.weights[0] >= 0).all() for s in specs)
+    plan = _Plan(flat, specs, thresholds, ratio, kept, kernel, used, tables, cv2, nonnegative)
+    bounds = _thread_ranges(pixels, threads)
+    if len(bounds) == 1:
+        plan.run(out, *bounds[0])
+    else:
+        with ThreadPoolExecutor(len(bounds)) as pool:
+            for future in [pool.submit(plan.run, out, start, stop) for start, stop in bounds]:
+                future.result()
+    shape = (height, width)
+    return FringePass(
+        frequencies=freqs,
+        method=method,
+        phase=None if out.phase is None else out.phase.reshape(shape),
+        orders=None if out.orders is None else out.orders.reshape(shape),
+        valid=out.valid.reshape(shape),
+        kept=kept,
+        wrapped=[m.reshape(shape) for m in out.wrapped],
+        modulation=[m.reshape(shape) for m in out.modulation],
+        background=[m.reshape(shape) for m in out.background],
+        thresholds=thresholds,
+        phase_frequency=freqs[used[-1]] if used else freqs[-1],
+    )
+
+
+def _sampled_high(flat: np.ndarray, spec: _Group, shape: tuple[int, int], cv2: Any | None) -> float:
+    """99th percentile of a group's modulation over :func:`sample_stride`'s subsample (no full pass)."""
+    stride = sample_stride(shape)
+    rows = flat[spec.rows]
+    sample = np.ascontiguousarray(rows[:, ::stride], dtype=np.float32)
+    coeffs = spec.weights @ sample
+    modulation = _magnitude_into(coeffs[1], coeffs[2], np.empty(coeffs.shape[1], dtype=np.float32), cv2)
+    if np.isfinite(modulation).any():
+        return robust_high(modulation)
+    everything = np.ascontiguousarray(rows, dtype=np.float32)  # rare: NaN throughout the subsample
+    coeffs = spec.weights @ everything
+    return robust_high(_magnitude_into(coeffs[1], coeffs[2], np.empty(coeffs.shape[1], dtype=np.float32), cv2))
+
+
+def _thread_ranges(pixels: int, threads: int) -> list[tuple[int, int]]:
+    """Contiguous pixel ranges, whole blocks each, one per thread (fewer for small images)."""
+    blocks = math.ceil(pixels / BLOCK)
+    parts = max(1, min(threads, blocks))
+    edges = [min(pixels, round(blocks * i / parts) * BLOCK) for i in range(parts + 1)]
+    return [(a, b) for a, b in itertools.pairwise(edges) if b > a]
+
+
+@dataclass
+class _Outputs:
+    """Full-size flat outputs that the blocks write into."""
+
+    phase: np.ndarray | None
+    orders: np.ndarray | None
+    valid: np.ndarray
+    wrapped: list[np.ndarray]
+    modulation: list[np.ndarray]
+    background: list[np.ndarray]
+
+    @classmethod
+    def allocate(cls, pixels: int, kept: int, unwrapping: bool) -> _Outputs:
+        # One allocation for the float32 maps: large enough for numpy to ask for huge pages, and
+        # a few big blocks instead of many 3 MiB ones keep the allocator from returning them to
+        # the system between runs (fresh pages cost more to touch than the pass to compute).
+        maps = np.empty((3 * kept + (1 if unwrapping else 0), pixels), dtype=np.float32)
+        rows = list(maps)
+        return cls(
+            phase=rows.pop() if unwrapping else None,
+            orders=np.empty(pixels, dtype=np.int32) if unwrapping else None,
+            valid=np.empty(pixels, dtype=bool),
+            wrapped=rows[:kept],
+            modulation=rows[kept : 2 * kept],
+            background=rows[2 * kept :],
+        )
+
+
+@dataclass
+class _Plan:
+    """Everything a thread needs to run the pass over a range of pixels."""
+
+    flat: np.ndarray
+    specs: list[_Group]
+    thresholds: list[float]
+    ratio: float
+    kept: list[int]
+    kernel: Callable[[Sequence[np.ndarray]], tuple[np.ndarray, ...]] | None
+    used: list[int]
+    tables: _DingTables | None
+    cv2: Any | None
+    background_nonnegative: bool  # unsigned frames and non-negative A weights
+
+    def run(self, out: _Outputs, start: int, stop: int) -> None:
+        """Blocks of [start, stop): scratch buffers are this call's own, outputs disjoint slices."""
+        size = min(BLOCK, stop - start)
+        scratch = _Scratch.allocate(self.specs, size)
+        for begin in range(start, stop, BLOCK):
+            end = min(begin + BLOCK, stop)
+            self._block(out, begin, end, scratch if end - begin == size else _Scratch.allocate(self.specs, end - begin))
+
+    def _block(self, out: _Outputs, begin: int, end: int, scratch: _Scratch) -> None:
+        cv2 = self.cv2
+        window = slice(begin, end)
+        valid = out.valid[window]
+        angles: list[np.ndarray] = []
+        for g, spec in enumerate(self.specs):
+            frames = scratch.frames[g]
+            np.copyto(frames, self.flat[spec.rows, window], casting="unsafe")
+            coeffs = scratch.coeffs[g]
+            np.matmul(spec.weights, frames, out=coeffs)
+            slot = self.kept.index(g) if g in self.kept else -1
+            angle = out.wrapped[slot][window] if slot >= 0 else scratch.angle[g]
+            angles.append(_angle_into(coeffs[1], coeffs[2], angle, cv2, below_two_pi=slot >= 0 or self.tables is None))
+            modulation = out.modulation[slot][window] if slot >= 0 else scratch.modulation
+            _magnitude_into(coeffs[1], coeffs[2], modulation, cv2)
+            if slot >= 0:
+                np.copyto(out.background[slot][window], coeffs[0])
+            self._mask(coeffs[0], modulation, self.thresholds[g], valid if g == 0 else scratch.test, scratch)
+            if g:
+                valid &= scratch.test
+        if self.kernel is None:
+            return
+        assert out.phase is not None and out.orders is not None
+        phase, orders = out.phase[window], out.orders[window]
+        if self.tables is not None:
+            self._ding_opencv(angles[self.used[0]], angles[self.used[1]], phase, orders, valid, scratch)
+        else:
+            turns = [np.minimum(angles[i] * np.float32(1.0 / TWO_PI), _BELOW_ONE) for i in self.used]
+            absolute, k, consistent = self.kernel(turns)
+            np.copyto(phase, absolute, casting="same_kind")
+            np.copyto(orders, k, casting="unsafe")
+            valid &= consistent
+        np.logical_not(valid, out=scratch.test)
+        np.copyto(phase, np.float32(np.nan), where=scratch.test)
+
+    def _mask(
+        self, background: np.ndarray, modulation: np.ndarray, threshold: float, out: np.ndarray, scratch: _Scratch
+    ) -> None:
+        """shadow_mask's test: B >= max(threshold, ratio A) and A > 0 (NaN compares False)."""
+        level = np.multiply(background, np.float32(self.ratio), out=scratch.level)
+        np.maximum(level, np.float32(threshold), out=level)
+        np.greater_equal(modulation, level, out=out)
+        if not self.background_nonnegative:  # else A = 0 only where every frame is 0, so B = 0 fails
+            out &= np.greater(background, 0, out=scratch.positive)
+
+    def _ding_opencv(
+        self,
+        low: np.ndarray,
+        high: np.ndarray,
+        phase: np.ndarray,
+        orders: np.ndarray,
+        valid: np.ndarray,
+        scratch: _Scratch,
+    ) -> None:
+        """Ding's look-up as OpenCV tables: index m + f1 = round(f2 t1 - f1 t2 + f1), rounded by addWeighted."""
+        cv2, tables = self.cv2, self.tables
+        assert cv2 is not None and tables is not None
+        f1, f2 = tables.f1, tables.f2
+        index = cv2.addWeighted(low, f2 / TWO_PI, high, -f1 / TWO_PI, float(f1), dtype=cv2.CV_8U)
+        cv2.LUT(index, tables.phase, dst=phase)
+        phase += high
+        cv2.LUT(index, tables.orders, dst=orders)
+        valid &= cv2.LUT(index, tables.reach, dst=scratch.reach).view(bool)
+
+
+@dataclass
+class _Scratch:
+    """Per-thread block buffers, reused from block to block."""
+
+    frames: list[np.ndarray]
+    coeffs: list[np.ndarray]
+    angle: list[np.ndarray]
+    modulation: np.ndarray
+    level: np.ndarray
+    test: np.ndarray
+    positive: np.ndarray
+    reach: np.ndarray
+
+    @classmethod
+    def allocate(cls, specs: Sequence[_Group], size: int) -> _Scratch:
+        def vector(dtype: type = np.float32) -> np.ndarray:
+            return np.empty(size, dtype=dtype)
+
+        return cls(
+            frames=[np.empty((s.weights.shape[1], size), dtype=np.float32) for s in specs],
+            coeffs=[np.empty((3, size), dtype=np.float32) for _ in specs],
+            angle=[vector() for _ in specs],
+            modulation=vector(),
+            level=vector(),
+            test=vector(np.bool_),
+            positive=vector(np.bool_),
+            reach=vector(np.uint8),
+        )
