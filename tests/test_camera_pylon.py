@@ -145,3 +145,82 @@ def test_burst_is_refused_by_the_emulator(image_folder: Path) -> None:
 def test_unknown_serial_is_device_not_found() -> None:
     with pytest.raises(DeviceNotFoundError, match="no pylon camera"):
         PylonCamera("no-such-serial").open()
+
+
+# -- what a real Basler USB3 camera does that the emulator does not (issue 15) -----------------
+# mock_devices.pylon_camera.UsbCameraQuirks overrides only those nodes of the emulator.
+
+def quirky(folder: Path, **quirks) -> PylonCamera:
+    from pypylon import pylon
+
+    from mock_devices.pylon_camera import UsbCameraQuirks
+
+    info = pylon.DeviceInfo()
+    info.SetDeviceClass("BaslerCamEmu")
+    inner = pylon.InstantCamera(pylon.TlFactory.GetInstance().CreateFirstDevice(info))
+    features = {"ImageFilename": str(folder), "ImageFileMode": "On", "TestImageSelector": "Off",
+                "OffsetX": 0, "OffsetY": 0, "Width": WIDTH, "Height": HEIGHT}
+    return PylonCamera(camera=UsbCameraQuirks(inner, **quirks), features=features)
+
+
+@needs_emulator
+def test_auto_gain_is_switched_off_and_gain_set_in_db(image_folder: Path) -> None:
+    # auto gain on makes Gain read-only; a USB camera has no GainRaw to fall back to
+    with quirky(image_folder, gain_auto="Continuous", gain_raw=False) as camera:
+        assert camera._read("GainAuto") == "Off"
+        camera.gain = 6.0
+        assert camera.gain_unit == "dB"
+        assert camera._read("Gain") == pytest.approx(6.0, abs=0.1)
+
+
+@needs_emulator
+def test_emulator_gain_is_the_db_feature(image_folder: Path) -> None:
+    with emulated(image_folder) as camera:
+        camera.gain = 3.0
+        assert camera.gain_unit == "dB" and camera._read("Gain") == pytest.approx(3.0, abs=0.1)
+
+
+@needs_emulator
+def test_other_trigger_selectors_are_switched_off(image_folder: Path) -> None:
+    # an AcquisitionStart trigger left on (pylon's default configuration not loaded) holds frames
+    with quirky(image_folder, acquisition_start="On") as camera:
+        camera.set_trigger(TriggerSource.SOFTWARE)
+        camera.start()
+        camera.trigger()
+        assert camera.fetch(timeout_s=5.0).frame_id == 0
+        camera.stop()
+        camera._write("TriggerSelector", "AcquisitionStart")
+        assert camera._read("TriggerMode") == "Off"
+
+
+@needs_emulator
+def test_emulator_trigger_selectors_other_than_the_active_one_are_off(image_folder: Path) -> None:
+    with emulated(image_folder) as camera:
+        camera._write("TriggerSelector", "ExposureStart")
+        camera._write("TriggerMode", "On")
+        camera.set_trigger(TriggerSource.SOFTWARE)
+        for selector in camera._symbolics("TriggerSelector"):
+            camera._write("TriggerSelector", selector)
+            assert camera._read("TriggerMode") == ("On" if selector == "FrameStart" else "Off"), selector
+
+
+@needs_emulator
+def test_frame_exposed_before_its_trigger_is_stale_on_the_camera_clock(image_folder: Path) -> None:
+    from drivers.camera import StaleFrameError
+
+    with quirky(image_folder, stale_frames=1) as camera:
+        camera.start()
+        camera.trigger()
+        with pytest.raises(StaleFrameError, match="before its trigger"):
+            camera.fetch(timeout_s=5.0)
+        camera.trigger()
+        frame = camera.fetch(timeout_s=5.0)
+        assert frame.frame_id == 1 and frame.timestamp_s <= camera.now()
+
+
+@needs_emulator
+def test_software_trigger_without_trigger_ready_support(image_folder: Path) -> None:
+    with quirky(image_folder, can_wait_for_trigger_ready=False) as camera:
+        camera.start()
+        camera.trigger()
+        assert camera.fetch(timeout_s=5.0).frame_id == 0
