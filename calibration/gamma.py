@@ -57,7 +57,7 @@ def _power(level: np.ndarray, offset: float, gain: float, gamma: float) -> np.nd
     return offset + gain * np.power(np.clip(level, 0.0, 1.0), gamma)
 
 
-def fit_gamma(levels: Sequence[float], responses: Sequence[float], saturation: float | None = None) -> GammaFit:
+def fit_gamma(levels: Sequence[float], responses: Sequence[float] | np.ndarray, saturation: float | None = None) -> GammaFit:
     """Fit I = offset + gain * level ** gamma to mean camera intensities at flat levels.
 
     Parameters
@@ -114,7 +114,7 @@ def mean_response(frames: np.ndarray, mask: np.ndarray | None = None) -> np.ndar
         raise CalibrationError(f"gamma frames: expected (N, H, W), found shape {stack.shape}")
     if mask is None:
         mask = np.zeros(stack.shape[1:], dtype=bool)
-        h, w = mask.shape
+        h, w = stack.shape[1:]
         mask[h // 4 : h - h // 4 or h, w // 4 : w - w // 4 or w] = True
     return stack[:, np.asarray(mask, dtype=bool)].mean(axis=1)
 

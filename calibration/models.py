@@ -93,13 +93,14 @@ def height_from_phase(
         from processing.height import phase_to_height
 
         delta = _delta(object_phase, reference_phase, calibration)
+        assert calibration.l0_mm is not None and calibration.d0_mm is not None  # checked when read
         with np.errstate(invalid="ignore", divide="ignore"):
             return phase_to_height(delta, calibration.l0_mm, calibration.d0_mm, calibration.per_mm(frequency))
     if calibration.model == POLYNOMIAL:
-        model = load_polynomial(calibration.to_dict(), getattr(calibration, "path", None), calibration.where)
-        return model.height(_delta(object_phase, reference_phase, calibration), frequency)
-    model = stereo_model(calibration)
-    return model.heights(triangulate(model, object_phase, frequency, axis=axis, extent=extent))
+        polynomial = load_polynomial(calibration.to_dict(), getattr(calibration, "path", None), calibration.where)
+        return polynomial.height(_delta(object_phase, reference_phase, calibration), frequency)
+    stereo = stereo_model(calibration)
+    return stereo.heights(triangulate(stereo, object_phase, frequency, axis=axis, extent=extent))
 
 
 def points_from_phase(

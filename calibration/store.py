@@ -104,7 +104,7 @@ def _number(where: str, data: Mapping[str, Any], key: str, rule: str) -> None:
     value = data.get(key)
     ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
     if ok and rule == "positive":
-        ok = value > 0
+        ok = float(value) > 0  # type: ignore[arg-type]  # a finite int or float here
     elif ok and rule == "non-zero":
         ok = value != 0
     if not ok:

@@ -379,7 +379,8 @@ class Camera(Device):
     def _after_open(self) -> None:
         """Read the ROI, push pixel format and trigger; exposure and gain if set before open(), else read them."""
         roi = self._read_roi()
-        self._roi = (0, 0, *self.sensor_size) if roi is None else tuple(int(c) for c in roi)
+        x, y, w, h = (0, 0, *self.sensor_size) if roi is None else (int(c) for c in roi)
+        self._roi = (x, y, w, h)
         if self._pixel_format not in self.supported_pixel_formats:
             self._pixel_format = self.supported_pixel_formats[0]
         self._set_pixel_format(self._pixel_format)

@@ -17,6 +17,8 @@ from __future__ import annotations
 import collections
 import logging
 
+from typing import Any
+
 import numpy as np
 
 from drivers.camera import Camera, Frame, TriggerMode, TriggerSource
@@ -54,7 +56,7 @@ class OpenCVCamera(Camera):
         self.source = source
         self.api_preference = api_preference
         self.buffer_frames = buffer_frames
-        self._cap = None
+        self._cap: Any = None  # cv2.VideoCapture while open
         self._size: tuple[int, int] | None = None
         self._queue: collections.deque[Frame] = collections.deque()
         self._next_id = 0

@@ -127,7 +127,7 @@ def trace(rig: StereoRig, scene: Scene) -> tuple[np.ndarray, ProjectorMap]:
     u, v = projected[..., 0], projected[..., 1]
     in_front = (np.einsum("ij,hwj->hwi", rig.rotation, safe) + rig.translation_mm)[..., 2] > 0
     lit &= in_front & (u >= 0) & (u < rig.projector.width) & (v >= 0) & (v < rig.projector.height)
-    return np.where(hit[..., None], points, np.nan), ProjectorMap(u=u, v=v, lit=lit, height_mm=None)
+    return np.where(hit[..., None], points, np.nan), ProjectorMap(u=u, v=v, lit=lit)
 
 
 def calibration_fields(rig: StereoRig) -> dict:

@@ -90,7 +90,7 @@ class ProjectorMap:
     u: np.ndarray            # (H, W) projector column (continuous, pixel centres at k + 0.5)
     v: np.ndarray            # (H, W) projector row
     lit: np.ndarray          # (H, W) bool: the projector reaches the pixel
-    height_mm: np.ndarray = field(repr=False, default=None)  # the scene
+    height_mm: np.ndarray | None = field(repr=False, default=None)  # the scene
 
 
 def projector_coordinates(height_mm: np.ndarray, geometry: RigGeometry, clip_to_projector: bool = True) -> ProjectorMap:

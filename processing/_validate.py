@@ -74,7 +74,7 @@ def positive_int(value: object, name: str, minimum: int = 1) -> int:
     if isinstance(value, (bool, np.bool_)):
         raise ValueError(f"{name}: expected an integer >= {minimum}, found {value!r}")
     try:
-        as_int = int(value)  # type: ignore[arg-type]
+        as_int = int(value)  # type: ignore[call-overload]  # anything int() takes; the rest raises below
     except (TypeError, ValueError):
         raise ValueError(f"{name}: expected an integer >= {minimum}, found {value!r}") from None
     if as_int != value or as_int < minimum:

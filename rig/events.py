@@ -81,6 +81,8 @@ class CancelToken:
 class ProgressSink(Protocol):
     """The part of a reporter a service calls (the CLI's bar and :class:`Reporter` both fit)."""
 
+    def begin(self, total: int, note: str = "") -> None: ...
+
     def step(self, note: str = "", count: int = 1) -> None: ...
 
 

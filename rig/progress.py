@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import sys
 import time
-from typing import Any, TextIO
+from typing import Any, Literal, TextIO
 
 BAR_WIDTH = 24
 
@@ -50,7 +50,7 @@ class Progress:
         self.done = min(self.done + count, self.total)
         self._draw(note)
 
-    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> bool:
+    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> Literal[False]:
         elapsed = time.perf_counter() - self.started
         if self.quiet:
             return False

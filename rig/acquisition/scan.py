@@ -16,7 +16,7 @@ from rig.errors import CaptureError
 
 if TYPE_CHECKING:
     from rig.acquisition.loop import ScanResult
-    from rig.events import ProgressSink, Reporter
+    from rig.events import ProgressSink
     from rig.hardware.assembly import RigDevices
 
 log = logging.getLogger(__name__)
@@ -34,7 +34,7 @@ def scan(
     scene: str = "object",
     overwrite: bool = False,
     patterns: Sequence[Mapping[str, Any]] | None = None,
-    progress: Reporter | None = None,
+    progress: ProgressSink | None = None,
 ) -> ScanResult:
     """Open the rig of ``config``, scan ``scene`` into ``output`` and close the rig.
 

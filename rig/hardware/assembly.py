@@ -141,6 +141,7 @@ def open_rig(config: RigConfig, scene: str = "object") -> Iterator[RigDevices]:
             if config.trigger.backend == "serial":
                 from drivers.trigger_box import SerialTriggerBox
 
+                assert config.trigger.port is not None  # rig.config requires it for backend "serial"
                 box = SerialTriggerBox(config.trigger.port, baudrate=config.trigger.baudrate, timeout_s=config.trigger.timeout_s)
                 stack.enter_context(box)
         lut = load_gamma_lut(config)

@@ -111,7 +111,7 @@ def simulate_scan(
         Extra parameters of the named scene.
     """
     geometry = demo_geometry() if geometry is None else geometry
-    patterns = [dict(p) for p in (patterns or synth.sinusoid_patterns(DEFAULT_FREQUENCIES, DEFAULT_STEPS))]
+    pattern_list: list[dict[str, Any]] = [dict(p) for p in (patterns or synth.sinusoid_patterns(DEFAULT_FREQUENCIES, DEFAULT_STEPS))]
     appearance = demo_appearance() if appearance is None else appearance
     if isinstance(scene, str):
         name = scene
@@ -122,8 +122,8 @@ def simulate_scan(
     rng = np.random.default_rng(seed)
     object_map = synth.projector_coordinates(height, geometry)
     reference_map = synth.projector_coordinates(np.zeros_like(height), geometry)
-    object_frames = synth.render_stack(patterns, object_map, geometry, appearance, rng)
-    reference_frames = synth.render_stack(patterns, reference_map, geometry, appearance, rng)
+    object_frames = synth.render_stack(pattern_list, object_map, geometry, appearance, rng)
+    reference_frames = synth.render_stack(pattern_list, reference_map, geometry, appearance, rng)
     description = {
         "scene": name,
         "scene_params": dict(scene_params or {}),
@@ -133,7 +133,7 @@ def simulate_scan(
     }
     return SimulatedScan(
         geometry=geometry,
-        patterns=patterns,
+        patterns=pattern_list,
         height_mm=height,
         object_frames=object_frames,
         reference_frames=reference_frames,
