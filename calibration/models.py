@@ -51,6 +51,38 @@ def _check_model(calibration: CalibrationLike) -> None:
         raise CalibrationError(f"{calibration.where}: model: expected one of {', '.join(MODELS)}, found {calibration.model!r}")
 
 
+# Shortest plausible lengths in millimetres: a value below is almost surely in metres (or cm).
+_MIN_BASELINE_MM = 5.0
+_MIN_DISTANCE_MM = 20.0
+
+
+def units_problem(calibration: CalibrationLike) -> str | None:
+    """A sentence naming a length that is implausible in millimetres (likely metres), or None.
+
+    A stereo baseline under 5 mm or a camera-to-plane distance l0 / projector offset d0 under
+    20 mm is no FPP rig; such files almost always store metres where millimetres are expected.
+    """
+    fields = calibration.to_dict()
+    if calibration.model == STEREO and "translation_mm" in fields:
+        try:
+            baseline = float(np.linalg.norm(np.asarray(fields["translation_mm"], dtype=np.float64)))
+        except (TypeError, ValueError):
+            return None
+        if 0 < baseline < _MIN_BASELINE_MM:
+            return (
+                f"translation_mm: baseline {baseline:.4g} mm is implausibly short for a projector-camera rig; likely "
+                f"cause: the translation is in metres; fix: multiply translation_mm by 1000 ({baseline * 1000:.4g} mm)"
+            )
+    for key in ("l0_mm", "d0_mm"):
+        value = fields.get(key)
+        if isinstance(value, (int, float)) and 0 < abs(value) < _MIN_DISTANCE_MM:
+            return (
+                f"{key}: {value:.4g} mm is implausibly short for a rig distance; likely cause: the value is in "
+                f"metres; fix: write it in millimetres ({value * 1000:.4g})"
+            )
+    return None
+
+
 def _delta(object_phase: np.ndarray, reference_phase: np.ndarray | None, calibration: CalibrationLike) -> np.ndarray:
     if reference_phase is None:
         raise CalibrationError(f"{calibration.where}: model {calibration.model!r} needs the reference-plane phase")

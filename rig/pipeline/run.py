@@ -15,7 +15,8 @@ from calibration import models as calibration_models
 from calibration.errors import CalibrationError
 from calibration.store import Calibration, read_calibration
 from rig.blas import rpca_blas
-from rig.errors import CaptureError, ProcessingError
+from rig.errors import ProcessingError
+from rig.pipeline.fit import check_fit
 from rig.pipeline.outputs import write_outputs
 from rig.pipeline.plan import (
     UNWRAP_METHODS,
@@ -30,7 +31,7 @@ from rig.pipeline.stages import (
     SceneState,
     stage_height,
 )
-from rig.store.capture import Capture, check_same_patterns, read_capture
+from rig.store.capture import Capture, read_capture
 
 log = logging.getLogger(__name__)
 
@@ -87,14 +88,24 @@ def total_steps(with_reference: bool) -> int:
     return len(SCENE_STAGES) * (2 if with_reference else 1) + 1
 
 
-def load_calibration_for(capture: Capture, calibration_path: str | Path) -> tuple[Calibration, Capture | None]:
-    """Read a calibration and (when its model needs one) its reference capture, checked against ``capture``."""
+def load_calibration_for(
+    capture: Capture, calibration_path: str | Path, axis: str | None = None
+) -> tuple[Calibration, Capture | None]:
+    """Read a calibration and (when its model needs one) its reference capture, checked against ``capture``.
+
+    Everything the two share must fit (:func:`rig.pipeline.fit.check_fit`): camera and projector
+    size, fringe axis (``axis``, default the capture's first sinusoid's), patterns, units.
+    """
     calibration = read_calibration(calibration_path)
     if calibration.model not in calibration_models.MODELS:
         raise CalibrationError(
             f"{calibration.where}: model: expected one of {', '.join(calibration_models.MODELS)}, found {calibration.model!r}"
         )
+    if axis is None:
+        groups = group_patterns(capture.patterns, str(capture.manifest_path))
+        axis = _fringe_axis(groups, ProcessOptions(), str(capture.manifest_path))
     if not calibration_models.needs_reference(calibration):
+        check_fit(capture, calibration, axis)
         return calibration, None
     ref_path = calibration.reference_path
     if ref_path is None:
@@ -102,10 +113,7 @@ def load_calibration_for(capture: Capture, calibration_path: str | Path) -> tupl
     if not (ref_path / "capture.json").is_file():
         raise CalibrationError(f"{calibration.where}: reference: no capture at {ref_path}")
     reference = read_capture(ref_path, verify=False)  # verified when loaded
-    try:
-        check_same_patterns(reference, capture)
-    except CaptureError as exc:
-        raise CalibrationError(f"{calibration.where}: the reference capture does not fit this capture: {exc}") from None
+    check_fit(capture, calibration, axis, reference)
     return calibration, reference
 
 
@@ -127,7 +135,8 @@ def process(
     capture = read_capture(capture_path, salvage=salvage, verify=False)  # the load stage checks every frame
     calibration, reference_capture = (None, None)
     if calibration_path is not None:
-        calibration, reference_capture = load_calibration_for(capture, calibration_path)
+        obj_axis = _fringe_axis(group_patterns(capture.patterns, str(capture.manifest_path)), options, str(capture.manifest_path))
+        calibration, reference_capture = load_calibration_for(capture, calibration_path, obj_axis)
     obj = _scene("object", capture, options)
     ref = _scene("reference", reference_capture, options) if reference_capture is not None else None
     for state in (obj, ref):
