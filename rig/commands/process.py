@@ -44,6 +44,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="valid pixels need fringe modulation B >= RATIO x background and x the image's 99th percentile of B (default 0.2)",
     )
     parser.add_argument(
+        "--min-island", type=float, default=0.005, metavar="FRACTION", dest="min_island",
+        help="drop isolated valid regions smaller than FRACTION of the largest (background specks; default 0.005)",
+    )
+    parser.add_argument("--keep-islands", action="store_true", help="keep isolated valid regions (same as --min-island 0)")
+    parser.add_argument(
         "--param", action="append", default=[], metavar="KEY=VALUE",
         help="a parameter of the chosen denoising / correction method (repeatable; VALUE read as JSON if it parses)",
     )
@@ -80,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
     options = ProcessOptions(
         unwrap=args.unwrap, denoise=args.denoise, correction=args.correction,
         min_modulation_ratio=args.min_modulation, axis=args.axis, params=parse_params(args.param),
-        undistort=args.undistort,
+        undistort=args.undistort, min_island_fraction=0.0 if args.keep_islands else args.min_island,
     )
     steps = total_steps(args.calibration is not None) + 1
     with Progress(f"process {args.capture}", total=steps, quiet=args.quiet) as progress:

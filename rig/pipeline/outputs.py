@@ -181,6 +181,7 @@ def build_report(result: ProcessResult) -> dict[str, Any]:
             "frequencies": obj.wrapped.frequencies,
             "phase_frequency": obj.unwrapped.frequency,
             "min_modulation_ratio": result.options.min_modulation_ratio,
+            "min_island_fraction": result.options.min_island_fraction,
             "params": result.options.params,
         },
         "image": {"width": obj.capture.width, "height": obj.capture.height},

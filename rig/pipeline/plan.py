@@ -74,6 +74,8 @@ class ProcessOptions:
     denoise: str = "none"
     correction: str = "none"
     min_modulation_ratio: float = 0.2
+    # valid regions smaller than this fraction of the largest are dropped (processing.islands); 0 keeps all
+    min_island_fraction: float = 0.005
     axis: str | None = None
     params: dict[str, Any] = field(default_factory=dict)
 

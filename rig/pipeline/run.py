@@ -173,6 +173,20 @@ def process(
     height_time = time.perf_counter() - t0
     if progress is not None:
         progress.step("height")
+    if options.min_island_fraction > 0:
+        from processing.islands import island_mask
+
+        islands = island_mask(mask, options.min_island_fraction)
+        dropped = int(np.count_nonzero(islands))
+        obj.info["islands_dropped"] = dropped
+        if dropped:
+            mask &= ~islands
+            if height is not None:
+                height = np.where(mask, height, np.nan).astype(np.float32)
+            notes.append(
+                f"{dropped} valid pixels in isolated islands (regions under {options.min_island_fraction:g} of the "
+                "largest) dropped as background specks; --keep-islands keeps them"
+            )
     if not mask.any():
         raise ProcessingError(f"{capture.manifest_path}: no valid pixel (all in shadow or too little fringe modulation)")
     timings: dict[str, Any] = {"object": dict(obj.timings)}
@@ -190,6 +204,8 @@ def _check_options(options: ProcessOptions) -> None:
         raise ProcessingError(f"--denoise: expected one of {', '.join(DENOISERS)}, found {options.denoise!r}")
     if options.correction not in CORRECTIONS:
         raise ProcessingError(f"--correction: expected one of {', '.join(CORRECTIONS)}, found {options.correction!r}")
+    if not 0 <= options.min_island_fraction <= 1:
+        raise ProcessingError(f"--min-island: expected a fraction in [0, 1], found {options.min_island_fraction}")
     if options.axis not in (None, "x", "y"):
         raise ProcessingError(f"--axis: expected x or y, found {options.axis!r}")
     if not 0 < options.min_modulation_ratio <= 1:

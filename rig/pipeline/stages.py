@@ -359,6 +359,15 @@ def _gray_threshold(state: SceneState) -> np.ndarray | None:
     return None
 
 
+def _rescue_rejected(state: SceneState, phase: np.ndarray, mask: np.ndarray, modulated: np.ndarray) -> np.ndarray:
+    """Take back modulated pixels a temporal residual test rejected where neighbours vouch for their phase."""
+    from processing.neighbour_rescue import rescue
+
+    rescued = rescue(phase, mask, modulated & np.isfinite(phase))
+    state.info["neighbour_rescue"] = {"readmitted": int(np.count_nonzero(rescued & ~mask)), "off": "--param neighbour_rescue=false"}
+    return rescued
+
+
 def stage_unwrap(state: SceneState, options: ProcessOptions) -> None:
     """Absolute (or, for spatial methods, relative) phase at the highest frequency."""
     if state.groups.single_shot:
@@ -417,6 +426,8 @@ def stage_unwrap(state: SceneState, options: ProcessOptions) -> None:
     mask = wrapped.valid & np.isfinite(phase)
     if valid is not None:
         mask &= np.asarray(valid, dtype=bool)
+        if method != "gray" and options.params.get("neighbour_rescue", True) is not False:
+            mask = _rescue_rejected(state, phase, mask, wrapped.valid)
     state.unwrapped = UnwrappedPhase(
         phase=np.where(mask, phase, np.nan), valid=mask, frequency=freqs[-1], method=method,
         absolute=absolute, orders=orders,
