@@ -61,11 +61,14 @@ def scan_with(
     scene: str = "object",
     overwrite: bool = False,
     progress: ProgressSink | None = None,
+    exposure_us: float | None = None,
+    gain: float | None = None,
 ) -> ScanResult:
     """Scan with devices that are already open (a console or a calibration session holds them).
 
     ``scene`` is the label capture.json records; what is really in front of the rig is whatever
     the operator (or the simulated world) put there. ``progress`` is stepped once per frame.
+    ``exposure_us`` and ``gain`` override the config's camera settings (the console's controls).
     """
     from rig.acquisition.loop import AcquisitionSettings, run_scan
 
@@ -91,8 +94,8 @@ def scan_with(
         settings,
         scene=scene,
         extra=extra,
-        exposure_us=config.camera.exposure_us,
-        gain=config.camera.gain,
+        exposure_us=config.camera.exposure_us if exposure_us is None else exposure_us,
+        gain=config.camera.gain if gain is None else gain,
         progress=progress,
         overwrite=overwrite,
     )

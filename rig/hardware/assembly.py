@@ -122,13 +122,20 @@ def world_operator(devices: RigDevices, board: BoardSpec | None = None) -> Any:
 
 
 @contextlib.contextmanager
-def open_rig(config: RigConfig, scene: str = "object") -> Iterator[RigDevices]:
-    """Open every device of ``config``; ``scene`` chooses what a simulated camera looks at."""
+def open_rig(config: RigConfig, scene: str = "object", fault: str | None = None) -> Iterator[RigDevices]:
+    """Open every device of ``config``; ``scene`` chooses what a simulated camera looks at.
+
+    ``fault`` names a device fault of the simulated rig (:data:`rig.hardware.simulated.FAULTS`) to
+    open it with; a real rig refuses it.
+    """
+    if fault is not None and not config.simulated:
+        raise ConfigError(f"fault {fault!r}: faults can only be injected into the simulated rig")
     with contextlib.ExitStack() as stack:
         if config.simulated:
-            from rig.hardware.simulated import SimulatedRig
+            from rig.hardware.simulated import SimulatedRig, fault_arguments
 
-            simulation = stack.enter_context(SimulatedRig(config, scene=scene))
+            faults = fault_arguments(fault, config) if fault is not None else {}
+            simulation = stack.enter_context(SimulatedRig(config, scene=scene, **faults))
             projector, camera, box = simulation.projector, simulation.camera, simulation.trigger_box
         else:
             simulation = None

@@ -82,6 +82,28 @@ def scene_height(config: RigConfig, scene: str, geometry: synth.RigGeometry) -> 
     )
 
 
+# Named device faults the simulated rig can be opened with (the console's fault drill, its tests):
+# each is a readable failure a real rig shows, raised by the real driver code paths.
+FAULTS = {
+    "camera-gone": "the camera disappears after 3 exposures (unplugged)",
+    "trigger-timeout": "the trigger box stops answering (hung firmware)",
+}
+
+
+def fault_arguments(fault: str, config: RigConfig) -> dict[str, Any]:
+    """:class:`SimulatedRig` arguments injecting the named fault of :data:`FAULTS`."""
+    from mock_devices.camera import CameraFaults
+    from mock_devices.trigger_box import TriggerFaults
+
+    if fault == "camera-gone":
+        return {"camera_faults": CameraFaults(disappear_after=3)}
+    if fault == "trigger-timeout":
+        if config.trigger.backend == "software":
+            raise ConfigError("fault trigger-timeout: the rig uses the camera's software trigger ([trigger] backend)")
+        return {"trigger_faults": TriggerFaults(stall=True)}
+    raise ConfigError(f"fault: expected one of {', '.join(FAULTS)}, found {fault!r}")
+
+
 class SimulatedRig:
     """Opens the simulated rig of ``config`` looking at ``scene``; closes everything on exit.
 

@@ -1,0 +1,174 @@
+"""A processing result as the page shows it: colour-mapped map, raw values for the hover read-out,
+a down-sampled surface for the 3-D view, the report's key figures, and differences of two results.
+
+Built from an in-memory :class:`rig.pipeline.run.ProcessResult` right after a scan (so the result
+is on screen before its files are written) or from a results directory written by
+:func:`rig.pipeline.outputs.write_outputs`.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from rig.errors import RigError
+from rig.pipeline.outputs import colour_map, read_ply_points
+
+SURFACE_MAX_SIDE = 160  # samples along the longer side of the 3-D surface
+
+
+@dataclass
+class ResultView:
+    """One result's arrays and figures; ``values`` are heights in mm (or phase in rad without a calibration)."""
+
+    name: str
+    values: np.ndarray  # (H, W) float32, NaN where invalid
+    unit: str  # "mm" or "rad"
+    shows: str  # "height" or "phase"
+    points: np.ndarray | None  # (H, W, 3) mm, NaN where invalid
+    report: dict[str, Any]
+    saved: bool = False
+    _png: bytes | None = field(default=None, repr=False)
+
+    @classmethod
+    def from_result(cls, name: str, result: Any) -> ResultView:
+        """From a :class:`rig.pipeline.run.ProcessResult` (in memory)."""
+        if result.height is not None:
+            values, unit, shows = result.height, "mm", "height"
+        else:
+            values, unit, shows = np.where(result.mask, result.phase, np.nan), "rad", "phase"
+        return cls(name, np.asarray(values, dtype=np.float32), unit, shows, result.points, result.report)
+
+    @classmethod
+    def from_directory(cls, name: str, path: Path) -> ResultView:
+        """From a results directory (report.json, height.npy or phase.npy, mask.npy, points.ply)."""
+        try:
+            report = json.loads((path / "report.json").read_text(encoding="utf-8"))
+            mask = np.load(path / "mask.npy", allow_pickle=False)
+            if (path / "height.npy").is_file():
+                values, unit, shows = np.load(path / "height.npy", allow_pickle=False), "mm", "height"
+            else:
+                values, unit, shows = np.load(path / "phase.npy", allow_pickle=False), "rad", "phase"
+            points = None
+            if (path / "points.ply").is_file():
+                points = np.full((*mask.shape, 3), np.nan, dtype=np.float32)
+                points[mask] = read_ply_points(path / "points.ply")
+        except (OSError, ValueError, KeyError) as exc:
+            raise RigError(f"results/{name}: cannot be read: {exc}") from None
+        return cls(name, np.asarray(values, dtype=np.float32), unit, shows, points, report, saved=True)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return (int(self.values.shape[0]), int(self.values.shape[1]))
+
+    def value_range(self) -> tuple[float, float]:
+        """Colour-scale range: the 0.5th to 99.5th percentile of the valid values."""
+        return robust_range(self.values)
+
+    def png(self) -> bytes:
+        """The colour-mapped map (turbo, invalid grey) as PNG."""
+        if self._png is None:
+            low, high = self.value_range()
+            self._png = encode_png(colour_map(self.values, low, high))
+        return self._png
+
+    def surface(self, max_side: int = SURFACE_MAX_SIDE) -> dict[str, Any]:
+        """Down-sampled grid for a 3-D surface: x, y (mm, or pixels without points), z; None where invalid."""
+        h, w = self.shape
+        step = max(1, int(np.ceil(max(h, w) / max_side)))
+        z = self.values[::step, ::step]
+        if self.points is not None and self.shows == "height":
+            x, y = self.points[::step, ::step, 0], self.points[::step, ::step, 1]
+            axis_unit = "mm"
+        else:
+            rows, cols = np.mgrid[0:h:step, 0:w:step]
+            x, y, axis_unit = cols.astype(np.float32), rows.astype(np.float32), "px"
+        valid = np.isfinite(z) & np.isfinite(x) & np.isfinite(y)
+        return {
+            "x": _nullable(x, valid),
+            "y": _nullable(y, valid),
+            "z": _nullable(z, valid),
+            "unit": self.unit,
+            "axis_unit": axis_unit,
+            "step": step,
+        }
+
+    def summary(self) -> dict[str, Any]:
+        """Key figures of the report, for the page and the API."""
+        report = self.report
+        low, high = self.value_range()
+        return {
+            "name": self.name,
+            "shows": self.shows,
+            "unit": self.unit,
+            "width": self.shape[1],
+            "height": self.shape[0],
+            "range": [low, high],
+            "valid_fraction": report.get("valid_fraction"),
+            "height_mm": report.get("height_mm"),
+            "methods": report.get("methods", {}),
+            "timings_s": report.get("timings_s", {}),
+            "capture": report.get("capture"),
+            "calibration": report.get("calibration"),
+            "notes": report.get("notes", []),
+            "saved": self.saved,
+        }
+
+
+def robust_range(values: np.ndarray) -> tuple[float, float]:
+    """0.5th and 99.5th percentile of the finite values ((0, 1) when there are none)."""
+    finite = values[np.isfinite(values)]
+    if finite.size == 0:
+        return 0.0, 1.0
+    low, high = (float(v) for v in np.percentile(finite, [0.5, 99.5]))
+    return (low, high) if high > low else (low, low + 1.0)
+
+
+def encode_png(image: np.ndarray) -> bytes:
+    ok, data = cv2.imencode(".png", image)
+    if not ok:  # pragma: no cover - OpenCV encodes any uint8 image
+        raise RigError("could not encode an image as PNG")
+    return data.tobytes()
+
+
+def _nullable(values: np.ndarray, valid: np.ndarray) -> list[list[float | None]]:
+    rounded = np.round(values.astype(np.float64), 3)
+    return [[float(v) if ok else None for v, ok in zip(row, ok_row)] for row, ok_row in zip(rounded, valid)]
+
+
+def difference(a: ResultView, b: ResultView) -> tuple[np.ndarray, dict[str, Any]]:
+    """``a - b`` where both are valid (NaN elsewhere) and its figures; the two must be the same size and unit."""
+    if a.shape != b.shape:
+        raise RigError(
+            f"compare: {a.name} is {a.shape[1]}x{a.shape[0]}, {b.name} is {b.shape[1]}x{b.shape[0]}; expected the same size"
+        )
+    if a.unit != b.unit:
+        raise RigError(
+            f"compare: {a.name} shows {a.shows} ({a.unit}), {b.name} shows {b.shows} ({b.unit}); expected the same"
+        )
+    diff = a.values - b.values
+    both = np.isfinite(diff)
+    figures: dict[str, Any] = {"a": a.name, "b": b.name, "unit": a.unit, "valid_fraction": float(both.mean())}
+    if both.any():
+        d = diff[both].astype(np.float64)
+        figures.update(mean=float(d.mean()), rms=float(np.sqrt(np.mean(d**2))), max_abs=float(np.max(np.abs(d))))
+    return diff, figures
+
+
+def difference_png(diff: np.ndarray) -> tuple[bytes, float]:
+    """The difference map on a symmetric colour scale (+-99.5th percentile of |diff|) and that bound."""
+    finite = np.abs(diff[np.isfinite(diff)])
+    bound = float(np.percentile(finite, 99.5)) if finite.size else 1.0
+    bound = bound if bound > 0 else 1.0
+    return encode_png(colour_map(diff, -bound, bound)), bound
+
+
+def colour_bar_png(height: int = 256, width: int = 16) -> bytes:
+    """The colour scale of the maps (turbo), top = high, as PNG."""
+    ramp = np.linspace(1.0, 0.0, height, dtype=np.float32)[:, None].repeat(width, axis=1)
+    return encode_png(colour_map(ramp, 0.0, 1.0))

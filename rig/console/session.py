@@ -1,0 +1,730 @@
+"""The console session: the one object that owns the opened rig and runs what the page asks for.
+
+- Every device call happens on one worker thread, the thread that opened the rig (the off-screen
+  projector's OpenGL context belongs to it). Requests are queued to it as tasks; between tasks,
+  while a page watches, it takes live frames on the camera's software trigger
+  (:mod:`rig.acquisition.live`). With no page watching the camera is stopped and the projector dark.
+- One acquisition at a time: a scan while another runs is refused with :class:`Busy`.
+- A scan goes through :func:`rig.acquisition.scan.scan_with` with the held devices; processing
+  (:func:`rig.pipeline.run.process`) runs on a processing thread so the rig is free again at once:
+  first without fringe-order correction (on screen within a second), then with the requested
+  options, whose outputs are written (:func:`rig.pipeline.outputs.write_outputs`).
+- Progress comes from the services' :class:`rig.events.Reporter` events, published with every
+  state change through ``publish`` (the app fans them out to the websocket clients); each job
+  has a :class:`rig.events.CancelToken` (Stop button, closed page, shutdown).
+- A device error closes the rig and is published as a readable message; the next request (or live
+  frame, after a short pause) opens the rig again.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import itertools
+import logging
+import math
+import queue
+import threading
+import time
+from collections import OrderedDict
+from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from drivers.errors import DeviceError
+from drivers.projector import validate_pattern
+from rig.acquisition.live import frame_figures, grab_frame
+from rig.config import RigConfig
+from rig.console.datadir import DataDir
+from rig.console.results import ResultView
+from rig.errors import RigError
+from rig.events import Cancelled, CancelToken, Event, Reporter
+from rig.hardware.assembly import RigDevices, open_rig
+from rig.pipeline.outputs import colour_map
+from rig.pipeline.plan import DEFAULT_CORRECTION, ProcessOptions
+
+log = logging.getLogger(__name__)
+
+Publish = Callable[[dict[str, Any], bytes | None], None]
+PROJECTOR_PATTERNS = ("black", "white", "fringe")
+REOPEN_AFTER_S = 2.0  # pause before the live view opens a rig again after a device error
+RESULTS_KEPT = 8  # results held in memory (older ones are read back from disk)
+JPEG_QUALITY = 80
+
+
+class Busy(RigError):
+    """The rig is already acquiring; the request would start a second acquisition."""
+
+
+@dataclass
+class Job:
+    """A scan, processing run or calibration the console started."""
+
+    id: str
+    kind: str
+    name: str
+    token: CancelToken = field(default_factory=CancelToken)
+    client: str | None = None
+    state: str = "running"  # running | done | failed | cancelled
+    stage: str = ""
+    done: int = 0
+    total: int = 0
+    error: str | None = None
+    result: str | None = None
+    started: float = field(default_factory=time.time)
+    finished: float | None = None
+    last_frame: float | None = None  # when a scan's last frame was stored (time.time)
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "id": self.id,
+            "kind": self.kind,
+            "name": self.name,
+            "state": self.state,
+            "stage": self.stage,
+            "done": self.done,
+            "total": self.total,
+            "error": self.error,
+            "result": self.result,
+            "started": self.started,
+            "finished": self.finished,
+            "last_frame": self.last_frame,
+        }
+
+
+@dataclass
+class ProjectorSetting:
+    """What the projector shows between scans: black, white, or a fringe of chosen frequency and phase."""
+
+    pattern: str = "black"
+    frequency: float = 8.0
+    phase_deg: float = 0.0
+    axis: str = "x"
+
+    def check(self) -> None:
+        if self.pattern not in PROJECTOR_PATTERNS:
+            raise RigError(f"pattern: expected one of {', '.join(PROJECTOR_PATTERNS)}, found {self.pattern!r}")
+        if self.axis not in ("x", "y"):
+            raise RigError(f"axis: expected x or y, found {self.axis!r}")
+        if not (math.isfinite(self.frequency) and 0 < self.frequency <= 512):
+            raise RigError(f"frequency: expected fringes across the projector in (0, 512], found {self.frequency}")
+        if not math.isfinite(self.phase_deg):
+            raise RigError(f"phase_deg: expected a finite angle, found {self.phase_deg}")
+
+    def capture_pattern(self) -> dict[str, Any]:
+        """The capture-format pattern entry the projector shows."""
+        if self.pattern == "fringe":
+            return {
+                "kind": "sinusoid",
+                "axis": self.axis,
+                "frequency": self.frequency,
+                "steps": 1,
+                "step": 0,
+                "phase_rad": math.radians(self.phase_deg),
+            }
+        return {"kind": "flat", "level": 1.0 if self.pattern == "white" else 0.0}
+
+    @property
+    def fringe_axis(self) -> str | None:
+        return self.axis if self.pattern == "fringe" else None
+
+
+@dataclass
+class LiveSettings:
+    """How live frames are drawn: saturated pixels in red, and the camera or the modulation map."""
+
+    overlay: bool = True
+    view: str = "camera"  # camera | modulation
+
+
+class ConsoleSession:
+    """Owns the rig of ``config`` for one console; see the module docstring.
+
+    Parameters
+    ----------
+    config : RigConfig
+    data : DataDir
+    publish : callable(message, image_bytes_or_None)
+        Called from any thread with every status change, progress event, result and live frame.
+    fault_injection : bool
+        Allow :meth:`inject_fault` (simulated rig only): tests and fault drills.
+    live_fps : float
+        Highest live frame rate (the rest of the time is left to the machine's other work).
+    """
+
+    def __init__(
+        self,
+        config: RigConfig,
+        data: DataDir,
+        publish: Publish,
+        fault_injection: bool = False,
+        live_fps: float = 20.0,
+    ) -> None:
+        self.config = config
+        self.data = data
+        self.publish = publish
+        self.fault_injection = fault_injection
+        self.live_interval_s = 1.0 / live_fps
+        self.exposure_us = float(config.camera.exposure_us)
+        self.gain: float | None = config.camera.gain
+        self.projector = ProjectorSetting()
+        self.live = LiveSettings()
+        self.calibration: str | None = None
+        calibrations = data.names("calibrations")
+        if calibrations:
+            self.calibration = calibrations[0]
+        self.device_error: str | None = None
+        self.jobs: OrderedDict[str, Job] = OrderedDict()
+        self.current: Job | None = None  # the acquisition running
+        self.results: OrderedDict[str, ResultView] = OrderedDict()
+        self.fps = 0.0
+        self.frames = 0
+        self._ids = itertools.count(1)
+        self._watchers = 0
+        self._tasks: queue.Queue[tuple[Callable[[], Any], Future[Any]]] = queue.Queue()
+        self._acquiring = threading.Lock()
+        self._processing = ThreadPoolExecutor(max_workers=1, thread_name_prefix="console-process")
+        self._stopping = threading.Event()
+        self._devices: RigDevices | None = None
+        self._stack: contextlib.ExitStack | None = None
+        self._fault: str | None = None
+        self._reopen_at = 0.0
+        self._idle = True
+        self._frame_times: list[float] = []
+        self._worker = threading.Thread(target=self._run, name="rig-worker", daemon=True)
+
+    # ------------------------------------------------------------------ life cycle
+    def start(self) -> None:
+        """Start the worker thread and open the rig on it (an opening error is shown, not raised)."""
+        self._worker.start()
+        with contextlib.suppress(RigError, DeviceError, OSError):
+            self.call(self._open)
+
+    def close(self) -> None:
+        """Stop every job, close the devices, stop the threads (Ctrl-C, app shutdown)."""
+        for job in list(self.jobs.values()):
+            if job.state == "running":
+                job.token.cancel("the console is shutting down")
+        self._stopping.set()
+        if self._worker.is_alive():
+            self._worker.join(timeout=30)
+        self._processing.shutdown(wait=True, cancel_futures=True)
+
+    def call(self, fn: Callable[[], Any], timeout_s: float = 60.0) -> Any:
+        """Run ``fn`` on the worker thread (the devices' thread) and return its result."""
+        if self._stopping.is_set():
+            raise RigError("the console is shutting down")
+        future: Future[Any] = Future()
+        self._tasks.put((fn, future))
+        return future.result(timeout=timeout_s)
+
+    def _run(self) -> None:
+        next_frame = 0.0
+        while not self._stopping.is_set():
+            live = self._watchers > 0
+            wait = max(0.0, next_frame - time.monotonic()) if live else 0.2
+            try:
+                fn, future = self._tasks.get(timeout=wait)
+            except queue.Empty:
+                fn = None
+            if fn is not None:
+                if future.set_running_or_notify_cancel():
+                    try:
+                        future.set_result(fn())
+                    except BaseException as exc:  # noqa: BLE001 - handed to the caller's thread
+                        future.set_exception(exc)
+                continue
+            if live:
+                next_frame = time.monotonic() + self.live_interval_s
+                self._live_frame()
+            elif not self._idle:
+                self._go_idle()
+        while True:  # requests that arrived during shutdown
+            try:
+                _, future = self._tasks.get_nowait()
+            except queue.Empty:
+                break
+            future.set_exception(RigError("the console is shutting down"))
+        self._close_rig()
+
+    # ------------------------------------------------------------------ devices (worker thread)
+    def _open(self) -> RigDevices:
+        if self._devices is not None:
+            return self._devices
+        stack = contextlib.ExitStack()
+        fault, self._fault = self._fault, None
+        try:
+            devices = stack.enter_context(open_rig(self.config, scene="object", fault=fault))
+            devices.camera.exposure_us = self.exposure_us
+            if self.gain is not None:
+                devices.camera.gain = self.gain
+            else:
+                self.gain = float(devices.camera.gain)
+            self.exposure_us = float(devices.camera.exposure_us)
+            devices.projector.show(self.projector.capture_pattern())
+        except (RigError, DeviceError, OSError, ValueError) as exc:
+            with contextlib.suppress(Exception):
+                stack.close()
+            self._device_failed(exc, "opening the rig")
+            raise
+        self._devices, self._stack = devices, stack
+        self.device_error = None
+        self._idle = False
+        log.info("console: rig open")
+        self._publish_status()
+        return devices
+
+    def _close_rig(self) -> None:
+        stack, self._stack, self._devices = self._stack, None, None
+        if stack is not None:
+            try:
+                stack.close()
+            except Exception as exc:  # noqa: BLE001 - a device that is gone may fail to close; the rig is closed anyway
+                log.warning("console: closing the rig: %s", exc)
+
+    def _device_failed(self, exc: BaseException, during: str) -> None:
+        """Close the rig after a device error and tell the page; the next use opens it again."""
+        message = f"{during}: {exc}"
+        log.warning("console: %s", message)
+        self.device_error = message
+        self._reopen_at = time.monotonic() + REOPEN_AFTER_S
+        self._close_rig()
+        self.publish({"type": "error", "source": "device", "message": message}, None)
+        self._publish_status()
+
+    def _go_idle(self) -> None:
+        """No page watches: stop the camera and darken the projector."""
+        self._idle = True
+        devices = self._devices
+        if devices is None:
+            return
+        try:
+            devices.camera.stop()
+            devices.projector.show({"kind": "flat", "level": 0.0})
+        except DeviceError as exc:
+            self._device_failed(exc, "going idle")
+
+    def _live_frame(self) -> None:
+        if self._devices is None and time.monotonic() < self._reopen_at:
+            return
+        try:
+            devices = self._open()
+            if self._idle:
+                devices.projector.show(self.projector.capture_pattern())
+                self._idle = False
+            image = grab_frame(devices.camera, timeout_s=self.config.scan.fetch_timeout_s)
+        except (RigError, DeviceError, OSError) as exc:
+            if self._devices is not None:
+                self._device_failed(exc, "live view")
+            return
+        max_value = devices.camera.pixel_format.max_value
+        figures = frame_figures(image, max_value, self.projector.fringe_axis)
+        picture = self._live_picture(image, max_value, figures)
+        ok, jpeg = cv2.imencode(".jpg", picture, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
+        now = time.monotonic()
+        self._frame_times = [t for t in self._frame_times if now - t < 2.0] + [now]
+        self.fps = (
+            (len(self._frame_times) - 1) / max(now - self._frame_times[0], 1e-6) if len(self._frame_times) > 1 else 0.0
+        )
+        self.frames += 1
+        header = {
+            "type": "frame",
+            "frame": self.frames,
+            "width": int(image.shape[1]),
+            "height": int(image.shape[0]),
+            "mean": figures.mean,
+            "saturated_fraction": figures.saturated_fraction,
+            "focus": figures.focus,
+            "histogram": figures.histogram,
+            "valid_fraction": figures.valid_fraction,
+            "fps": self.fps,
+            "exposure_us": self.exposure_us,
+            "gain": self.gain,
+            "view": self.live.view if figures.modulation is not None else "camera",
+            "overlay": self.live.overlay,
+        }
+        if ok:
+            self.publish(header, jpeg.tobytes())
+
+    def _live_picture(self, image: np.ndarray, max_value: int, figures: Any) -> np.ndarray:
+        """The picture sent to the page: the frame (saturation in red) or the modulation map."""
+        if self.live.view == "modulation" and figures.modulation is not None:
+            top = float(np.percentile(figures.modulation, 99)) or 1.0
+            picture = colour_map(figures.modulation, 0.0, top)
+            picture[~figures.valid] //= 3  # where the pipeline would drop the phase
+            return picture
+        grey = image if image.dtype == np.uint8 else np.clip(image * (255.0 / max_value), 0, 255).astype(np.uint8)
+        if not (self.live.overlay and figures.saturated_fraction > 0):
+            return grey
+        picture = cv2.cvtColor(grey, cv2.COLOR_GRAY2BGR)
+        picture[figures.saturated] = (0, 0, 255)
+        return picture
+
+    # ------------------------------------------------------------------ page presence
+    def watch(self, delta: int) -> None:
+        """A page starts (+1) or stops (-1) watching the live view."""
+        self._watchers = max(0, self._watchers + delta)
+
+    def client_left(self, client: str) -> None:
+        """A page closed: stop what it started, so the rig is left idle."""
+        for job in list(self.jobs.values()):
+            if job.client == client and job.state == "running":
+                job.token.cancel("the page that started it was closed")
+
+    # ------------------------------------------------------------------ settings
+    def _refuse_while_acquiring(self, what: str) -> None:
+        if self.current is not None:
+            raise Busy(f"busy: {what} cannot change while {self.current.kind} {self.current.name} runs")
+
+    def set_exposure(self, exposure_us: float | None = None, gain: float | None = None) -> dict[str, Any]:
+        """Camera exposure (us) and gain for the live view and the next scans."""
+        self._refuse_while_acquiring("the exposure")
+        if exposure_us is not None and not (math.isfinite(exposure_us) and 1 <= exposure_us <= 10_000_000):
+            raise RigError(f"exposure_us: expected 1 .. 10000000 us, found {exposure_us}")
+        if gain is not None and not (math.isfinite(gain) and gain >= 0):
+            raise RigError(f"gain: expected a value >= 0, found {gain}")
+
+        def apply() -> None:
+            devices = self._open()
+            if exposure_us is not None:
+                devices.camera.exposure_us = exposure_us
+                self.exposure_us = float(devices.camera.exposure_us)
+            if gain is not None:
+                devices.camera.gain = gain
+                self.gain = float(devices.camera.gain)
+
+        self.call(apply)
+        self._publish_status()
+        return {"exposure_us": self.exposure_us, "gain": self.gain}
+
+    def set_projector(self, setting: ProjectorSetting) -> dict[str, Any]:
+        """Show a pattern between scans (alignment, exposure checks, the live modulation map)."""
+        self._refuse_while_acquiring("the projector pattern")
+        setting.check()
+
+        def apply() -> None:
+            devices = self._open()
+            pattern = setting.capture_pattern()
+            validate_pattern(pattern, devices.projector.size)
+            devices.projector.show(pattern)
+            self.projector = setting
+
+        self.call(apply)
+        self._publish_status()
+        return self.projector.__dict__ | {"capture_pattern": self.projector.capture_pattern()}
+
+    def set_live(self, overlay: bool | None = None, view: str | None = None) -> dict[str, Any]:
+        if view is not None and view not in ("camera", "modulation"):
+            raise RigError(f"view: expected camera or modulation, found {view!r}")
+        self.live = replace(self.live, **{k: v for k, v in (("overlay", overlay), ("view", view)) if v is not None})
+        return self.live.__dict__
+
+    def set_calibration(self, name: str | None) -> str | None:
+        """The calibration scans are processed with (a name in DATA/calibrations, or None: phase only)."""
+        if name is not None:
+            self.data.existing("calibrations", name)
+        self.calibration = name
+        self._publish_status()
+        return name
+
+    def inject_fault(self, fault: str) -> None:
+        """Reopen the simulated rig with a named device fault (only with ``fault_injection``)."""
+        from rig.hardware.simulated import FAULTS
+
+        if not self.fault_injection:
+            raise RigError("fault injection is not enabled for this console")
+        if not self.config.simulated:
+            raise RigError("faults can only be injected into the simulated rig")
+        if fault not in FAULTS:
+            raise RigError(f"fault: expected one of {', '.join(FAULTS)}, found {fault!r}")
+        self._refuse_while_acquiring("the rig")
+
+        def reopen() -> None:
+            self._close_rig()
+            self._fault = fault
+            self._reopen_at = 0.0
+
+        self.call(reopen)
+
+    # ------------------------------------------------------------------ jobs
+    def _new_job(self, kind: str, name: str, client: str | None) -> Job:
+        job = Job(id=f"{kind}-{next(self._ids)}", kind=kind, name=name, client=client)
+        self.jobs[job.id] = job
+        while len(self.jobs) > 50:
+            self.jobs.popitem(last=False)
+        self._publish_job(job)
+        return job
+
+    def _publish_job(self, job: Job) -> None:
+        self.publish({"type": "job", "job": job.as_dict()}, None)
+
+    def _sink(self, job: Job) -> Callable[[Event], None]:
+        def sink(event: Event) -> None:
+            job.stage, job.done, job.total = event.task, event.done, event.total
+            if job.kind == "scan" and event.kind == "step" and event.total and event.done >= event.total:
+                job.last_frame = job.last_frame or time.time()
+            self.publish({"type": "progress", "job": job.id, "kind": job.kind, "event": event.as_dict()}, None)
+
+        return sink
+
+    def _finish(self, job: Job, error: BaseException | None = None) -> None:
+        job.finished = time.time()
+        if error is None:
+            job.state = "done"
+        elif isinstance(error, Cancelled):
+            job.state, job.error = "cancelled", str(error)
+        else:
+            job.state, job.error = "failed", str(error)
+            self.publish(
+                {"type": "error", "source": job.kind, "job": job.id, "message": f"{job.kind} {job.name}: {error}"}, None
+            )
+        self._publish_job(job)
+
+    def scan(
+        self,
+        name: str | None = None,
+        scene: str = "object",
+        process: bool = True,
+        options: ProcessOptions | None = None,
+        client: str | None = None,
+    ) -> Job:
+        """Start a scan into DATA/captures/NAME (then process it); :class:`Busy` if one is running."""
+        if not self._acquiring.acquire(blocking=False):
+            running = self.current
+            raise Busy(
+                f"busy: {running.kind if running else 'an acquisition'} {running.name if running else ''} "
+                "is running; one acquisition at a time"
+            )
+        try:
+            name = name or self.data.new_name("captures", "scan")
+            path = self.data.path("captures", name)
+            if path.exists():
+                raise RigError(f"captures/{name}: already exists; choose another name")
+            if scene != "object" and not self.config.simulated:
+                raise RigError("scene: only the simulated rig can be told what it looks at")
+            job = self._new_job("scan", name, client)
+            self.current = job
+            self._tasks.put((lambda: self._scan(job, path, scene, process, options), Future()))
+        except BaseException:
+            self._acquiring.release()
+            raise
+        self._publish_status()
+        return job
+
+    def _scan(self, job: Job, path: Path, scene: str, process: bool, options: ProcessOptions | None) -> None:
+        """Worker thread: the acquisition itself, then hand the capture to processing."""
+        from rig.acquisition.scan import scan_with
+
+        error: BaseException | None = None
+        try:
+            devices = self._open()
+            devices.camera.stop()  # the live view's software-trigger acquisition
+            patterns = self.config.scan.patterns()
+            reporter = Reporter(f"scan {job.name}", sink=self._sink(job), cancel=job.token)
+            reporter.begin(len(patterns), f"scan {job.name}")
+            scan_with(
+                devices, path, patterns, scene=scene, progress=reporter, exposure_us=self.exposure_us, gain=self.gain
+            )
+            job.result = job.name
+        except (DeviceError, RigError, OSError) as exc:
+            error = exc
+            if not isinstance(exc, Cancelled) and self._devices is not None and _is_device_fault(exc):
+                self._device_failed(exc, f"scan {job.name}")
+        finally:
+            self.current = None
+            self._acquiring.release()
+        if error is not None:
+            self._finish(job, error)
+        else:
+            self._restore_projector()
+            if process:
+                job.stage = "processing"
+                self._publish_job(job)
+                self._processing.submit(self._process, job, path, job.name, options, True)
+            else:
+                self._finish(job)
+        self._publish_status()
+
+    def _restore_projector(self) -> None:
+        if self._devices is not None:
+            try:
+                self._devices.projector.show(self.projector.capture_pattern())
+            except DeviceError as exc:
+                self._device_failed(exc, "projector")
+
+    def process(
+        self, capture: str, options: ProcessOptions | None = None, name: str | None = None, client: str | None = None
+    ) -> Job:
+        """Reprocess DATA/captures/CAPTURE with ``options`` into DATA/results/NAME (queued)."""
+        path = self.data.existing("captures", capture)
+        options = options or ProcessOptions(correction=DEFAULT_CORRECTION)
+        name = name or self.data.new_name("results", f"{capture}-{options.correction}")
+        self.data.path("results", name)
+        job = self._new_job("process", name, client)
+        self._processing.submit(self._process, job, path, name, options, False)
+        return job
+
+    def _process(self, job: Job, capture: Path, name: str, options: ProcessOptions | None, quick_first: bool) -> None:
+        """Processing thread: the capture to a result on screen, then its files."""
+        from rig.pipeline.outputs import write_outputs
+        from rig.pipeline.run import process
+
+        options = options or ProcessOptions(correction=DEFAULT_CORRECTION)
+        calibration = self.data.existing("calibrations", self.calibration) if self.calibration else None
+        try:
+            if quick_first and options.correction != "none":
+                reporter = Reporter(f"process {name} (quick)", sink=self._sink(job), cancel=job.token)
+                quick = process(capture, calibration, replace(options, correction="none"), progress=reporter)
+                self._show(ResultView.from_result(name, quick), job, final=False)
+            reporter = Reporter(f"process {name}", sink=self._sink(job), cancel=job.token)
+            result = process(capture, calibration, options, progress=reporter)
+            view = ResultView.from_result(name, result)
+            self._show(view, job, final=True)
+            write_outputs(result, self.data.path("results", name))
+            view.saved = True
+            job.result = name
+            self.publish({"type": "saved", "name": name, "job": job.id}, None)
+        except (RigError, OSError, ValueError) as exc:
+            self._finish(job, exc)
+        except Exception as exc:  # a bug must reach the page, not die silently in a thread
+            log.exception("console: processing %s failed", name)
+            self._finish(job, exc)
+        else:
+            self._finish(job)
+        self._publish_status()
+
+    def _show(self, view: ResultView, job: Job, final: bool) -> None:
+        self.results[view.name] = view
+        self.results.move_to_end(view.name)
+        while len(self.results) > RESULTS_KEPT:
+            self.results.popitem(last=False)
+        since = time.time() - job.last_frame if job.last_frame else None
+        self.publish(
+            {
+                "type": "result",
+                "name": view.name,
+                "job": job.id,
+                "final": final,
+                "since_last_frame_s": since,
+                "summary": view.summary(),
+            },
+            None,
+        )
+
+    def result(self, name: str) -> ResultView:
+        """A result by name: in memory, or read back from DATA/results/NAME."""
+        if name in self.results:
+            return self.results[name]
+        path = self.data.existing("results", name)
+        view = ResultView.from_directory(name, path)
+        self.results[name] = view
+        while len(self.results) > RESULTS_KEPT:
+            self.results.popitem(last=False)
+        return view
+
+    def stop(self, job_id: str | None = None) -> list[str]:
+        """Cancel ``job_id`` (default: every running job); returns the ids asked to stop."""
+        stopped = []
+        for job in self.jobs.values():
+            if job.state == "running" and (job_id is None or job.id == job_id):
+                job.token.cancel("stopped from the console")
+                stopped.append(job.id)
+        if job_id is not None and not stopped:
+            raise RigError(f"job {job_id!r}: not running")
+        return stopped
+
+    # ------------------------------------------------------------------ state
+    def devices(self) -> list[dict[str, Any]]:
+        """Each device's backend, name, state and details."""
+        config, devices = self.config, self._devices
+        state = "open" if devices is not None else ("fault" if self.device_error else "closed")
+        rows = [
+            {
+                "role": "projector",
+                "backend": config.projector.backend,
+                "state": state,
+                "name": devices.projector.name if devices else None,
+                "detail": f"{config.projector.width}x{config.projector.height}",
+            },
+            {
+                "role": "camera",
+                "backend": config.camera.backend,
+                "state": state,
+                "name": devices.camera.name if devices else None,
+                "detail": f"{config.camera.width}x{config.camera.height} {config.camera.pixel_format}",
+            },
+            {
+                "role": "trigger",
+                "backend": config.trigger.backend,
+                "state": state,
+                "name": type(devices.trigger).__name__ if devices else None,
+                "detail": "camera software trigger"
+                if config.trigger.backend == "software"
+                else (config.trigger.port or "simulated box"),
+            },
+        ]
+        return rows
+
+    def status(self) -> dict[str, Any]:
+        running = [job.as_dict() for job in self.jobs.values() if job.state == "running"]
+        if self.current is not None:
+            state = "scanning"
+        elif running:
+            state = "processing"
+        elif self.device_error and self._devices is None:
+            state = "fault"
+        elif self._watchers and self._devices is not None:
+            state = "live"
+        else:
+            state = "idle"
+        return {
+            "state": state,
+            "busy": self.current is not None,
+            "acquisition": self.current.as_dict() if self.current else None,
+            "jobs": running,
+            "device_error": self.device_error,
+            "devices": self.devices(),
+            "exposure_us": self.exposure_us,
+            "gain": self.gain,
+            "projector": self.projector.__dict__,
+            "live": {"watchers": self._watchers, "fps": round(self.fps, 1), **self.live.__dict__},
+            "calibration": self.calibration,
+            "calibrations": self.data.names("calibrations"),
+            "process_options": process_choices(),
+            "simulated": self.config.simulated,
+            "fault_injection": self.fault_injection,
+            "config": str(self.config.source) if self.config.source else "built-in simulated rig",
+            "data": self.data.describe(),
+        }
+
+    def _publish_status(self) -> None:
+        self.publish({"type": "status", "status": self.status()}, None)
+
+
+def process_choices() -> dict[str, Any]:
+    """The processing options a page can offer (the pipeline's own lists)."""
+    from rig.pipeline.plan import UNWRAP_METHODS
+    from rig.pipeline.stages import CORRECTIONS, DENOISERS
+
+    return {
+        "unwrap": list(UNWRAP_METHODS),
+        "denoise": list(DENOISERS),
+        "correction": list(CORRECTIONS),
+        "default_correction": DEFAULT_CORRECTION,
+    }
+
+
+def _is_device_fault(exc: BaseException) -> bool:
+    """Whether an acquisition error came from a device (close and reopen the rig) rather than from the data."""
+    from rig.acquisition.loop import AcquisitionError
+
+    seen: BaseException | None = exc
+    while seen is not None:
+        if isinstance(seen, (DeviceError, AcquisitionError)):
+            return True
+        seen = seen.__cause__
+    return False
