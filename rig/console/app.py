@@ -319,7 +319,7 @@ def create_app(
                     }
                 )
             except RigError as exc:
-                rows.append({"name": name, "error": str(exc)})
+                rows.append({"name": name, "complete": False, "error": str(exc)})
         return {"captures": rows}
 
     @app.get("/api/captures/{name}", tags=["data"])
@@ -377,13 +377,13 @@ def create_app(
 
     @app.get("/api/compare", tags=["data"], summary="difference of two results (a - b)")
     async def compare(a: str = Query(...), b: str = Query(...)) -> dict[str, Any]:
-        view_a, view_b = (await run_in_threadpool(session.result, n) for n in (a, b))
+        view_a, view_b = await run_in_threadpool(session.result, a), await run_in_threadpool(session.result, b)
         _, figures = difference(view_a, view_b)
         return figures
 
     @app.get("/api/compare.png", tags=["data"], summary="difference map of two results, symmetric colour scale")
     async def compare_png(a: str = Query(...), b: str = Query(...)) -> Response:
-        view_a, view_b = (await run_in_threadpool(session.result, n) for n in (a, b))
+        view_a, view_b = await run_in_threadpool(session.result, a), await run_in_threadpool(session.result, b)
         diff, _ = difference(view_a, view_b)
         png, bound = difference_png(diff)
         return Response(png, media_type="image/png", headers={"X-Range": f"{-bound},{bound}"})

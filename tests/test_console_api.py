@@ -1,0 +1,252 @@
+"""The console's JSON API through the ASGI test client, on the simulated rig (issue 13).
+
+Status and devices, a scan to a result, the busy refusal of a second acquisition, Stop, live
+frames and exposure, containment of every name in the data directory, the access token and the
+same-origin rule, readable errors, and recovery after an injected device fault.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+
+from rig.config import load_config
+from rig.console.app import create_app
+
+WIDTH, HEIGHT = 320, 240
+
+
+@pytest.fixture
+def rig_toml(tmp_path: Path, simulated_rig_toml: Callable[..., str]) -> Path:
+    path = tmp_path / "rig.toml"
+    text = simulated_rig_toml((456, 570), (WIDTH, HEIGHT), 35.0)
+    path.write_text(text.replace("[scan]\n", "[scan]\nfetch_timeout_s = 0.5\nretries = 1\n"))
+    return path
+
+
+@pytest.fixture
+def console(tmp_path: Path, rig_toml: Path) -> Iterator[TestClient]:
+    app = create_app(load_config(rig_toml), tmp_path / "data", fault_injection=True)
+    with TestClient(app) as client:
+        yield client
+
+
+def wait_job(client: TestClient, job_id: str, timeout_s: float = 60.0) -> dict[str, Any]:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        job = client.get(f"/api/jobs/{job_id}").json()
+        if job["state"] != "running":
+            return job
+        time.sleep(0.05)
+    raise AssertionError(f"job {job_id} still running after {timeout_s} s")
+
+
+def wait_saved(client: TestClient, name: str, timeout_s: float = 60.0) -> dict[str, Any]:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        reply = client.get(f"/api/results/{name}")
+        if reply.status_code == 200 and reply.json()["saved"]:
+            return reply.json()
+        time.sleep(0.05)
+    raise AssertionError(f"result {name} not saved after {timeout_s} s")
+
+
+def live_frames(socket: Any, count: int) -> list[dict[str, Any]]:
+    """The headers of the next ``count`` live frames (text messages in between are skipped)."""
+    headers = []
+    while len(headers) < count:
+        message = socket.receive()
+        if message.get("bytes"):
+            data = message["bytes"]
+            size = int.from_bytes(data[:4], "little")
+            headers.append(json.loads(data[4 : 4 + size]))
+    return headers
+
+
+def test_status_devices_and_openapi(console: TestClient) -> None:
+    status = console.get("/api/status").json()
+    assert status["state"] == "idle" and not status["busy"] and status["simulated"]
+    devices = {d["role"]: d for d in console.get("/api/devices").json()["devices"]}
+    assert devices["camera"]["backend"] == "simulated" and devices["camera"]["state"] == "open"
+    assert devices["projector"]["backend"] == "gl-offscreen" and devices["trigger"]["backend"] == "simulated-serial"
+    paths = console.get("/api/openapi.json").json()["paths"]
+    for path in ("/api/status", "/api/devices", "/api/exposure", "/api/projector", "/api/scan", "/api/process",
+                 "/api/captures", "/api/results", "/api/calibrations"):
+        assert path in paths
+
+
+def test_scan_gives_a_result_and_a_second_scan_is_refused_as_busy(console: TestClient) -> None:
+    first = console.post("/api/scan", json={"name": "part-001", "options": {"correction": "none"}})
+    assert first.status_code == 202
+    second = console.post("/api/scan", json={"name": "part-002"})
+    assert second.status_code == 409
+    assert "busy" in second.json()["error"] and "one acquisition at a time" in second.json()["error"]
+    job = wait_job(console, first.json()["job"]["id"])
+    assert job["state"] == "done", job
+    assert [c["name"] for c in console.get("/api/captures").json()["captures"]] == ["part-001"]
+    assert not (console.app.state.session.data.root / "captures" / "part-002").exists()
+    summary = wait_saved(console, "part-001")
+    assert summary["shows"] == "phase" and summary["unit"] == "rad"  # no calibration in the data directory
+    assert summary["valid_fraction"] > 0.9
+    values = console.get("/api/results/part-001/values.f32")
+    assert values.headers["X-Width"] == str(WIDTH) and len(values.content) == WIDTH * HEIGHT * 4
+    assert console.get("/api/results/part-001/map.png").content[:8] == b"\x89PNG\r\n\x1a\n"
+    surface = console.get("/api/results/part-001/surface").json()
+    assert len(surface["z"]) == HEIGHT // surface["step"] or len(surface["z"]) == -(-HEIGHT // surface["step"])
+    assert console.get("/api/results/part-001/files/phase.npy").status_code == 200
+    assert console.get("/api/results/part-001/files/points.ply").status_code == 404  # phase only: no cloud
+
+
+def test_scan_with_a_calibration_gives_heights(
+    tmp_path: Path, rig_toml: Path, exact_calibration: Callable[[Path, Path], Path]
+) -> None:
+    data = tmp_path / "data"
+    exact_calibration(rig_toml, data / "calibrations" / "cal")
+    with TestClient(create_app(load_config(rig_toml), data)) as client:
+        assert client.get("/api/calibrations").json() == {"calibrations": ["cal"], "active": "cal"}
+        job = client.post("/api/scan", json={"name": "part", "options": {"correction": "none"}}).json()["job"]
+        assert wait_job(client, job["id"])["state"] == "done"
+        summary = wait_saved(client, "part")
+        heights = np.frombuffer(client.get("/api/results/part/values.f32").content, dtype="<f4").reshape(HEIGHT, WIDTH)
+    from rig.hardware.simulated import geometry_from_config, scene_height
+
+    config = load_config(rig_toml)
+    truth = scene_height(config, "object", geometry_from_config(config))
+    valid = np.isfinite(heights)
+    assert summary["shows"] == "height" and valid.mean() > 0.9
+    assert np.median(np.abs(heights[valid] - truth[valid])) < 0.5  # mm; the hemisphere is ~80 mm high
+    assert (data / "results" / "part" / "points.ply").is_file()
+
+
+def test_stop_cancels_the_scan_and_leaves_no_complete_capture(console: TestClient) -> None:
+    with console.websocket_connect("/api/events") as socket:
+        socket.receive_text()  # hello
+        job = console.post("/api/scan", json={"name": "stopped"}).json()["job"]
+        while True:
+            message = socket.receive()
+            if message.get("text") and json.loads(message["text"]).get("type") == "progress":
+                break
+        assert console.post("/api/stop").json()["stopped"] == [job["id"]]
+    finished = wait_job(console, job["id"])
+    assert finished["state"] == "cancelled" and "stopped" in finished["error"]
+    root = console.app.state.session.data.root / "captures"
+    assert not (root / "stopped").exists()
+    leftovers = list(root.glob("stopped.incomplete*"))
+    assert leftovers and json.loads((leftovers[0] / "capture.json").read_text())["complete"] is False
+    listed = console.get("/api/captures").json()["captures"]
+    assert [c["complete"] for c in listed] == [False] and listed[0]["name"].startswith("stopped.incomplete")
+    # the rig is free again
+    again = console.post("/api/scan", json={"name": "after-stop", "process": False}).json()["job"]
+    assert wait_job(console, again["id"])["state"] == "done"
+
+
+def test_live_frames_follow_the_exposure(console: TestClient) -> None:
+    assert console.put("/api/projector", json={"pattern": "white"}).status_code == 200
+    with console.websocket_connect("/api/events") as socket:
+        socket.receive_text()
+        socket.send_text(json.dumps({"live": True}))
+        bright = live_frames(socket, 3)[-1]
+        assert console.put("/api/exposure", json={"exposure_us": 2500}).json()["exposure_us"] == 2500
+        dark = live_frames(socket, 3)[-1]
+        assert dark["exposure_us"] == 2500
+        assert dark["mean"] < 0.5 * bright["mean"]
+        assert len(bright["histogram"]) == 256 and bright["focus"] > 0
+        console.put("/api/projector", json={"pattern": "fringe", "frequency": 16})
+        fringe = live_frames(socket, 3)[-1]
+        assert fringe["valid_fraction"] is not None and fringe["valid_fraction"] > 0.5
+    assert console.app.state.session.status()["live"]["watchers"] == 0  # the page went away: rig idle
+
+
+@pytest.mark.parametrize("name", ["../outside", "a/b", ".hidden", "..", "x" * 200])
+def test_names_stay_inside_the_data_directory(console: TestClient, name: str) -> None:
+    reply = console.post("/api/process", json={"capture": name})
+    assert reply.status_code == 400 and "plain name" in reply.json()["error"]
+    assert console.post("/api/scan", json={"name": name}).status_code == 400
+    assert not console.app.state.session.status()["busy"]
+
+
+def test_a_link_out_of_the_data_directory_is_refused(console: TestClient, tmp_path: Path) -> None:
+    outside = tmp_path / "elsewhere"
+    outside.mkdir()
+    (outside / "report.json").write_text("{}")
+    (console.app.state.session.data.root / "results" / "link").symlink_to(outside)
+    reply = console.get("/api/results/link")
+    assert reply.status_code == 400 and "outside the data directory" in reply.json()["error"]
+    assert console.get("/api/results/..%2F..%2Fetc/map.png").status_code in (400, 404)
+    assert console.get("/api/results/nothing").status_code == 404
+
+
+def test_errors_are_one_readable_line(console: TestClient) -> None:
+    reply = console.put("/api/exposure", json={"exposure_us": -5})
+    assert reply.status_code == 400 and reply.json()["error"].startswith("exposure_us: expected")
+    reply = console.put("/api/projector", json={"pattern": "checkerboard"})
+    assert reply.status_code == 400 and "pattern: expected one of black, white, fringe" in reply.json()["error"]
+    reply = console.post("/api/process", json={"capture": "missing"})
+    assert reply.status_code == 404 and "captures/missing: not found" in reply.json()["error"]
+
+
+def test_token_is_required_when_set(tmp_path: Path, rig_toml: Path) -> None:
+    app = create_app(load_config(rig_toml), tmp_path / "data", token="s3cret")
+    with TestClient(app) as client:
+        assert client.get("/api/status").status_code == 401
+        assert client.get("/api/status", headers={"Authorization": "Bearer wrong"}).status_code == 401
+        assert client.get("/api/status", headers={"Authorization": "Bearer s3cret"}).status_code == 200
+        page = client.get("/?token=s3cret")
+        assert page.status_code == 200 and "rig_console_token=s3cret" in page.headers["set-cookie"]
+        assert client.get("/api/status").status_code == 200  # the cookie now carries it
+        client.cookies.clear()
+        with pytest.raises(Exception):
+            with client.websocket_connect("/api/events") as socket:
+                socket.receive_text()
+
+
+def test_requests_from_another_origin_are_refused(console: TestClient) -> None:
+    reply = console.post("/api/scan", json={}, headers={"Origin": "http://example.com"})
+    assert reply.status_code == 403 and not console.app.state.session.status()["busy"]
+
+
+def test_a_device_fault_is_reported_and_the_next_scan_works(console: TestClient) -> None:
+    with console.websocket_connect("/api/events") as socket:
+        socket.receive_text()
+        assert console.post("/api/simulation/fault", json={"fault": "camera-gone"}).status_code == 200
+        job = console.post("/api/scan", json={"name": "faulty", "process": False}).json()["job"]
+        errors = []
+        while not errors:
+            message = socket.receive()
+            if message.get("text"):
+                data = json.loads(message["text"])
+                if data["type"] == "error":
+                    errors.append(data["message"])
+    assert "disappeared" in errors[0]
+    assert wait_job(console, job["id"])["state"] == "failed"
+    status = console.get("/api/status").json()
+    assert "disappeared" in status["device_error"]
+    retry = console.post("/api/scan", json={"name": "after-fault", "process": False}).json()["job"]
+    assert wait_job(console, retry["id"])["state"] == "done"
+    assert console.get("/api/devices").json()["devices"][1]["state"] == "open"
+
+
+def test_fault_injection_is_off_unless_asked_for(tmp_path: Path, rig_toml: Path) -> None:
+    with TestClient(create_app(load_config(rig_toml), tmp_path / "data")) as client:
+        assert client.post("/api/simulation/fault", json={"fault": "camera-gone"}).status_code in (404, 405)
+
+
+def test_reprocess_and_compare(console: TestClient) -> None:
+    job = console.post("/api/scan", json={"name": "base", "options": {"correction": "none"}}).json()["job"]
+    wait_job(console, job["id"])
+    wait_saved(console, "base")
+    again = console.post("/api/process", json={"capture": "base", "name": "base-vote", "options": {"correction": "vote"}})
+    assert again.status_code == 202
+    assert wait_job(console, again.json()["job"]["id"])["state"] == "done"
+    assert console.get("/api/results/base-vote").json()["methods"]["correction"] == "vote"
+    assert set(console.get("/api/captures/base").json()["results"]) == {"base", "base-vote"}
+    figures = console.get("/api/compare", params={"a": "base", "b": "base-vote"}).json()
+    assert figures["unit"] == "rad" and figures["rms"] >= 0 and figures["valid_fraction"] > 0.5
+    assert console.get("/api/compare.png", params={"a": "base", "b": "base-vote"}).content[:4] == b"\x89PNG"
