@@ -1,4 +1,4 @@
-"""Abstract projector: shows capture-format pattern dicts (processing/patterns.py defines them).
+"""Abstract projector: shows capture-format patterns (the typed model of processing/patterns.py).
 
 The base class owns the rules (open/closed state from :class:`~drivers.device.Device`, argument
 checks, logging, the gamma LUT's meaning); a backend fills in the hooks ``_open``, ``_show``,
@@ -21,7 +21,7 @@ import numpy as np
 
 from drivers.device import Device, check_timeout_s
 from drivers.errors import IncompatibleStateError, WaitTimeoutError
-from processing.patterns import PATTERN_KINDS, pattern_intensity
+from processing.patterns import Pattern, PatternError, as_pattern
 
 log = logging.getLogger(__name__)
 
@@ -52,20 +52,23 @@ def apply_gamma_lut(image: np.ndarray, lut: np.ndarray | None) -> np.ndarray:
     return np.interp(x * (lut.size - 1), positions, lut).astype(np.float32)
 
 
-def validate_pattern(pattern: Mapping[str, Any], size: tuple[int, int]) -> None:
-    """Raise ``ValueError`` naming the problem if ``pattern`` is not a showable pattern dict."""
-    if not isinstance(pattern, Mapping):
-        raise ValueError(f"pattern: expected a mapping (a capture.json pattern entry), found {type(pattern).__name__}")
-    kind = pattern.get("kind")
-    if kind not in PATTERN_KINDS:
-        raise ValueError(f"pattern kind: expected one of {', '.join(PATTERN_KINDS)}, found {kind!r}")
-    probe = np.array([0.5])
-    try:  # evaluating one pixel checks every key the kind needs
-        pattern_intensity(pattern, probe, probe, size)
-    except KeyError as exc:
-        raise ValueError(f"pattern {kind!r}: missing key {exc.args[0]!r}") from exc
-    except (TypeError, ZeroDivisionError) as exc:
-        raise ValueError(f"pattern {kind!r}: invalid value ({exc})") from exc
+def validate_pattern(pattern: Pattern | Mapping[str, Any], size: tuple[int, int] | None = None) -> Pattern:
+    """The typed pattern of ``pattern`` (a Pattern or its capture.json entry); ``ValueError`` naming the problem.
+
+    ``size`` is accepted for callers that pass the projector's size; every pattern kind can be
+    shown at any size.
+    """
+    try:
+        return as_pattern(pattern)
+    except PatternError as exc:
+        kind = pattern.get("kind") if isinstance(pattern, Mapping) else None
+        if not exc.key:
+            raise ValueError(f"pattern: {exc.detail}") from None
+        if exc.key == "kind":
+            raise ValueError(f"pattern kind: {exc.detail}") from None
+        if exc.missing:
+            raise ValueError(f"pattern {kind!r}: missing key {exc.key!r}") from None
+        raise ValueError(f"pattern {kind!r}: {exc}") from None
 
 
 class Projector(Device):
@@ -88,7 +91,7 @@ class Projector(Device):
         super().__init__(name)
         self.size: tuple[int, int] = (width, height)
         self._gamma_lut: np.ndarray | None = None
-        self._pattern: Mapping[str, Any] | None = None
+        self._pattern: Pattern | None = None
         self._shown_count = 0
 
     # -- public API: state checks and logging, then the hook -------------------------------------
@@ -101,8 +104,8 @@ class Projector(Device):
         return self.size[1]
 
     @property
-    def pattern(self) -> Mapping[str, Any] | None:
-        """The pattern last passed to :meth:`show` (None before the first)."""
+    def pattern(self) -> Pattern | None:
+        """The pattern last passed to :meth:`show`, typed (None before the first)."""
         return self._pattern
 
     @property
@@ -114,13 +117,13 @@ class Projector(Device):
     def gamma_lut(self) -> np.ndarray | None:
         return None if self._gamma_lut is None else self._gamma_lut.copy()
 
-    def show(self, pattern: Mapping[str, Any]) -> None:
-        """Start showing ``pattern`` (a capture-format pattern dict); see :meth:`wait_shown`."""
+    def show(self, pattern: Pattern | Mapping[str, Any]) -> None:
+        """Start showing ``pattern`` (a Pattern or its capture.json entry); see :meth:`wait_shown`."""
         self._require_open("show a pattern")
-        validate_pattern(pattern, self.size)
-        log.debug("%s: show %s", self.name, dict(pattern))
-        self._show(pattern)
-        self._pattern = dict(pattern)
+        model = validate_pattern(pattern)
+        log.debug("%s: show %s", self.name, model)
+        self._show(model)
+        self._pattern = model
         self._shown_count += 1
 
     def wait_shown(self, timeout_s: float = 1.0) -> None:
@@ -164,8 +167,8 @@ class Projector(Device):
 
     # -- hooks (and Device's _open / _close) ------------------------------------------------------
     @abc.abstractmethod
-    def _show(self, pattern: Mapping[str, Any]) -> None:
-        """Render / load ``pattern`` (already validated) with the current gamma LUT."""
+    def _show(self, pattern: Pattern) -> None:
+        """Render / load ``pattern`` (typed, so valid) with the current gamma LUT."""
 
     @abc.abstractmethod
     def _wait(self, timeout_s: float) -> bool:

@@ -13,7 +13,6 @@ import contextlib
 import ctypes
 import logging
 import math
-from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -22,8 +21,8 @@ import numpy as np
 
 from drivers.errors import DeviceNotFoundError
 from drivers.projector import Projector
-from processing.patterns import sinusoid_shift
-from processing.speckle import DEFAULT_DOT_PX, DEFAULT_SEED, DEFAULT_SPECKLE_GAIN, speckle_field
+from processing.patterns import Flat, Gray, Pattern, Sinusoid, SpeckleSinusoid
+from processing.speckle import speckle_field
 
 log = logging.getLogger(__name__)
 
@@ -94,27 +93,25 @@ class PatternRenderer:
             self._speckle[key] = self._texture(speckle_field(self.size[0], self.size[1], seed, dot_px))
         return self._speckle[key]
 
-    def render(self, pattern: Mapping[str, Any]) -> None:
-        """Draw ``pattern`` (validated by the caller) over the whole bound framebuffer."""
-        kind = pattern["kind"]
-        self._set("kind", KIND_CODES[kind])
-        self._set("axis", 0 if pattern.get("axis", "x") == "x" else 1)
+    def render(self, pattern: Pattern) -> None:
+        """Draw ``pattern`` (typed, so valid) over the whole bound framebuffer."""
+        self._set("kind", KIND_CODES[pattern.kind])
+        self._set("axis", 0 if getattr(pattern, "axis", "x") == "x" else 1)
         speckle = self._blank
-        if kind in ("sinusoid", "speckle-sinusoid"):
-            phase = float(pattern.get("phase_rad", 0.0)) + sinusoid_shift(pattern)
-            self._set("frequency", float(pattern["frequency"]))
-            self._set("offset", float(pattern.get("offset", 0.5)))
-            self._set("amplitude", float(pattern.get("amplitude", 0.5)))
-            self._set("phase", math.fmod(phase, 2.0 * math.pi) % (2.0 * math.pi))
-        if kind == "speckle-sinusoid":
-            self._set("speckle_gain", float(pattern.get("speckle_gain", DEFAULT_SPECKLE_GAIN)))
-            speckle = self._speckle_texture(int(pattern.get("seed", DEFAULT_SEED)), int(pattern.get("dot_px", DEFAULT_DOT_PX)))
-        elif kind == "gray":
-            self._set("bits", int(pattern["bits"]))
-            self._set("bit", int(pattern["bit"]))
-            self._set("inverted", bool(pattern.get("inverted", False)))
-        elif kind == "flat":
-            self._set("level", float(pattern["level"]))
+        if isinstance(pattern, Sinusoid):
+            self._set("frequency", float(pattern.frequency))
+            self._set("offset", float(pattern.offset))
+            self._set("amplitude", float(pattern.amplitude))
+            self._set("phase", math.fmod(pattern.phase_delay, 2.0 * math.pi) % (2.0 * math.pi))
+        if isinstance(pattern, SpeckleSinusoid):
+            self._set("speckle_gain", float(pattern.speckle_gain))
+            speckle = self._speckle_texture(int(pattern.seed), int(pattern.dot_px))
+        elif isinstance(pattern, Gray):
+            self._set("bits", int(pattern.bits))
+            self._set("bit", int(pattern.bit))
+            self._set("inverted", bool(pattern.inverted))
+        elif isinstance(pattern, Flat):
+            self._set("level", float(pattern.level))
         speckle.use(location=0)
         (self._lut_texture or self._blank).use(location=1)
         self.ctx.viewport = (0, 0, *self.size)
@@ -174,7 +171,7 @@ class RenderedProjector(Projector):
     def _current(self) -> contextlib.AbstractContextManager[Any]:
         """A context manager that makes the OpenGL context current for the calls inside it."""
 
-    def _draw(self, pattern: Mapping[str, Any], fbo: Any, bits: int, readback: bool = True) -> None:
+    def _draw(self, pattern: Pattern, fbo: Any, bits: int, readback: bool = True) -> None:
         """Render ``pattern`` into ``fbo`` (context current) and, if ``readback``, keep it for last_frame."""
         assert self._renderer is not None
         self._frame = None
@@ -243,7 +240,7 @@ class GLProjector(RenderedProjector):
         # open in one thread, and a standalone context is not made current by moderngl on its own.
         return self._ctx
 
-    def _show(self, pattern: Mapping[str, Any]) -> None:
+    def _show(self, pattern: Pattern) -> None:
         assert self._fbo is not None
         self._frame = None
         with self._current():

@@ -11,13 +11,14 @@ from __future__ import annotations
 
 import contextlib
 import logging
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator
 from typing import Any
 
 import moderngl
 
 from drivers.errors import DeviceError, DeviceNotFoundError, UnsupportedFeatureError
 from drivers.projector_gl import PatternRenderer, RenderedProjector, release_egl_thread
+from processing.patterns import Pattern
 
 log = logging.getLogger(__name__)
 
@@ -117,7 +118,7 @@ class WindowProjector(RenderedProjector):
         _glfw().make_context_current(self._window)
         yield
 
-    def _show(self, pattern: Mapping[str, Any]) -> None:
+    def _show(self, pattern: Pattern) -> None:
         glfw = _glfw()
         with self._current():
             self._draw(pattern, self._ctx.screen, 8, readback=self.readback)

@@ -1,43 +1,331 @@
-"""What each pattern kind of capture-format.md projects, as numpy maths.
+"""The pattern model of capture-format.md: typed patterns, their validation, JSON form and maths.
 
-This module is the single definition of the projected intensities: the moderngl shaders, the
-synthesiser and the simulated camera are all checked against it. Intensities are in [0, 1],
+A pattern is what the projector shows for one frame. Every layer uses these classes: the
+projector driver validates what it is asked to show with them, the capture store checks
+``capture.json`` entries with them, the importer and the rig config build them, the pipeline
+groups them. Validation lives in one place, the classes' ``__post_init__``; a wrong value raises
+:class:`PatternError` (a ``ValueError``) naming the key, what was expected and what was found,
+which each layer prefixes with its own context (file and field, or the device).
+
+JSON form (format v1): :func:`parse_pattern` reads one ``patterns`` entry, :meth:`Pattern.to_dict`
+writes it back. The round trip is exact: keys the entry carried stay, in their order, with their
+values as written (``5`` stays ``5``, not ``5.0``); keys it left out stay out; unknown keys are
+kept in ``extra`` (capture-format.md: tools that rewrite a file preserve them). A pattern built
+in code writes its kind's main keys and every optional key that differs from its default.
+
+This module is also the single definition of the projected intensities: the moderngl shaders,
+the synthesiser and the simulated camera are all checked against it. Intensities are in [0, 1],
 before the projector's gamma. The projector pixel coordinate ``u`` runs along the pattern's
 ``axis`` over ``0 .. W`` (``W`` the projector width for ``"x"``, its height for ``"y"``).
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import Any
+import dataclasses
+import math
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
 
 import numpy as np
 
-PATTERN_KINDS = ("sinusoid", "speckle-sinusoid", "gray", "flat")
+from processing.speckle import DEFAULT_DOT_PX, DEFAULT_SEED, DEFAULT_SPECKLE_GAIN, cached_speckle_field
+
+AXES = ("x", "y")
+_MISSING = object()
+
+
+class PatternError(ValueError):
+    """A pattern entry or value that capture-format.md does not allow.
+
+    ``key`` is the entry's key at fault (``""`` for the entry itself); ``missing`` is True when the
+    key is required and absent, otherwise ``expected`` and ``found`` say what is wrong.
+    """
+
+    def __init__(self, key: str, expected: str = "", found: Any = _MISSING) -> None:
+        self.key = key
+        self.expected = expected
+        self.missing = found is _MISSING
+        self.found = None if self.missing else found
+        self.detail = "missing" if self.missing else f"expected {expected}, found {found!r}"
+        super().__init__(f"{key}: {self.detail}" if key else self.detail)
+
+
+# --------------------------------------------------------------------------- value checks
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _is_int(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _check_number(key: str, value: Any, positive: bool = False) -> None:
+    if not _is_number(value):
+        raise PatternError(key, "a finite number", value)
+    if positive and value <= 0:
+        raise PatternError(key, "a positive number", value)
+
+
+def _check_int(key: str, value: Any, minimum: int) -> None:
+    if not _is_int(value) or value < minimum:
+        raise PatternError(key, f"an integer >= {minimum}", value)
+
+
+def _check_axis(value: Any) -> None:
+    if value not in AXES:
+        raise PatternError("axis", "'x' or 'y'", value)
+
+
+# --------------------------------------------------------------------------- the kinds
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class Pattern(Mapping[str, Any]):
+    """Base of the pattern kinds: the JSON round trip and the unknown keys.
+
+    ``extra`` holds the entry's keys that are not the kind's own (provenance, a tool's notes);
+    ``source_keys`` the order of the keys of the entry it was parsed from (empty when built in
+    code), so that :meth:`to_dict` writes the entry back as it was. A pattern also reads as a
+    read-only mapping of its capture.json entry (``pattern["kind"]``, ``dict(pattern)``) for
+    code that handles entries generically; code that needs values uses the typed attributes.
+    """
+
+    kind: ClassVar[str] = ""
+    # JSON keys of the kind (besides "kind"), in the order an entry built in code writes them,
+    # and those written even when they hold their default.
+    KEYS: ClassVar[tuple[str, ...]] = ()
+    MAIN_KEYS: ClassVar[tuple[str, ...]] = ()
+
+    extra: dict[str, Any] = field(default_factory=dict, hash=False)
+    source_keys: tuple[str, ...] = field(default=(), compare=False, repr=False)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.extra, Mapping):
+            raise PatternError("extra", "a mapping of extra keys", self.extra)
+        clash = sorted(set(self.extra) & ({"kind"} | set(self.KEYS)))
+        if clash:
+            raise PatternError(clash[0], f"a key of {self.kind!r} given as a field, not in extra", self.extra[clash[0]])
+        self.validate()
+
+    def validate(self) -> None:
+        """Raise :class:`PatternError` on the first value the format does not allow."""
+
+    def _defaults(self) -> dict[str, Any]:
+        return {f.name: f.default for f in dataclasses.fields(self) if f.default is not dataclasses.MISSING}
+
+    def to_dict(self) -> dict[str, Any]:
+        """The capture.json entry (format v1); the exact entry it was parsed from, if unchanged."""
+        values = {"kind": self.kind, **{key: getattr(self, key) for key in self.KEYS}, **self.extra}
+        defaults = self._defaults()
+        parsed = bool(self.source_keys)
+
+        def written(key: str) -> bool:
+            if key == "kind" or key in self.extra or key in self.source_keys:
+                return True
+            if not parsed and key in self.MAIN_KEYS:
+                return True
+            return values[key] != defaults.get(key, _MISSING)
+
+        order = [k for k in self.source_keys if k in values] + [k for k in values if k not in self.source_keys]
+        return {key: values[key] for key in order if written(key)}
+
+    def _values(self) -> tuple[Any, ...]:
+        return tuple(getattr(self, f.name) for f in dataclasses.fields(self) if f.compare and f.name != "extra")
+
+    def __eq__(self, other: object) -> bool:
+        """Same kind and values (key order aside); equal to a mapping holding its capture.json entry."""
+        if isinstance(other, Pattern):
+            return type(self) is type(other) and self._values() == other._values() and self.extra == other.extra
+        if isinstance(other, Mapping):
+            return self.to_dict() == dict(other)
+        return NotImplemented
+
+    def __hash__(self) -> int:
+        return hash((self.kind, self._values()))
+
+    def __getitem__(self, key: str) -> Any:
+        return self.to_dict()[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.to_dict())
+
+    def __len__(self) -> int:
+        return len(self.to_dict())
+
+    def replace(self, **changes: Any) -> Pattern:
+        """A copy with ``changes`` (validated); keeps the key order and extra keys."""
+        return dataclasses.replace(self, **changes)
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class Sinusoid(Pattern):
+    """``offset + amplitude cos(2 pi frequency u / W + phase_rad + shift)``.
+
+    ``shift`` is ``shift_rad`` if given, else 2 pi ``step`` / ``steps``. The absolute phase the
+    product reports is 2 pi f u / W, whatever ``offset``, ``phase_rad`` and ``shift``.
+    """
+
+    kind: ClassVar[str] = "sinusoid"
+    KEYS: ClassVar[tuple[str, ...]] = ("axis", "frequency", "steps", "step", "offset", "amplitude", "phase_rad", "shift_rad")
+    MAIN_KEYS: ClassVar[tuple[str, ...]] = ("axis", "frequency", "steps", "step")
+
+    axis: str = "x"
+    frequency: float
+    steps: int
+    step: int
+    offset: float = 0.5
+    amplitude: float = 0.5
+    phase_rad: float = 0.0
+    shift_rad: float | None = None
+
+    def validate(self) -> None:
+        _check_axis(self.axis)
+        _check_number("frequency", self.frequency, positive=True)
+        _check_int("steps", self.steps, 1)
+        _check_int("step", self.step, 0)
+        if self.step >= self.steps:
+            raise PatternError("step", f"0 .. {self.steps - 1} (steps = {self.steps})", self.step)
+        for key in ("offset", "amplitude", "phase_rad"):
+            _check_number(key, getattr(self, key))
+        if self.shift_rad is not None:
+            _check_number("shift_rad", self.shift_rad)
+
+    @property
+    def shift(self) -> float:
+        """This frame's phase shift in radians: ``shift_rad`` if given, else 2 pi j / J."""
+        if self.shift_rad is not None:
+            return float(self.shift_rad)
+        return 2.0 * np.pi * int(self.step) / int(self.steps)
+
+    @property
+    def phase_delay(self) -> float:
+        """``phase_rad + shift``: what phase shifting subtracts to get 2 pi f u / W."""
+        return self.shift + float(self.phase_rad)
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class SpeckleSinusoid(Sinusoid):
+    """The thesis' single-shot pattern: a :class:`Sinusoid` scaled by (1 - g) plus g times a speckle field.
+
+    ``seed`` and ``dot_px`` choose the field (:func:`processing.speckle.speckle_field`),
+    ``speckle_gain`` is g in [0, 1].
+    """
+
+    kind: ClassVar[str] = "speckle-sinusoid"
+    KEYS: ClassVar[tuple[str, ...]] = Sinusoid.KEYS + ("seed", "dot_px", "speckle_gain")
+    MAIN_KEYS: ClassVar[tuple[str, ...]] = Sinusoid.MAIN_KEYS + ("seed", "dot_px", "speckle_gain")
+
+    seed: int = DEFAULT_SEED
+    dot_px: int = DEFAULT_DOT_PX
+    speckle_gain: float = DEFAULT_SPECKLE_GAIN
+
+    def validate(self) -> None:
+        super().validate()
+        _check_int("seed", self.seed, 0)
+        _check_int("dot_px", self.dot_px, 1)
+        _check_number("speckle_gain", self.speckle_gain)
+        if not 0.0 <= self.speckle_gain <= 1.0:
+            raise PatternError("speckle_gain", "a value in [0, 1]", self.speckle_gain)
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class Gray(Pattern):
+    """Gray-code bit plane ``bit`` (0 the most significant) of ``bits``; ``inverted`` its negative."""
+
+    kind: ClassVar[str] = "gray"
+    KEYS: ClassVar[tuple[str, ...]] = ("axis", "bit", "bits", "inverted")
+    MAIN_KEYS: ClassVar[tuple[str, ...]] = KEYS
+
+    axis: str = "x"
+    bit: int
+    bits: int
+    inverted: bool = False
+
+    def validate(self) -> None:
+        _check_axis(self.axis)
+        _check_int("bits", self.bits, 1)
+        _check_int("bit", self.bit, 0)
+        if self.bit >= self.bits:
+            raise PatternError("bit", f"0 .. {self.bits - 1} (bits = {self.bits})", self.bit)
+        if not isinstance(self.inverted, bool):
+            raise PatternError("inverted", "true or false", self.inverted)
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class Flat(Pattern):
+    """Constant intensity ``level`` (white 1, black 0, mid 0.5)."""
+
+    kind: ClassVar[str] = "flat"
+    KEYS: ClassVar[tuple[str, ...]] = ("level",)
+    MAIN_KEYS: ClassVar[tuple[str, ...]] = KEYS
+
+    level: float
+
+    def validate(self) -> None:
+        _check_number("level", self.level)
+
+
+PATTERN_TYPES: dict[str, type[Pattern]] = {cls.kind: cls for cls in (Sinusoid, SpeckleSinusoid, Gray, Flat)}
+PATTERN_KINDS = tuple(PATTERN_TYPES)
 
 # Keys of a pattern entry that change what is projected: two captures are comparable only if
 # these agree pattern by pattern (provenance and other extra keys may differ).
-PROJECTION_KEYS = (
-    "kind", "axis", "frequency", "steps", "step", "offset", "amplitude", "phase_rad", "shift_rad",
-    "bit", "bits", "inverted", "level", "seed", "dot_px", "speckle_gain",
-)
+PROJECTION_KEYS = ("kind",) + tuple(dict.fromkeys(key for cls in PATTERN_TYPES.values() for key in cls.KEYS))
 
 
-def sinusoid_shift(pattern: Mapping[str, Any]) -> float:
+def parse_pattern(entry: Any) -> Pattern:
+    """The typed pattern of one capture.json ``patterns`` entry; :class:`PatternError` if invalid."""
+    if isinstance(entry, Pattern):
+        return entry
+    if not isinstance(entry, Mapping):
+        raise PatternError("", "a mapping (a capture.json pattern entry)", type(entry).__name__)
+    kind = entry.get("kind", _MISSING)
+    if kind is _MISSING:
+        raise PatternError("kind")
+    cls = PATTERN_TYPES.get(kind) if isinstance(kind, str) else None
+    if cls is None:
+        raise PatternError("kind", f"one of {', '.join(PATTERN_KINDS)}", kind)
+    required = [f.name for f in dataclasses.fields(cls) if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING]
+    for key in required:
+        if key not in entry:
+            raise PatternError(key)
+    own = {key: entry[key] for key in cls.KEYS if key in entry}
+    extra = {key: value for key, value in entry.items() if key != "kind" and key not in cls.KEYS}
+    return cls(**own, extra=extra, source_keys=tuple(entry))
+
+
+def as_pattern(pattern: Pattern | Mapping[str, Any]) -> Pattern:
+    """``pattern`` itself if typed, else :func:`parse_pattern` of the entry."""
+    return pattern if isinstance(pattern, Pattern) else parse_pattern(pattern)
+
+
+def same_projection(a: Pattern | Mapping[str, Any], b: Pattern | Mapping[str, Any]) -> bool:
+    """True when two patterns project the same image (extra keys and key order aside)."""
+    pa, pb = as_pattern(a), as_pattern(b)
+    return dataclasses.replace(pa, extra={}) == dataclasses.replace(pb, extra={})
+
+
+# --------------------------------------------------------------------------- intensities
+
+
+def sinusoid_shift(pattern: Sinusoid | Mapping[str, Any]) -> float:
     """Phase shift of one sinusoid frame in radians: ``shift_rad`` if given, else 2 pi j / J."""
-    if "shift_rad" in pattern:
-        return float(pattern["shift_rad"])
-    return 2.0 * np.pi * int(pattern["step"]) / int(pattern["steps"])
+    sinusoid = as_pattern(pattern)
+    if not isinstance(sinusoid, Sinusoid):
+        raise PatternError("kind", "'sinusoid' or 'speckle-sinusoid'", sinusoid.kind)
+    return sinusoid.shift
 
 
-def sinusoid_intensity(pattern: Mapping[str, Any], u: np.ndarray, extent: float) -> np.ndarray:
-    """Intensity of a ``sinusoid`` pattern at projector coordinate ``u`` along its axis.
+def sinusoid_intensity(pattern: Sinusoid | Mapping[str, Any], u: np.ndarray, extent: float) -> np.ndarray:
+    """Intensity of a ``sinusoid`` (or the fringe of a ``speckle-sinusoid``) at coordinate ``u``.
 
     Parameters
     ----------
-    pattern : mapping
-        A ``sinusoid`` entry of capture.json (``frequency``, ``steps``, ``step``; optional
-        ``offset``, ``amplitude``, ``phase_rad``, ``shift_rad``).
+    pattern : Sinusoid or mapping
+        A sinusoid pattern (its capture.json entry is accepted too).
     u : array
         Projector coordinate in pixels along the pattern's axis.
     extent : float
@@ -47,11 +335,12 @@ def sinusoid_intensity(pattern: Mapping[str, Any], u: np.ndarray, extent: float)
     -------
     array like ``u``: offset + amplitude cos(2 pi f u / W + phase_rad + shift).
     """
-    offset = float(pattern.get("offset", 0.5))
-    amplitude = float(pattern.get("amplitude", 0.5))
-    phase = 2.0 * np.pi * float(pattern["frequency"]) * np.asarray(u, dtype=np.float64) / extent
-    phase += float(pattern.get("phase_rad", 0.0)) + sinusoid_shift(pattern)
-    return offset + amplitude * np.cos(phase)
+    sinusoid = as_pattern(pattern)
+    if not isinstance(sinusoid, Sinusoid):
+        raise PatternError("kind", "'sinusoid' or 'speckle-sinusoid'", sinusoid.kind)
+    phase = 2.0 * np.pi * float(sinusoid.frequency) * np.asarray(u, dtype=np.float64) / extent
+    phase += float(sinusoid.phase_rad) + sinusoid.shift
+    return float(sinusoid.offset) + float(sinusoid.amplitude) * np.cos(phase)
 
 
 def gray_stripe_index(u: np.ndarray, extent: float, bits: int) -> np.ndarray:
@@ -60,58 +349,77 @@ def gray_stripe_index(u: np.ndarray, extent: float, bits: int) -> np.ndarray:
     return np.clip(np.floor(np.asarray(u, dtype=np.float64) * stripes / extent), 0, stripes - 1).astype(np.int64)
 
 
-def gray_intensity(pattern: Mapping[str, Any], u: np.ndarray, extent: float) -> np.ndarray:
+def gray_intensity(pattern: Gray | Mapping[str, Any], u: np.ndarray, extent: float) -> np.ndarray:
     """Intensity (0 or 1) of one Gray-code bit plane; ``bit`` 0 is the most significant.
 
     The projector width is cut into ``2**bits`` stripes; stripe ``s`` carries Gray code
     ``s ^ (s >> 1)``. ``inverted`` gives the complementary (negative) image.
     """
-    bits = int(pattern["bits"])
-    bit = int(pattern["bit"])
-    stripe = gray_stripe_index(u, extent, bits)
+    gray_pattern = as_pattern(pattern)
+    if not isinstance(gray_pattern, Gray):
+        raise PatternError("kind", "'gray'", gray_pattern.kind)
+    stripe = gray_stripe_index(u, extent, gray_pattern.bits)
     gray = stripe ^ (stripe >> 1)
-    value = ((gray >> (bits - 1 - bit)) & 1).astype(np.float64)
-    return 1.0 - value if pattern.get("inverted", False) else value
+    value = ((gray >> (gray_pattern.bits - 1 - gray_pattern.bit)) & 1).astype(np.float64)
+    return 1.0 - value if gray_pattern.inverted else value
+
+
+def speckle_sinusoid_intensity(
+    pattern: SpeckleSinusoid | Mapping[str, Any], u: np.ndarray, v: np.ndarray, projector_size: tuple[int, int]
+) -> np.ndarray:
+    """Intensity in [0, 1] of a ``speckle-sinusoid`` pattern at projector coordinates (u, v).
+
+    I = (1 - g) * (offset + amplitude cos(2 pi f u / W + phase)) + g * Z(floor v, floor u), with
+    ``g`` = ``speckle_gain`` and ``Z`` = :func:`processing.speckle.speckle_field` of the whole
+    projector frame with the pattern's ``seed`` and ``dot_px``. Scaling the sinusoid by (1 - g)
+    keeps the sum inside [0, 1] whenever the sinusoid is; in the thesis' notation
+    A = (1 - g) offset, B = (1 - g) amplitude, C = g. The speckle field is fixed to the
+    projector's pixels: it does not move with ``step`` or ``axis``.
+    """
+    speckle = as_pattern(pattern)
+    if not isinstance(speckle, SpeckleSinusoid):
+        raise PatternError("kind", "'speckle-sinusoid'", speckle.kind)
+    width, height = (int(projector_size[0]), int(projector_size[1]))
+    gain = float(speckle.speckle_gain)
+    coord, extent = (u, width) if speckle.axis == "x" else (v, height)
+    fringe = sinusoid_intensity(speckle, coord, extent)
+    field_z = cached_speckle_field(width, height, int(speckle.seed), int(speckle.dot_px))
+    cols = np.clip(np.floor(np.asarray(u, dtype=np.float64)), 0, width - 1).astype(np.intp)
+    rows = np.clip(np.floor(np.asarray(v, dtype=np.float64)), 0, height - 1).astype(np.intp)
+    return (1.0 - gain) * fringe + gain * field_z[rows, cols]
 
 
 def pattern_intensity(
-    pattern: Mapping[str, Any], u: np.ndarray, v: np.ndarray, projector_size: tuple[int, int]
+    pattern: Pattern | Mapping[str, Any], u: np.ndarray, v: np.ndarray, projector_size: tuple[int, int]
 ) -> np.ndarray:
     """Projected intensity in [0, 1] of any pattern kind at projector pixel coordinates (u, v).
 
     Parameters
     ----------
-    pattern : mapping
-        One entry of capture.json's ``patterns``.
+    pattern : Pattern or mapping
+        A pattern (or its capture.json entry).
     u, v : arrays of equal shape
         Projector column and row coordinates in pixels (pixel centres at k + 0.5).
     projector_size : (width, height)
         Projector resolution in pixels.
     """
-    kind = pattern.get("kind")
+    model = as_pattern(pattern)
     width, height = projector_size
-    axis = pattern.get("axis", "x")
-    if axis not in ("x", "y"):
-        raise ValueError(f"pattern axis: expected 'x' or 'y', found {axis!r}")
-    coord, extent = (u, width) if axis == "x" else (v, height)
-    if kind == "sinusoid":
-        return sinusoid_intensity(pattern, coord, extent)
-    if kind == "gray":
-        return gray_intensity(pattern, coord, extent)
-    if kind == "flat":
-        return np.full(np.shape(u), float(pattern["level"]))
-    if kind == "speckle-sinusoid":
-        from processing.speckle import speckle_sinusoid_intensity
-
-        return speckle_sinusoid_intensity(pattern, u, v, projector_size)
-    raise ValueError(f"pattern kind: expected one of {', '.join(PATTERN_KINDS)}, found {kind!r}")
+    if isinstance(model, SpeckleSinusoid):
+        return speckle_sinusoid_intensity(model, u, v, projector_size)
+    if isinstance(model, Flat):
+        return np.full(np.shape(u), float(model.level))
+    assert isinstance(model, (Sinusoid, Gray))
+    coord, extent = (u, width) if model.axis == "x" else (v, height)
+    if isinstance(model, Sinusoid):
+        return sinusoid_intensity(model, coord, extent)
+    return gray_intensity(model, coord, extent)
 
 
-def pattern_image(pattern: Mapping[str, Any], projector_size: tuple[int, int]) -> np.ndarray:
+def pattern_image(pattern: Pattern | Mapping[str, Any], projector_size: tuple[int, int]) -> np.ndarray:
     """The full projector frame of a pattern, (height, width) float32 in [0, 1], sampled at pixel centres."""
     width, height = projector_size
     u = np.arange(width, dtype=np.float64) + 0.5
     v = np.arange(height, dtype=np.float64) + 0.5
     uu, vv = np.meshgrid(u, v)
     return pattern_intensity(pattern, uu, vv, projector_size).astype(np.float32)
-

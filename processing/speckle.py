@@ -15,17 +15,16 @@ Generation is vectorised: the cells are visited in four interleaved classes (cel
 parity); cells of one class are two cells apart and cannot conflict, so each class draws its dot
 at once among the positions that do not touch dots already placed. The centre of a cell touches
 nothing outside its own cell, so every cell always has a legal position.
+
+The pattern that embeds the field in a sinusoid, ``speckle-sinusoid``, is defined with the other
+pattern kinds in :mod:`processing.patterns`, which uses this module (not the other way round).
 """
 
 from __future__ import annotations
 
 import functools
-from collections.abc import Mapping
-from typing import Any
 
 import numpy as np
-
-from processing.patterns import sinusoid_intensity
 
 CELL_DOTS = 3  # a cell is 3 x 3 dots holding one white dot
 DEFAULT_DOT_PX = 3
@@ -83,7 +82,8 @@ def speckle_dots(cells_y: int, cells_x: int, seed: int) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=8)
-def _cached_field(width: int, height: int, seed: int, dot_px: int) -> np.ndarray:
+def cached_speckle_field(width: int, height: int, seed: int, dot_px: int) -> np.ndarray:
+    """Read-only :func:`speckle_field` (arguments already checked), cached for repeated frames."""
     cell_px = CELL_DOTS * dot_px
     cells_y = -(-height // cell_px)
     cells_x = -(-width // cell_px)
@@ -116,7 +116,7 @@ def speckle_field(width: int, height: int, seed: int, dot_px: int = DEFAULT_DOT_
     dot_px = _check_size("dot_px", dot_px)
     if isinstance(seed, bool) or int(seed) != seed:
         raise ValueError(f"seed: expected an integer, found {seed!r}")
-    return _cached_field(width, height, int(seed), dot_px).copy()
+    return cached_speckle_field(width, height, int(seed), dot_px).copy()
 
 
 def check_speckle_rules(field: np.ndarray, dot_px: int = DEFAULT_DOT_PX) -> list[str]:
@@ -174,30 +174,3 @@ def check_speckle_rules(field: np.ndarray, dot_px: int = DEFAULT_DOT_PX) -> list
         y, x = np.argwhere(touching)[0]
         problems.append(f"rule 3: {int(touching.sum())} white dots touch another white dot, first at dot ({y}, {x})")
     return problems
-
-
-def speckle_sinusoid_intensity(
-    pattern: Mapping[str, Any], u: np.ndarray, v: np.ndarray, projector_size: tuple[int, int]
-) -> np.ndarray:
-    """Intensity in [0, 1] of a ``speckle-sinusoid`` pattern at projector coordinates (u, v).
-
-    I = (1 - g) * (offset + amplitude cos(2 pi f u / W + phase)) + g * Z(floor v, floor u), with
-    ``g`` = ``speckle_gain`` (default 0.3) and ``Z`` = :func:`speckle_field` of the whole
-    projector frame with the pattern's ``seed`` (default 0) and ``dot_px`` (default 3). The
-    sinusoid keys (``frequency``, ``steps``, ``step``, ``offset``, ``amplitude``, ``phase_rad``,
-    ``shift_rad``, ``axis``) mean what they mean for ``sinusoid``. Scaling the sinusoid by
-    (1 - g) keeps the sum inside [0, 1] whenever the sinusoid is; in the thesis' notation
-    A = (1 - g) offset, B = (1 - g) amplitude, C = g. The speckle field is fixed to the
-    projector's pixels: it does not move with ``step`` or ``axis``.
-    """
-    width, height = (int(projector_size[0]), int(projector_size[1]))
-    gain = float(pattern.get("speckle_gain", DEFAULT_SPECKLE_GAIN))
-    if not 0.0 <= gain <= 1.0:
-        raise ValueError(f"speckle_gain: expected a value in [0, 1], found {gain}")
-    axis = pattern.get("axis", "x")
-    coord, extent = (u, width) if axis == "x" else (v, height)
-    fringe = sinusoid_intensity(pattern, coord, extent)
-    field = _cached_field(width, height, int(pattern.get("seed", DEFAULT_SEED)), int(pattern.get("dot_px", DEFAULT_DOT_PX)))
-    cols = np.clip(np.floor(np.asarray(u, dtype=np.float64)), 0, width - 1).astype(np.intp)
-    rows = np.clip(np.floor(np.asarray(v, dtype=np.float64)), 0, height - 1).astype(np.intp)
-    return (1.0 - gain) * fringe + gain * field[rows, cols]

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from processing.patterns import AXES, Gray, Pattern, Sinusoid, SpeckleSinusoid
 from rig.errors import ConfigError
 
 if sys.version_info >= (3, 11):
@@ -26,7 +27,7 @@ else:  # pragma: no cover - exercised on Python 3.10 only
 PROJECTOR_BACKENDS = ("gl-offscreen", "window", "dlp4500")
 CAMERA_BACKENDS = ("simulated", "opencv", "pylon")
 TRIGGER_BACKENDS = ("software", "serial", "simulated-serial")
-PATTERN_AXES = ("x", "y")
+PATTERN_AXES = AXES
 # [scan] pattern_set: temporal phase shifting (several frames) or the thesis' single-shot
 # speckle-embedded fringe (one frame, ch. 2.3; rig process recognises it by its kind).
 PATTERN_SETS = ("phase-shifting", "speckle")
@@ -91,20 +92,23 @@ class ScanConfig:
         Otherwise sinusoids of every frequency (``steps`` shifts each), then, if ``gray_bits`` > 0,
         the Gray code bit planes with their inverses (for per-pixel thresholding).
         """
+        return [pattern.to_dict() for pattern in self.pattern_models()]
+
+    def pattern_models(self) -> list[Pattern]:
+        """The typed patterns of one scan (see :meth:`patterns`)."""
         if self.pattern_set == "speckle":
-            return [{
-                "kind": "speckle-sinusoid", "axis": self.axis, "frequency": _plain_number(self.speckle_frequency),
-                "steps": 1, "step": 0, "seed": self.speckle_seed, "dot_px": self.speckle_dot_px,
-                "speckle_gain": self.speckle_gain,
-            }]
-        out: list[dict[str, Any]] = [
-            {"kind": "sinusoid", "axis": self.axis, "frequency": _plain_number(f), "steps": self.steps, "step": j}
+            return [SpeckleSinusoid(
+                axis=self.axis, frequency=_plain_number(self.speckle_frequency), steps=1, step=0,
+                seed=self.speckle_seed, dot_px=self.speckle_dot_px, speckle_gain=self.speckle_gain,
+            )]
+        out: list[Pattern] = [
+            Sinusoid(axis=self.axis, frequency=_plain_number(f), steps=self.steps, step=j)
             for f in self.frequencies
             for j in range(self.steps)
         ]
         for bit in range(self.gray_bits):
             for inverted in (False, True):
-                out.append({"kind": "gray", "axis": self.axis, "bit": bit, "bits": self.gray_bits, "inverted": inverted})
+                out.append(Gray(axis=self.axis, bit=bit, bits=self.gray_bits, inverted=inverted))
         return out
 
 

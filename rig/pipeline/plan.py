@@ -47,7 +47,7 @@ from typing import Any
 
 import numpy as np
 
-from processing.patterns import sinusoid_shift
+from processing.patterns import Flat, Gray, Pattern, Sinusoid, SpeckleSinusoid, as_pattern
 from rig.errors import CaptureError, ProcessingError
 
 log = logging.getLogger(__name__)
@@ -123,30 +123,28 @@ class PatternGroups:
         return sorted((g for g in self.sinusoids if g.axis == axis), key=lambda g: g.frequency)
 
 
-def group_patterns(patterns: Sequence[Mapping[str, Any]], where: str = "capture.json") -> PatternGroups:
-    """Group pattern entries by kind: sinusoids per (axis, frequency), Gray planes per axis, flats."""
+def group_patterns(patterns: Sequence[Pattern | Mapping[str, Any]], where: str = "capture.json") -> PatternGroups:
+    """Group patterns by kind: sinusoids per (axis, frequency), Gray planes per axis, flats."""
     sinusoids: dict[tuple[str, float], SinusoidGroup] = {}
     single: dict[tuple[str, float], SinusoidGroup] = {}
     gray: dict[str, GrayGroup] = {}
     flats: list[tuple[int, float]] = []
-    for index, pattern in enumerate(patterns):
-        kind = pattern["kind"]
-        axis = pattern.get("axis", "x")
-        if kind in ("sinusoid", "speckle-sinusoid"):
-            table = sinusoids if kind == "sinusoid" else single
-            key = (axis, float(pattern["frequency"]))
-            group = table.setdefault(key, SinusoidGroup(axis, key[1], [], [], kind))
+    for index, pattern in enumerate(as_pattern(p) for p in patterns):
+        if isinstance(pattern, Sinusoid):
+            table = single if isinstance(pattern, SpeckleSinusoid) else sinusoids
+            key = (pattern.axis, float(pattern.frequency))
+            group = table.setdefault(key, SinusoidGroup(pattern.axis, key[1], [], [], pattern.kind))
             group.indices.append(index)
-            group.shifts.append(sinusoid_shift(pattern) + float(pattern.get("phase_rad", 0.0)))
-        elif kind == "gray":
-            bits = int(pattern["bits"])
-            group = gray.setdefault(axis, GrayGroup(axis, bits))
-            if group.bits != bits:
-                raise CaptureError(f"{where}: patterns[{index}].bits: expected {group.bits} like the other Gray planes, found {bits}")
-            table = group.inverted if pattern.get("inverted", False) else group.planes
-            table[int(pattern["bit"])] = index
-        elif kind == "flat":
-            flats.append((index, float(pattern["level"])))
+            group.shifts.append(pattern.phase_delay)
+        elif isinstance(pattern, Gray):
+            group_g = gray.setdefault(pattern.axis, GrayGroup(pattern.axis, pattern.bits))
+            if group_g.bits != pattern.bits:
+                raise CaptureError(
+                    f"{where}: patterns[{index}].bits: expected {group_g.bits} like the other Gray planes, found {pattern.bits}"
+                )
+            (group_g.inverted if pattern.inverted else group_g.planes)[pattern.bit] = index
+        elif isinstance(pattern, Flat):
+            flats.append((index, float(pattern.level)))
     for group in gray.values():
         missing = [b for b in range(group.bits) if b not in group.planes]
         if missing:

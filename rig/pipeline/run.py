@@ -79,7 +79,7 @@ def _fringe_axis(groups: PatternGroups, options: ProcessOptions, where: str) -> 
 
 
 def _scene(name: str, capture: Capture, options: ProcessOptions) -> SceneState:
-    groups = group_patterns(capture.patterns, str(capture.manifest_path))
+    groups = group_patterns(capture.pattern_models, str(capture.manifest_path))
     return SceneState(name=name, capture=capture, groups=groups, axis=_fringe_axis(groups, options, str(capture.manifest_path)))
 
 

@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 
 from calibration.jsonfile import read_json, write_json_atomic
-from processing.patterns import PATTERN_KINDS, PROJECTION_KEYS
+from processing.patterns import PROJECTION_KEYS, Pattern, PatternError, parse_pattern, same_projection
 from rig.errors import CaptureError
 
 log = logging.getLogger(__name__)
@@ -112,36 +112,15 @@ def _mapping(where: str, obj: Mapping[str, Any], key: str) -> Mapping[str, Any]:
     return obj[key]
 
 
-def validate_pattern(where: str, index: int, pattern: Any) -> None:
-    """Check one ``patterns[index]`` entry: a known kind with its required keys."""
+def validate_pattern(where: str, index: int, pattern: Any) -> Pattern:
+    """Check one ``patterns[index]`` entry against the pattern model; return it typed."""
     field = f"patterns[{index}]"
     if not isinstance(pattern, Mapping):
         raise _fail(where, field, "an object", pattern)
-    kind = pattern.get("kind")
-    if kind not in PATTERN_KINDS:
-        raise _fail(where, f"{field}.kind", f"one of {', '.join(PATTERN_KINDS)}", kind)
-    if kind in ("sinusoid", "speckle-sinusoid", "gray"):
-        axis = pattern.get("axis", "x")
-        if axis not in ("x", "y"):
-            raise _fail(where, f"{field}.axis", "'x' or 'y'", axis)
-    if kind in ("sinusoid", "speckle-sinusoid"):
-        _number(where, pattern, "frequency", f"{field}.frequency", positive=True)
-        steps = _int(where, pattern, "steps", f"{field}.steps", minimum=1)
-        step = _int(where, pattern, "step", f"{field}.step", minimum=0)
-        if step >= steps:
-            raise _fail(where, f"{field}.step", f"0 .. {steps - 1} (steps = {steps})", step)
-        for key in ("offset", "amplitude", "phase_rad", "shift_rad"):
-            if key in pattern:
-                _number(where, pattern, key, f"{field}.{key}")
-    elif kind == "gray":
-        bits = _int(where, pattern, "bits", f"{field}.bits", minimum=1)
-        bit = _int(where, pattern, "bit", f"{field}.bit", minimum=0)
-        if bit >= bits:
-            raise _fail(where, f"{field}.bit", f"0 .. {bits - 1} (bits = {bits})", bit)
-        if not isinstance(pattern.get("inverted", False), bool):
-            raise _fail(where, f"{field}.inverted", "true or false", pattern.get("inverted"))
-    elif kind == "flat":
-        _number(where, pattern, "level", f"{field}.level")
+    try:
+        return parse_pattern(pattern)
+    except PatternError as exc:
+        raise CaptureError(f"{where}: {field}{'.' + exc.key if exc.key else ''}: {exc.detail}") from None
 
 
 def check_relative_path(where: str, field: str, file: Any) -> PurePosixPath:
@@ -276,7 +255,13 @@ class Capture:
 
     @property
     def patterns(self) -> list[dict[str, Any]]:
+        """The manifest's pattern entries as written (extra keys included)."""
         return self.manifest["patterns"]
+
+    @property
+    def pattern_models(self) -> list[Pattern]:
+        """The patterns, typed (the manifest was validated when read, so they parse)."""
+        return [parse_pattern(p) for p in self.patterns]
 
     @property
     def frames(self) -> list[dict[str, Any]]:
@@ -400,7 +385,7 @@ def check_same_patterns(reference: Capture, capture: Capture) -> None:
             f"{capture.manifest_path}, found {len(reference.patterns)}"
         )
     for i, (ref, obj) in enumerate(zip(reference.patterns, capture.patterns)):
-        if pattern_signature(ref) != pattern_signature(obj):
+        if not same_projection(ref, obj):
             raise CaptureError(
                 f"{reference.manifest_path}: patterns[{i}]: expected {pattern_signature(obj)} like "
                 f"{capture.manifest_path}, found {pattern_signature(ref)}"

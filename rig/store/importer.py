@@ -32,7 +32,7 @@ import json
 import math
 import os
 import re
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -40,6 +40,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from processing.patterns import Flat, Gray, Pattern, Sinusoid
 from rig.errors import CaptureError, ConfigError
 from rig.store.capture import (
     CaptureWriter,
@@ -131,9 +132,9 @@ def _axis(params: dict[str, str], where: str) -> str:
     return axis
 
 
-def parse_spec(spec: str) -> list[dict[str, Any] | None]:
+def parse_spec(spec: str) -> list[Pattern | None]:
     """Patterns of a spec string, one per file; ``None`` marks a skipped file."""
-    out: list[dict[str, Any] | None] = []
+    out: list[Pattern | None] = []
     groups = [g.strip() for g in spec.split(";") if g.strip()]
     if not groups:
         raise ConfigError("--patterns: empty spec; expected e.g. 'sin:f=32,steps=12,phase=pi; gray:bits=6'")
@@ -155,12 +156,10 @@ def parse_spec(spec: str) -> list[dict[str, Any] | None]:
             axis = _axis(p, where)
             for frequency in frequencies:
                 for j in range(steps):
-                    pattern: dict[str, Any] = {"kind": "sinusoid", "axis": axis, "frequency": frequency, "steps": steps, "step": j}
-                    if phase is not None:
-                        pattern["phase_rad"] = phase
-                    if shifts is not None:
-                        pattern["shift_rad"] = shifts[j]
-                    out.append(pattern)
+                    out.append(Sinusoid(
+                        axis=axis, frequency=frequency, steps=steps, step=j,
+                        phase_rad=0.0 if phase is None else phase, shift_rad=None if shifts is None else shifts[j],
+                    ))
         elif kind == "gray":
             p = _params(body, where, ("bits", "inverted", "axis"))
             if "bits" not in p:
@@ -170,7 +169,7 @@ def parse_spec(spec: str) -> list[dict[str, Any] | None]:
             if inverted not in ("none", "after", "interleaved"):
                 raise ConfigError(f"{where}: inverted: expected none, after or interleaved, found {inverted!r}")
             axis = _axis(p, where)
-            plane = lambda b, inv: {"kind": "gray", "axis": axis, "bit": b, "bits": bits, "inverted": inv}  # noqa: E731
+            plane = lambda b, inv: Gray(axis=axis, bit=b, bits=bits, inverted=inv)  # noqa: E731
             if inverted == "interleaved":
                 out.extend(plane(b, inv) for b in range(bits) for inv in (False, True))
             else:
@@ -186,7 +185,7 @@ def parse_spec(spec: str) -> list[dict[str, Any] | None]:
                 value = float("nan")
             if not 0.0 <= value <= 1.0:
                 raise ConfigError(f"{where}: level: expected a number in 0..1, found {level!r}")
-            out.append({"kind": "flat", "level": value})
+            out.append(Flat(level=value))
         elif kind == "skip":
             p = _params(body, where, ("n",))
             out.extend([None] * _positive_int(p.get("n", "1"), f"{where}: n"))
@@ -195,7 +194,7 @@ def parse_spec(spec: str) -> list[dict[str, Any] | None]:
     return out
 
 
-def load_spec(text: str) -> tuple[list[dict[str, Any] | None], list[str] | None]:
+def load_spec(text: str) -> tuple[list[Pattern | Mapping[str, Any] | None], list[str] | None]:
     """A spec string, or ``@FILE``/``FILE.json`` holding {"patterns": [...], "files": [...]}."""
     candidate = text[1:] if text.startswith("@") else text
     if text.startswith("@") or (candidate.endswith(".json") and Path(candidate).is_file()):
@@ -328,14 +327,11 @@ def import_folder(folder: str | os.PathLike[str], spec: str, output: str | os.Pa
             + (f" ({files[0].name} .. {files[-1].name})" if files else "")
         )
     pairs = [(pattern, path) for pattern, path in zip(entries, files) if pattern is not None]
-    patterns = []
-    for i, (pattern, _) in enumerate(pairs):
-        pattern = dict(pattern)
-        if pattern["kind"] in ("sinusoid", "speckle-sinusoid") and options.shift_sign == -1:
-            from processing.patterns import sinusoid_shift
-
-            pattern["shift_rad"] = -sinusoid_shift(pattern)
-        validate_pattern(f"--patterns ({spec})", i, pattern)
+    patterns: list[Pattern] = []
+    for i, (entry, _) in enumerate(pairs):
+        pattern = validate_pattern(f"--patterns ({spec})", i, entry)
+        if isinstance(pattern, Sinusoid) and options.shift_sign == -1:
+            pattern = pattern.replace(shift_rad=-pattern.shift)  # the rig shifted the other way
         patterns.append(pattern)
     images, notes = [], set()
     for _, path in pairs:
