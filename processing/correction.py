@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from processing.fringe_regions import pool_region_orders
 from processing.order_correction import correct_orders_rpca
 from processing.phase_correction import (
     accept_if_consistent, correct_phase_rpca, low_rank_misfit, order_breaks, phase_noise_sigma, phase_pair,
@@ -120,43 +121,50 @@ def correct_auto(
     absolute_phase: np.ndarray, wrapped_phase: np.ndarray, orders: np.ndarray | None = None, mask: np.ndarray | None = None,
     frequency: float | None = None, tau: float | None = None, k_sigma: float = 4.0, svd: str = "auto",
 ) -> Result:
-    """The most accurate method measured: ch. 4 RPCA, re-derived orders, measured detail restored.
+    """The most accurate method measured: region-pooled orders, ch. 4 RPCA, measured detail restored.
 
-    1. L = low-rank part of the phase (stable inexact ALM, thesis ch. 4, stopped at the noise
+    1. pool the fringe orders over 2-D fringe regions (:func:`~processing.fringe_regions.
+       pool_region_orders`: one order per region that no wrapped-phase jump or kink crosses,
+       voted per 16 x 16 square, re-voted pixel by pixel where squares disagree);
+    2. L = low-rank part of that phase (stable inexact ALM, thesis ch. 4, stopped at the noise
        level of :func:`~processing.phase_correction.phase_noise_sigma`, blind to order errors);
-    2. re-derive every pixel's fringe order from L and the measured wrapped phase; where L does
-       not fit the wrapped phase (|wrap(phi - L)| > pi / 2 nearby: structure the low-rank model
-       missed), accept a changed order only where it fits the neighbours of a guard map better
-       than the guard does; two guards, the measured phase (safe where fringes are too dense for
-       row segments) and Ding's row vote (far fewer wrong orders at low SNR);
-    3. settle each candidate: every order re-derived twice from its neighbours' phase;
-    4. keep the candidate with fewer order breaks (second differences beyond pi, truth-free);
-    5. keep L (denoised) where that phase agrees with it within ``k_sigma`` noise standard
-       deviations, the measured phase with its corrected order where it does not.
+       the measured phase is used instead if pooling left more order breaks;
+    3. candidate order maps: the pooled orders; the pooled orders where L misfits the wrapped
+       phase (|wrap(phi - L)| > pi / 2 nearby) and L's re-derived orders elsewhere; L's orders
+       guarded where L misfits by the measured phase or by Ding's row vote, then settled from
+       their neighbours (the earlier ``auto``, kept for scenes the regions cannot pool);
+    4. keep the candidate with fewest order breaks (second differences beyond pi, truth-free);
+    5. keep L (denoised) except where the result departs from it coherently beyond the noise
+       (:func:`~processing.phase_correction.restore_detail`, ``k_sigma`` standard deviations
+       of the 3 x 3 mean residual).
 
-    Measured (rig study's cases at 500 x 500 and 1000 x 1000, one seed; NMSE_h): Table 4.1 on par
-    with ``rpca-phase`` (7.3e-5 vs 7.1e-5 at 500 px, oracle 1.2e-3); sphere cap at 10 dB 6.8e-4
-    (``rpca-phase`` 2.2e-3, ch. 3 + post-processing 3.8e-3, vote 0.030); isolated objects,
-    f = (18, 25), 18 dB, a quarter of the orders wrong: 0.0074 (``rpca-phase`` 0.062, vote 1.15,
-    ch. 3 + post 0.73, true orders 0.0013); 64 fringes over 160 px (2.5 rad per pixel): 0.056 mm
-    RMS against 0.12 mm uncorrected (vote 81 mm; the vote guard loses on order breaks there).
-    k_sigma = 4 was best of 3, 4, 5 over six scenes; two settling passes beat one and three.
+    Measured (rig study's cases at 1000 x 1000, seeds 0-2, NMSE_h; ``python -m rig.cli study``):
+    isolated objects, f = (18, 25), 18 dB, a quarter of the orders wrong: 3.7e-4 - 6.1e-4, 0.30 -
+    0.49x the true orders' 1.24e-3 (``rpca-phase`` 0.09 - 0.12, vote 0.09); the same at 16 dB
+    (35 % wrong) 7.1e-4 and 15 dB (41 % wrong) 7.7e-4, 0.36x and 0.31x the true orders; sphere
+    cap 10 dB 9.0e-5 (``rpca-phase`` 3.1e-3 - 3.8e-3); Table 4.1 4.0e-5, on par with
+    ``rpca-phase`` (4.0e-5 - 4.7e-5); at 25 dB 5.2e-6 (``rpca-phase`` 6.9e-6).
     """
     start = time.perf_counter()
     phase, wrapped, valid = _inputs(absolute_phase, wrapped_phase, mask)
     sigma = phase_noise_sigma(phase, valid)
-    low_rank, result = correct_phase_rpca(phase, valid, tau=tau, stable=True, svd=svd, noise_sigma=sigma)
+    pooled = pool_region_orders(phase, wrapped, valid)
+    # RPCA on the pooled phase (far sparser errors) unless pooling left more order breaks.
+    base_breaks = {"regions": order_breaks(pooled, valid), "measured": order_breaks(phase, valid)}
+    base_name = min(base_breaks, key=base_breaks.__getitem__)  # ties: the pooled phase
+    base = pooled if base_name == "regions" else phase
+    low_rank, result = correct_phase_rpca(base, valid, tau=tau, stable=True, svd=svd, noise_sigma=sigma)
     proposed = reorder_from_low_rank(low_rank, wrapped, valid)
     misfit = low_rank_misfit(low_rank, wrapped, valid)
-    # Where L misfits, an order change must fit the neighbours of a guard map: the measured phase
-    # (safe where fringes are too dense for row segments) or the row vote (far fewer order errors
-    # at low SNR). Both candidates are settled and the one with fewer order breaks is kept.
-    candidates = {}
+    # Candidate order maps, the one with fewest order breaks kept: the pooled orders, alone and
+    # with L's orders where L fits the wrapped phase; L's orders guarded (where L misfits, an
+    # order change must fit the neighbours of the measured phase or of the row vote) and settled.
+    candidates = {"regions": pooled, "regions+low-rank": np.where(misfit, pooled, proposed)}
     for guard_name, guard in (("measured", phase), ("vote", vote_row_orders(phase, wrapped, valid))):
         guarded = np.where(misfit, accept_if_consistent(proposed, guard, valid), proposed)
         candidates[guard_name] = settle_orders(guarded, wrapped, valid)
     breaks = {name: order_breaks(candidate, valid) for name, candidate in candidates.items()}
-    guard_name = min(breaks, key=breaks.__getitem__)  # ties: the measured phase
+    guard_name = min(breaks, key=breaks.__getitem__)  # ties: the first
     reordered = candidates[guard_name]
     out = restore_detail(low_rank, reordered, valid, k_sigma=k_sigma, noise_sigma=sigma)
     changed = valid & (np.abs(reordered - phase) > np.pi)
@@ -166,9 +174,9 @@ def correct_auto(
     }
     return out, _solver_info(
         "auto", parameters, start, frequency, result,
-        steps=["rpca-phase", "reorder-if-consistent", "settle-orders", "restore-detail"],
+        steps=["pool-region-orders", "rpca-phase", "reorder-if-consistent", "settle-orders", "restore-detail"],
         orders_changed=int(np.count_nonzero(changed)), misfit_pixels=int(np.count_nonzero(misfit)), guard=guard_name,
-        order_breaks=breaks,
+        order_breaks=breaks, rpca_input=base_name,
     )
 
 

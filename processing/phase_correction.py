@@ -23,9 +23,9 @@ the truth (see :func:`processing.correction.correct_auto`).
 from __future__ import annotations
 
 import numpy as np
-from scipy import ndimage
 
 from processing import _validate
+from processing.fringe_regions import order_break_pixels
 from processing.rpca import RPCAResult, robust_noise_sigma, rpca_ialm, second_differences
 from processing.shadow_fill import fill_shadows, valid_mask
 
@@ -147,21 +147,40 @@ def neighbour_prediction(phase: np.ndarray, valid: np.ndarray) -> np.ndarray:
     whatever its slope; the prediction is the median of the complete pairs. Where fewer than two
     pairs are complete (image borders, corners of shadows), one wrong neighbour could sway it: the
     median of the valid single neighbours is used instead; NaN if there is none.
+
+    The median of the (at most four) pairs is closed-form, in float32 (the prediction only ever
+    picks a fringe order or compares two candidates; float32 is exact to 2e-5 rad at 160 rad):
+    with n complete pairs, sum S, largest and smallest, it is (S - max - min) / (n - 2) for
+    n = 3, 4 and (max + min) / 2 for n = 2; no sort of a (4, H, W) stack.
     """
-    padded = np.pad(np.where(valid, phase, np.nan), 1, constant_values=np.nan)
+    padded = np.pad(np.where(valid, phase, np.nan).astype(np.float32), 1, constant_values=np.nan)
     rows, cols = phase.shape
 
     def shifted(dy: int, dx: int) -> np.ndarray:
         return padded[1 + dy : 1 + dy + rows, 1 + dx : 1 + dx + cols]
 
     offsets = ((0, 1), (1, 0), (1, 1), (1, -1))
-    pairs = np.stack([(shifted(-dy, -dx) + shifted(dy, dx)) / 2.0 for dy, dx in offsets])
-    usable = np.isfinite(pairs).sum(axis=0) >= 2
-    out = np.where(usable, _nan_median_first_axis(pairs), np.nan)
+    total = np.zeros((rows, cols), dtype=np.float32)
+    count = np.zeros((rows, cols), dtype=np.float32)
+    largest = np.full((rows, cols), -np.inf, dtype=np.float32)
+    smallest = np.full((rows, cols), np.inf, dtype=np.float32)
+    pair = np.empty((rows, cols), dtype=np.float32)
+    for dy, dx in offsets:
+        np.add(shifted(-dy, -dx), shifted(dy, dx), out=pair)
+        pair *= 0.5
+        complete = np.isfinite(pair)
+        count += complete
+        total += np.where(complete, pair, 0.0)
+        np.fmax(largest, pair, out=largest)
+        np.fmin(smallest, pair, out=smallest)
+    usable = count >= 2
+    with np.errstate(invalid="ignore", divide="ignore"):
+        median = np.where(count >= 3, (total - largest - smallest) / (count - 2), (largest + smallest) * 0.5)
+    out = np.where(usable, median, np.nan).astype(np.float64)
     lonely = valid & ~usable
     if lonely.any():
         singles = np.stack([shifted(sy * dy, sy * dx)[lonely] for dy, dx in offsets for sy in (-1, 1)])
-        out[lonely] = _nan_median_first_axis(singles)
+        out[lonely] = _nan_median_first_axis(singles.astype(np.float64))
     return out
 
 
@@ -198,7 +217,18 @@ def low_rank_misfit(
     """
     residual = np.mod(wrapped_phase - low_rank_phase + np.pi, TWO_PI) - np.pi
     bad = valid & ~(np.abs(np.nan_to_num(residual, nan=np.pi)) < limit)
-    return valid & ndimage.binary_dilation(bad, structure=np.ones((3, 3), dtype=bool))
+    return valid & _dilate_3x3(bad)
+
+
+def _dilate_3x3(mask: np.ndarray) -> np.ndarray:
+    """Binary dilation by a 3 x 3 square (separable: rows, then columns), without scipy.ndimage."""
+    across = mask.copy()
+    across[:, 1:] |= mask[:, :-1]
+    across[:, :-1] |= mask[:, 1:]
+    out = across.copy()
+    out[1:, :] |= across[:-1, :]
+    out[:-1, :] |= across[1:, :]
+    return out
 
 
 def settle_orders(phase: np.ndarray, wrapped_phase: np.ndarray, valid: np.ndarray, passes: int = 2) -> np.ndarray:
@@ -226,14 +256,19 @@ def order_breaks(phase: np.ndarray, valid: np.ndarray) -> int:
 
 
 def restore_detail(
-    low_rank_phase: np.ndarray, measured_phase: np.ndarray, mask: np.ndarray | None = None, k_sigma: float = 3.0,
+    low_rank_phase: np.ndarray, measured_phase: np.ndarray, mask: np.ndarray | None = None, k_sigma: float = 4.0,
     noise_sigma: float | None = None,
 ) -> np.ndarray:
-    """Low-rank phase, except where the measured phase departs from it beyond the noise.
+    """Low-rank phase, except where the measured phase departs from it coherently beyond the noise.
 
-    Where |measured - L| > k_sigma sigma (sigma: ``noise_sigma``, default
-    :func:`phase_noise_sigma` of ``measured``), the
-    low-rank model missed structure (an edge, a small feature) and the measured value is kept.
+    Where the residual r = measured - L averaged over the 3 x 3 neighbourhood exceeds
+    ``k_sigma`` standard deviations of such a mean (k_sigma sigma / 3; sigma: ``noise_sigma``,
+    default :func:`phase_noise_sigma` of ``measured``) and at least 3 of the 9 pixels depart by
+    more than 2 sigma, the low-rank model missed structure (an edge, a small feature, a bias of
+    the low-rank fit) and the measured value is kept. Requiring a coherent departure keeps L at
+    noise outliers and at a lone wrong order that ``measured_phase`` may still carry: measured
+    on rig study's sphere cap (15 dB) and isolated objects (18 dB, 15 dB), it beats the per-pixel
+    rule |r| > 4 sigma by 6 % to 37 % in NMSE_h and the plain L everywhere but at 10 dB (2 %).
     ``measured_phase`` should be free of order errors, e.g. from :func:`reorder_from_low_rank`.
 
     Returns
@@ -245,6 +280,21 @@ def restore_detail(
     if not k_sigma > 0:
         raise ValueError(f"k_sigma: expected > 0, found {k_sigma}")
     sigma = phase_noise_sigma(measured, valid) if noise_sigma is None else float(noise_sigma)
-    keep = valid & (np.abs(measured - estimate) > k_sigma * sigma)
+    residual = np.where(valid, measured - estimate, 0.0).astype(np.float32)
+    mean = _box_sum_3x3(residual) / 9.0
+    departing = _box_sum_3x3((np.abs(residual) > 2.0 * sigma).astype(np.float32))
+    coherent = (np.abs(mean) > k_sigma * sigma / 3.0) & (departing >= 3)
+    # A lone departure far beyond any noise (2 k_sigma sigma) is structure too (a one-pixel
+    # feature, fringes too dense for L), unless the measured pixel breaks with its neighbours
+    # (a wrong order left in it).
+    lone = (np.abs(residual) > 2.0 * k_sigma * sigma) & ~order_break_pixels(np.where(valid, measured, np.nan))
+    keep = valid & (coherent | lone)
     out = np.where(keep, measured, estimate)
     return np.where(valid, out, np.nan)
+
+
+def _box_sum_3x3(values: np.ndarray) -> np.ndarray:
+    """Sum over each pixel's 3 x 3 neighbourhood (zero beyond the borders), separable."""
+    padded = np.pad(values, 1)
+    across = padded[:, :-2] + padded[:, 1:-1] + padded[:, 2:]
+    return across[:-2, :] + across[1:-1, :] + across[2:, :]

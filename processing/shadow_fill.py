@@ -9,7 +9,6 @@ beyond the ends of a row; rows without any valid pixel take the nearest valid pi
 from __future__ import annotations
 
 import numpy as np
-from scipy import ndimage
 
 from processing import _validate
 
@@ -62,13 +61,18 @@ def fill_shadows(image: np.ndarray, mask: np.ndarray | None = None, method: str 
     valid = valid_mask(arr, mask)
     if valid.all():
         return arr
-    nearest = _nearest_fill(arr, valid)
     if method == "nearest":
-        return nearest
-    return _row_linear_fill(arr, valid, nearest)
+        return _nearest_fill(arr, valid)
+    # The 2-D nearest fill is only needed for rows without any valid pixel (a distance transform
+    # of the whole map otherwise costs more than the interpolation itself).
+    empty_rows = ~valid.any(axis=1)
+    fallback = _nearest_fill(arr, valid) if empty_rows.any() else arr
+    return _row_linear_fill(arr, valid, fallback)
 
 
 def _nearest_fill(arr: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    from scipy import ndimage  # lazily: most maps have a valid pixel in every row
+
     indices = ndimage.distance_transform_edt(~valid, return_distances=False, return_indices=True)
     return arr[tuple(indices)]
 
