@@ -1,4 +1,4 @@
-"""Trigger box drivers: the family base and the serial host driver (protocol v1).
+"""Trigger box drivers: the family base and the serial host driver (protocol v2).
 
 The box turns a software command (``FIRE``) or an edge on its sync input into one exposure pulse
 of configured width, delay and polarity. Protocol: docs/trigger-protocol.md; line format:
@@ -73,6 +73,7 @@ class TriggerBoxStatus:
     delay_us: int
     polarity: Polarity
     source: ExposureSource
+    missed: int = 0  # sync edges since the last ARM that arrived while a pulse was pending
 
 
 class TriggerBox(Device):
@@ -176,7 +177,7 @@ class _Garbled(Exception):
 
 
 class SerialTriggerBox(TriggerBox):
-    """Host driver for the serial trigger box (firmware/trigger_box, protocol v1).
+    """Host driver for the serial trigger box (firmware/trigger_box, protocol v2).
 
     Parameters
     ----------
@@ -188,7 +189,11 @@ class SerialTriggerBox(TriggerBox):
         Deadline of one reply; FIRE adds the configured delay and width.
     command_timeouts : mapping, optional
         Per-command deadlines overriding ``timeout_s``; by default HELLO gets
-        ``HELLO_TIMEOUT_S`` (boards that reset when the port opens need ~1.5 s to boot).
+        ``HELLO_TIMEOUT_S``.
+    boot_timeout_s : float
+        An Arduino Uno resets when its port is opened (DTR) and its bootloader drops what
+        arrives meanwhile; ``open()`` waits up to this long for the ``! READY`` banner before
+        sending HELLO (0: send HELLO at once, for boards that do not reset).
     retries : int
         Extra attempts after a missing or garbled reply. A retry resends the same request id,
         which the box answers from its reply cache without acting twice (FIRE never doubles).
@@ -200,7 +205,7 @@ class SerialTriggerBox(TriggerBox):
 
     def __init__(self, url: str, baudrate: int = 115200, timeout_s: float = 0.5,
                  retries: int = 2, command_timeouts: Mapping[str, float] | None = None,
-                 name: str | None = None) -> None:
+                 boot_timeout_s: float = 3.0, name: str | None = None) -> None:
         super().__init__(name or f"trigger box on {url}")
         if timeout_s <= 0:
             raise ValueError(f"timeout_s must be > 0, got {timeout_s}")
@@ -212,6 +217,9 @@ class SerialTriggerBox(TriggerBox):
                                  f"{', '.join(tp.COMMANDS)}, got {command}={seconds}")
         if retries < 0:
             raise ValueError(f"retries must be >= 0, got {retries}")
+        if boot_timeout_s < 0:
+            raise ValueError(f"boot_timeout_s must be >= 0, got {boot_timeout_s}")
+        self.boot_timeout_s = float(boot_timeout_s)
         self.url = url
         self.baudrate = baudrate
         self.timeout_s = float(timeout_s)
@@ -244,6 +252,12 @@ class SerialTriggerBox(TriggerBox):
         """Indices of the ``! PULSE`` events received so far (since the last ARM)."""
         return [int(e.tokens[0]) for e in self.events if e.name == "PULSE" and e.tokens]
 
+    def missed_edges(self) -> int:
+        """Sync edges the box reported missed (``! MISSED <total>``) since the last ARM."""
+        totals = [int(e.tokens[0]) for e in self.events if e.name == "MISSED" and e.tokens
+                  and e.tokens[0].isdigit()]
+        return max(totals, default=0)
+
     # -- hooks ----------------------------------------------------------------------------------
     def _open(self) -> None:
         try:
@@ -254,6 +268,26 @@ class SerialTriggerBox(TriggerBox):
             raise DeviceNotFoundError(
                 f"cannot open trigger box port {self.url}: {exc}; check the cable, the port name "
                 "and that you may open it (Linux: be in the 'dialout' group)") from exc
+        if self.boot_timeout_s > 0:
+            self._wait_ready(self.boot_timeout_s)
+
+    def _wait_ready(self, timeout_s: float) -> None:
+        """Wait for the ``! READY`` banner of a board that reset on open; anything sent before
+        it would be lost in the bootloader. Without a banner (a board that does not reset) the
+        HELLO that follows finds out."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            raw = self._read_line(deadline, "the READY banner")
+            if not raw.endswith(b"\n"):
+                break
+            try:
+                message = tp.parse_incoming(raw)
+            except tp.LineError:
+                continue  # bootloader noise
+            if isinstance(message, tp.Event) and message.name == "READY":
+                log.info("%s booted (protocol %s)", self, " ".join(message.tokens))
+                return
+        log.info("%s: no READY banner within %.3g s; sending HELLO anyway", self, timeout_s)
 
     def _close(self) -> None:
         port, self._port = self._port, None
@@ -304,12 +338,17 @@ class SerialTriggerBox(TriggerBox):
         tokens = self._command("STATUS")
         try:
             kv = tp.parse_key_values(tuple(tokens))
-            return TriggerBoxStatus(
-                state=kv["state"], armed=int(kv["armed"]), fired=int(kv["fired"]),
-                pulse_width_us=int(kv["width"]), delay_us=int(kv["delay"]),
-                polarity=Polarity(kv["polarity"]), source=ExposureSource(kv["source"]))
+            status = TriggerBoxStatus(
+                state=kv["st"], armed=int(kv["n"]), fired=int(kv["fired"]),
+                pulse_width_us=int(kv["w"]), delay_us=int(kv["d"]),
+                polarity=Polarity(kv["pol"]), source=ExposureSource(kv["src"]),
+                missed=int(kv["miss"]))
         except (tp.LineError, KeyError, ValueError) as exc:
             raise ProtocolError(f"{self}: malformed STATUS reply {tokens!r}: {exc}") from exc
+        if status.missed:
+            log.warning("%s: %d sync edge(s) missed since ARM (arrived while a pulse was pending)",
+                        self, status.missed)
+        return status
 
     def _do_reset(self) -> None:
         self._command("RESET")
@@ -423,4 +462,7 @@ class SerialTriggerBox(TriggerBox):
         if event.name == "WATCHDOG":
             log.warning("%s: the box disarmed itself after heartbeat silence", self)
             self._armed_count = 0
+        elif event.name == "MISSED":
+            log.warning("%s: sync edges missed since ARM: %s (edge while a pulse was pending)",
+                        self, " ".join(event.tokens))
         self.events.append(event)

@@ -1,4 +1,4 @@
-"""Line format of the trigger box protocol (version 1), shared by the host driver and the fake box.
+"""Line format of the trigger box protocol (version 2), shared by the host driver and the fake box.
 
 Every line is ASCII, ends with ``\\n`` and carries an NMEA-style checksum: ``*HH`` where ``HH`` is
 the XOR of every byte before the ``*``, as two upper-case hex digits. See docs/trigger-protocol.md.
@@ -16,7 +16,7 @@ import enum
 import re
 from dataclasses import dataclass
 
-PROTOCOL_VERSION = 1
+PROTOCOL_VERSION = 2
 MAX_LINE_BYTES = 96
 MAX_REQUEST_ID = 65535
 

@@ -9,6 +9,13 @@ host logic. Faults are requested through ``TriggerFaults``.
 Each exposure pulse calls ``on_pulse(index)`` (index within the current ARM, from 0): the
 acquisition loop wires the simulated camera's ``pulse(trigger_index)`` there. Pulses are not timed
 in real time unless ``realtime=True``.
+
+Like an Arduino Uno, the box reboots whenever the port is opened (DTR): for ``boot_s`` it reads
+and drops whatever arrives (the bootloader), then prints ``! READY <version>``; the settings are
+lost except the output polarity, which the firmware keeps in EEPROM so that the output idles at
+the right level from the first instruction (``pin_level``). A sync edge closer than
+``LOCKOUT_US`` to the previous one is ringing and ignored; one while a pulse is pending or active
+is missed, counted in STATUS and reported as ``! MISSED <total>``.
 """
 
 from __future__ import annotations
@@ -28,9 +35,11 @@ from drivers import trigger_protocol as tp
 
 log = logging.getLogger(__name__)
 
-FIRMWARE_ID = "fpp-trigger-box/1.0.0"
+FIRMWARE_ID = "fpp-trigger-box/2.0.0"
 DEFAULT_PULSE_WIDTH_US = 100
 DEFAULT_WATCHDOG_S = 10.0
+LOCKOUT_US = 20  # sync edges closer than this are ringing
+DEFAULT_BOOT_S = 0.1  # a real Uno's bootloader takes about 0.5-1.6 s
 
 
 @dataclass(frozen=True)
@@ -96,23 +105,33 @@ class _Output:
 class _BoxFirmware:
     """The box's protocol state machine, as the firmware implements it."""
 
-    def __init__(self, protocol_version: int, watchdog_s: float | None, now: float) -> None:
+    def __init__(self, protocol_version: int, watchdog_s: float | None, now: float,
+                 polarity: tp.Polarity = tp.Polarity.ACTIVE_HIGH) -> None:
         self.protocol_version = protocol_version
         self.watchdog_s = watchdog_s
         self.hello_done = False
         self.last_request = b""  # the last executed request line, as received
         self.last_reply = b""
         self.last_line_at = now
+        self.polarity = polarity  # kept in EEPROM: survives RESET and reboots
+        self.active = False  # the pulse output's logical level
+        self.last_edge_at: float | None = None
+        self.busy_until = 0.0
         self._defaults()
 
     def _defaults(self) -> None:
         self.width_us = DEFAULT_PULSE_WIDTH_US
         self.delay_us = 0
-        self.polarity = tp.Polarity.ACTIVE_HIGH
         self.state = "IDLE"
         self.source = tp.ExposureSource.SOFTWARE
         self.armed = 0
         self.fired = 0
+        self.missed = 0
+
+    @property
+    def pin_level(self) -> int:
+        """Electrical level of the pulse output: 1 high, 0 low."""
+        return int(self.active == (self.polarity is tp.Polarity.ACTIVE_HIGH))
 
     # -- input ----------------------------------------------------------------------------------
     def handle_line(self, line: bytes, now: float) -> _Output:
@@ -134,17 +153,26 @@ class _BoxFirmware:
         self.last_request, self.last_reply = raw, out.reply
         return out
 
-    def sync_edge(self) -> _Output:
+    def sync_edge(self, now: float) -> _Output:
         out = _Output()
-        if self.state == "ARMED" and self.source is tp.ExposureSource.EXTERNAL_SYNC:
-            self._pulse(out)
+        if self.last_edge_at is not None and now - self.last_edge_at < LOCKOUT_US * 1e-6:
+            return out  # ringing
+        self.last_edge_at = now
+        if self.state != "ARMED" or self.source is not tp.ExposureSource.EXTERNAL_SYNC:
+            return out
+        if now < self.busy_until:  # a pulse is pending or active
+            self.missed += 1
+            out.before.append(tp.encode_event("MISSED", self.missed))
+            return out
+        self.busy_until = now + (self.delay_us + self.width_us) * 1e-6
+        self._pulse(out)
         return out
 
     def tick(self, now: float) -> _Output:
         out = _Output()
         if (self.state == "ARMED" and self.watchdog_s is not None
                 and now - self.last_line_at > self.watchdog_s):
-            self.state, self.armed, self.fired = "IDLE", 0, 0
+            self.state, self.armed, self.fired, self.missed = "IDLE", 0, 0, 0
             out.before.append(tp.encode_event("WATCHDOG"))
         return out
 
@@ -184,6 +212,7 @@ class _BoxFirmware:
         if self.state == "ARMED":
             return tp.encode_error(rid, tp.ErrorCode.STATE, "armed RESET first")
         self.width_us, self.delay_us, self.polarity = width, delay, polarity
+        self.active = False
         return tp.encode_ok(rid, width, delay, polarity.value)
 
     def _cmd_arm(self, rid: int, args: tuple[str, ...], out: _Output) -> bytes:
@@ -196,7 +225,7 @@ class _BoxFirmware:
             raise _BadArgument("source must be SW or EXT") from None
         if self.state == "ARMED":
             return tp.encode_error(rid, tp.ErrorCode.STATE, "already armed RESET first")
-        self.state, self.source, self.armed, self.fired = "ARMED", source, count, 0
+        self.state, self.source, self.armed, self.fired, self.missed = "ARMED", source, count, 0, 0
         return tp.encode_ok(rid, count, source.value)
 
     def _cmd_fire(self, rid: int, args: tuple[str, ...], out: _Output) -> bytes:
@@ -211,9 +240,9 @@ class _BoxFirmware:
     def _cmd_status(self, rid: int, args: tuple[str, ...], out: _Output) -> bytes:
         _ints(args, 0, (0, 0))
         return tp.encode_ok(
-            rid, f"state={self.state}", f"armed={self.armed}", f"fired={self.fired}",
-            f"width={self.width_us}", f"delay={self.delay_us}",
-            f"polarity={self.polarity.value}", f"source={self.source.value}")
+            rid, f"st={self.state}", f"n={self.armed}", f"fired={self.fired}", f"miss={self.missed}",
+            f"w={self.width_us}", f"d={self.delay_us}", f"pol={self.polarity.value}",
+            f"src={self.source.value}")
 
     def _cmd_reset(self, rid: int, args: tuple[str, ...], out: _Output) -> bytes:
         _ints(args, 0, (0, 0))
@@ -279,6 +308,14 @@ class FakeTriggerBox:
         Silence after which an armed box disarms itself (``! WATCHDOG``); None disables.
     realtime : bool
         Sleep through delay + width of each pulse (off by default: tests stay fast).
+    reset_on_open : bool
+        Reboot whenever the port is opened, as an Uno does (DTR); False: a board that does not.
+        The fake sees the port closed by polling every 10 ms: a reopen faster than that is
+        not noticed.
+    boot_s : float
+        How long a reboot takes: input is dropped meanwhile, then ``! READY`` is sent.
+    polarity : Polarity
+        The polarity kept in the box's EEPROM from an earlier CONFIG (the idle level at boot).
     """
 
     def __init__(
@@ -289,17 +326,26 @@ class FakeTriggerBox:
         protocol_version: int = tp.PROTOCOL_VERSION,
         watchdog_s: float | None = DEFAULT_WATCHDOG_S,
         realtime: bool = False,
+        reset_on_open: bool = True,
+        boot_s: float = DEFAULT_BOOT_S,
+        polarity: tp.Polarity = tp.Polarity.ACTIVE_HIGH,
     ) -> None:
         self.on_pulse = on_pulse
         self.faults = faults or TriggerFaults()
         self._rng = rng if rng is not None else np.random.default_rng(0)
         self._realtime = realtime
-        self._firmware = _BoxFirmware(protocol_version, watchdog_s, time.monotonic())
+        self._protocol_version, self._watchdog_s = protocol_version, watchdog_s
+        self._firmware = _BoxFirmware(protocol_version, watchdog_s, time.monotonic(), polarity)
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._master, self._slave = os.openpty()
         tty.setraw(self._slave)
         self.port = os.ttyname(self._slave)
+        self.reset_on_open = reset_on_open
+        self.boot_s = boot_s
+        self.boots = 1  # times the board started (power-up included)
+        self._booting_until: float | None = None
+        self._port_open = False
         self.received: list[bytes] = []  # every line the box read, for tests and debugging
         self.sent: list[bytes] = []  # every line the box wrote
         self.pulses: list[int] = []
@@ -308,7 +354,11 @@ class FakeTriggerBox:
         self._garbled: dict[int, int] = {}
         self._dropped: dict[int, int] = {}
         self._gone = False
-        self._write(tp.encode_event("READY", protocol_version))  # the boot banner
+        if reset_on_open:  # no one holds the port yet: the board's banner went nowhere
+            os.close(self._slave)
+            self._slave = -1
+        else:
+            self._write(tp.encode_event("READY", protocol_version))  # the boot banner
         self._thread = threading.Thread(target=self._serve, name="fake-trigger-box", daemon=True)
         self._thread.start()
 
@@ -317,11 +367,23 @@ class FakeTriggerBox:
         """Simulate one edge on the box's SYNC_IN pin (e.g. the DLP's TRIG_OUT)."""
         with self._lock:
             if not self._gone:
-                self._emit(self._firmware.sync_edge())
+                self._emit(self._firmware.sync_edge(time.monotonic()))
 
     @property
     def state(self) -> str:
         return self._firmware.state
+
+    @property
+    def pin_level(self) -> int:
+        """Electrical level of the pulse output now (1 high, 0 low)."""
+        return self._firmware.pin_level
+
+    def _reboot(self, now: float) -> None:
+        """DTR reset: RAM state lost, the EEPROM polarity kept; input dropped while booting."""
+        self.boots += 1
+        polarity = self._firmware.polarity
+        self._firmware = _BoxFirmware(self._protocol_version, self._watchdog_s, now, polarity)
+        self._booting_until = now + self.boot_s
 
     def close(self) -> None:
         """Stop the serving thread, close the pty; re-raise an error raised by ``on_pulse``."""
@@ -350,17 +412,39 @@ class FakeTriggerBox:
             with self._lock:
                 if self._gone:
                     return
-                if ready:
+                now = time.monotonic()
+                if self.reset_on_open:
+                    data = b""
+                    if ready:
+                        try:
+                            data = os.read(self._master, 1024)
+                        except OSError:  # EIO: no process holds the port open
+                            self._port_open = False
+                            buffer = b""
+                            self._stop.wait(0.005)
+                            continue
+                    if not self._port_open:  # opened since the last look: DTR resets the board
+                        self._port_open = True
+                        self._reboot(now)
+                    if self._booting_until is not None:
+                        if now < self._booting_until:
+                            continue  # the bootloader eats what arrives
+                        self._booting_until = None
+                        buffer = b""
+                        self._write(tp.encode_event("READY", self._protocol_version))
+                        continue
+                    buffer += data
+                elif ready:
                     try:
                         buffer += os.read(self._master, 1024)
                     except OSError:
                         pass  # no process holds the slave open (EIO); keep waiting
-                    while b"\n" in buffer and not self._gone:
-                        line, buffer = buffer.split(b"\n", 1)
-                        self._handle(line + b"\n")
-                    if len(buffer) > tp.MAX_LINE_BYTES:  # a line too long: answered as SYNTAX
-                        self._handle(buffer + b"\n")
-                        buffer = b""
+                while b"\n" in buffer and not self._gone:
+                    line, buffer = buffer.split(b"\n", 1)
+                    self._handle(line + b"\n")
+                if len(buffer) > tp.MAX_LINE_BYTES:  # a line too long: answered as SYNTAX
+                    self._handle(buffer + b"\n")
+                    buffer = b""
                 if not self._gone:  # input first: a late thread must not fire the watchdog
                     self._emit(self._firmware.tick(time.monotonic()))
 

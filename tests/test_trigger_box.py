@@ -27,10 +27,11 @@ from mock_devices.trigger_box import FakeTriggerBox, TriggerFaults
 from tests.contracts import device_option
 from tests.protocol import expected_protocol, expected_serial_protocol
 
-HELLO = (b"1 HELLO 1*42\n", b"1 OK 1 box-fw/2.1*6F\n")
+HELLO = (b'1 HELLO 2*41\n', b'1 OK 2 box-fw/2.1*6C\n')
 
 
 def opened(port: str, **kwargs) -> SerialTriggerBox:
+    kwargs.setdefault("boot_timeout_s", 0)  # scripted peers send no READY banner
     box = SerialTriggerBox(port, **kwargs)
     box.open()
     return box
@@ -82,9 +83,9 @@ def test_full_exposure_sequence_lines():
         (b"5 FIRE*0D\n", b"! PULSE 0*4E\n5 OK 0*01\n"),
         (b"6 FIRE*0E\n", b"! PULSE 1*4F\n6 OK 1*03\n! DONE 2*13\n"),
         (b"7 STATUS*03\n",
-         b"7 OK state=DONE armed=2 fired=2 width=250 delay=40 polarity=NEG source=SW*0B\n"),
+         b'7 OK st=DONE n=2 fired=2 miss=0 w=250 d=40 pol=NEG src=SW*4B\n'),
     ]
-    with expected_protocol(SerialTriggerBox, exchanges) as box:
+    with expected_protocol(SerialTriggerBox, exchanges, boot_timeout_s=0) as box:
         box.ping()
         box.configure(pulse_width_us=250, delay_us=40, polarity=Polarity.ACTIVE_LOW)
         box.arm(2)
@@ -152,9 +153,9 @@ def test_error_replies_map_to_device_errors(reply, error):
 
 
 def test_hello_has_its_own_longer_deadline_for_booting_boards():
-    exchanges = [(b"1 HELLO 1*42\n", None), HELLO]  # the first HELLO is lost while booting
+    exchanges = [(b'1 HELLO 2*41\n', None), HELLO]  # the first HELLO is lost while booting
     with expected_serial_protocol(exchanges) as port:
-        box = SerialTriggerBox(port, timeout_s=0.02, command_timeouts={"HELLO": 0.1})
+        box = SerialTriggerBox(port, timeout_s=0.02, command_timeouts={"HELLO": 0.1}, boot_timeout_s=0)
         start = time.monotonic()
         box.open()
         assert time.monotonic() - start >= 0.1
@@ -164,9 +165,9 @@ def test_hello_has_its_own_longer_deadline_for_booting_boards():
 
 
 def test_box_version_other_than_ours_is_refused_and_port_closed():
-    with expected_serial_protocol([(b"1 HELLO 1*42\n", b"1 OK 2 box-fw/2.1*6C\n")]) as port:
-        box = SerialTriggerBox(port)
-        with pytest.raises(UnsupportedFeatureError, match="protocol 2.*speaks 1"):
+    with expected_serial_protocol([(b'1 HELLO 2*41\n', b'1 OK 1 box-fw/2.1*6F\n')]) as port:
+        box = SerialTriggerBox(port, boot_timeout_s=0)
+        with pytest.raises(UnsupportedFeatureError, match="protocol 1.*speaks 2"):
             box.open()
         assert not box.is_open
 
@@ -257,8 +258,8 @@ def test_fault_requests_are_checked():
 
 
 def test_version_mismatch_with_fake_box_is_refused():
-    with FakeTriggerBox(protocol_version=2) as fake:
-        with pytest.raises(UnsupportedFeatureError, match="VERSION box speaks 2"):
+    with FakeTriggerBox(protocol_version=3) as fake:
+        with pytest.raises(UnsupportedFeatureError, match="VERSION box speaks 3"):
             SerialTriggerBox(fake.port).open()
 
 
@@ -270,6 +271,7 @@ def test_external_sync_fires_armed_exposures():
             box.fire()
         for _ in range(3):
             fake.sync_in()
+            time.sleep(0.002)  # longer than a pulse (100 us): none is missed
         box.wait_done(timeout_s=1.0)
         assert box.pulses_seen() == [0, 1, 2]
         fake.sync_in()  # not armed any more: ignored
@@ -326,10 +328,11 @@ def test_fake_box_answers_the_wire_format_exactly():
         box.arm(1)
         box.fire()
         box.reset()
-    assert fake.received == [b"1 HELLO 1*42\n", b"2 ARM 1 SW*79\n", b"3 FIRE*0B\n",
+    assert fake.received == [b'1 HELLO 2*41\n', b"2 ARM 1 SW*79\n", b"3 FIRE*0B\n",
                              b"4 RESET*41\n"]
-    assert fake.sent == [b"! READY 1*5B\n", b"1 OK 1 fpp-trigger-box/1.0.0*51\n", b"2 OK 1 SW*23\n",
-                         b"! PULSE 0*4E\n", b"3 OK 0*07\n", b"! DONE 1*10\n", b"4 OK*10\n"]
+    assert fake.sent == [b'! READY 2*58\n', b'1 OK 2 fpp-trigger-box/2.0.0*51\n',
+                         b"2 OK 1 SW*23\n", b"! PULSE 0*4E\n", b"3 OK 0*07\n", b"! DONE 1*10\n",
+                         b"4 OK*10\n"]
 
 
 # -- contract: every TriggerBox backend, simulated or real ------------------------------------
@@ -375,6 +378,15 @@ class TriggerBoxContract:
         with self.make_box() as box:
             assert 0 < box.ping() < 1.0
 
+    def test_reopening_reboots_cleanly_and_keeps_the_polarity(self):
+        with self.make_box() as box:
+            box.configure(pulse_width_us=100, polarity=Polarity.ACTIVE_LOW)
+        time.sleep(0.05)
+        with self.make_box() as box:  # an Uno reboots here; open waits for its banner
+            status = box.status()
+            assert (status.state, status.polarity, status.missed) == ("IDLE", Polarity.ACTIVE_LOW, 0)
+            box.configure(pulse_width_us=100, polarity=Polarity.ACTIVE_HIGH)
+
     def test_closed_box_refuses_commands(self):
         box = self.make_box()
         with pytest.raises(IncompatibleStateError):
@@ -404,3 +416,62 @@ class TestTriggerBoxOnDevice(TriggerBoxContract):
 
     def make_box(self) -> TriggerBox:
         return SerialTriggerBox(self.port, timeout_s=2.0)
+
+
+# -- what an Arduino Uno does that a box always listening would not (issue 15) ----------------
+
+def test_open_waits_for_the_banner_of_a_board_that_resets_on_open():
+    # the Uno reboots when the port opens (DTR); its bootloader drops what arrives meanwhile
+    with FakeTriggerBox(boot_s=0.3) as fake:
+        box = SerialTriggerBox(fake.port, command_timeouts={"HELLO": 0.2}, retries=0)
+        box.open()  # no HELLO lost, no retry needed although HELLO's deadline is shorter
+        assert fake.boots == 2 and fake.received[0] == tp.frame("1 HELLO 2")
+        box.close()
+
+
+def test_board_without_reset_is_opened_without_waiting_long():
+    with FakeTriggerBox(reset_on_open=False) as fake:
+        with SerialTriggerBox(fake.port, boot_timeout_s=0.05) as box:
+            assert box.firmware.startswith("fpp-trigger-box/")
+
+
+def test_negative_polarity_idles_inactive_from_boot():
+    # a camera armed on a falling edge must not see one at reset: the box keeps its polarity
+    with FakeTriggerBox() as fake:
+        with SerialTriggerBox(fake.port) as box:
+            box.configure(pulse_width_us=100, polarity=Polarity.ACTIVE_LOW)
+            assert fake.pin_level == 1
+        time.sleep(0.05)  # the fake notices a closed port by polling (10 ms)
+        with SerialTriggerBox(fake.port) as box:  # reopening resets the board
+            assert fake.boots == 3
+            assert fake.pin_level == 1  # idle high before any CONFIG
+            box.reset()
+            assert box.status().polarity is Polarity.ACTIVE_LOW and fake.pin_level == 1
+
+
+def test_missed_sync_edges_are_reported_and_ringing_ignored():
+    box_fw = FakeTriggerBox(reset_on_open=False)
+    with box_fw as fake, SerialTriggerBox(fake.port, boot_timeout_s=0) as box:
+        box.configure(pulse_width_us=1000, delay_us=0)
+        box.arm(3, ExposureSource.EXTERNAL_SYNC)
+        firmware = fake._firmware
+        with fake._lock:  # edges at chosen times (seconds): pulse, ringing, missed, pulse
+            for at in (10.0, 10.000005, 10.0005, 10.002):
+                fake._emit(firmware.sync_edge(at))
+        status = box.status()
+        assert (status.fired, status.missed) == (2, 1)
+        assert box.missed_edges() == 1
+        assert box.pulses_seen() == [0, 1]
+
+
+def test_status_reply_fits_the_line_limit_at_its_longest():
+    from mock_devices.trigger_box import _BoxFirmware
+
+    firmware = _BoxFirmware(tp.PROTOCOL_VERSION, None, 0.0, tp.Polarity.ACTIVE_LOW)
+    firmware.hello_done = True
+    firmware.state, firmware.armed, firmware.fired, firmware.missed = "ARMED", 65535, 65535, 65535
+    firmware.width_us = firmware.delay_us = tp.MAX_PULSE_WIDTH_US
+    firmware.source = tp.ExposureSource.EXTERNAL_SYNC
+    reply = firmware.handle_line(tp.encode_request(65535, "STATUS"), 0.0).reply
+    assert reply is not None and len(reply) <= tp.MAX_LINE_BYTES
+    tp.parse_incoming(reply)

@@ -1,0 +1,3 @@
+// Host build: the stand-ins are in ../Arduino.h.
+#pragma once
+#include "../Arduino.h"
