@@ -73,12 +73,14 @@ static PGM_P errorName(uint8_t code) {
 enum BoxState { STATE_IDLE, STATE_ARMED, STATE_DONE };
 
 // -- settings and state ----------------------------------------------------------------------
-static unsigned long widthUs = DEFAULT_WIDTH_US;
-static unsigned long delayUs = 0;
-static bool activeHigh = true;
-static BoxState state = STATE_IDLE;
-static bool sourceExt = false;
-static unsigned long armedCount = 0;
+// Written by the command loop, read by the interrupts: volatile, so every access goes to memory in
+// program order (the loop sets a value before the state that lets an interrupt use it).
+static volatile unsigned long widthUs = DEFAULT_WIDTH_US;
+static volatile unsigned long delayUs = 0;
+static volatile bool activeHigh = true;
+static volatile BoxState state = STATE_IDLE;
+static volatile bool sourceExt = false;
+static volatile unsigned long armedCount = 0;
 static bool helloDone = false;
 
 static char lastRequest[MAX_LINE + 1] = "";  // the last executed request line, as received
