@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -368,6 +368,28 @@ def _rescue_rejected(state: SceneState, phase: np.ndarray, mask: np.ndarray, mod
     return rescued
 
 
+def _check_convention(
+    state: SceneState, options: ProcessOptions, evidence: str, maps: Sequence[np.ndarray], freqs: Sequence[int],
+    stripes: np.ndarray | None = None, bits: int = 0,
+) -> None:
+    """Refuse images whose phase convention differs from the capture's (:mod:`rig.pipeline.convention_check`)."""
+    from processing.convention import gray_offset, heterodyne_offset
+    from rig.pipeline import convention_check
+
+    if not convention_check.enabled(options):
+        return
+    assert state.wrapped is not None
+    if evidence == "gray":
+        assert stripes is not None
+        estimate = gray_offset(maps[0], stripes, bits, freqs[0], state.wrapped.valid, state.axis)
+        text = "the Gray-code period boundaries fall mid-period instead of at the phase wrap"
+    else:
+        estimate = heterodyne_offset(maps, freqs, state.wrapped.valid)
+        text = "the heterodyne residuals are far above the noise (the beats disagree with the finest phase)"
+    state.info["phase_convention_offset_rad"] = estimate.offset
+    convention_check.check(estimate, text, state.capture, state.capture.patterns, str(state.capture.manifest_path))
+
+
 def stage_unwrap(state: SceneState, options: ProcessOptions) -> None:
     """Absolute (or, for spatial methods, relative) phase at the highest frequency."""
     if state.groups.single_shot:
@@ -397,6 +419,8 @@ def stage_unwrap(state: SceneState, options: ProcessOptions) -> None:
             if "max_residual" in options.params:  # e.g. --param max_residual=3.14 for rendered data with drifting beats
                 extra["max_residual"] = float(options.params["max_residual"])
             unwrap = temporal.unwrap_hierarchical if method == "hierarchical" else temporal.unwrap_heterodyne
+            if method == "heterodyne":
+                _check_convention(state, options, "heterodyne", maps, ints)
             result = unwrap(maps, ints, **extra)
     elif method == "gray":
         gray = state.groups.gray.get(state.axis)
@@ -414,6 +438,7 @@ def stage_unwrap(state: SceneState, options: ProcessOptions) -> None:
                 f"--unwrap gray: {gray.bits} Gray bits give {1 << gray.bits} stripes; expected the fringe count "
                 f"{frequency:g} (or twice it, complementary Gray code)"
             )
+        _check_convention(state, options, "gray", [phis[-1]], [int(frequency)], stripes, gray.bits)
         result = temporal.unwrap_gray(phis[-1], stripes, gray.bits, int(frequency), complementary=complementary)
     elif method in ("spatial", "ftp"):
         from processing import spatial
