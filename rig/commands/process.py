@@ -32,6 +32,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_capture_argument(parser)
     parser.add_argument("--calibration", type=Path, metavar="CAL", help="calibration directory (calibration.json)")
     parser.add_argument("-o", "--output", type=Path, metavar="OUT", help="output directory (default: CAPTURE-processed)")
+    add_processing_options(parser)
+    parser.add_argument("--salvage", action="store_true", help="accept an incomplete capture (interrupted scan)")
+    add_report_options(parser)
+
+
+def add_processing_options(parser: argparse.ArgumentParser) -> None:
+    """The pipeline's options (--unwrap, --denoise, --correction, ...), shared by `rig process` and `rig batch`."""
     parser.add_argument(
         "--unwrap", default="auto", choices=UNWRAP_METHODS,
         help="phase unwrapping method (default auto: gray or spatial for one frequency, hierarchical when "
@@ -55,8 +62,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--axis", choices=("x", "y"), help="fringe axis to use when a capture has both (default: the first)")
     parser.add_argument("--no-undistort", dest="undistort", action="store_false", default=None,
                         help="keep lens distortion (default: removed when the calibration has camera_matrix and distortion)")
-    parser.add_argument("--salvage", action="store_true", help="accept an incomplete capture (interrupted scan)")
-    add_report_options(parser)
+
+
+def processing_options(args: argparse.Namespace) -> ProcessOptions:
+    """The :class:`ProcessOptions` of the options :func:`add_processing_options` added."""
+    return ProcessOptions(
+        unwrap=args.unwrap, denoise=args.denoise, correction=args.correction,
+        min_modulation_ratio=args.min_modulation, axis=args.axis, params=parse_params(args.param),
+        undistort=args.undistort, min_island_fraction=0.0 if args.keep_islands else args.min_island,
+    )
 
 
 def summary(report: dict, out: Path) -> dict:
@@ -82,11 +96,7 @@ def parse_params(items: list[str]) -> dict[str, object]:
 
 def run(args: argparse.Namespace) -> int:
     out = args.output or args.capture.with_name(args.capture.name + "-processed")
-    options = ProcessOptions(
-        unwrap=args.unwrap, denoise=args.denoise, correction=args.correction,
-        min_modulation_ratio=args.min_modulation, axis=args.axis, params=parse_params(args.param),
-        undistort=args.undistort, min_island_fraction=0.0 if args.keep_islands else args.min_island,
-    )
+    options = processing_options(args)
     steps = total_steps(args.calibration is not None) + 1
     with Progress(f"process {args.capture}", total=steps, quiet=args.quiet) as progress:
         result = process(args.capture, args.calibration, options, progress=progress, salvage=args.salvage)

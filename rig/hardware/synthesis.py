@@ -16,6 +16,7 @@ On disk (:func:`write_simulated_scan`)::
 from __future__ import annotations
 
 import os
+import shutil
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -174,3 +175,33 @@ def write_simulated_scan(scan: SimulatedScan, out: str | os.PathLike[str], overw
     np.save(paths.truth, scan.height_mm.astype(np.float32))
     return paths
 
+
+
+ARCHIVE_SCENES = ("hemisphere", "sphere-cap", "two-hemispheres", "steps")
+
+
+def write_simulated_archive(
+    out: str | os.PathLike[str], count: int, width: int = 64, height: int = 48, seed: int = 0,
+    scene_names: Sequence[str] = ARCHIVE_SCENES,
+) -> tuple[Path, Path]:
+    """An archive of ``count`` simulated scans sharing one calibration (for batch tests and benchmarks).
+
+    Writes ``OUT/calibration/`` (with its reference capture) and ``OUT/archive/scan-NNN/object``
+    with ``truth-height.npy`` beside each capture, scenes cycling through ``scene_names``, noise
+    seeded by ``seed + i``. Returns (archive directory, calibration directory).
+    """
+    root = Path(out)
+    geometry = demo_geometry(width, height)
+    archive = root / "archive"
+    first: SimulatedScan | None = None
+    for i in range(count):
+        scan = simulate_scan(scene_names[i % len(scene_names)], geometry=geometry, seed=seed + i)
+        paths = write_simulated_scan(scan, archive / f"scan-{i:03d}")
+        shutil.rmtree(paths.calibration)  # one calibration for the whole archive, written below
+        first = first or scan
+    calibration = root / "calibration"
+    scan = first if first is not None else simulate_scan(scene_names[0], geometry=geometry, seed=seed)
+    projector = {"width": geometry.projector_width, "height": geometry.projector_height}
+    write_capture(calibration / "reference", scan.reference_frames, scan.patterns, projector, scene="reference")
+    write_calibration(calibration, scan.calibration(reference="reference"))
+    return archive, calibration

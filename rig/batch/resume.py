@@ -1,0 +1,89 @@
+"""What makes a finished output reusable: a fingerprint of everything that decides its content.
+
+The fingerprint hashes the capture's manifest (its frames' sha256 checksums, patterns, camera),
+the calibration's ``calibration.json`` and its reference capture's manifest, the processing
+options, the corrections compared and the program version. Each output's ``report.json`` carries
+it under ``batch.fingerprint``; a rerun keeps an output whose fingerprint matches and whose files
+are all there, and processes everything else again.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from rig import __version__
+from rig.pipeline.plan import ProcessOptions
+
+BATCH_KEY = "batch"  # report.json key holding the batch's bookkeeping
+
+
+def _canonical(obj: Any) -> bytes:
+    return json.dumps(obj, sort_keys=True, separators=(",", ":"), default=str).encode("utf-8")
+
+
+def manifest_digest(capture_dir: Path) -> str | None:
+    """sha256 of a capture's manifest content (None when it cannot be read: such a capture is always processed)."""
+    try:
+        manifest = json.loads((capture_dir / "capture.json").read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return None
+    return hashlib.sha256(_canonical(manifest)).hexdigest()
+
+
+def calibration_digest(calibration_dir: Path | None) -> str:
+    """sha256 of calibration.json's bytes and of its reference capture's manifest ("" without calibration)."""
+    if calibration_dir is None:
+        return ""
+    digest = hashlib.sha256()
+    path = calibration_dir / "calibration.json"
+    try:
+        data = path.read_bytes()
+    except OSError:
+        return "unreadable"  # processing reports the error itself
+    digest.update(data)
+    try:
+        reference = json.loads(data).get("reference")
+    except (UnicodeDecodeError, json.JSONDecodeError, AttributeError):
+        reference = None
+    if isinstance(reference, str):
+        ref_dir = Path(reference) if Path(reference).is_absolute() else calibration_dir / reference
+        digest.update((manifest_digest(ref_dir) or "").encode("ascii"))
+    return digest.hexdigest()
+
+
+def options_key(options: ProcessOptions, compare: Sequence[str]) -> str:
+    """The options and compared corrections as canonical text (part of every fingerprint)."""
+    return _canonical(
+        {"options": dataclasses.asdict(options), "compare": list(compare), "program": __version__}
+    ).decode()
+
+
+def fingerprint(capture_dir: Path, calibration: str, options: str) -> str | None:
+    """Fingerprint of one capture's inputs; None when its manifest is unreadable (never reused)."""
+    manifest = manifest_digest(capture_dir)
+    if manifest is None:
+        return None
+    return hashlib.sha256(_canonical([manifest, calibration, options])).hexdigest()
+
+
+def reusable_report(out_dir: Path, expected: str | None) -> dict[str, Any] | None:
+    """The report of a finished output whose fingerprint is ``expected`` and whose files all exist, else None."""
+    if expected is None:
+        return None
+    try:
+        report = json.loads((out_dir / "report.json").read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return None
+    if not isinstance(report, dict) or not isinstance(report.get(BATCH_KEY), dict):
+        return None
+    if report[BATCH_KEY].get("fingerprint") != expected:
+        return None
+    files = report.get("files")
+    if not isinstance(files, dict) or not all(isinstance(f, str) and (out_dir / f).is_file() for f in files.values()):
+        return None
+    return report
