@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from processing.correction_method import CorrectionMethod
 from processing.fringe_regions import pool_region_orders
 from processing.order_correction import correct_orders_rpca
 from processing.phase_correction import (
@@ -180,12 +181,15 @@ def correct_auto(
     )
 
 
-CORRECTIONS: dict[str, Correction] = {
-    "none": correct_none,
-    "vote": correct_vote,
-    "rpca-orders": correct_rpca_orders,
-    "rpca-phase": correct_rpca_phase,
-    "auto": correct_auto,
+CORRECTIONS: dict[str, CorrectionMethod] = {
+    method.name: method
+    for method in (
+        CorrectionMethod("none", correct_none, "no correction: the phase as unwrapped"),
+        CorrectionMethod("vote", correct_vote, "Ding's row-wise voting of fringe orders between wrapped-phase jumps"),
+        CorrectionMethod("rpca-orders", correct_rpca_orders, "RPCA on the fringe-order map, then monotonic rows (thesis ch. 3)"),
+        CorrectionMethod("rpca-phase", correct_rpca_phase, "low-rank part of the absolute phase by stable RPCA (thesis ch. 4)"),
+        CorrectionMethod("auto", correct_auto, "ch. 4 RPCA with guarded re-derived fringe orders (most accurate measured)"),
+    )
 }
 
 

@@ -9,6 +9,8 @@ transformed at once (``scipy.fft.rfft`` along the axis).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from scipy import fft as sfft
 
@@ -125,3 +127,43 @@ def ftp_phase(
     phase = np.angle(analytic)
     phase[phase >= np.pi] -= 2.0 * np.pi
     return phase, 2.0 * np.abs(analytic)
+
+
+@dataclass
+class FringeParts:
+    """What the height and correction stages need from one FTP-phased fringe image, all (H, W)."""
+
+    phase: np.ndarray       # wrapped phase in [-pi, pi), float64
+    amplitude: np.ndarray   # fringe amplitude B, float64
+    background: np.ndarray  # mean intensity over one fringe period along the axis, float64
+    valid: np.ndarray       # bool: amplitude above ``min_modulation`` times its median
+
+
+def ftp_fringe_parts(
+    fringe: np.ndarray, carrier: float, axis: int = 1, bandwidth: float = 0.5, min_modulation: float = 0.2
+) -> FringeParts:
+    """Wrapped phase, amplitude, background and modulation mask of a fringe image at a known carrier.
+
+    Parameters
+    ----------
+    fringe : (H, W) array
+        Fringe image (e.g. the fringe part a single shot separated from its speckle).
+    carrier : float
+        Carrier in cycles per pixel along ``axis`` (:func:`ftp_phase`).
+    axis : int
+        1: fringes vary along x; 0: along y.
+    bandwidth : float
+        FTP band half-width as a fraction of the carrier.
+    min_modulation : float
+        A pixel is valid where its amplitude exceeds this fraction of the median amplitude.
+    """
+    import cv2
+
+    axis = _check_axis(axis)
+    phase, amplitude = ftp_phase(fringe, carrier=carrier, axis=axis, bandwidth=bandwidth)
+    amplitude = np.asarray(amplitude, dtype=np.float64)
+    period = max(int(round(1.0 / abs(carrier))), 1) if carrier else 1
+    kernel = (period, 1) if axis == 1 else (1, period)
+    background = cv2.blur(np.asarray(fringe, dtype=np.float64), kernel, borderType=cv2.BORDER_REFLECT)
+    valid = amplitude > min_modulation * float(np.median(amplitude))
+    return FringeParts(np.asarray(phase, dtype=np.float64), amplitude, background, valid)

@@ -176,3 +176,19 @@ def unwrap_quality_guided(
     result = flat_phi + TWO_PI * wraps
     out.ravel()[flat_valid] = result[flat_valid]
     return out
+
+
+def remove_region_offsets(delta: np.ndarray) -> np.ndarray:
+    """Subtract from each 4-connected region of finite ``delta`` the multiple of 2 pi nearest its median.
+
+    For a phase known up to 2 pi k per region (spatial unwrapping): ``delta`` is the object's
+    phase minus the reference plane's, (H, W) with NaN where invalid; the result has each
+    region's median within pi of 0, right where the reference plane shows in the region.
+    """
+    finite = np.isfinite(delta)
+    labels, count = ndimage.label(finite)
+    if count == 0:
+        return delta
+    medians = np.asarray(ndimage.median(np.where(finite, delta, 0.0), labels, np.arange(1, count + 1)))
+    offsets = np.concatenate([[0.0], 2.0 * np.pi * np.round(medians / (2.0 * np.pi))])
+    return delta - offsets[labels]

@@ -110,3 +110,20 @@ def test_bad_input_names_the_argument(kwargs: dict, match: str) -> None:
     arguments = {"image": _fringes(np.zeros(SHAPE))} | kwargs
     with pytest.raises(ValueError, match=match):
         ftp_phase(**arguments)
+
+
+def test_fringe_parts_recover_phase_background_and_modulation() -> None:
+    """ftp_fringe_parts on an analytic fringe: phase, amplitude, background within stated tolerances (issue 9)."""
+    from processing.ftp import ftp_fringe_parts
+
+    height, width, f0 = 64, 256, 1 / 16
+    x = np.arange(width)[None, :].repeat(height, axis=0)
+    phi = 2 * np.pi * f0 * x
+    image = 100.0 + 40.0 * np.cos(phi)
+    image[:, 96:160] = 100.0  # no fringes here: invalid
+    parts = ftp_fringe_parts(image, f0, axis=1)
+    inner = (slice(None), slice(16, 64))
+    np.testing.assert_allclose(np.angle(np.exp(1j * (parts.phase - phi)))[inner], 0.0, atol=1e-2)
+    np.testing.assert_allclose(parts.amplitude[inner], 40.0, rtol=0.02)
+    np.testing.assert_allclose(parts.background[inner], 100.0, atol=1e-6)
+    assert parts.valid[inner].all() and not parts.valid[:, 120:136].any()

@@ -129,3 +129,19 @@ def test_bad_input_names_the_argument(kwargs: dict, match: str) -> None:
         unwrap_quality_guided(**arguments)
     with pytest.raises(ValueError, match="window"):
         phase_derivative_variance(np.zeros(SHAPE), window=4)
+
+
+def test_remove_region_offsets_takes_each_regions_nearest_multiple_of_two_pi() -> None:
+    """Two regions off by 2 pi k from the reference (plus a small true difference) come back to it (issue 9)."""
+    from processing.spatial import remove_region_offsets
+
+    rng = np.random.default_rng(5)
+    truth = 0.3 * rng.standard_normal((20, 30))
+    delta = np.full((20, 30), np.nan)
+    delta[:, :12] = truth[:, :12] + 2 * np.pi * 3
+    delta[:, 15:] = truth[:, 15:] - 2 * np.pi * 2
+    out = remove_region_offsets(delta)
+    np.testing.assert_allclose(out[:, :12], truth[:, :12], atol=1e-12)
+    np.testing.assert_allclose(out[:, 15:], truth[:, 15:], atol=1e-12)
+    assert np.isnan(out[:, 12:15]).all()
+    assert np.isnan(remove_region_offsets(np.full((3, 3), np.nan))).all()

@@ -17,7 +17,9 @@ from rig.errors import ConfigError
 from rig.pipeline.outputs import write_outputs
 from rig.pipeline.plan import DEFAULT_CORRECTION, UNWRAP_METHODS, ProcessOptions
 from rig.pipeline.run import process, total_steps
-from rig.pipeline.stages import CORRECTIONS, DENOISERS
+from rig.pipeline.corrections import REGISTRY as CORRECTIONS
+from rig.pipeline.corrections import help_text as correction_help
+from rig.pipeline.stages import DENOISERS
 from rig.progress import Progress
 
 
@@ -45,7 +47,7 @@ def add_processing_options(parser: argparse.ArgumentParser) -> None:
         "frequency 1 is present, two-frequency for 2 coprime, heterodyne or three-frequency for 3)",
     )
     parser.add_argument("--denoise", default="none", choices=sorted(DENOISERS), help="fringe denoising before phase (default none)")
-    parser.add_argument("--correction", default=DEFAULT_CORRECTION, choices=sorted(CORRECTIONS), help=f"phase / fringe-order correction (default {DEFAULT_CORRECTION})")
+    parser.add_argument("--correction", default=DEFAULT_CORRECTION, choices=sorted(CORRECTIONS), help=f"phase / fringe-order correction (default {DEFAULT_CORRECTION}); {correction_help()}")
     parser.add_argument(
         "--min-modulation", type=float, default=0.2, metavar="RATIO",
         help="valid pixels need fringe modulation B >= RATIO x background and x the image's 99th percentile of B (default 0.2)",

@@ -708,7 +708,8 @@ class ConsoleSession:
 def process_choices() -> dict[str, Any]:
     """The processing options a page can offer (the pipeline's own lists)."""
     from rig.pipeline.plan import UNWRAP_METHODS
-    from rig.pipeline.stages import CORRECTIONS, DENOISERS
+    from rig.pipeline.corrections import REGISTRY as CORRECTIONS
+    from rig.pipeline.stages import DENOISERS
 
     return {
         "unwrap": list(UNWRAP_METHODS),

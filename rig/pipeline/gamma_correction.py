@@ -8,35 +8,46 @@ the object and of the reference, both at the table's frequency.
 
 from __future__ import annotations
 
+import time
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
 from calibration.errors import CalibrationError
 from calibration.gamma import compensate_phase, table_from_fields
+from processing.correction_method import CorrectionMethod, Result
 
 NAME = "gamma-table"
 
 
-def correct_gamma_ripple(state: Any, options: Any) -> None:
-    """A ``rig.pipeline`` correction: ``state.unwrapped.phase`` minus the tabulated ripple."""
-    calibration = state.calibration
-    if calibration is None:
-        raise CalibrationError(f"--correction {NAME}: needs --calibration (its phase_error table)")
-    fields = calibration.extra.get("phase_error")
-    if not isinstance(fields, dict):
-        raise CalibrationError(f"{calibration.where}: phase_error: missing (recalibrate with rig calibrate, or --from)")
-    table = table_from_fields(fields)
-    frequency = float(fields.get("frequency", state.unwrapped.frequency))
-    if frequency != state.unwrapped.frequency:
-        raise CalibrationError(
-            f"{calibration.where}: phase_error: learnt at {frequency:g} fringes, the capture's phase is at {state.unwrapped.frequency:g}"
-        )
-    phase = state.unwrapped.phase
-    state.unwrapped.phase = np.where(np.isfinite(phase), compensate_phase(phase, table), np.nan)
-    state.info["gamma_table_rms_rad"] = float(np.sqrt(np.mean(table.error**2)))
+def correct_gamma_ripple(
+    absolute_phase: np.ndarray, wrapped_phase: np.ndarray, orders: np.ndarray | None = None,
+    mask: np.ndarray | None = None, frequency: float | None = None, *, phase_error: Mapping[str, Any],
+) -> Result:
+    """``absolute_phase`` minus the ripple tabulated in a calibration's ``phase_error`` fields.
+
+    ``phase_error`` must have been learnt at ``frequency`` (when it records one).
+    """
+    start = time.perf_counter()
+    table = table_from_fields(dict(phase_error))
+    learnt = float(phase_error.get("frequency", frequency if frequency is not None else np.nan))
+    if frequency is not None and learnt != frequency:
+        raise CalibrationError(f"phase_error: learnt at {learnt:g} fringes, the capture's phase is at {frequency:g}")
+    phase = np.asarray(absolute_phase, dtype=np.float64)
+    out = np.where(np.isfinite(phase), compensate_phase(phase, table), np.nan)
+    if mask is not None:
+        out = np.where(np.asarray(mask, dtype=bool), out, np.nan)
+    info: dict[str, Any] = {
+        "method": NAME, "parameters": {"bins": int(table.error.size)}, "iterations": 0, "rank": None,
+        "seconds": round(time.perf_counter() - start, 4), "table_rms_rad": float(np.sqrt(np.mean(table.error**2))),
+    }
+    if frequency is not None:
+        info["frequency"] = float(frequency)
+    return out, info
 
 
-def register(corrections: dict) -> None:
-    """Add the correction to a pipeline's correction registry."""
-    corrections[NAME] = correct_gamma_ripple
+GAMMA_TABLE = CorrectionMethod(
+    NAME, correct_gamma_ripple, "subtract the projector-gamma phase ripple the calibration tabulated (needs --calibration)",
+    needs=("phase_error",),
+)

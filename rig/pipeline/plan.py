@@ -11,8 +11,9 @@ wall-clock time goes into report.json. Methods plug in through registries, so a 
 phase correction is one entry, not a new code path:
 
 - :data:`DENOISERS` ``name -> f(frames, groups, options) -> frames`` (``--denoise``);
-- :data:`CORRECTIONS` ``name -> f(state, options) -> None`` adjusting ``state.unwrapped``
-  (``--correction``); a correction may read ``state.reference`` (processed first);
+- :data:`rig.pipeline.corrections.REGISTRY` ``name -> CorrectionMethod`` (``--correction``):
+  typed entries, ``f(absolute, wrapped, orders, mask, frequency, **params) -> (phase, info)``,
+  with what each needs from the calibration (``needs``);
 - :data:`SINGLE_SHOT` ``pattern kind -> f(state, options) -> None`` filling ``state.unwrapped``
   for single-shot patterns (``speckle-sinusoid``);
 - heights and points come from :mod:`calibration.models` (reference-plane, polynomial, stereo),

@@ -17,6 +17,7 @@ from calibration.store import Calibration, read_calibration
 from rig.blas import rpca_blas
 from rig.errors import ProcessingError
 from rig.pipeline.fit import check_fit
+from rig.pipeline.corrections import REGISTRY as CORRECTIONS
 from rig.pipeline.outputs import write_outputs
 from rig.pipeline.plan import (
     UNWRAP_METHODS,
@@ -25,7 +26,6 @@ from rig.pipeline.plan import (
     group_patterns,
 )
 from rig.pipeline.stages import (
-    CORRECTIONS,
     DENOISERS,
     SCENE_STAGES,
     SceneState,

@@ -15,7 +15,7 @@ from calibration import models as calibration_models
 from calibration.errors import CalibrationError
 from calibration.store import Calibration
 from rig.errors import ProcessingError
-from rig.pipeline import gamma_correction
+from rig.pipeline.corrections import stage_correction
 from rig.pipeline.plan import (
     TWO_PI,
     UNWRAP_METHODS,
@@ -220,24 +220,6 @@ def _single_shot_parameters(options: ProcessOptions) -> tuple[dict[str, Any], di
     return given, {**defaults, **given}
 
 
-def _single_shot_wrapped(
-    fringe: np.ndarray, carrier: float, axis: str, bandwidth: float, min_modulation: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Wrapped phase, FTP amplitude, background and modulation mask of a single-shot fringe part."""
-    import cv2
-
-    from processing.ftp import ftp_phase
-
-    along = 1 if axis == "x" else 0
-    phase, amplitude = ftp_phase(fringe, carrier=carrier, axis=along, bandwidth=bandwidth)
-    amplitude = np.asarray(amplitude, dtype=np.float64)
-    period = max(int(round(1.0 / abs(carrier))), 1) if carrier else 1
-    kernel = (period, 1) if axis == "x" else (1, period)
-    background = cv2.blur(np.asarray(fringe, dtype=np.float64), kernel, borderType=cv2.BORDER_REFLECT)
-    valid = amplitude > min_modulation * float(np.median(amplitude))
-    return np.asarray(phase, dtype=np.float64), amplitude, background, valid
-
-
 def _speckle_single_shot(state: SceneState, options: ProcessOptions) -> None:
     """``speckle-sinusoid`` captures (thesis ch. 2.3) through :mod:`processing.single_shot`.
 
@@ -251,6 +233,7 @@ def _speckle_single_shot(state: SceneState, options: ProcessOptions) -> None:
     result fills ``state.wrapped`` / ``state.unwrapped`` for the correction and height stages;
     method, parameters, RPCA iterations and rank and the time of each step go to the report.
     """
+    from processing.ftp import ftp_fringe_parts
     from processing.single_shot import (
         prepare_reference,
         separate_fringe_speckle,
@@ -297,9 +280,8 @@ def _speckle_single_shot(state: SceneState, options: ProcessOptions) -> None:
                                              **{k: v for k, v in prep.items() if k in ("carrier", "bandwidth")})
             prepared.seconds = time.perf_counter() - start
             state.single_shot_reference = prepared
-            wrapped, amplitude, background, valid = _single_shot_wrapped(
-                prepared.fringe, prepared.carrier, state.axis, settings["bandwidth"], settings["min_modulation"]
-            )
+            parts = ftp_fringe_parts(prepared.fringe, prepared.carrier, axis, settings["bandwidth"], settings["min_modulation"])
+            wrapped, amplitude, background, valid = parts.phase, parts.amplitude, parts.background, parts.valid
             absolute = prepared.absolute_phase
             orders = np.where(valid, np.rint((absolute - prepared.wrapped_phase) / TWO_PI), -1).astype(np.int64)
             timings = {"reference": prepared.seconds}
@@ -309,9 +291,8 @@ def _speckle_single_shot(state: SceneState, options: ProcessOptions) -> None:
                 raise ProcessingError(f"{where}: the reference capture is not a speckle-sinusoid single shot like this capture")
             result = single_shot_unwrap(image, prepared, None, group.frequency, axis=axis, **given)
             rpca = result.rpca
-            wrapped, amplitude, background, _ = _single_shot_wrapped(
-                result.fringe, prepared.carrier, state.axis, settings["bandwidth"], settings["min_modulation"]
-            )
+            parts = ftp_fringe_parts(result.fringe, prepared.carrier, axis, settings["bandwidth"], settings["min_modulation"])
+            wrapped, amplitude, background = parts.phase, parts.amplitude, parts.background
             valid = result.mask & np.isfinite(result.absolute_phase)
             absolute, orders, timings = result.absolute_phase, result.orders, dict(result.timings)
             timings.pop("reference", None)  # prepared with the reference capture, reported there
@@ -459,58 +440,6 @@ def stage_unwrap(state: SceneState, options: ProcessOptions) -> None:
     )
 
 
-def _correction_none(state: SceneState, options: ProcessOptions) -> None:
-    return None
-
-
-def _registered_correction(name: str) -> Callable[[SceneState, ProcessOptions], None]:
-    """Stage adapter for a method of :data:`processing.correction.CORRECTIONS` (thesis chs. 3-4, voting)."""
-
-    def run(state: SceneState, options: ProcessOptions) -> None:
-        from processing.correction import CORRECTIONS as METHODS
-
-        unwrapped = state.unwrapped
-        assert unwrapped is not None
-        if name == "auto" and not unwrapped.absolute:
-            state.info["correction"] = {"method": "auto", "skipped": "relative phase (spatial unwrapping): nothing to correct"}
-            return
-        method = METHODS[name]
-        params = _method_params(method, options.params)
-        wrapped = None
-        if state.wrapped is not None and unwrapped.frequency in state.wrapped.frequencies:
-            wrapped = state.wrapped.phase[state.wrapped.frequencies.index(unwrapped.frequency)]
-        if wrapped is None or not np.isfinite(wrapped[unwrapped.valid]).all():
-            wrapped = np.angle(np.exp(1j * np.nan_to_num(unwrapped.phase)))  # Phi = phi + 2 pi k wraps back to phi
-        try:
-            phase, info = method(unwrapped.phase, wrapped, orders=unwrapped.orders, mask=unwrapped.valid,
-                                 frequency=unwrapped.frequency, **params)
-        except ValueError as exc:
-            raise ProcessingError(f"--correction {name}: {exc}") from None
-        unwrapped.phase = phase
-        if unwrapped.orders is not None:
-            orders = np.rint((np.nan_to_num(phase) - np.mod(wrapped, 2.0 * np.pi)) / (2.0 * np.pi))
-            unwrapped.orders = np.where(unwrapped.valid, orders, unwrapped.orders).astype(unwrapped.orders.dtype)
-        state.info["correction"] = info
-
-    run.__doc__ = f"``--correction {name}`` (processing.correction)."
-    return run
-
-
-CORRECTIONS: dict[str, Callable[[SceneState, ProcessOptions], None]] = {
-    "none": _correction_none,
-    **{name: _registered_correction(name) for name in ("vote", "rpca-orders", "rpca-phase", "auto")},
-}
-gamma_correction.register(CORRECTIONS)  # --correction gamma-table: the phase-ripple table of rig calibrate
-
-
-def stage_correction(state: SceneState, options: ProcessOptions) -> None:
-    """Optional correction of the unwrapped phase (``--correction``); methods may record their info."""
-    if options.correction == "none":
-        return
-    CORRECTIONS[options.correction](state, options)
-    state.info.setdefault("correction", options.correction)
-
-
 SCENE_STAGES: list[tuple[str, Callable[[SceneState, ProcessOptions], None]]] = [
     ("load", stage_load),
     ("undistort", stage_undistort),
@@ -542,7 +471,9 @@ def stage_height(
                 f"{obj.capture.manifest_path}: spatial unwrapping gives phase only up to 2 pi k, and the "
                 f"{calibration.model!r} calibration has no reference plane to fix k; capture temporal patterns"
             )
-        obj_phase = ref_phase + _remove_region_offsets(obj_phase - ref_phase)
+        from processing.spatial import remove_region_offsets
+
+        obj_phase = ref_phase + remove_region_offsets(obj_phase - ref_phase)
         notes.append(
             "spatial unwrapping: phase known up to 2 pi k per connected region; removed from each region the "
             "multiple of 2 pi nearest its median object-reference difference (right where the reference plane "
@@ -555,20 +486,3 @@ def stage_height(
             calibration, obj_phase, ref_phase, obj.unwrapped.frequency, axis=obj.axis, extent=extent
         )
     return points, heights
-
-
-def _remove_region_offsets(delta: np.ndarray) -> np.ndarray:
-    """Subtract from each 4-connected region of finite ``delta`` the multiple of 2 pi nearest its median."""
-    from scipy import ndimage
-
-    finite = np.isfinite(delta)
-    labels, count = ndimage.label(finite)
-    if count == 0:
-        return delta
-    medians = np.asarray(ndimage.median(np.where(finite, delta, 0.0), labels, np.arange(1, count + 1)))
-    offsets = np.concatenate([[0.0], TWO_PI * np.round(medians / TWO_PI)])
-    return delta - offsets[labels]
-
-
-
-

@@ -1,0 +1,84 @@
+"""The correction stage and the one registry of corrections ``rig process --correction`` offers.
+
+The registry holds typed entries (:class:`processing.correction_method.CorrectionMethod`): the
+numeric methods of :mod:`processing.correction` and the calibration-backed ``gamma-table``
+(:mod:`rig.pipeline.gamma_correction`). An entry's ``needs`` names what it takes beyond the
+phase pair; the stage fetches it from the calibration (``phase_error``) and refuses clearly when
+it is missing.
+"""
+
+from __future__ import annotations
+
+import inspect
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from calibration.errors import CalibrationError
+from processing.correction import CORRECTIONS as NUMERIC_CORRECTIONS
+from processing.correction_method import CorrectionMethod
+from rig.errors import ProcessingError
+from rig.pipeline.gamma_correction import GAMMA_TABLE
+
+if TYPE_CHECKING:
+    from calibration.store import Calibration
+    from rig.pipeline.plan import ProcessOptions
+    from rig.pipeline.stages import SceneState
+
+REGISTRY: dict[str, CorrectionMethod] = {**NUMERIC_CORRECTIONS, GAMMA_TABLE.name: GAMMA_TABLE}
+
+
+def help_text() -> str:
+    """One line per correction for ``--help``."""
+    return "; ".join(f"{m.name}: {m.description}" for m in REGISTRY.values())
+
+
+def method_params(method: CorrectionMethod, params: Mapping[str, Any]) -> dict[str, Any]:
+    """The ``--param`` entries that the method's function takes as keyword arguments."""
+    accepted = inspect.signature(method.run).parameters
+    return {key: value for key, value in params.items() if key in accepted and key not in method.needs}
+
+
+def needed_inputs(method: CorrectionMethod, calibration: Calibration | None) -> dict[str, Any]:
+    """What ``method.needs``, taken from the calibration; CalibrationError naming what is missing."""
+    inputs: dict[str, Any] = {}
+    for need in method.needs:
+        if calibration is None:
+            raise CalibrationError(f"--correction {method.name}: needs --calibration (its {need} table)")
+        value = calibration.extra.get(need)
+        if not isinstance(value, dict):
+            raise CalibrationError(f"{calibration.where}: {need}: missing (recalibrate with rig calibrate, or --from)")
+        inputs[need] = value
+    return inputs
+
+
+def stage_correction(state: SceneState, options: ProcessOptions) -> None:
+    """Optional correction of the unwrapped phase (``--correction``); the method's info goes to the report."""
+    if options.correction == "none":
+        return
+    method = REGISTRY[options.correction]
+    unwrapped = state.unwrapped
+    assert unwrapped is not None
+    if method.name == "auto" and not unwrapped.absolute:
+        state.info["correction"] = {"method": "auto", "skipped": "relative phase (spatial unwrapping): nothing to correct"}
+        return
+    inputs = needed_inputs(method, state.calibration)
+    wrapped = None
+    if state.wrapped is not None and unwrapped.frequency in state.wrapped.frequencies:
+        wrapped = state.wrapped.phase[state.wrapped.frequencies.index(unwrapped.frequency)]
+    if wrapped is None or not np.isfinite(wrapped[unwrapped.valid]).all():
+        wrapped = np.angle(np.exp(1j * np.nan_to_num(unwrapped.phase)))  # Phi = phi + 2 pi k wraps back to phi
+    try:
+        phase, info = method(unwrapped.phase, wrapped, orders=unwrapped.orders, mask=unwrapped.valid,
+                             frequency=unwrapped.frequency, **method_params(method, options.params), **inputs)
+    except CalibrationError as exc:
+        where = state.calibration.where if state.calibration is not None else "--calibration"
+        raise CalibrationError(f"{where}: {exc}") from None
+    except ValueError as exc:
+        raise ProcessingError(f"--correction {method.name}: {exc}") from None
+    unwrapped.phase = phase
+    if unwrapped.orders is not None:
+        orders = np.rint((np.nan_to_num(phase) - np.mod(wrapped, 2.0 * np.pi)) / (2.0 * np.pi))
+        unwrapped.orders = np.where(unwrapped.valid, orders, unwrapped.orders).astype(unwrapped.orders.dtype)
+    state.info["correction"] = info
