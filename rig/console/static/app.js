@@ -204,30 +204,34 @@ function updateJob(job) {
 // ------------------------------------------------------------------ result
 async function showResult(name, summary, final) {
   const started = performance.now();
+  const lastFrameAt = state.lastFrameAt;
   state.result = summary;
   $("result-title").textContent = `${name}: ${summary.shows} (${summary.unit})` + (final ? "" : " — quick result, refining");
   const stamp = Date.now();
+  const base = `/api/results/${encodeURIComponent(name)}`;
+  const valuesReady = fetch(`${base}/values.f32?v=${stamp}`).then(async (r) => ({
+    data: new Float32Array(await r.arrayBuffer()), width: Number(r.headers.get("X-Width")), height: Number(r.headers.get("X-Height")),
+  }));
+  const surfaceReady = api("GET", `${base}/surface`);
   const map = $("height-map");
   const loaded = new Promise((resolve) => { map.onload = resolve; map.onerror = resolve; });
-  map.src = `/api/results/${encodeURIComponent(name)}/map.png?v=${stamp}`;
+  map.src = `${base}/map.png?v=${stamp}`;
   $("scale-high").textContent = summary.range[1].toFixed(2) + " " + summary.unit;
   $("scale-low").textContent = summary.range[0].toFixed(2) + " " + summary.unit;
-  const [values, surface] = await Promise.all([
-    fetch(`/api/results/${encodeURIComponent(name)}/values.f32?v=${stamp}`).then(async (r) => ({
-      data: new Float32Array(await r.arrayBuffer()), width: Number(r.headers.get("X-Width")), height: Number(r.headers.get("X-Height")),
-    })),
-    api("GET", `/api/results/${encodeURIComponent(name)}/surface`),
-  ]);
-  state.values = { ...values, unit: summary.unit, name };
-  await loaded;
-  await drawSurface(surface);
   renderFigures(summary);
   renderDownloads();
+  showView("result");
+  await loaded;
+  const mapShown = performance.now();
+  state.values = { ...(await valuesReady), unit: summary.unit, name };
+  await drawSurface(await surfaceReady);
   const shown = performance.now();
-  state.timings.push({ name, final, since_last_frame_ms: state.lastFrameAt ? shown - state.lastFrameAt : null, render_ms: shown - started });
+  state.timings.push({
+    name, final, map_since_last_frame_ms: lastFrameAt ? mapShown - lastFrameAt : null,
+    since_last_frame_ms: lastFrameAt ? shown - lastFrameAt : null, map_ms: mapShown - started, render_ms: shown - started,
+  });
   $("view-result").dataset.result = name;
   $("view-result").dataset.final = String(final);
-  showView("result");
 }
 
 async function drawSurface(surface) {

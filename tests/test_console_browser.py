@@ -1,0 +1,248 @@
+"""The console in a real headless Chromium (Debian's ``chromium`` through Playwright), issue 13.
+
+The page loads and live frames update; lowering the exposure lowers the mean of the displayed
+frame; Scan produces a 3-D view and a height read-out that matches the simulated object's known
+height; a concurrent scan is refused with a message; an injected device fault appears in the page
+and the next scan works; a capture is reprocessed and compared. Screenshots of each view go to
+docs/console/ (shown in the README).
+"""
+
+from __future__ import annotations
+
+import shutil
+import socket
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from rig.config import load_config
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+playwright_api = pytest.importorskip("playwright.sync_api", reason="playwright not installed (pip install -e '.[test]')")
+if CHROMIUM is None:
+    pytest.skip("no chromium browser (apt-get install chromium)", allow_module_level=True)
+
+SHOTS = Path(__file__).resolve().parent.parent / "docs" / "console"
+WIDTH, HEIGHT = 640, 480
+RIG_TOML = f"""
+[camera]
+size = [{WIDTH}, {HEIGHT}]
+[scan]
+fetch_timeout_s = 0.5
+retries = 1
+[simulation]
+scene = "hemisphere"
+"""
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]]:
+    """The console on the simulated rig (640x480, with an exact calibration) served by uvicorn."""
+    import uvicorn
+
+    from calibration.store import Calibration, write_calibration
+    from rig.acquisition.scan import scan
+    from rig.console.app import create_app
+    from rig.hardware.simulated import geometry_from_config
+
+    root = tmp_path_factory.mktemp("console")
+    (root / "rig.toml").write_text(RIG_TOML)
+    config = load_config(root / "rig.toml")
+    cal = root / "data" / "calibrations" / "cal"
+    scan(config, cal / "reference", scene="reference")
+    g = geometry_from_config(config)
+    write_calibration(cal, Calibration(l0_mm=g.l0_mm, d0_mm=g.d0_mm, f0_per_mm=g.f0_per_mm, f0_frequency=g.f0_frequency,
+                                       pixel_mm=g.pixel_mm, reference="reference"))
+    app = create_app(config, root / "data", fault_injection=True)
+    port = _free_port()
+    uv = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning", ws="websockets-sansio"))
+    thread = threading.Thread(target=uv.run, daemon=True)
+    thread.start()
+    deadline = time.monotonic() + 30
+    while not uv.started:
+        assert time.monotonic() < deadline, "console did not start"
+        time.sleep(0.05)
+    yield {"url": f"http://127.0.0.1:{port}/", "config": config, "app": app}
+    uv.should_exit = True
+    thread.join(timeout=30)
+
+
+@pytest.fixture(scope="module")
+def browser(server: dict[str, Any]) -> Iterator[Any]:
+    with playwright_api.sync_playwright() as p:
+        chromium = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=["--use-gl=swiftshader", "--enable-webgl",
+                                                                                     "--ignore-gpu-blocklist"])
+        yield chromium
+        chromium.close()
+
+
+@pytest.fixture
+def page(browser: Any, server: dict[str, Any]) -> Iterator[Any]:
+    context = browser.new_context(viewport={"width": 1400, "height": 900})
+    page = context.new_page()
+    page.goto(server["url"])
+    yield page
+    context.close()
+
+
+def shot(page: Any, name: str) -> None:
+    SHOTS.mkdir(parents=True, exist_ok=True)
+    page.screenshot(path=str(SHOTS / f"{name}.png"))
+
+
+def displayed_mean(page: Any) -> float:
+    """Mean grey level (0..255) of what the live-view canvas shows."""
+    return float(page.evaluate("""() => {
+        const c = document.querySelector('[data-testid=live-view]');
+        const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+        let s = 0; for (let i = 0; i < d.length; i += 4) s += (d[i] + d[i + 1] + d[i + 2]) / 3;
+        return s / (d.length / 4); }"""))
+
+
+def wait_frames(page: Any, count: int) -> None:
+    start = page.evaluate("window.consoleState.frames")
+    page.wait_for_function(f"window.consoleState.frames >= {start + count}", timeout=20_000)
+
+
+def wait_result(page: Any, final: bool = True) -> str:
+    page.wait_for_function(
+        "document.querySelector('#view-result').dataset.final === " + ("'true'" if final else "'false' || true"),
+        timeout=60_000,
+    )
+    return str(page.eval_on_selector("#view-result", "e => e.dataset.result"))
+
+
+def scan_and_wait(page: Any) -> str:
+    previous = page.eval_on_selector("#view-result", "e => e.dataset.result || ''")
+    page.get_by_test_id("scan-button").click()
+    page.wait_for_function(
+        f"(() => {{ const v = document.querySelector('#view-result'); return v.dataset.final === 'true' && v.dataset.result !== '{previous}'; }})()",
+        timeout=60_000,
+    )
+    return str(page.eval_on_selector("#view-result", "e => e.dataset.result"))
+
+
+def test_live_view_updates_and_follows_the_exposure(page: Any) -> None:
+    wait_frames(page, 3)
+    page.get_by_test_id("projector-pattern").select_option("white")
+    wait_frames(page, 4)
+    bright = displayed_mean(page)
+    assert bright > 60
+    exposure = page.get_by_test_id("exposure")
+    exposure.fill("3000")
+    exposure.dispatch_event("change")
+    page.wait_for_function("document.querySelector('[data-testid=exposure]').value === '3000'")
+    wait_frames(page, 5)
+    dark = displayed_mean(page)
+    assert dark < 0.6 * bright, (bright, dark)  # 3000 us vs 10000 us: the signal part scales with exposure
+    assert page.get_by_test_id("saturation").inner_text().endswith("%")
+    assert float(page.get_by_test_id("focus").inner_text()) > 0
+    exposure.fill("10000")
+    exposure.dispatch_event("change")
+    page.get_by_test_id("projector-pattern").select_option("fringe")
+    wait_frames(page, 4)
+    page.wait_for_function("document.querySelector('[data-testid=modulation-valid]').textContent.endsWith('%')")
+    fps = page.evaluate("Number(document.getElementById('fps').textContent)")
+    print(f"live view: {fps:.1f} fps at {WIDTH}x{HEIGHT} on the simulated rig")
+    shot(page, "live")
+    page.get_by_test_id("live-mode").select_option("modulation")
+    wait_frames(page, 3)
+    shot(page, "live-modulation")
+    page.get_by_test_id("live-mode").select_option("camera")
+
+
+def test_scan_shows_3d_and_a_height_readout_matching_the_object(page: Any, server: dict[str, Any]) -> None:
+    from rig.hardware.simulated import geometry_from_config, scene_height
+
+    wait_frames(page, 1)
+    name = scan_and_wait(page)
+    assert page.get_by_test_id("result-3d").locator(".gl-container canvas, canvas").count() > 0
+    config = server["config"]
+    truth = scene_height(config, "object", geometry_from_config(config))
+    box = page.get_by_test_id("height-map").bounding_box()
+    top_y, top_x = np.unravel_index(int(np.argmax(truth)), truth.shape)
+    for (py, px) in ((top_y, top_x), (top_y + 40, top_x - 30)):
+        page.mouse.move(box["x"] + (px + 0.5) * box["width"] / WIDTH, box["y"] + (py + 0.5) * box["height"] / HEIGHT)
+        readout = page.get_by_test_id("height-readout")
+        x, y, value = (readout.get_attribute(k) for k in ("data-x", "data-y", "data-value"))
+        assert value, readout.inner_text()
+        assert abs(float(value) - truth[int(y), int(x)]) < 1.0, (readout.inner_text(), truth[int(y), int(x)])
+        assert "mm" in readout.inner_text()
+    timings = page.evaluate("window.consoleState.timings")
+    first = [t for t in timings if t["name"] == name][0]
+    print(f"scan to result on screen ({WIDTH}x{HEIGHT}): height map {first['map_since_last_frame_ms']:.0f} ms, "
+          f"with the 3-D view {first['since_last_frame_ms']:.0f} ms after the last frame")
+    page.get_by_test_id("downloads").locator("a").first.wait_for(timeout=30_000)
+    assert page.get_by_test_id("downloads").locator("a", has_text="points.ply").count() == 1
+    shot(page, "result")
+
+
+def test_a_concurrent_scan_is_refused_with_a_message(page: Any, browser: Any, server: dict[str, Any]) -> None:
+    other = browser.new_context().new_page()
+    other.goto(server["url"])
+    wait_frames(page, 1)
+    page.get_by_test_id("scan-button").click()
+    other.evaluate("api('POST', '/api/scan', {}).catch(() => null)")
+    error = other.get_by_test_id("error")
+    error.wait_for(state="visible")
+    assert "busy" in error.inner_text() and "one acquisition at a time" in error.inner_text()
+    wait_result(page)
+    other.context.close()
+
+
+def test_stop_cancels_the_scan(page: Any) -> None:
+    wait_frames(page, 1)
+    page.get_by_test_id("scan-button").click()
+    page.wait_for_function("Number(document.querySelector('[data-testid=scan-progress]').value) >= 1")
+    page.get_by_test_id("stop-button").click()
+    page.wait_for_function("document.querySelector('[data-testid=scan-note]').textContent.includes('stopped')")
+    assert page.get_by_test_id("scan-button").is_enabled()
+
+
+def test_an_injected_fault_shows_and_the_next_scan_works(page: Any, server: dict[str, Any]) -> None:
+    wait_frames(page, 1)
+    page.evaluate("api('POST', '/api/simulation/fault', {fault: 'camera-gone'})")
+    error = page.get_by_test_id("error")
+    error.wait_for(state="visible", timeout=20_000)
+    assert "disappeared" in error.inner_text()
+    page.get_by_test_id("rig-state").click()  # (focus away)
+    page.locator("nav button[data-view=devices]").click()
+    page.wait_for_function("document.querySelector('[data-testid=device-error]').textContent.includes('disappeared')")
+    assert page.get_by_test_id("device-status").locator("tr").count() == 4
+    shot(page, "devices-fault")
+    page.locator("nav button[data-view=live]").click()
+    name = scan_and_wait(page)
+    assert name.startswith("scan-")
+    page.locator("nav button[data-view=devices]").click()
+    page.wait_for_function("document.querySelector('[data-testid=device-status]').textContent.includes('open')")
+    shot(page, "devices")
+
+
+def test_captures_reprocess_and_compare(page: Any) -> None:
+    page.locator("nav button[data-view=captures]").click()
+    items = page.get_by_test_id("capture-list").locator("li")
+    items.first.wait_for()
+    items.first.click()
+    page.locator("#opt-correction").select_option("vote")
+    page.get_by_test_id("reprocess").click()
+    page.wait_for_function("(document.querySelector('#view-result').dataset.result || '').includes('-vote')", timeout=60_000)
+    page.locator("nav button[data-view=captures]").click()
+    page.wait_for_function("document.querySelectorAll('#compare-a option').length >= 2")
+    options = page.locator("#compare-a option").all_inner_texts()
+    page.get_by_test_id("compare-a").select_option(options[0])
+    page.get_by_test_id("compare-b").select_option(options[1])
+    page.get_by_test_id("compare-button").click()
+    page.wait_for_function("document.querySelector('[data-testid=compare-figures]').textContent.includes('rms')")
+    page.wait_for_function("document.querySelector('[data-testid=compare-diff]').naturalWidth > 0")
+    shot(page, "captures")
