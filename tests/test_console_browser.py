@@ -4,13 +4,16 @@ The page loads and live frames update; lowering the exposure lowers the mean of 
 frame; Scan produces a 3-D view and a height read-out that matches the simulated object's known
 height; a concurrent scan is refused with a message; an injected device fault appears in the page
 and the next scan works; a capture is reprocessed and compared. Screenshots of each view go to
-docs/console/ (shown in the README).
+docs/console/ (shown in the README) when ``RIG_SCREENSHOTS=1``, else to a temporary folder (so
+that a test run leaves the committed pictures alone).
 """
 
 from __future__ import annotations
 
+import os
 import shutil
 import socket
+import tempfile
 import threading
 import time
 from collections.abc import Iterator
@@ -27,7 +30,8 @@ playwright_api = pytest.importorskip("playwright.sync_api", reason="playwright n
 if CHROMIUM is None:
     pytest.skip("no chromium browser (apt-get install chromium)", allow_module_level=True)
 
-SHOTS = Path(__file__).resolve().parent.parent / "docs" / "console"
+SHOTS = (Path(__file__).resolve().parent.parent / "docs" / "console" if os.environ.get("RIG_SCREENSHOTS") == "1"
+         else Path(tempfile.gettempdir()) / "rig-console-screenshots")
 WIDTH, HEIGHT = 640, 480
 RIG_TOML = f"""
 [camera]
