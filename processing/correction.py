@@ -131,9 +131,10 @@ def correct_auto(
        level of :func:`~processing.phase_correction.phase_noise_sigma`, blind to order errors);
        the measured phase is used instead if pooling left more order breaks;
     3. candidate order maps: the pooled orders; the pooled orders where L misfits the wrapped
-       phase (|wrap(phi - L)| > pi / 2 nearby) and L's re-derived orders elsewhere; L's orders
-       guarded where L misfits by the measured phase or by Ding's row vote, then settled from
-       their neighbours (the earlier ``auto``, kept for scenes the regions cannot pool);
+       phase (|wrap(phi - L)| > pi / 2 nearby) and L's re-derived orders elsewhere; only if both
+       leave more order breaks than the measured phase (fringes too dense to pool), also L's
+       orders guarded where L misfits by the measured phase or by Ding's row vote, then settled
+       from their neighbours (the earlier ``auto``);
     4. keep the candidate with fewest order breaks (second differences beyond pi, truth-free);
     5. keep L (denoised) except where the result departs from it coherently beyond the noise
        (:func:`~processing.phase_correction.restore_detail`, ``k_sigma`` standard deviations
@@ -158,13 +159,17 @@ def correct_auto(
     proposed = reorder_from_low_rank(low_rank, wrapped, valid)
     misfit = low_rank_misfit(low_rank, wrapped, valid)
     # Candidate order maps, the one with fewest order breaks kept: the pooled orders, alone and
-    # with L's orders where L fits the wrapped phase; L's orders guarded (where L misfits, an
-    # order change must fit the neighbours of the measured phase or of the row vote) and settled.
+    # with L's orders where L fits the wrapped phase. Only where pooling left more order breaks
+    # than the measured phase (fringes too dense for regions) are L's orders also guarded (where
+    # L misfits, an order change must fit the neighbours of the measured phase or of the row
+    # vote) and settled, as the earlier auto did.
     candidates = {"regions": pooled, "regions+low-rank": np.where(misfit, pooled, proposed)}
-    for guard_name, guard in (("measured", phase), ("vote", vote_row_orders(phase, wrapped, valid))):
-        guarded = np.where(misfit, accept_if_consistent(proposed, guard, valid), proposed)
-        candidates[guard_name] = settle_orders(guarded, wrapped, valid)
-    breaks = {name: order_breaks(candidate, valid) for name, candidate in candidates.items()}
+    breaks = {"regions": base_breaks["regions"], "regions+low-rank": order_breaks(candidates["regions+low-rank"], valid)}
+    if min(breaks.values()) > base_breaks["measured"]:
+        for guard_name, guard in (("measured", phase), ("vote", vote_row_orders(phase, wrapped, valid))):
+            guarded = np.where(misfit, accept_if_consistent(proposed, guard, valid), proposed)
+            candidates[guard_name] = settle_orders(guarded, wrapped, valid)
+            breaks[guard_name] = order_breaks(candidates[guard_name], valid)
     guard_name = min(breaks, key=breaks.__getitem__)  # ties: the first
     reordered = candidates[guard_name]
     out = restore_detail(low_rank, reordered, valid, k_sigma=k_sigma, noise_sigma=sigma)
@@ -175,7 +180,8 @@ def correct_auto(
     }
     return out, _solver_info(
         "auto", parameters, start, frequency, result,
-        steps=["pool-region-orders", "rpca-phase", "reorder-if-consistent", "settle-orders", "restore-detail"],
+        steps=["pool-region-orders", "rpca-phase", "reorder-if-consistent"]
+        + (["settle-orders"] if len(candidates) > 2 else []) + ["restore-detail"],
         orders_changed=int(np.count_nonzero(changed)), misfit_pixels=int(np.count_nonzero(misfit)), guard=guard_name,
         order_breaks=breaks, rpca_input=base_name,
     )
