@@ -97,7 +97,7 @@ METHODS: dict[str, tuple[str, str | None, dict[str, Any]]] = {
     "rpca-orders-nopost": ("ch. 3: RPCA on orders, no post-processing", None, {}),
     "rpca-orders": ("ch. 3: RPCA on orders + post-processing", None, {}),
     "vote": ("Ding's row voting [119]", "vote", {}),
-    "auto": ("auto (ch. 4 + guarded re-derived orders)", "auto", {}),
+    "auto": ("auto (region-pooled orders + ch. 4)", "auto", {}),
     "oracle": ("oracle: true fringe orders", None, {}),
 }
 ORDER_T = 0.034
@@ -650,19 +650,21 @@ def write_report(out: Path, config: StudyConfig, rows: Rows, figures: list[tuple
     add(f"Compared pixels per seed: {int(pixels[0]) if pixels else 0}. Ch. 3 uses t = {ORDER_T}; the RPCA runs once "
         "and the post-processing pass is applied to its result for the second column.")
     add("")
-    add("`auto` (processing.correction.correct_auto): ch. 4's low-rank phase L (stable inexact ALM, stopped "
-        "at a noise level estimated from wrapped second differences, so wrong orders do not inflate it); every "
-        "pixel's fringe order re-derived from L and the measured wrapped phase, k = round((L - phi) / 2 pi); "
-        "where L misfits the wrapped phase (structure the low-rank model missed) a changed order is accepted "
-        "only if it fits the neighbours of a guard map better, with two guards tried (the measured phase and "
-        "Ding's row vote), each result settled twice from its neighbours, and the one with fewer order breaks "
-        "(second differences beyond pi; no ground truth) kept; finally L where the result agrees with it within "
-        "4 noise standard deviations, the measured phase with its corrected order where it does not. Why: ch. 4 "
-        "alone removes order errors and noise on smooth scenes, but a low-rank model flattens real detail and "
-        "fails when errors are dense (isolated objects); re-deriving orders keeps the measured detail and the "
-        "guards keep dense-error and low-SNR cases from getting worse. The oracle column (true orders, "
-        "measured wrapped phase) is the best any order-only correction (ch. 3, voting) can do; ch. 4 and auto "
-        "can beat it because they also smooth the phase noise.")
+    add("`auto` (processing.correction.correct_auto): first the fringe orders are pooled over 2-D fringe "
+        "regions (processing.fringe_regions): every 4-connected region that no wrapped-phase jump or kink "
+        "crosses lies within one fringe and has one order, so it takes the majority of its pixels' orders, voted "
+        "per 16 x 16 square and re-voted pixel by pixel over a 9 x 9 window of the region where squares "
+        "disagree (a hidden object edge inside the region); then ch. 4's low-rank phase L of that phase (stable "
+        "inexact ALM, stopped at a noise level estimated from wrapped second differences); the pooled orders, "
+        "alone and with L's re-derived orders k = round((L - phi) / 2 pi) where L fits the wrapped phase, are "
+        "ranked by order breaks (second differences beyond pi; no ground truth), with the earlier guarded "
+        "re-derivation as a fallback where pooling leaves more breaks than the measured phase; finally L, except "
+        "where the result departs from it coherently beyond the noise (3 x 3 mean residual above 4 of its "
+        "standard deviations), where the measured phase with its corrected order is kept. Why: ch. 4 alone "
+        "removes order errors and noise on smooth scenes, but a low-rank model fails when errors are dense "
+        "(isolated objects); one pixel's temporal order is unreliable there, a region's majority is not. The "
+        "oracle column (true orders, measured wrapped phase) is the best any order-only correction (ch. 3, "
+        "voting) can do; ch. 4 and auto can beat it because they also smooth the phase noise.")
     ch4 = rows.select("table-4.1", "nmse_h", method="rpca-phase")
     auto = rows.select("table-4.1", "nmse_h", method="auto")
     if ch4 and auto:
