@@ -173,7 +173,7 @@ def _check_output(plan: BatchPlan) -> None:
     if plan.calibration is not None and not (plan.calibration / "calibration.json").is_file():
         raise ConfigError(f"{plan.calibration}: no calibration.json (expected a calibration directory)")
     for method in plan.compare:
-        from rig.pipeline.stages import CORRECTIONS
+        from rig.pipeline.corrections import REGISTRY as CORRECTIONS
 
         if method not in CORRECTIONS:
             raise ConfigError(
