@@ -72,14 +72,32 @@ class GeometryFit:
         }
 
 
-def _valid(values: np.ndarray, mask: np.ndarray | None, name: str) -> np.ndarray:
+# Pixels this close to an invalid one (the edge of the projector's footprint, a shadow) are left out
+# of the fits: partly lit pixels mix lit and unlit surface and their phase (or fringe order) is wrong.
+EDGE_PX = 2
+
+
+def _valid(values: np.ndarray, mask: np.ndarray | None, name: str, edge_px: int = 0) -> np.ndarray:
     keep = np.isfinite(values)
     if mask is not None:
         mask = np.asarray(mask, dtype=bool)
         if mask.shape != values.shape:
             raise CalibrationError(f"{name}: mask shape {mask.shape} differs from the phase map {values.shape}")
         keep &= mask
+    if edge_px > 0 and not keep.all():
+        from scipy import ndimage
+
+        inner = ndimage.binary_erosion(keep, iterations=edge_px, border_value=1)
+        if inner.any():
+            keep = inner
     return keep
+
+
+def lit_interior(phase: np.ndarray, edge_px: int = EDGE_PX) -> np.ndarray:
+    """``phase`` with NaN within ``edge_px`` of an invalid pixel: the footprint's partly lit edge removed."""
+    phase = np.asarray(phase, dtype=np.float64)
+    keep = _valid(phase, None, "phase", edge_px)
+    return np.where(keep, phase, np.nan)
 
 
 def _trimmed_mean(values: np.ndarray) -> float:
@@ -121,14 +139,16 @@ def fit_f0(
     pixel_mm : float
         Size of one camera pixel on the plane (see :func:`pixel_mm_from_corners`).
     mask : (H, W) bool array, optional
-        Pixels to use (default: every finite one).
+        Pixels to use (default: every finite one); pixels within :data:`EDGE_PX` of an unusable
+        one (a partly lit footprint edge) are left out, and so are outliers of a first fit
+        (beyond 5 scaled MADs: wrong fringe orders).
     """
     phase = np.asarray(reference_phase, dtype=np.float64)
     if phase.ndim != 2:
         raise CalibrationError(f"reference phase: expected a 2-D map, found shape {phase.shape}")
     if not (np.isfinite(pixel_mm) and pixel_mm > 0):
         raise CalibrationError(f"pixel_mm: expected > 0, found {pixel_mm}")
-    keep = _valid(phase, mask, "reference phase")
+    keep = _valid(phase, mask, "reference phase", EDGE_PX)
     count = int(keep.sum())
     if count < min_pixels:
         raise CalibrationError(f"reference phase: {count} valid pixels, need at least {min_pixels} to fit f0")
@@ -139,6 +159,13 @@ def fit_f0(
     values = phase[rows, cols]
     coef, *_ = np.linalg.lstsq(design, values, rcond=None)
     residual = values - design @ coef
+    # a few pixels with a wrong fringe order (2 pi k off) would tilt the plane: refit without them
+    mad = 1.4826 * float(np.median(np.abs(residual - np.median(residual))))
+    inliers = np.abs(residual) <= max(5.0 * mad, 1e-9)
+    if 16 <= inliers.sum() < count:
+        design, values, count = design[inliers], values[inliers], int(inliers.sum())
+        coef, *_ = np.linalg.lstsq(design, values, rcond=None)
+        residual = values - design @ coef
     dof = max(count - 3, 1)
     sigma2 = float(residual @ residual) / dof
     cov = sigma2 * np.linalg.inv(design.T @ design)
@@ -237,7 +264,7 @@ def fit_l0_d0(
     means, maps = [], []
     for h, dphi, mask in zip(heights, delta_phases, masks):
         dphi = np.asarray(dphi, dtype=np.float64)
-        keep = _valid(dphi, mask, f"plane at {h:g} mm")
+        keep = _valid(dphi, mask, f"plane at {h:g} mm", EDGE_PX)
         if not keep.any():
             raise CalibrationError(f"plane at {h:g} mm: no valid pixel")
         means.append(_trimmed_mean(dphi[keep]))

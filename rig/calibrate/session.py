@@ -50,7 +50,7 @@ from calibration.gamma import (
     ramp_patterns,
     ripple_table_from_plane,
 )
-from calibration.geometry import MIN_HEIGHTS, fit_f0, fit_l0_d0, pixel_mm_from_corners
+from calibration.geometry import MIN_HEIGHTS, fit_f0, fit_l0_d0, lit_interior, pixel_mm_from_corners
 from calibration.jsonfile import read_json
 from calibration.polynomial import POLYNOMIAL, fit_polynomial
 from calibration.reference import REFERENCE_DIR, check_same_patterns
@@ -405,6 +405,7 @@ def compute(
 
     def phase_of(path: Path) -> tuple[np.ndarray, float, str, list[dict[str, Any]]]:
         phase, frequency, axis, patterns = _absolute_phase(path)
+        phase = lit_interior(phase)  # fits use lit, modulated pixels only: not the footprint's partly lit edge
         if undistort:
             assert camera is not None
             phase = undistort_map(phase, camera.camera_matrix, camera.distortion)

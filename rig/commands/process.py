@@ -107,11 +107,16 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print_json(summary(report, out))
     else:
-        line = f"{out}: valid {report['valid_fraction']:.1%}, unwrap {report['methods']['unwrap']}"
-        if "height_mm" in report:
-            h = report["height_mm"]
-            line += f", height {h['min']:.2f} .. {h['max']:.2f} mm, {report['points']} points"
-        print(line, file=sys.stderr)
-        for note in report["notes"]:
-            print(f"note: {note}", file=sys.stderr)
+        print_summary(report, out)
     return 0
+
+
+def print_summary(report: dict, out: Path) -> None:
+    """The one-line summary of a processing run (and its notes) on stderr: `rig process`, `rig scan --process`."""
+    line = f"{out}: valid {report['valid_fraction']:.1%}, unwrap {report['methods']['unwrap']}"
+    if "height_mm" in report:
+        h = report["height_mm"]
+        line += f", {report.get('quantity', 'height')} {h['min']:.2f} .. {h['max']:.2f} mm, {report['points']} points"
+    print(line, file=sys.stderr)
+    for note in report["notes"]:
+        print(f"note: {note}", file=sys.stderr)

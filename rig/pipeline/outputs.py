@@ -119,6 +119,12 @@ def write_preview(path: Path, values: np.ndarray, unit: str, title: str = "") ->
         cv2.putText(panel, label, (34, y + 4), font, font_scale, (0, 0, 0), 1, cv2.LINE_AA)
         tick += step
     cv2.putText(panel, unit, (8, min(rows - 2, bottom + 10)), font, font_scale, (0, 0, 0), 1, cv2.LINE_AA)
+    if not np.isfinite(values).all():  # legend entry for the colour of invalid pixels
+        grey = tuple(int(v) for v in colour_map(np.full((1, 1), np.nan), low, high)[0, 0])
+        y = min(rows - 14, bottom + 14)
+        cv2.rectangle(panel, (8, y), (18, y + 8), grey, -1)
+        cv2.rectangle(panel, (8, y), (18, y + 8), (0, 0, 0), 1)
+        cv2.putText(panel, "invalid", (21, y + 8), font, font_scale * 0.8, (0, 0, 0), 1, cv2.LINE_AA)
     out = np.concatenate([image, panel], axis=1)
     if title:
         cv2.putText(out, title, (6, 16), font, font_scale, (255, 255, 255), 1, cv2.LINE_AA)
@@ -198,6 +204,9 @@ def build_report(result: ProcessResult) -> dict[str, Any]:
         }
         report["points"] = int(np.count_nonzero(result.mask))
         report["calibration_model"] = result.calibration.model
+        # stereo without a plane gives distance from the camera, not height above a plane
+        depth = result.calibration.model == "stereo" and result.calibration.to_dict().get("plane") is None
+        report["quantity"] = "depth" if depth else "height"
     report["timings_s"] = dict(result.timings)
     report["stage_info"] = {"object": obj.info, **({"reference": result.reference.info} if result.reference else {})}
     report["versions"] = _versions()
@@ -235,8 +244,9 @@ def write_outputs(result: ProcessResult, out_dir: str | Path) -> dict[str, Any]:
             grey = texture[result.mask]
             colours = np.column_stack([grey, grey, grey])
         files["points"] = write_ply(out / "points.ply", points, colours).name
-        low, high = write_preview(out / "preview.png", result.height, "mm", "height")
-        report["preview"] = {"shows": "height", "unit": "mm", "range": [low, high]}
+        quantity = report["quantity"]
+        low, high = write_preview(out / "preview.png", result.height, "mm", quantity)
+        report["preview"] = {"shows": quantity, "unit": "mm", "range": [low, high]}
     files["preview"] = "preview.png"
     files["report"] = "report.json"
     report["files"] = files

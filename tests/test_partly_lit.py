@@ -1,0 +1,81 @@
+"""Partly lit views: calibration fits use lit, modulated pixels only; previews and summaries name what they show.
+
+The simulated rig's footprint is set by ``[simulation] f0_per_mm``: footprint width on the plane =
+f0_frequency / f0_per_mm (default 512 mm, 1.25 x the 409.6 mm view); 8 / 0.0266667 = 300 mm
+covers only 73 % of the view, the camera sees the unlit plane around it.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from rig.cli import main
+from rig.pipeline.outputs import colour_map
+
+REAL_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "real-data"
+needs_real_data = pytest.mark.skipif(not REAL_DATA.is_dir(), reason=f"real data not present at {REAL_DATA}")
+
+PARTLY_LIT = """
+[projector]
+size = [320, 400]
+[camera]
+size = [320, 240]
+[scan]
+frequencies = [1, 8, 32]
+steps = 4
+[simulation]
+scene = "hemisphere"
+snr_db = 35
+f0_per_mm = 0.0266667
+"""
+
+
+def test_partly_lit_view_calibrates_within_half_a_percent(tmp_path, capsys) -> None:
+    config = tmp_path / "rig.toml"
+    config.write_text(PARTLY_LIT)
+    # the pixel size is given: this test is about the phase fits (f0, l0, d0) on a partly lit view
+    assert main(["calibrate", "--config", str(config), "-o", str(tmp_path / "cal"), "--board", "none",
+                 "--pixel-mm", "1.28", "-q"]) == 0, capsys.readouterr().err
+    cal = json.loads((tmp_path / "cal" / "calibration.json").read_text())
+    f0_at_32 = 0.0266667 * 32 / 8
+    assert cal["f0_per_mm"] * 8 / cal["f0_frequency"] == pytest.approx(0.0266667, rel=0.005)
+    assert cal["f0_per_mm"] == pytest.approx(f0_at_32, rel=0.005)
+    assert cal["l0_mm"] == pytest.approx(1000.0, rel=0.005)  # 975.7 when the footprint's edge entered the fits
+    assert cal["d0_mm"] == pytest.approx(250.0, rel=0.005)
+
+
+@needs_real_data
+def test_stereo_summary_says_depth_and_preview_has_an_invalid_legend(tmp_path, capsys) -> None:
+    eye = REAL_DATA / "slmaster-eye"
+    assert main(["calibrate", "--import-opencv", str(eye / "caliInfo.yml"), "--projector-size", "1920x1024",
+                 "--pixel-centre", "0", "-o", str(tmp_path / "cal")]) == 0
+    assert main(["import", str(eye / "L"), "--patterns", "sin:f=32,steps=12,phase=pi; gray:bits=6",
+                 "--projector-width", "1920", "-o", str(tmp_path / "eye")]) == 0
+    capsys.readouterr()
+    assert main(["process", str(tmp_path / "eye"), "--calibration", str(tmp_path / "cal"), "-o", str(tmp_path / "out"),
+                 "--correction", "none"]) == 0
+    err = capsys.readouterr().err
+    assert ", depth " in err and ", height " not in err
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert report["quantity"] == "depth" and report["preview"]["shows"] == "depth"
+    preview = cv2.imread(str(tmp_path / "out" / "preview.png"))
+    panel = preview[:, 1280:]
+    grey = tuple(int(v) for v in colour_map(np.full((1, 1), np.nan), 0.0, 1.0)[0, 0])
+    assert (np.all(panel == grey, axis=2)).sum() >= 50  # the legend's swatch of the invalid colour
+
+
+def test_scan_process_prints_the_process_summary(tmp_path, capsys, simulated_rig_toml) -> None:
+    config = tmp_path / "rig.toml"
+    config.write_text(simulated_rig_toml((320, 400), (160, 120), 35.0))
+    assert main(["calibrate", "--config", str(config), "-o", str(tmp_path / "cal"), "--board", "none",
+                 "--pixel-mm", "2.56", "-q"]) == 0
+    capsys.readouterr()
+    assert main(["scan", "--config", str(config), "-o", str(tmp_path / "part"), "--calibration", str(tmp_path / "cal"),
+                 "--process"]) == 0
+    err = capsys.readouterr().err
+    assert "part-processed: valid " in err and ", height " in err and " points" in err
