@@ -68,8 +68,8 @@ def run(args: argparse.Namespace) -> int:
     )
     print(result.path)  # stdout: the capture directory, for scripts (the default name has the time in it)
     if args.process:
-        from rig.pipeline.plan import DEFAULT_CORRECTION, ProcessOptions
         from rig.commands.process import print_summary
+        from rig.pipeline.plan import DEFAULT_CORRECTION, ProcessOptions
         from rig.pipeline.run import process_capture, total_steps
 
         destination = args.process_output or output.with_name(output.name + "-processed")
