@@ -112,7 +112,7 @@ def scan_to_result(width: int, height: int, runs: int) -> tuple[list[float], lis
             for run in range(runs):
                 job = session.scan(name=f"run-{run}", options=ProcessOptions(correction="none"))
                 with recorder.event:
-                    recorder.event.wait_for(lambda: any(r["job"] == job.id for r in recorder.results), timeout=120)
+                    recorder.event.wait_for(lambda job=job: any(r["job"] == job.id for r in recorder.results), timeout=120)
                 result = next(r for r in recorder.results if r["job"] == job.id)
                 console_s.append(float(result["since_last_frame_s"]))
                 while job.state == "running":

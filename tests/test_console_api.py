@@ -202,7 +202,9 @@ def test_token_is_required_when_set(tmp_path: Path, rig_toml: Path) -> None:
         assert page.status_code == 200 and "rig_console_token=s3cret" in page.headers["set-cookie"]
         assert client.get("/api/status").status_code == 200  # the cookie now carries it
         client.cookies.clear()
-        with pytest.raises(Exception):
+        from starlette.websockets import WebSocketDisconnect
+
+        with pytest.raises(WebSocketDisconnect):
             with client.websocket_connect("/api/events") as socket:
                 socket.receive_text()
 
@@ -250,3 +252,29 @@ def test_reprocess_and_compare(console: TestClient) -> None:
     figures = console.get("/api/compare", params={"a": "base", "b": "base-vote"}).json()
     assert figures["unit"] == "rad" and figures["rms"] >= 0 and figures["valid_fraction"] > 0.5
     assert console.get("/api/compare.png", params={"a": "base", "b": "base-vote"}).content[:4] == b"\x89PNG"
+
+
+def test_calibration_wizard_runs_unattended_on_the_simulated_rig(console: TestClient) -> None:
+    with console.websocket_connect("/api/events") as socket:
+        socket.receive_text()
+        reply = console.post("/api/calibrate", json={"name": "cal", "heights_mm": [25, 50, 100], "board_views": 0})
+        assert reply.status_code == 202
+        assert console.post("/api/scan", json={}).status_code == 409  # one acquisition at a time
+        steps, result = [], None
+        while result is None:
+            message = socket.receive()
+            if message.get("text"):
+                data = json.loads(message["text"])
+                if data["type"] == "progress" and data["event"]["kind"] == "message":
+                    steps.append(data["event"]["note"])
+                elif data["type"] == "calibration":
+                    result = data
+                elif data["type"] == "error":
+                    raise AssertionError(data["message"])
+    assert any("reference plane" in s for s in steps) and any("25 mm" in s for s in steps)
+    assert result["l0_mm"] == pytest.approx(1000.0, rel=0.01) and result["d0_mm"] == pytest.approx(250.0, rel=0.01)
+    assert wait_job(console, reply.json()["job"]["id"])["state"] == "done"
+    assert console.get("/api/calibrations").json() == {"calibrations": ["cal"], "active": "cal"}
+    job = console.post("/api/scan", json={"name": "after-cal", "options": {"correction": "none"}}).json()["job"]
+    wait_job(console, job["id"])
+    assert wait_saved(console, "after-cal")["shows"] == "height"

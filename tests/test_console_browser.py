@@ -250,3 +250,18 @@ def test_captures_reprocess_and_compare(page: Any) -> None:
     page.wait_for_function("document.querySelector('[data-testid=compare-figures]').textContent.includes('rms')")
     page.wait_for_function("document.querySelector('[data-testid=compare-diff]').naturalWidth > 0")
     shot(page, "captures")
+
+
+def test_calibration_wizard(page: Any) -> None:
+    wait_frames(page, 1)
+    page.locator("nav button[data-view=calibration]").click()
+    page.get_by_test_id("calibration-name").fill("wizard-cal")
+    page.locator("#cal-heights").fill("25, 50, 100")
+    page.locator("#cal-views").fill("0")
+    page.get_by_test_id("calibration-start").click()
+    page.wait_for_function("document.querySelector('[data-testid=calibration-result]').dataset.done === 'true'", timeout=90_000)
+    text = page.get_by_test_id("calibration-result").inner_text()
+    assert "l0 = " in text and "d0 = " in text and "residuals" in text
+    assert page.get_by_test_id("calibration-steps").locator("li").count() >= 4
+    page.wait_for_function("document.querySelector('[data-testid=calibration]').value === 'wizard-cal'")
+    shot(page, "calibration")

@@ -97,6 +97,12 @@ class CalibrationBody(BaseModel):
     name: str | None = Field(None, description="calibration name in DATA/calibrations; null: none (phase only)")
 
 
+class CalibrateBody(BaseModel):
+    name: str | None = Field(None, description="calibration name in DATA/calibrations (default cal-<time>)")
+    heights_mm: list[float] = Field([25.0, 50.0, 100.0, 150.0], description="plane heights above the reference plane")
+    board_views: int = Field(6, description="tilted board views for the camera intrinsics (0: pixel size only)")
+
+
 class FaultBody(BaseModel):
     fault: str = Field(..., description="camera-gone or trigger-timeout")
 
@@ -399,6 +405,17 @@ def create_app(
     @app.put("/api/calibration", tags=["calibration"], summary="the calibration scans are processed with")
     async def set_calibration(body: CalibrationBody) -> dict[str, Any]:
         return {"active": session.set_calibration(body.name)}
+
+    @app.post("/api/calibrate", tags=["calibration"], status_code=202,
+              summary="run the calibration session (prompts and steps on the websocket); 409 while acquiring")
+    async def calibrate(body: CalibrateBody, request: Request) -> dict[str, Any]:
+        job = session.calibrate(body.name, tuple(body.heights_mm), body.board_views, client_of(request))
+        return {"job": job.as_dict()}
+
+    @app.post("/api/calibrate/answer", tags=["calibration"], summary="the operator did what the prompt asked")
+    async def calibrate_answer() -> dict[str, Any]:
+        session.answer()
+        return {"answered": True}
 
     if fault_injection:
 

@@ -549,6 +549,73 @@ class ConsoleSession:
                 self._finish(job)
         self._publish_status()
 
+    def calibrate(self, name: str | None = None, heights_mm: tuple[float, ...] = (25.0, 50.0, 100.0, 150.0),
+                  board_views: int = 6, client: str | None = None) -> Job:
+        """Run the calibration session into DATA/calibrations/NAME (an acquisition: :class:`Busy` if one runs).
+
+        The same steps and prompts as ``rig calibrate``: prompts reach the page as ``prompt``
+        messages and wait for :meth:`answer`; the simulated rig sets up each step by itself.
+        """
+        from rig.calibrate.session import CalibrationPlan
+
+        plan = CalibrationPlan(heights_mm=tuple(float(h) for h in heights_mm), board_views=int(board_views))
+        plan.check()
+        if not self._acquiring.acquire(blocking=False):
+            raise Busy("busy: an acquisition is running; one acquisition at a time")
+        try:
+            name = name or self.data.new_name("calibrations", "cal")
+            path = self.data.path("calibrations", name)
+            if path.exists():
+                raise RigError(f"calibrations/{name}: already exists; choose another name")
+            job = self._new_job("calibrate", name, client)
+            self.current = job
+            self._tasks.put((lambda: self._calibrate(job, path, plan), Future()))
+        except BaseException:
+            self._acquiring.release()
+            raise
+        self._publish_status()
+        return job
+
+    def _calibrate(self, job: Job, path: Path, plan: Any) -> None:
+        """Worker thread: the session opens the rig itself, so the console's rig is closed meanwhile."""
+        from rig.calibrate.operator import ConsoleOperator
+        from rig.calibrate.session import acquire, compute
+
+        error: BaseException | None = None
+        self._close_rig()
+        try:
+            reporter = Reporter(f"calibrate {job.name}", sink=self._sink(job), cancel=job.token)
+            operator = None if self.config.simulated else ConsoleOperator(ask=lambda text: self._ask(job, text))
+            acquire(self.config, plan, path, operator, progress=reporter)
+            report = compute(path, progress=reporter)
+            cal = report.calibration
+            self.publish({"type": "calibration", "name": job.name, "job": job.id, "lines": list(report.lines),
+                          "l0_mm": cal.l0_mm, "d0_mm": cal.d0_mm, "f0_per_mm": cal.f0_per_mm, "model": cal.model}, None)
+            self.calibration = job.name
+            job.result = job.name
+        except (DeviceError, RigError, OSError, ValueError) as exc:
+            error = exc
+        finally:
+            self.current = None
+            self._acquiring.release()
+        self._finish(job, error)
+        self._publish_status()
+
+    def _ask(self, job: Job, text: str) -> str:
+        """A calibration prompt: shown in the page, answered by :meth:`answer` (or Stop)."""
+        self._answer = threading.Event()
+        self.publish({"type": "prompt", "job": job.id, "text": text}, None)
+        while not self._answer.wait(0.2):
+            job.token.check(job.kind)
+        return ""
+
+    def answer(self) -> None:
+        """The operator has done what the current calibration prompt asked."""
+        answer = getattr(self, "_answer", None)
+        if answer is None or answer.is_set():
+            raise RigError("no calibration prompt is waiting for an answer")
+        answer.set()
+
     def _restore_projector(self) -> None:
         if self._devices is not None:
             try:
@@ -707,8 +774,8 @@ class ConsoleSession:
 
 def process_choices() -> dict[str, Any]:
     """The processing options a page can offer (the pipeline's own lists)."""
-    from rig.pipeline.plan import UNWRAP_METHODS
     from rig.pipeline.corrections import REGISTRY as CORRECTIONS
+    from rig.pipeline.plan import UNWRAP_METHODS
     from rig.pipeline.stages import DENOISERS
 
     return {

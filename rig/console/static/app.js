@@ -351,3 +351,45 @@ $("compare-button").onclick = async () => {
 };
 
 connect();
+
+// ------------------------------------------------------------------ calibration wizard
+(function calibrationWizard() {
+  const box = $("calibration-wizard");
+  box.innerHTML = `
+    <fieldset><legend>New calibration</legend>
+      <label>name <input id="cal-name" data-testid="calibration-name" placeholder="cal-<time>"></label>
+      <label>plane heights (mm) <input id="cal-heights" value="25, 50, 100, 150"></label>
+      <label>board views <input id="cal-views" type="number" min="0" value="6"></label>
+      <button id="cal-start" data-testid="calibration-start" class="primary">Start</button>
+    </fieldset>
+    <div id="cal-prompt" data-testid="calibration-prompt" class="error" hidden><span></span>
+      <button id="cal-done" data-testid="calibration-done">Done</button></div>
+    <ol id="cal-steps" data-testid="calibration-steps" class="wizard-steps"></ol>
+    <progress id="cal-progress" max="1" value="0"></progress>
+    <pre id="cal-result" data-testid="calibration-result" class="info"></pre>`;
+  $("cal-start").onclick = async () => {
+    $("cal-steps").innerHTML = ""; $("cal-result").textContent = "";
+    const heights = $("cal-heights").value.split(",").map(Number);
+    await api("POST", "/api/calibrate", { name: $("cal-name").value || null, heights_mm: heights,
+      board_views: Number($("cal-views").value) }).catch(() => {});
+  };
+  $("cal-done").onclick = async () => { $("cal-prompt").hidden = true; await api("POST", "/api/calibrate/answer").catch(() => {}); };
+  window.calibrationMessage = (m) => {
+    if (m.type === "prompt") { $("cal-prompt").querySelector("span").textContent = m.text; $("cal-prompt").hidden = false; }
+    if (m.type === "calibration") {
+      $("cal-result").textContent = `${m.name}: ${m.model}\nl0 = ${m.l0_mm} mm, d0 = ${m.d0_mm} mm, f0 = ${m.f0_per_mm} /mm\n` + m.lines.join("\n");
+      $("cal-result").dataset.done = "true";
+    }
+  };
+  const previous = updateProgress;
+  updateProgress = (message) => {
+    if (message.kind !== "calibrate") return previous(message);
+    const e = message.event;
+    if (e.total) { $("cal-progress").max = e.total; $("cal-progress").value = e.done; }
+    if (e.kind === "message") {
+      document.querySelectorAll("#cal-steps li").forEach((li) => { li.className = "done"; });
+      const li = document.createElement("li"); li.textContent = e.note; li.className = "current";
+      $("cal-steps").appendChild(li);
+    }
+  };
+})();
