@@ -31,15 +31,27 @@ LAYOUT = {
 }
 
 
+# How an OpenCV FileStorage file starts (YAML, XML, JSON): anything else is refused before OpenCV parses it.
+FILESTORAGE_HEADS = (b"%YAML", b"<?xml", b"{")
+
+
 def read_filestorage(path: str | os.PathLike[str], names: tuple[str, ...]) -> dict[str, np.ndarray]:
     """Matrices ``names`` of an OpenCV FileStorage file; CalibrationError naming a missing one."""
     path = Path(path)
     if not path.is_file():
         raise CalibrationError(f"{path}: missing (expected an OpenCV FileStorage .yml/.xml calibration)")
     try:
+        with open(path, "rb") as handle:
+            head = handle.read(64).lstrip()
+    except OSError as exc:
+        raise CalibrationError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    if not head.startswith(FILESTORAGE_HEADS):
+        raise CalibrationError(f"{path}: expected an OpenCV FileStorage file (starting with %YAML, <?xml or {{), found {head[:16]!r}")
+    try:
         storage = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
-    except cv2.error as exc:
-        raise CalibrationError(f"{path}: not an OpenCV FileStorage file ({str(exc).strip().splitlines()[-1]})") from None
+    except Exception as exc:  # cv2.error in OpenCV 4; OpenCV 5 raises SystemError and others for the same file
+        message = (str(exc).strip().splitlines() or [type(exc).__name__])[-1]
+        raise CalibrationError(f"{path}: not an OpenCV FileStorage file ({message})") from None
     if not storage.isOpened():
         raise CalibrationError(f"{path}: cannot be opened as an OpenCV FileStorage file")
     try:

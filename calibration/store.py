@@ -14,7 +14,7 @@ import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 from typing import Any
 
 from calibration.errors import CalibrationError
@@ -71,7 +71,7 @@ class Calibration:
         if self.reference is None:
             return None
         ref = Path(self.reference)
-        return ref if ref.is_absolute() or self.path is None else self.path / ref
+        return ref if self.path is None else self.path / ref
 
     def to_dict(self) -> dict[str, Any]:
         """calibration.json content: the known fields (those set) followed by the extra keys."""
@@ -85,7 +85,7 @@ class Calibration:
         return out
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any], path: Path | None = None) -> "Calibration":
+    def from_dict(cls, data: Mapping[str, Any], path: Path | None = None) -> Calibration:
         """Validate a parsed calibration.json (see :func:`validate`) and build the dataclass."""
         where = str(path / FILENAME) if path is not None else FILENAME
         validate(data, where)
@@ -111,6 +111,19 @@ def _number(where: str, data: Mapping[str, Any], key: str, rule: str) -> None:
         raise CalibrationError(f"{where}: {key}: expected a {rule} finite number, found {value!r}")
 
 
+def _check_reference(where: str, reference: Any) -> None:
+    """``reference`` is relative to the calibration directory and stays inside it (capture-format.md)."""
+    if reference is None:
+        return
+    if not isinstance(reference, str) or not reference:
+        raise CalibrationError(f"{where}: reference: expected a relative path, found {reference!r}")
+    posix = PurePosixPath(reference.replace("\\", "/"))
+    if posix.is_absolute() or (len(reference) > 1 and reference[1] == ":") or ".." in posix.parts or "\0" in reference:
+        raise CalibrationError(
+            f"{where}: reference: expected a path relative to the calibration directory, inside it, found {reference!r}"
+        )
+
+
 def validate(data: Any, where: str = FILENAME) -> None:
     """Check a parsed calibration.json; raise CalibrationError naming the field on the first problem."""
     if not isinstance(data, Mapping):
@@ -134,6 +147,7 @@ def validate(data: Any, where: str = FILENAME) -> None:
         for key, rule in _REFERENCE_PLANE_NUMBERS.items():
             if key in data:
                 _number(where, data, key, rule)
+    _check_reference(where, data.get("reference"))
 
 
 def read_calibration(path: str | os.PathLike[str]) -> Calibration:

@@ -42,6 +42,9 @@ class CameraFaults:
     duplicate: exposures whose frame is delivered twice.
     stale: exposures delivered with the previous exposure's timestamp (a frame from before the trigger).
     disappear_after: the device vanishes after this many exposures (DeviceNotFoundError).
+
+    Indices count again from 0 after every ``start()``: ``timeout_on={0}`` is a camera whose first
+    frame after every start is missed, ``stale={0}`` one whose first frame is left over from before.
     """
 
     timeout_on: Collection[int] = field(default_factory=frozenset)

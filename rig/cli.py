@@ -44,11 +44,23 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return int(args.func(args) or 0)
     except USER_ERRORS as exc:
-        print(f"rig {args.command}: error: {exc}", file=sys.stderr)
+        print(f"rig {args.command}: error: {one_line(str(exc))}", file=sys.stderr)
+        return EXIT_USER_ERROR
+    except OSError as exc:  # the environment refused (disk full, permissions, a vanished file): still one line
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"rig {args.command}: error: {where}{one_line(exc.strerror or str(exc))}", file=sys.stderr)
+        return EXIT_USER_ERROR
+    except MemoryError:
+        print(f"rig {args.command}: error: out of memory (see the size limits in docs/safety.md)", file=sys.stderr)
         return EXIT_USER_ERROR
     except KeyboardInterrupt:
         print(f"rig {args.command}: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+
+
+def one_line(text: str) -> str:
+    """An error message as one line: inner line breaks and control characters become visible escapes."""
+    return "".join(ch if ch.isprintable() else repr(ch)[1:-1] for ch in text)
 
 
 if __name__ == "__main__":

@@ -18,6 +18,7 @@ from typing import Any
 
 from processing.patterns import AXES, Gray, Pattern, Sinusoid, SpeckleSinusoid
 from rig.errors import ConfigError
+from rig.store import files
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -28,6 +29,7 @@ PROJECTOR_BACKENDS = ("gl-offscreen", "window", "dlp4500")
 CAMERA_BACKENDS = ("simulated", "opencv", "pylon")
 TRIGGER_BACKENDS = ("software", "serial", "simulated-serial")
 PATTERN_AXES = AXES
+MAX_BAUDRATE = 12_000_000  # beyond any UART a trigger box uses; larger values overflow the serial driver
 # [scan] pattern_set: temporal phase shifting (several frames) or the thesis' single-shot
 # speckle-embedded fringe (one frame, ch. 2.3; rig process recognises it by its kind).
 PATTERN_SETS = ("phase-shifting", "speckle")
@@ -223,12 +225,21 @@ def _string_or_int(value: Any) -> str:
     return _string(value)
 
 
+MAX_FREQUENCY = 16384.0  # fringes across the projector: more than its pixels cannot be projected
+
+
 def _frequencies(value: Any) -> tuple[float, ...]:
-    if not isinstance(value, list) or not value or not all(_is_number(v) and v > 0 for v in value):
-        raise _Bad("a non-empty list of positive numbers")
+    if not isinstance(value, list) or not value or not all(_is_number(v) and 0 < v <= MAX_FREQUENCY for v in value):
+        raise _Bad(f"a non-empty list of positive numbers up to {MAX_FREQUENCY:g}")
     if len(set(value)) != len(value):
         raise _Bad("distinct frequencies")
     return tuple(float(v) for v in value)
+
+
+def _frequency(value: Any) -> float:
+    if not _is_number(value) or not 0 < value <= MAX_FREQUENCY:
+        raise _Bad(f"a positive number up to {MAX_FREQUENCY:g}")
+    return float(value)
 
 
 def _size(value: Any) -> tuple[int, int]:
@@ -238,6 +249,9 @@ def _size(value: Any) -> tuple[int, int]:
         or not all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in value)
     ):
         raise _Bad("[width, height] in pixels, two positive integers")
+    side = files.limits().max_image_side
+    if max(value) > side or value[0] * value[1] > files.limits().max_image_pixels:
+        raise _Bad(f"[width, height] of at most {side} pixels per side (RIG_MAX_IMAGE_SIDE, docs/safety.md)")
     return (value[0], value[1])
 
 
@@ -269,7 +283,7 @@ _SCHEMA: dict[str, dict[str, Callable[[Any], Any]]] = {
     "trigger": {
         "backend": _choice(TRIGGER_BACKENDS),
         "port": _string,
-        "baudrate": _int_range(1),
+        "baudrate": _int_range(1, MAX_BAUDRATE),
         "timeout_s": _positive_number,
     },
     "scan": {
@@ -281,7 +295,7 @@ _SCHEMA: dict[str, dict[str, Callable[[Any], Any]]] = {
         "fetch_timeout_s": _positive_number,
         "retries": _int_range(0, 20),
         "pattern_set": _choice(PATTERN_SETS),
-        "speckle_frequency": _positive_number,
+        "speckle_frequency": _frequency,
         "speckle_seed": _int_range(0),
         "speckle_dot_px": _int_range(1, 64),
         "speckle_gain": _fraction,

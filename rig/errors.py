@@ -20,6 +20,10 @@ class ConfigError(RigError):
     """A rig configuration file or a command-line value is wrong."""
 
 
+class OutputError(RigError):
+    """An output cannot be written where asked: unwritable, or it would replace something not ours."""
+
+
 class ProcessingError(RigError):
     """The data cannot be processed (for example every pixel is in shadow)."""
 

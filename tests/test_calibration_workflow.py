@@ -103,7 +103,9 @@ def test_recompute_from_stored_captures_with_another_model(session, capsys):
     printed = json.loads(capsys.readouterr().out)
     assert printed["model"] == "polynomial"
     poly = read_calibration(root / "poly")
-    assert poly.reference == "../cal/reference" and (root / "poly" / "polynomial.npy").is_file()
+    # the reference capture travels with the calibration: references are relative and inside (issue 10)
+    assert poly.reference == "reference" and (root / "poly" / "reference" / "capture.json").is_file()
+    assert (root / "poly" / "polynomial.npy").is_file()
     # same captures, both models: heights of the 100 mm plane agree with it
     reference = read_calibration(root / "cal")
     from rig.calibrate.session import _absolute_phase

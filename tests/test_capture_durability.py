@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from rig.store import capture as capture_module
+from rig.store import files
 from rig.store.capture import CaptureWriter, read_capture
 
 pytestmark = pytest.mark.skipif(not Path("/proc/self/fd").is_dir(), reason="needs /proc/self/fd to name fsynced files")
@@ -39,8 +40,15 @@ def disk_log(monkeypatch: pytest.MonkeyPatch) -> list[tuple[str, ...]]:
         events.append(("replace", str(src), str(dst)))
         real_replace(src, dst)
 
+    real_commit_rename = files.rename_noreplace
+
+    def commit_rename(src, dst) -> None:
+        events.append(("replace", str(src), str(dst)))
+        real_commit_rename(src, dst)
+
     monkeypatch.setattr(capture_module.os, "fsync", fsync)
     monkeypatch.setattr(capture_module.os, "replace", replace)
+    monkeypatch.setattr(files, "rename_noreplace", commit_rename)
     return events
 
 

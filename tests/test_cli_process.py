@@ -305,7 +305,7 @@ def test_demo_reports_a_small_height_error(capsys, tmp_path) -> None:
     foreign.mkdir()
     (foreign / "thesis.tex").write_text("precious")
     code, _, err = _run(capsys, "demo", "-o", foreign, "-q")
-    _assert_one_line_error(code, err, "is not an earlier demo output")
+    _assert_one_line_error(code, err, "not written by this program")
     assert (foreign / "thesis.tex").exists()
 
 
@@ -316,4 +316,4 @@ def test_rerun_without_calibration_leaves_no_stale_height(capsys, small_capture,
     assert _run(capsys, "process", small_capture.capture, "-o", out, "-q")[0] == 0
     assert not (out / "height.npy").exists() and not (out / "points.ply").exists() and (out / "wrapped.npy").exists()
     code, _, err = _run(capsys, "process", small_capture.capture, "-o", small_capture.capture, "-q")
-    _assert_one_line_error(code, err, "is a capture or calibration directory")
+    _assert_one_line_error(code, err, "exists and is a capture directory")

@@ -97,7 +97,7 @@ def test_gamma_lut_resolves_against_the_config_folder(tmp_path):
         ('[projector]\ngamma_lut = "missing.npy"\n', "[projector] gamma_lut: expected an existing file"),
         ('[trigger]\nbackend = "serial"\n', "[trigger] port: expected a serial port or pyserial URL"),
         ('[trigger]\nbackend = "serial"\nport = "/dev/ttyACM0"\n', "[trigger] backend: expected 'simulated-serial' or 'software' with the simulated camera"),
-        ("[trigger]\nbaudrate = 0\n", "[trigger] baudrate: expected an integer >= 1, found 0"),
+        ("[trigger]\nbaudrate = 0\n", "[trigger] baudrate: expected an integer 1..12000000, found 0"),
         ("[scan]\nsteps = 2\n", "[scan] steps: expected an integer 3..64, found 2"),
         ("[scan]\nsteps = 6.0\n", "[scan] steps: expected an integer 3..64, found 6.0"),
         ("[scan]\nfrequencies = []\n", "[scan] frequencies: expected a non-empty list of positive numbers, found []"),

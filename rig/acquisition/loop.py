@@ -375,7 +375,10 @@ def acquire_pattern(
     discarded = 0
     last_error: Exception | None = None
     for attempt in range(1, settings.retries + 2):
-        if last_error is not None and not triggers.indexed:
+        # A restart realigns frame ids with triggers; after a failure on the first trigger since the
+        # camera started it would only meet the same state (and a camera whose first frame after a
+        # start is bad, the same fault, for ever): the retry then goes on without one.
+        if last_error is not None and not triggers.indexed and triggers.fired > 1:
             _restart_camera(camera, trigger, triggers, label)
             first_index, first_rank = triggers.next_index, triggers.fired
         try:

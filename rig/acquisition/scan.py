@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 from rig.config import RigConfig
 from rig.errors import CaptureError
+from rig.store import files
 
 if TYPE_CHECKING:
     from rig.acquisition.loop import ScanResult
@@ -45,8 +46,9 @@ def scan(
     """
     from rig.hardware.assembly import open_rig
 
-    if output.exists() and not overwrite:  # fail before opening any device
-        raise CaptureError(f"{output}: already exists; refusing to overwrite (choose another -o or pass --overwrite)")
+    # fail before opening any device: an existing non-capture is never replaced, an unwritable place never tried
+    files.check_target(Path(output), ("capture",), overwrite, CaptureError, hint=" (choose another -o or pass --overwrite)")
+    files.check_writable(Path(output), ("capture",), overwrite, CaptureError)
     patterns = config.scan.patterns() if patterns is None else list(patterns)
     if progress is not None:
         progress.begin(len(patterns), f"scan {output}")

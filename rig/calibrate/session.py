@@ -338,6 +338,17 @@ def _planes(directory: Path) -> list[tuple[float, Path]]:
     return sorted(found)
 
 
+def _copy_capture(source: Path, target: Path) -> None:
+    """Copy a capture directory atomically (an earlier capture at ``target`` is replaced)."""
+    import shutil
+
+    from rig.store import files
+
+    read_capture(source)  # only a complete, verified capture is copied
+    with files.staged_directory(target, ("capture",), True, CaptureError) as staging:
+        shutil.copytree(source, staging, dirs_exist_ok=True)
+
+
 def compute(
     directory: Path,
     plan: CalibrationPlan | None = None,
@@ -347,7 +358,7 @@ def compute(
     """Compute and write ``calibration.json`` from the captures in ``directory``.
 
     ``plan`` overrides the stored session (e.g. another model); ``output`` writes the calibration
-    elsewhere (the reference path then points back into ``directory``).
+    elsewhere (the reference capture is then copied into it: references are relative and inside).
     """
     def note(message: str) -> None:
         if progress is not None:
@@ -448,7 +459,9 @@ def compute(
         extra.update({k: v for k, v in poly.save(output).items() if k != "model"})
         lines.append(f"polynomial degree {plan.degree}: residual RMS {poly.residual_rms_mm:.4f} mm")
 
-    reference_rel = os.path.relpath(directory / REFERENCE_DIR, output)
+    if output.resolve() != directory.resolve():  # a calibration carries its reference inside it (a relative path)
+        _copy_capture(directory / REFERENCE_DIR, output / REFERENCE_DIR)
+    reference_rel = REFERENCE_DIR
     calibration = Calibration(
         model=plan.model,
         l0_mm=fit.l0_mm,

@@ -106,9 +106,12 @@ def _import_opencv(args: argparse.Namespace) -> int:
     fields = import_opencv_calibration(args.import_opencv, args.projector_size, pixel_centre=args.pixel_centre)
     fields.pop("model")
     output = args.output or Path("calibration")
-    if (output / "calibration.json").exists() and not args.overwrite:
-        raise ConfigError(f"{output}: already holds a calibration; choose another -o or pass --overwrite")
-    target = write_calibration(output, Calibration(model="stereo", extra=fields))
+    from rig.errors import OutputError
+    from rig.store import files
+
+    with files.staged_directory(output, ("calibration",), args.overwrite, OutputError) as staging:
+        write_calibration(staging, Calibration(model="stereo", extra=fields))
+    target = output / "calibration.json"
     print(f"{target}: stereo calibration imported from {args.import_opencv}", file=sys.stderr)
     return 0
 
@@ -138,6 +141,11 @@ def run(args: argparse.Namespace) -> int:
 
     if args.import_opencv is not None:
         return _import_opencv(args)
+    from rig.errors import OutputError
+    from rig.store import files
+
+    if args.output is not None and args.from_dir is None:  # unwritable or foreign: say so before the session
+        files.check_writable(args.output, ("calibration", "calibration-session"), args.overwrite, OutputError)
     if args.from_dir is not None:
         session = args.from_dir / "session.json"
         base = None

@@ -4,19 +4,20 @@ from __future__ import annotations
 
 import argparse
 import json
-import shutil
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from rig.commands._common import add_command, add_report_options, print_json, split_size
-from rig.errors import ConfigError
+from rig.errors import ConfigError, OutputError
 from rig.hardware.scenes import scene_names
-from rig.hardware.synthesis import demo_appearance, demo_geometry, simulate_scan, write_simulated_scan
+from rig.hardware.synthesis import demo_appearance, demo_geometry, simulate_scan, simulated_paths, write_simulated_scan
 from rig.pipeline.outputs import write_outputs
 from rig.pipeline.plan import DEFAULT_CORRECTION, ProcessOptions
 from rig.pipeline.run import process, total_steps
 from rig.progress import Progress
+from rig.store import files
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -47,35 +48,17 @@ def parse_size(text: str) -> tuple[int, int]:
     return width, height
 
 
-def _prepare(out: Path) -> None:
-    """Refuse to clobber a directory that is not an earlier demo; clear an earlier demo."""
-    if not out.exists():
-        return
-    if not out.is_dir() or (any(out.iterdir()) and not (out / "demo.json").is_file()):
-        raise ConfigError(f"{out}: exists and is not an earlier demo output; choose another -o")
-    shutil.rmtree(out)
+DEMO_KINDS = ("demo",)
 
 
-def run(args: argparse.Namespace) -> int:
-    width, height = parse_size(args.size)
-    out: Path = args.output
-    _prepare(out)
-    with Progress("demo", total=2 + total_steps(True) + 1, quiet=args.quiet) as progress:
-        scan = simulate_scan(
-            args.scene, geometry=demo_geometry(width, height), seed=args.seed,
-            appearance=demo_appearance(args.snr),
-        )
-        progress.step("synthesised")
-        paths = write_simulated_scan(scan, out / "scan")
-        progress.step("captures written")
-        result = process(paths.capture, paths.calibration, ProcessOptions(correction=DEFAULT_CORRECTION), progress=progress)
-        report = write_outputs(result, out / "processed")
-        progress.step("outputs")
+def _summary(args: argparse.Namespace, out: Path, width: int, height: int, scan: Any, result: Any,
+             report: dict[str, Any], paths: Any) -> dict[str, Any]:
+    """demo.json: what was simulated and how far the processed heights are from the truth."""
     assert result.height is not None
     valid = result.mask & scan.lit
     error = result.height[valid].astype(np.float64) - scan.height_mm[valid]
     rms = float(np.sqrt(np.mean(error**2)))
-    summary = {
+    return {
         "output": str(out),
         "scene": args.scene,
         "size": [width, height],
@@ -89,7 +72,28 @@ def run(args: argparse.Namespace) -> int:
         "truth": str(paths.truth),
         "processing_s": report["timings_s"]["total"],
     }
-    (out / "demo.json").write_text(json.dumps(summary, indent=2) + "\n")
+
+
+def run(args: argparse.Namespace) -> int:
+    width, height = parse_size(args.size)
+    out: Path = args.output
+    # the whole demo directory is built beside OUT and renamed into place; an earlier demo is replaced
+    files.check_writable(out, DEMO_KINDS, True, OutputError)
+    with Progress("demo", total=2 + total_steps(True) + 1, quiet=args.quiet) as progress, \
+            files.staged_directory(out, DEMO_KINDS, True, OutputError) as staging:
+        scan = simulate_scan(
+            args.scene, geometry=demo_geometry(width, height), seed=args.seed,
+            appearance=demo_appearance(args.snr),
+        )
+        progress.step("synthesised")
+        staged = write_simulated_scan(scan, staging / "scan")
+        progress.step("captures written")
+        result = process(staged.capture, staged.calibration, ProcessOptions(correction=DEFAULT_CORRECTION), progress=progress)
+        report = write_outputs(result, staging / "processed")
+        progress.step("outputs")
+        paths = simulated_paths(out / "scan")
+        summary = _summary(args, out, width, height, scan, result, report, paths)
+        (staging / "demo.json").write_text(json.dumps(summary, indent=2) + "\n")
     if args.json:
         print_json(summary)
         return 0

@@ -14,7 +14,7 @@ from rig.commands._common import (
     print_json,
 )
 from rig.errors import ConfigError
-from rig.pipeline.outputs import write_outputs
+from rig.pipeline.outputs import check_output_directory, write_outputs
 from rig.pipeline.plan import DEFAULT_CORRECTION, UNWRAP_METHODS, ProcessOptions
 from rig.pipeline.run import process, total_steps
 from rig.pipeline.corrections import REGISTRY as CORRECTIONS
@@ -99,6 +99,7 @@ def parse_params(items: list[str]) -> dict[str, object]:
 def run(args: argparse.Namespace) -> int:
     out = args.output or args.capture.with_name(args.capture.name + "-processed")
     options = processing_options(args)
+    check_output_directory(out)  # an unwritable output fails now, not after the computation
     steps = total_steps(args.calibration is not None) + 1
     with Progress(f"process {args.capture}", total=steps, quiet=args.quiet) as progress:
         result = process(args.capture, args.calibration, options, progress=progress, salvage=args.salvage)

@@ -59,6 +59,10 @@ def run(args: argparse.Namespace) -> int:
     )
 
     output = args.output or default_capture_path()
+    if args.process:  # both outputs must be writable before the scan starts
+        from rig.pipeline.outputs import check_output_directory
+
+        check_output_directory(args.process_output or output.with_name(output.name + "-processed"))
     with Progress(f"scan {output}", total=len(config.scan.patterns())) as progress:
         result = scan(config, output, scene=args.scene, overwrite=args.overwrite, progress=progress)
     print(

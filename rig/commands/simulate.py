@@ -110,20 +110,31 @@ def load_patterns(path: Path) -> list[dict[str, Any]]:
     return patterns
 
 
+SIMULATION_KINDS = ("simulation",)
+
+
 def run(args: argparse.Namespace) -> int:
     from rig.hardware.simulated import (
         appearance_from_config,
         geometry_from_config,
         scene_height,
     )
-    from rig.hardware.synthesis import simulate_scan, write_simulated_scan
+    from rig.hardware.synthesis import (
+        simulate_scan,
+        simulated_paths,
+        write_simulated_scan,
+    )
     from rig.progress import Progress
 
     config = config_with_overrides(load_config(args.config), args)
     patterns = load_patterns(args.patterns) if args.patterns is not None else config.scan.patterns()
     geometry = geometry_from_config(config)
-    if args.output.exists() and any(args.output.iterdir()) and not args.overwrite:
-        raise ConfigError(f"{args.output}: already exists and is not empty (use --overwrite or another -o)")
+    from rig.errors import OutputError
+    from rig.store import files
+
+    # OUT is written whole into a temporary sibling and renamed into place; --overwrite replaces
+    # an earlier simulation only, never another directory
+    files.check_writable(args.output, SIMULATION_KINDS, args.overwrite, OutputError)
     with Progress(f"simulate {args.output}", total=2) as progress:
         scan = simulate_scan(
             scene=scene_height(config, "object", geometry),
@@ -134,7 +145,9 @@ def run(args: argparse.Namespace) -> int:
         )
         scan.description["scene"] = config.simulation.scene
         progress.step("write")
-        paths = write_simulated_scan(scan, args.output, overwrite=args.overwrite)
+        with files.staged_directory(args.output, SIMULATION_KINDS, args.overwrite, OutputError) as staging:
+            write_simulated_scan(scan, staging)
+        paths = simulated_paths(args.output)
         progress.step()
     print(f"{paths.capture}: {len(patterns)} frames of scene {config.simulation.scene!r}", file=sys.stderr)
     print(f"{paths.calibration}: calibration with reference {paths.reference}", file=sys.stderr)

@@ -155,16 +155,22 @@ class SimulatedPaths:
     truth: Path
 
 
-def write_simulated_scan(scan: SimulatedScan, out: str | os.PathLike[str], overwrite: bool = False) -> SimulatedPaths:
-    """Write the object capture, the calibration with its reference capture, and the true heights."""
+def simulated_paths(out: str | os.PathLike[str]) -> SimulatedPaths:
+    """Where :func:`write_simulated_scan` puts things under ``out``."""
     root = Path(out)
-    paths = SimulatedPaths(
+    return SimulatedPaths(
         root=root,
         capture=root / "object",
         calibration=root / "calibration",
         reference=root / "calibration" / "reference",
         truth=root / "truth-height.npy",
     )
+
+
+def write_simulated_scan(scan: SimulatedScan, out: str | os.PathLike[str], overwrite: bool = False) -> SimulatedPaths:
+    """Write the object capture, the calibration with its reference capture, and the true heights."""
+    paths = simulated_paths(out)
+    root = paths.root
     g = scan.geometry
     projector = {"width": g.projector_width, "height": g.projector_height}
     extra = {"simulation": dict(scan.description)}

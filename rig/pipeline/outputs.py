@@ -14,7 +14,8 @@ import cv2
 import numpy as np
 
 from rig import __version__
-from rig.errors import ProcessingError
+from rig.errors import OutputError
+from rig.store import files as safe_files
 
 if TYPE_CHECKING:
     from rig.pipeline.run import ProcessResult
@@ -213,15 +214,28 @@ def build_report(result: ProcessResult) -> dict[str, Any]:
     return report
 
 
+def check_output_directory(out_dir: str | Path) -> None:
+    """Before computing: ``out_dir`` can be written and is new, empty or an earlier output (OutputError if not)."""
+    safe_files.check_writable(Path(out_dir), OUTPUT_KINDS, True, OutputError)
+
+
 def write_outputs(result: ProcessResult, out_dir: str | Path) -> dict[str, Any]:
-    """Write the outputs of capture-format.md into ``out_dir``; returns the report (also in report.json)."""
+    """Write the outputs of capture-format.md as the directory ``out_dir``; returns the report (also in report.json).
+
+    The files are written into a fresh temporary sibling and renamed into place, replacing an
+    earlier output of this program (never anything else): after any interruption ``out_dir``
+    holds the complete old or the complete new result.
+    """
     t0 = time.perf_counter()
-    out = Path(out_dir)
-    if (out / "capture.json").exists() or (out / "calibration.json").exists():
-        raise ProcessingError(f"{out}: is a capture or calibration directory; choose another output directory")
-    out.mkdir(parents=True, exist_ok=True)
-    for name in OUTPUT_FILES:  # an earlier run's files must not pass for this run's
-        (out / name).unlink(missing_ok=True)
+    with safe_files.staged_directory(Path(out_dir), OUTPUT_KINDS, True, OutputError) as staging:
+        report = _write_files(result, staging, t0)
+    return report
+
+
+OUTPUT_KINDS = ("output",)
+
+
+def _write_files(result: ProcessResult, out: Path, t0: float) -> dict[str, Any]:
     obj = result.object
     assert obj.unwrapped is not None and obj.wrapped is not None
     report = build_report(result)

@@ -152,7 +152,25 @@ def group_patterns(patterns: Sequence[Pattern | Mapping[str, Any]], where: str =
             raise CaptureError(f"{where}: Gray code along {group.axis}: expected bits 0..{group.bits - 1}, missing {missing}")
         if group.inverted and sorted(group.inverted) != sorted(group.planes):
             raise CaptureError(f"{where}: Gray code along {group.axis}: inverted planes must cover the same bits as the normal ones")
+    for group in sinusoids.values():
+        _check_separable(group, where)
     return PatternGroups(list(sinusoids.values()), gray, flats, list(single.values()))
+
+
+def _check_separable(group: SinusoidGroup, where: str) -> None:
+    """A phase-shifting group whose shifts cannot separate A, B and phi (too few, or all equal) is refused here."""
+    from processing.phase_shift import shift_weights
+
+    if group.steps < 3:  # one frame goes to FTP; two are refused by the wrapped-phase stage
+        return
+    try:
+        shift_weights(group.steps, np.asarray(group.shifts))
+    except ValueError as exc:
+        names = ", ".join(f"patterns[{i}]" for i in group.indices[:8]) + (" ..." if len(group.indices) > 8 else "")
+        raise CaptureError(
+            f"{where}: {names} (sinusoid {group.axis} frequency {group.frequency:g}, shifts "
+            f"{', '.join(f'{s:.3g}' for s in group.shifts[:8])} rad): cannot compute a phase: {exc}"
+        ) from None
 
 
 def _beat_chain_ends_at_one(frequencies: Sequence[float]) -> bool:

@@ -31,6 +31,7 @@ from rig.pipeline.stages import (
     SceneState,
     stage_height,
 )
+from rig.store import files
 from rig.store.capture import Capture, read_capture
 
 log = logging.getLogger(__name__)
@@ -107,9 +108,10 @@ def load_calibration_for(
     if not calibration_models.needs_reference(calibration):
         check_fit(capture, calibration, axis)
         return calibration, None
-    ref_path = calibration.reference_path
-    if ref_path is None:
+    if calibration.reference is None or calibration.path is None:
         raise CalibrationError(f"{calibration.where}: reference: missing (the reference-plane capture)")
+    # relative, and inside the calibration directory once every link is resolved
+    ref_path = files.contained(calibration.path, calibration.reference, calibration.where, "reference", CalibrationError)
     if not (ref_path / "capture.json").is_file():
         raise CalibrationError(f"{calibration.where}: reference: no capture at {ref_path}")
     reference = read_capture(ref_path, verify=False)  # verified when loaded
@@ -150,8 +152,11 @@ def process(
     for state in ([ref] if ref is not None else []) + [obj]:
         for name, stage in SCENE_STAGES:
             t0 = time.perf_counter()
-            with rpca_blas() if name in RPCA_STAGES else contextlib.nullcontext():
-                stage(state, options)
+            try:
+                with rpca_blas() if name in RPCA_STAGES else contextlib.nullcontext():
+                    stage(state, options)
+            except ValueError as exc:  # the numeric kernels name the argument that does not fit
+                raise ProcessingError(f"{state.capture.manifest_path}: {name}: {exc}") from None
             state.timings[name] = time.perf_counter() - t0
             if progress is not None:
                 progress.step(f"{state.name}: {name}")

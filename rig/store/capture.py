@@ -28,9 +28,8 @@ from __future__ import annotations
 import copy
 import hashlib
 import logging
+import math
 import os
-import shutil
-import tempfile
 import time
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -40,16 +39,17 @@ from typing import Any
 
 import numpy as np
 
-from calibration.jsonfile import read_json, write_json_atomic
+from calibration.jsonfile import write_json_atomic
 from processing.patterns import PROJECTION_KEYS, Pattern, PatternError, parse_pattern, same_projection
 from rig.errors import CaptureError
+from rig.store import files
 
 log = logging.getLogger(__name__)
 
 FORMAT = "fpp-capture"
 VERSION = 1
 MANIFEST = "capture.json"
-INCOMPLETE_MARK = ".incomplete-"
+INCOMPLETE_MARK = files.INCOMPLETE_MARK
 
 
 def utc_now() -> str:
@@ -97,8 +97,12 @@ def _number(where: str, obj: Mapping[str, Any], key: str, field: str, positive: 
     if key not in obj:
         raise CaptureError(f"{where}: {field}: missing")
     value = obj[key]
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
-        raise _fail(where, field, "a finite number", value)
+    try:
+        finite = not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
+    except OverflowError:  # an integer too large for a float
+        finite = False
+    if not finite:
+        raise _fail(where, field, "a finite number", files.shorten(repr(value)))
     if positive and value <= 0:
         raise _fail(where, field, "a positive number", value)
     return float(value)
@@ -125,14 +129,7 @@ def validate_pattern(where: str, index: int, pattern: Any) -> Pattern:
 
 def check_relative_path(where: str, field: str, file: Any) -> PurePosixPath:
     """A frame path must be relative and stay inside the capture directory (no absolute, no ``..``)."""
-    if not isinstance(file, str) or not file:
-        raise _fail(where, field, "a relative file path", file)
-    posix = PurePosixPath(file.replace("\\", "/"))
-    if posix.is_absolute() or file.startswith(("/", "\\")) or (len(file) > 1 and file[1] == ":"):
-        raise _fail(where, field, "a path relative to the capture directory", file)
-    if ".." in posix.parts:
-        raise _fail(where, field, "a path inside the capture directory (no '..')", file)
-    return posix
+    return files.relative_path(file, where, field, CaptureError)
 
 
 def validate_manifest(manifest: Any, where: str) -> None:
@@ -151,24 +148,33 @@ def validate_manifest(manifest: Any, where: str) -> None:
     if not isinstance(manifest.get("complete"), bool):
         raise _fail(where, "complete", "true or false", manifest.get("complete"))
     camera = _mapping(where, manifest, "camera")
-    _int(where, camera, "width", "camera.width", minimum=1)
-    _int(where, camera, "height", "camera.height", minimum=1)
+    files.check_image_size(
+        _int(where, camera, "width", "camera.width", minimum=1),
+        _int(where, camera, "height", "camera.height", minimum=1),
+        f"{where}: camera", CaptureError,
+    )
     depth = _int(where, camera, "bit_depth", "camera.bit_depth", minimum=1)
     if not (depth <= 16 or depth == 32):
         raise _fail(where, "camera.bit_depth", "1..16 or 32", depth)
     projector = _mapping(where, manifest, "projector")
-    _int(where, projector, "width", "projector.width", minimum=1)
-    _int(where, projector, "height", "projector.height", minimum=1)
+    files.check_image_size(
+        _int(where, projector, "width", "projector.width", minimum=1),
+        _int(where, projector, "height", "projector.height", minimum=1),
+        f"{where}: projector", CaptureError,
+    )
     patterns = manifest.get("patterns")
     if not isinstance(patterns, list) or not patterns:
         raise _fail(where, "patterns", "a non-empty list", patterns)
+    max_frames = files.limits().max_frames
+    if len(patterns) > max_frames:
+        raise _fail(where, "patterns", f"at most {max_frames} entries (RIG_MAX_FRAMES)", len(patterns))
     for i, pattern in enumerate(patterns):
         validate_pattern(where, i, pattern)
     frames = manifest.get("frames")
     if not isinstance(frames, list):
         raise _fail(where, "frames", "a list", frames)
     owner: dict[int, int] = {}
-    files: dict[str, int] = {}
+    names: dict[str, int] = {}
     for i, frame in enumerate(frames):
         field = f"frames[{i}]"
         if not isinstance(frame, Mapping):
@@ -183,9 +189,9 @@ def validate_manifest(manifest: Any, where: str) -> None:
             )
         owner[pattern] = i
         file = str(check_relative_path(where, f"{field}.file", frame.get("file")))
-        if file in files:
-            raise CaptureError(f"{where}: {field}.file: {file!r} is also frames[{files[file]}].file")
-        files[file] = i
+        if file in names:
+            raise CaptureError(f"{where}: {field}.file: {file!r} is also frames[{names[file]}].file")
+        names[file] = i
         digest = frame.get("sha256")
         if not isinstance(digest, str) or len(digest) != 64 or any(c not in "0123456789abcdef" for c in digest.lower()):
             raise _fail(where, f"{field}.sha256", "a 64-digit hex sha256 digest", digest)
@@ -203,13 +209,8 @@ def validate_manifest(manifest: Any, where: str) -> None:
 
 
 def decode_image(data: bytes, where: str) -> np.ndarray:
-    """Decode PNG/TIFF bytes unchanged (8/16-bit integer or 32-bit float); CaptureError if corrupt."""
-    import cv2  # imported on first use: OpenCV costs ~0.1 s, which commands that read no image skip
-
-    image = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED) if data else None
-    if image is None:
-        raise CaptureError(f"{where}: corrupt or unreadable image ({len(data)} bytes)")
-    return image
+    """Decode PNG/TIFF bytes unchanged (8/16-bit integer or 32-bit float); CaptureError if corrupt or too large."""
+    return files.decode_image(data, where, CaptureError)
 
 
 @dataclass
@@ -272,23 +273,19 @@ class Capture:
         return {int(frame["pattern"]): frame for frame in self.frames}
 
     def frame_path(self, frame: Mapping[str, Any]) -> Path:
-        return self.path / PurePosixPath(str(frame["file"]).replace("\\", "/"))
+        """Where a frame's file is, every link resolved; CaptureError unless it is inside the capture."""
+        field = f"frame of pattern {frame.get('pattern')}: file"
+        return files.contained(self.path, frame["file"], str(self.manifest_path), field, CaptureError)
 
     def read_frame_bytes(self, frame: Mapping[str, Any]) -> bytes:
-        """The file of one frame, its sha256 checked (and, through links, still inside the capture)."""
+        """The file of one frame (a regular file inside the capture), its sha256 checked."""
         path = self.frame_path(frame)
-        if path.is_symlink() and not path.resolve().is_relative_to(self.path.resolve()):
-            raise CaptureError(f"{path}: links outside the capture directory (to {path.resolve()})")
-        try:
-            data = path.read_bytes()
-        except FileNotFoundError:
-            raise CaptureError(f"{path}: frame file missing (pattern {frame['pattern']})") from None
-        except OSError as exc:
-            raise CaptureError(f"{path}: cannot read frame: {exc.strerror or exc}") from None
+        where = str(self.path / str(frame["file"]))
+        data = files.read_regular(path, where, CaptureError, missing=f"frame file missing (pattern {frame['pattern']})")
         digest = hashlib.sha256(data).hexdigest()
         if digest != str(frame["sha256"]).lower():
             raise CaptureError(
-                f"{path}: checksum mismatch: expected sha256 {frame['sha256']}, found {digest}"
+                f"{where}: checksum mismatch: expected sha256 {frame['sha256']}, found {digest}"
             )
         return data
 
@@ -342,20 +339,27 @@ def read_capture(path: str | os.PathLike[str], salvage: bool = False, verify: bo
         Check every frame's sha256 now (images are decoded and size-checked when loaded).
     """
     path = Path(path)
+    files.check_path_text(str(path), "capture path", CaptureError)
     if path.name == MANIFEST and path.is_file():
         path = path.parent
     manifest_path = path / MANIFEST
     if not path.exists():
-        raise CaptureError(f"{path}: capture directory not found")
+        note = files.leftovers(path)
+        raise CaptureError(f"{path}: capture directory not found" + (f" ({note})" if note else ""))
     if not path.is_dir():
         raise CaptureError(f"{path}: expected a capture directory, found a file")
-    manifest = read_json(manifest_path, CaptureError, "missing (not a capture directory?)")
+    manifest = files.read_json(manifest_path, CaptureError, "missing (not a capture directory?)")
     validate_manifest(manifest, str(manifest_path))
     capture = Capture(path=path, manifest=manifest)
-    if not capture.complete and not salvage:
+    if not salvage and not capture.complete:
         raise CaptureError(
             f"{manifest_path}: complete: expected true, found false (interrupted or still being written; "
             "salvage it explicitly to read what is there)"
+        )
+    if not salvage and INCOMPLETE_MARK in path.resolve().name:
+        raise CaptureError(
+            f"{path}: never committed (its name says the write did not finish, whatever its capture.json says); "
+            "salvage it explicitly to read what is there"
         )
     if verify:
         capture.verify_checksums()
@@ -393,20 +397,6 @@ def check_same_patterns(reference: Capture, capture: Capture) -> None:
 
 
 # --------------------------------------------------------------------------- writing
-
-
-def _fsync_path(path: Path, directory: bool = False) -> None:
-    flags = os.O_RDONLY | (getattr(os, "O_DIRECTORY", 0) if directory else 0)
-    try:
-        fd = os.open(path, flags)
-    except OSError:  # some platforms cannot open directories; the data files are synced anyway
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
 
 
 def write_bytes_durable(path: Path, data: bytes) -> None:
@@ -481,10 +471,8 @@ class CaptureWriter:
         self._manifest_synced_at = 0.0  # time.monotonic() of the last fsynced manifest
 
     def __enter__(self) -> "CaptureWriter":
-        if self.path.exists() and not self.overwrite:
-            raise CaptureError(f"{self.path}: already exists; refusing to overwrite (choose another path or remove it)")
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self.temp_path = Path(tempfile.mkdtemp(prefix=self.path.name + INCOMPLETE_MARK, dir=self.path.parent))
+        files.check_target(self.path, ("capture",), self.overwrite, CaptureError, hint=" (choose another path or remove it)")
+        self.temp_path = files.make_staging(self.path, CaptureError)
         (self.temp_path / "frames").mkdir()
         self._manifest_synced_at = time.monotonic()
         self._write_manifest(durable=False)
@@ -546,23 +534,24 @@ class CaptureWriter:
         log.warning("capture %s not completed (%s); partial data left at %s", self.path, reason, self.temp_path)
 
     def _commit(self) -> None:
+        """Rename the finished directory onto ``path`` (see :func:`rig.store.files.commit_directory`).
+
+        ``complete: true`` is written only under the commit lock, just before the rename; the
+        ``.incomplete-`` name keeps a directory killed in between from passing for a capture.
+        """
         assert self.temp_path is not None
-        if self.path.exists() and not self.overwrite:  # appeared while we were writing
-            self._leave_incomplete(f"{self.path} appeared while writing")
-            raise CaptureError(f"{self.path}: appeared while writing; refusing to overwrite, new capture left at {self.temp_path}")
         self.manifest["frames"].sort(key=lambda frame: frame["pattern"])
-        self.manifest["complete"] = True
-        self._write_manifest()
-        _fsync_path(self.temp_path / "frames", directory=True)
-        _fsync_path(self.temp_path, directory=True)
-        if self.path.exists():  # overwrite requested: move the old one aside, then drop it
-            replaced = Path(tempfile.mkdtemp(prefix=self.path.name + ".replaced-", dir=self.path.parent))
-            os.replace(self.path, replaced / self.path.name)
-            os.replace(self.temp_path, self.path)
-            shutil.rmtree(replaced, ignore_errors=True)
-        else:
-            os.replace(self.temp_path, self.path)
-        _fsync_path(self.path.parent, directory=True)
+
+        def mark_complete() -> None:
+            self.manifest["complete"] = True
+            self._write_manifest()
+
+        try:
+            files.commit_directory(self.temp_path, self.path, ("capture",), self.overwrite, CaptureError, mark_complete)
+        except BaseException as exc:
+            self.manifest["complete"] = False
+            self._leave_incomplete(f"not committed: {exc}")
+            raise
         self.temp_path = None
 
 
