@@ -416,6 +416,8 @@ def load_config(path: str | Path | None) -> RigConfig:
         raise ConfigError(f"{path}: expected a rig config file, found a directory") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+    except (ValueError, RecursionError) as exc:  # integers of thousands of digits, arrays nested thousands deep
+        raise ConfigError(f"{path}: not valid TOML: {files.shorten(str(exc) or type(exc).__name__, 120)}") from None
     except OSError as exc:
         raise ConfigError(f"{path}: cannot read the rig config: {exc.strerror}") from None
     return parse_config(data, source=path)

@@ -167,12 +167,16 @@ def process(
     mask = obj.unwrapped.valid.copy()
     t0 = time.perf_counter()
     if calibration is not None:
-        points, height = stage_height(obj, ref, calibration, notes)
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):  # absurd calibrations: masked below
+            points, height = stage_height(obj, ref, calibration, notes)
+            # valid only where the stored (float32) height and point are finite: no infinity in any output
+            height32 = np.asarray(height).astype(np.float32)
+            finite_points = np.isfinite(np.asarray(points).astype(np.float32)).all(axis=-1) if points is not None else True
         if ref is not None:
             assert ref.unwrapped is not None
             mask &= ref.unwrapped.valid
-        mask &= np.isfinite(height)
-        height = np.where(mask, height, np.nan).astype(np.float32)
+        mask &= np.isfinite(height32) & finite_points
+        height = np.where(mask, height32, np.nan).astype(np.float32)
     else:
         notes.append("no calibration: height, points and height preview skipped; phase, mask and wrapped phase written")
     height_time = time.perf_counter() - t0
@@ -193,6 +197,11 @@ def process(
                 "largest) dropped as background specks; --keep-islands keeps them"
             )
     if not mask.any():
+        if calibration is not None and obj.unwrapped.valid.any():  # lit pixels, but the model gave no finite height
+            raise ProcessingError(
+                f"{calibration.where}: no pixel has a finite height with this calibration although "
+                f"{int(obj.unwrapped.valid.sum())} pixels have a phase (check its numbers and matrices)"
+            )
         raise ProcessingError(f"{capture.manifest_path}: no valid pixel (all in shadow or too little fringe modulation)")
     timings: dict[str, Any] = {"object": dict(obj.timings)}
     if ref is not None:

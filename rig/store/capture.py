@@ -299,7 +299,7 @@ class Capture:
         frame = self.frame_index().get(pattern)
         if frame is None:
             raise CaptureError(f"{self.manifest_path}: frames: no frame for pattern {pattern}")
-        where = str(self.frame_path(frame))
+        where = str(self.path / str(frame["file"]))
         image = decode_image(self.read_frame_bytes(frame), where)
         if image.ndim != 2:
             channels = image.shape[2] if image.ndim == 3 else image.ndim

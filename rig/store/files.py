@@ -211,11 +211,14 @@ def _depth(value: Any, limit: int) -> int:
     return deepest
 
 
-def parse_json(text: str, where: str, error: ErrorType) -> Any:
+def parse_json(text: str, where: str, error: ErrorType, strict: bool = True) -> Any:
     """Parse JSON text with the depth limit; every failure is one line naming ``where``."""
     lim = limits()
     try:
-        value = json.loads(text, parse_constant=lambda name: _bad_constant(name, where, error))
+        if strict:  # NaN / Infinity are not JSON; an older report may hold them (``strict=False``)
+            value = json.loads(text, parse_constant=lambda name: _bad_constant(name, where, error))
+        else:
+            value = json.loads(text)
     except json.JSONDecodeError as exc:
         raise error(f"{where}: not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}") from None
     except RecursionError:
@@ -231,14 +234,14 @@ def _bad_constant(name: str, where: str, error: ErrorType) -> Any:
     raise error(f"{where}: not valid JSON: {name} is not a number JSON allows")
 
 
-def read_json(path: Path, error: ErrorType, missing: str = "missing") -> Any:
+def read_json(path: Path, error: ErrorType, missing: str = "missing", strict: bool = True) -> Any:
     """Parse a JSON file (regular file, manifest size limit, depth limit); one-line errors."""
     data = read_regular(Path(path), str(path), error, limits().max_manifest_bytes, missing)
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise error(f"{path}: cannot read: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
-    return parse_json(text, str(path), error)
+    return parse_json(text, str(path), error, strict)
 
 
 # --------------------------------------------------------------------------- images
@@ -357,7 +360,7 @@ def kind_of(path: Path) -> str | None:
         return None
     for kind, (marker, key, values) in KINDS.items():
         try:
-            data = read_json(path / marker, FileLayerError)
+            data = read_json(path / marker, FileLayerError, strict=False)
         except FileLayerError:
             continue
         if isinstance(data, dict) and key in data:
@@ -549,7 +552,7 @@ def commit_directory(
     parent = target.parent if str(target.parent) else Path(".")
     with parent_lock(parent):
         left = f"; the new data is left at {staging}" if kept else ""
-        check_target(target, kinds, replace, error, hint=left)
+        check_target(target, kinds, replace, error, hint=f" (it appeared while writing){left}")
         if before_rename is not None:
             before_rename()
             _fsync(staging, directory=True)

@@ -28,7 +28,6 @@ conversion are recorded in the capture's ``import`` key and each frame's ``sourc
 from __future__ import annotations
 
 import hashlib
-import json
 import math
 import os
 import re
@@ -42,6 +41,7 @@ import numpy as np
 
 from processing.patterns import Flat, Gray, Pattern, Sinusoid
 from rig.errors import CaptureError, ConfigError
+from rig.store import files as files_layer
 from rig.store.capture import (
     CaptureWriter,
     bit_depth_of,
@@ -199,12 +199,7 @@ def load_spec(text: str) -> tuple[list[Pattern | Mapping[str, Any] | None], list
     candidate = text[1:] if text.startswith("@") else text
     if text.startswith("@") or (candidate.endswith(".json") and Path(candidate).is_file()):
         path = Path(candidate)
-        try:
-            data = json.loads(path.read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            raise ConfigError(f"{path}: pattern file not found") from None
-        except (OSError, ValueError) as exc:
-            raise ConfigError(f"{path}: cannot read the pattern file: {exc}") from None
+        data = files_layer.read_json(path, ConfigError, "pattern file not found")
         if isinstance(data, list):
             data = {"patterns": data}
         patterns = data.get("patterns") if isinstance(data, dict) else None
@@ -270,10 +265,8 @@ def parse_crop(text: str) -> tuple[int, int, int, int]:
 
 def read_source_image(path: Path, options: ImportOptions) -> tuple[np.ndarray, list[str]]:
     """One source image as single-channel uint8/uint16/float32, cropped and downsampled; notes of conversions."""
-    data = path.read_bytes()
-    image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED) if data else None
-    if image is None:
-        raise CaptureError(f"{path}: corrupt or unreadable image")
+    data = files_layer.read_regular(path, str(path), CaptureError)  # a regular file, size-limited
+    image = files_layer.decode_image(data, str(path), CaptureError)  # header checked before decoding
     notes: list[str] = []
     if image.ndim == 3:
         channels = image.shape[2]
@@ -313,7 +306,12 @@ def import_folder(folder: str | os.PathLike[str], spec: str, output: str | os.Pa
         raise ConfigError(f"--downsample: expected an integer >= 1, found {options.downsample}")
     entries, listed = load_spec(spec)
     if listed is not None:
-        files = [folder / name for name in listed]
+        # names relative to the folder, inside it once links are resolved (never /abs or ../..)
+        files = [
+            folder / files_layer.relative_path(name, f"{spec}", f"files[{i}]", ConfigError) for i, name in enumerate(listed)
+        ]
+        for i, name in enumerate(listed):
+            files_layer.contained(folder, name, spec, f"files[{i}]", ConfigError)
         missing = [f.name for f in files if not f.is_file()]
         if missing:
             raise ConfigError(f"{folder}: files listed in the pattern file are missing: {', '.join(missing[:5])}")
