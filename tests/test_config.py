@@ -100,7 +100,7 @@ def test_gamma_lut_resolves_against_the_config_folder(tmp_path):
         ("[trigger]\nbaudrate = 0\n", "[trigger] baudrate: expected an integer 1..12000000, found 0"),
         ("[scan]\nsteps = 2\n", "[scan] steps: expected an integer 3..64, found 2"),
         ("[scan]\nsteps = 6.0\n", "[scan] steps: expected an integer 3..64, found 6.0"),
-        ("[scan]\nfrequencies = []\n", "[scan] frequencies: expected a non-empty list of positive numbers, found []"),
+        ("[scan]\nfrequencies = []\n", "[scan] frequencies: expected a non-empty list of positive numbers up to 16384, found []"),
         ("[scan]\nfrequencies = [8, 8]\n", "[scan] frequencies: expected distinct frequencies"),
         ("[scan]\nretries = true\n", "[scan] retries: expected an integer 0..20, found True"),
         ('[scan]\naxis = "z"\n', "[scan] axis: expected one of 'x', 'y', found 'z'"),
