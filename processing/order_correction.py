@@ -56,6 +56,18 @@ def monotonic_rows(phase: np.ndarray, anchor: np.ndarray | None = None, valid: n
     return np.where(valid, phase - TWO_PI * turns, phase)
 
 
+def postprocess_orders(phase: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """Ch. 3's post-processing of an RPCA-corrected absolute phase (thesis ch. 3.3.3).
+
+    :func:`monotonic_rows` along the rows, each run of ``valid`` pixels anchored to the majority
+    of its own RPCA-corrected pixels rather than to its first pixel. Only the ``valid`` pixels are
+    read and changed, so the result of :func:`correct_orders_rpca` with ``postprocess=False``
+    (NaN outside its mask) gives, passed through this, that of ``postprocess=True``: a study can
+    report both from one RPCA solve.
+    """
+    return monotonic_rows(phase, anchor=phase, valid=valid)
+
+
 def correct_orders_rpca(
     orders: np.ndarray,
     wrapped_phase: np.ndarray,
@@ -122,6 +134,6 @@ def correct_orders_rpca(
     k_rpca = np.rint(result.low_rank.astype(np.float64))
     phase = phi + TWO_PI * k_rpca
     if postprocess:
-        phase = monotonic_rows(phase, anchor=phase, valid=valid)
+        phase = postprocess_orders(phase, valid)
     k_out = np.where(valid, np.rint((phase - phi) / TWO_PI), 0).astype(np.int64)
     return np.where(valid, phase, np.nan), k_out, result

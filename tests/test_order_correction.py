@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from benchmarks.correction_protocol import ProtocolCase, table41_case
-from processing.order_correction import correct_orders_rpca, monotonic_rows
+from processing.order_correction import correct_orders_rpca, monotonic_rows, postprocess_orders
 
 TWO_PI = 2.0 * np.pi
 
@@ -43,6 +43,15 @@ def test_postprocessing_removes_the_misalignment_left_by_rpca(case: ProtocolCase
     none = case.nmse_h(case.object.absolute, case.reference.absolute)
     assert with_post < without / 10
     assert without < none
+
+
+def test_postprocessing_the_unprocessed_result_equals_postprocess_true(case: ProtocolCase) -> None:
+    # The study reports ch. 3 with and without post-processing from one RPCA solve this way.
+    m = case.object
+    without, _, _ = correct_orders_rpca(orders_of(m), m.wrapped, m.mask, postprocess=False)
+    with_post, _, _ = correct_orders_rpca(orders_of(m), m.wrapped, m.mask)
+    assert np.count_nonzero(np.abs(without - with_post) > np.pi) > 0  # the pass changes something
+    np.testing.assert_array_equal(postprocess_orders(without, np.isfinite(without)), with_post)
 
 
 def test_adm_solver_and_ialm_solver_agree_after_postprocessing(case: ProtocolCase) -> None:

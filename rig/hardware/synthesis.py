@@ -3,7 +3,9 @@
 Builds on :mod:`mock_devices.synth` (rig geometry, camera-to-projector map, rendering) and
 :mod:`mock_devices.scenes` (height maps). The result is exactly what a real rig would leave on
 disk after ``rig calibrate`` and ``rig scan``, plus the true height map, so that ``rig demo``,
-the tests and ``rig simulate`` can check processed heights against the truth.
+the tests and ``rig simulate`` can check processed heights against the truth. The reproduction study
+(:mod:`rig.study.experiments`) renders its scenes with :func:`render_scene` and the names
+re-exported below, so that only ``rig/hardware`` reaches into ``mock_devices``.
 
 On disk (:func:`write_simulated_scan`)::
 
@@ -30,6 +32,34 @@ from rig.store.capture import write_capture
 
 DEFAULT_FREQUENCIES = (1, 8, 64)
 DEFAULT_STEPS = 4
+
+# The simulation's rig geometry, photometry and truth, for callers outside rig/hardware.
+RigGeometry = synth.RigGeometry
+Appearance = synth.Appearance
+ProjectorMap = synth.ProjectorMap
+sinusoid_patterns = synth.sinusoid_patterns
+true_absolute_phase = synth.true_absolute_phase
+
+
+def scene_height(name: str, geometry: synth.RigGeometry, **params: float) -> np.ndarray:
+    """Height map (mm) of a named scene of :data:`mock_devices.scenes.SCENES` seen by ``geometry``'s camera."""
+    return scenes.make_scene(name, geometry.camera_height, geometry.camera_width, geometry.pixel_mm, **params)
+
+
+def render_scene(
+    height_mm: np.ndarray,
+    geometry: synth.RigGeometry,
+    patterns: Sequence[Mapping[str, Any]],
+    appearance: synth.Appearance,
+    rng: np.random.Generator,
+) -> tuple[np.ndarray, synth.ProjectorMap]:
+    """Frames (N, H, W) of one scene under a pattern sequence, noise drawn from ``rng``, and its projector map.
+
+    Scenes rendered one after another from the same ``rng`` (an object, then its reference plane)
+    draw their noise in that order, as :func:`simulate_scan` does.
+    """
+    mapping = synth.projector_coordinates(np.asarray(height_mm, dtype=np.float64), geometry)
+    return synth.render_stack(patterns, mapping, geometry, appearance, rng), mapping
 
 
 def demo_appearance(snr_db: float | None = 35.0) -> synth.Appearance:
@@ -121,10 +151,8 @@ def simulate_scan(
         name = "custom"
         height = np.asarray(scene, dtype=np.float64)
     rng = np.random.default_rng(seed)
-    object_map = synth.projector_coordinates(height, geometry)
-    reference_map = synth.projector_coordinates(np.zeros_like(height), geometry)
-    object_frames = synth.render_stack(pattern_list, object_map, geometry, appearance, rng)
-    reference_frames = synth.render_stack(pattern_list, reference_map, geometry, appearance, rng)
+    object_frames, object_map = render_scene(height, geometry, pattern_list, appearance, rng)
+    reference_frames, reference_map = render_scene(np.zeros_like(height), geometry, pattern_list, appearance, rng)
     description = {
         "scene": name,
         "scene_params": dict(scene_params or {}),

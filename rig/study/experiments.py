@@ -1,7 +1,10 @@
 """Reproduction study: the thesis' simulations regenerated with this package's methods.
 
-Every experiment simulates captures with :mod:`mock_devices.synth` on a scene of
-:mod:`mock_devices.scenes`, runs the thesis' processing chain with :mod:`processing` and compares
+Every experiment simulates captures with the product's simulated rig
+(:mod:`rig.hardware.synthesis`: the scenes and renderer ``rig demo`` and ``rig simulate`` use),
+runs the thesis' processing chain with the numeric kernels the pipeline's stages call
+(:mod:`processing`), corrects the phase with the methods of the one correction registry
+(:data:`rig.pipeline.corrections.REGISTRY`, what ``rig process --correction`` offers) and compares
 heights (NMSE_h, thesis eq. 2.18) or phases (MSE, eq. 3.5) with the simulation's truth:
 
 - Table 4.1: sphere cap, f = (5, 8), 6-step, 15 dB; no correction, ch. 4, ch. 3 with and
@@ -31,18 +34,18 @@ from typing import Any
 
 import numpy as np
 
-from mock_devices import scenes, synth
-from processing.correction import CORRECTIONS
 from processing.denoise import rpca_denoise_stack
 from processing.height import nmse, phase_mse, phase_to_height
-from processing.order_correction import correct_orders_rpca, monotonic_rows
+from processing.order_correction import postprocess_orders
 from processing.phase_shift import phase_shift
-from processing.shadow_fill import fill_shadows
 from processing.single_shot import prepare_reference, single_shot_unwrap
 from processing.temporal import unwrap_two_frequency
 from processing.voting import vote_row_orders
 from rig.blas import rpca_blas
 from rig.errors import ConfigError
+from rig.hardware import synthesis
+from rig.hardware.synthesis import Appearance, ProjectorMap, RigGeometry
+from rig.pipeline.corrections import REGISTRY as CORRECTIONS
 from rig.study import figures as fig
 
 log = logging.getLogger(__name__)
@@ -70,9 +73,9 @@ class StudyRig:
     def f0_per_mm(self) -> float:
         return self.f0_frequency / (self.margin * self.view_mm)
 
-    def geometry(self, size: int) -> synth.RigGeometry:
+    def geometry(self, size: int) -> RigGeometry:
         """RigGeometry of a ``size`` x ``size`` camera over the fixed view."""
-        return synth.RigGeometry(
+        return RigGeometry(
             l0_mm=self.l0_mm, d0_mm=self.d0_mm, f0_per_mm=self.f0_per_mm, f0_frequency=self.f0_frequency,
             pixel_mm=self.view_mm / size, camera_width=size, camera_height=size,
         )
@@ -90,17 +93,17 @@ THESIS_TABLE_4_1 = {
 }
 THESIS_DENOISE = {"psp3-hemisphere": (0.0199, 0.000866), "two-freq-two-hemispheres": (0.6786, 0.0025)}
 
+ORDER_T = 0.034
 # Methods compared on two-frequency captures: key -> (label, CORRECTIONS entry or None, parameters).
 METHODS: dict[str, tuple[str, str | None, dict[str, Any]]] = {
     "none": ("no correction", "none", {}),
     "rpca-phase": ("ch. 4: RPCA on the absolute phase", "rpca-phase", {}),
-    "rpca-orders-nopost": ("ch. 3: RPCA on orders, no post-processing", None, {}),
-    "rpca-orders": ("ch. 3: RPCA on orders + post-processing", None, {}),
+    "rpca-orders-nopost": ("ch. 3: RPCA on orders, no post-processing", "rpca-orders", {"t": ORDER_T, "postprocess": False}),
+    "rpca-orders": ("ch. 3: RPCA on orders + post-processing", "rpca-orders", {"t": ORDER_T}),
     "vote": ("Ding's row voting [119]", "vote", {}),
     "auto": ("auto (region-pooled orders + ch. 4)", "auto", {}),
     "oracle": ("oracle: true fringe orders", None, {}),
 }
-ORDER_T = 0.034
 
 SINGLE_SHOT_FREQUENCY = 16
 SINGLE_SHOT_SNR_DB = 25.0
@@ -123,7 +126,7 @@ class StudyConfig:
     quick: bool = False
 
     @classmethod
-    def quick_config(cls, seeds: int = 2) -> "StudyConfig":
+    def quick_config(cls, seeds: int = 2) -> StudyConfig:
         """A small, fast configuration that runs every experiment (for tests)."""
         return cls(size=128, sweep_size=96, snr_size=96, seeds=seeds, t_values=(0.02, 0.034, 0.09),
                    sweep_snrs=(15.0, 10.0), snr_values=(10.0, 15.0, 25.0), quick=True)
@@ -167,19 +170,18 @@ class PhaseCapture:
     frames: np.ndarray | None = None
 
 
-def _render(height_mm: np.ndarray, geometry: synth.RigGeometry, patterns: list[dict[str, Any]],
-            snr_db: float, rng: np.random.Generator) -> tuple[np.ndarray, synth.ProjectorMap]:
-    mapping = synth.projector_coordinates(height_mm, geometry)
-    stack = synth.render_stack(patterns, mapping, geometry, synth.Appearance(snr_db=snr_db), rng)
+def _render(height_mm: np.ndarray, geometry: RigGeometry, patterns: list[dict[str, Any]],
+            snr_db: float | None, rng: np.random.Generator) -> tuple[np.ndarray, ProjectorMap]:
+    stack, mapping = synthesis.render_scene(height_mm, geometry, patterns, Appearance(snr_db=snr_db), rng)
     return stack.astype(np.float64), mapping
 
 
-def two_frequency_capture(height_mm: np.ndarray, geometry: synth.RigGeometry, frequencies: tuple[int, int],
+def two_frequency_capture(height_mm: np.ndarray, geometry: RigGeometry, frequencies: tuple[int, int],
                           steps: int, snr_db: float, rng: np.random.Generator, denoise: bool = False,
                           keep_frames: bool = False) -> PhaseCapture:
     """Render, phase-shift and unwrap (Ding) one scene; optionally RPCA-denoise every frame first."""
     f1, f2 = frequencies
-    stack, mapping = _render(height_mm, geometry, synth.sinusoid_patterns([f1, f2], steps), snr_db, rng)
+    stack, mapping = _render(height_mm, geometry, synthesis.sinusoid_patterns([f1, f2], steps), snr_db, rng)
     frames = stack
     if denoise:
         frames, _ = rpca_denoise_stack(stack)
@@ -187,17 +189,17 @@ def two_frequency_capture(height_mm: np.ndarray, geometry: synth.RigGeometry, fr
     phi2 = phase_shift(frames[steps:]).phase
     result = unwrap_two_frequency(phi1, phi2, f1, f2)
     wrapped = result.phase - TWO_PI * result.orders
-    return PhaseCapture(result.phase, wrapped, result.orders, synth.true_absolute_phase(mapping, geometry, f2),
+    return PhaseCapture(result.phase, wrapped, result.orders, synthesis.true_absolute_phase(mapping, geometry, f2),
                         mapping.lit, stack if keep_frames else None)
 
 
-def single_frequency_capture(height_mm: np.ndarray, geometry: synth.RigGeometry, frequency: int, steps: int,
+def single_frequency_capture(height_mm: np.ndarray, geometry: RigGeometry, frequency: int, steps: int,
                              snr_db: float, rng: np.random.Generator, denoise: bool = False) -> PhaseCapture:
     """Phase-shifted capture at one frequency, unwrapped with the true fringe orders (oracle)."""
-    stack, mapping = _render(height_mm, geometry, synth.sinusoid_patterns([frequency], steps), snr_db, rng)
+    stack, mapping = _render(height_mm, geometry, synthesis.sinusoid_patterns([frequency], steps), snr_db, rng)
     frames = rpca_denoise_stack(stack)[0] if denoise else stack
     wrapped = np.mod(phase_shift(frames).phase, TWO_PI)
-    truth = synth.true_absolute_phase(mapping, geometry, frequency)
+    truth = synthesis.true_absolute_phase(mapping, geometry, frequency)
     orders = np.rint((np.nan_to_num(truth) - wrapped) / TWO_PI).astype(np.int64)
     return PhaseCapture(wrapped + TWO_PI * orders, wrapped, orders, truth, mapping.lit, stack)
 
@@ -208,40 +210,38 @@ def oracle_phase(capture: PhaseCapture) -> np.ndarray:
     return capture.wrapped + TWO_PI * orders
 
 
-def postprocess_orders(phase: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """Ch. 3's monotonicity pass on an RPCA-corrected phase, as ``correct_orders_rpca(postprocess=True)`` runs it."""
-    post = monotonic_rows(fill_shadows(phase, mask), anchor=phase, valid=mask)
-    return np.where(mask, post, np.nan)
+def correct(key: str, capture: PhaseCapture, **params: Any) -> np.ndarray:
+    """Absolute phase of ``capture`` after the :data:`METHODS` entry ``key`` (NaN outside the lit pixels).
+
+    ``oracle`` is the study's yardstick (:func:`oracle_phase`); every other key is a method of the
+    correction registry, called as the correction stage calls it; ``params`` override the entry's.
+    """
+    if key == "oracle":
+        return oracle_phase(capture)
+    _, registry_name, entry_params = METHODS[key]
+    assert registry_name is not None
+    phase, _info = CORRECTIONS[registry_name](capture.phase, capture.wrapped, mask=capture.lit, **{**entry_params, **params})
+    return phase
 
 
 def corrected_phases(capture: PhaseCapture, methods: Sequence[str]) -> dict[str, tuple[np.ndarray, float]]:
     """Absolute phase after each method (NaN outside the lit pixels) and its seconds."""
     out: dict[str, tuple[np.ndarray, float]] = {}
-    mask = capture.lit
     for key in methods:
-        if key in ("rpca-orders-nopost", "rpca-orders"):
-            if "rpca-orders-nopost" not in out:
-                start = time.perf_counter()
-                nopost, _, _ = correct_orders_rpca(capture.orders, capture.wrapped, mask, t=ORDER_T, postprocess=False)
-                out["rpca-orders-nopost"] = (nopost, time.perf_counter() - start)
-            if key == "rpca-orders":
-                # Ch. 3's post-processing pass on the same RPCA result (what postprocess=True does
-                # inside correct_orders_rpca), so the costly RPCA runs once for both columns.
-                nopost, rpca_seconds = out["rpca-orders-nopost"]
-                start = time.perf_counter()
-                out["rpca-orders"] = (postprocess_orders(nopost, mask), rpca_seconds + time.perf_counter() - start)
-            continue
         start = time.perf_counter()
-        if key == "oracle":
-            phase = oracle_phase(capture)
-        else:
-            _, registry_name, params = METHODS[key]
-            phase, _info = CORRECTIONS[registry_name](capture.phase, capture.wrapped, mask=mask, **params)
+        if key == "rpca-orders" and "rpca-orders-nopost" in out:
+            # Ch. 3's post-processing pass (what rpca-orders runs after its RPCA solve) on the
+            # no-post-processing result, so the costly RPCA runs once for both columns.
+            nopost, rpca_seconds = out["rpca-orders-nopost"]
+            post = postprocess_orders(nopost, np.isfinite(nopost))
+            out[key] = (post, rpca_seconds + time.perf_counter() - start)
+            continue
+        phase = correct(key, capture)
         out[key] = (phase, time.perf_counter() - start)
-    return {k: out[k] for k in methods}
+    return out
 
 
-def heights(obj_phase: np.ndarray, ref_phase: np.ndarray, geometry: synth.RigGeometry, frequency: float) -> np.ndarray:
+def heights(obj_phase: np.ndarray, ref_phase: np.ndarray, geometry: RigGeometry, frequency: float) -> np.ndarray:
     """Eq. 1.15 on object - reference absolute phases of ``frequency``."""
     return phase_to_height(obj_phase - ref_phase, geometry.l0_mm, geometry.d0_mm, geometry.per_mm(frequency))
 
@@ -258,7 +258,7 @@ def order_errors(phase: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> int:
 Progress = Callable[[str], None]
 
 
-def _compare_methods(experiment: str, rows: Rows, height_mm: np.ndarray, geometry: synth.RigGeometry,
+def _compare_methods(experiment: str, rows: Rows, height_mm: np.ndarray, geometry: RigGeometry,
                      obj: PhaseCapture, ref: PhaseCapture, frequency: float, methods: Sequence[str],
                      **keys: Any) -> dict[str, np.ndarray]:
     """NMSE_h, order errors and seconds of every method on one object/reference pair."""
@@ -281,7 +281,7 @@ def _compare_methods(experiment: str, rows: Rows, height_mm: np.ndarray, geometr
 def table_4_1(config: StudyConfig, rows: Rows, progress: Progress) -> dict[str, Any]:
     """Thesis Table 4.1 on ``config.seeds`` noise seeds; returns the first seed's maps for figures."""
     geometry = RIG.geometry(config.size)
-    cap = scenes.sphere_cap(config.size, config.size, geometry.pixel_mm, radius_mm=300.0, max_height_mm=100.0)
+    cap = synthesis.scene_height("sphere-cap", geometry, radius_mm=300.0, max_height_mm=100.0)
     first: dict[str, Any] = {}
     for seed in range(config.seeds):
         rng = np.random.default_rng(4100 + seed)
@@ -298,8 +298,8 @@ def table_4_1(config: StudyConfig, rows: Rows, progress: Progress) -> dict[str, 
 def denoising(config: StudyConfig, rows: Rows, progress: Progress) -> dict[str, Any]:
     """Thesis ch. 2.4: the two denoising experiments, without and with RPCA denoising."""
     geometry = RIG.geometry(config.size)
-    hemi = scenes.hemisphere(config.size, config.size, geometry.pixel_mm)
-    pair = scenes.two_hemispheres(config.size, config.size, geometry.pixel_mm)
+    hemi = synthesis.scene_height("hemisphere", geometry)
+    pair = synthesis.scene_height("two-hemispheres", geometry)
     figure: dict[str, Any] = {}
     for seed in range(config.seeds):
         for denoise in (False, True):
@@ -314,9 +314,10 @@ def denoising(config: StudyConfig, rows: Rows, progress: Progress) -> dict[str, 
             if seed == 0:
                 figure[f"psp3:{label}:height"] = h
                 if denoise:
+                    assert obj.frames is not None
                     figure["psp3:frame"] = obj.frames[0]
                     figure["psp3:denoised"] = rpca_denoise_stack(obj.frames[:1])[0][0]
-                    clean, _ = _render(hemi, geometry, synth.sinusoid_patterns([8], 3)[:1], None, rng)
+                    clean, _ = _render(hemi, geometry, synthesis.sinusoid_patterns([8], 3)[:1], None, rng)
                     figure["psp3:clean"] = clean[0]
             # (b) two frequencies (5, 8), 6-step, Ding unwrapping, on two hemispheres.
             rng = np.random.default_rng(2410 + seed)
@@ -338,7 +339,7 @@ def denoising(config: StudyConfig, rows: Rows, progress: Progress) -> dict[str, 
 def t_sweep(config: StudyConfig, rows: Rows, progress: Progress) -> None:
     """Thesis Figs. 3.6-3.8: ch. 3 RPCA (no post-processing) over t, at several SNRs."""
     geometry = RIG.geometry(config.sweep_size)
-    hemi = scenes.hemisphere(config.sweep_size, config.sweep_size, geometry.pixel_mm)
+    hemi = synthesis.scene_height("hemisphere", geometry)
     for snr in config.sweep_snrs:
         rng = np.random.default_rng(3600 + int(snr))
         obj = two_frequency_capture(hemi, geometry, (5, 8), 6, snr, rng)
@@ -351,10 +352,10 @@ def t_sweep(config: StudyConfig, rows: Rows, progress: Progress) -> None:
                      snr_db=snr, t="none")
             rows.add("t-sweep", "mse", phase_mse(cap.phase, cap.truth, mask), scene=scene_name, snr_db=snr, t="none")
             for t in config.t_values:
-                phase, _, _ = correct_orders_rpca(cap.orders, cap.wrapped, mask, t=t, postprocess=False)
+                phase = correct("rpca-orders-nopost", cap, t=t)
                 rows.add("t-sweep", "order_errors", order_errors(phase, cap.truth, mask), scene=scene_name,
                          snr_db=snr, t=t)
-                rows.add("t-sweep", "order_errors_post", order_errors(postprocess_orders(phase, mask), cap.truth, mask),
+                rows.add("t-sweep", "order_errors_post", order_errors(postprocess_orders(phase, np.isfinite(phase)), cap.truth, mask),
                          scene=scene_name, snr_db=snr, t=t)
                 rows.add("t-sweep", "mse", phase_mse(phase, cap.truth, mask), scene=scene_name, snr_db=snr, t=t)
         progress(f"t sweep at {snr:g} dB done")
@@ -363,7 +364,7 @@ def t_sweep(config: StudyConfig, rows: Rows, progress: Progress) -> None:
 def snr_sweep(config: StudyConfig, rows: Rows, progress: Progress) -> None:
     """Thesis Fig. 4.5: NMSE_h of every method against SNR (sphere cap, (5, 8), 6-step)."""
     geometry = RIG.geometry(config.snr_size)
-    cap = scenes.sphere_cap(config.snr_size, config.snr_size, geometry.pixel_mm)
+    cap = synthesis.scene_height("sphere-cap", geometry)
     for snr in config.snr_values:
         for seed in range(config.seeds):
             rng = np.random.default_rng(4500 + int(snr) + 100 * seed)
@@ -377,7 +378,7 @@ def snr_sweep(config: StudyConfig, rows: Rows, progress: Progress) -> None:
 def isolated(config: StudyConfig, rows: Rows, progress: Progress) -> dict[str, Any]:
     """Thesis ch. 4.3.1: isolated objects, f = (18, 25), 6-step, 18 dB; returns seed 0's maps."""
     geometry = RIG.geometry(config.size)
-    objects = scenes.isolated_objects(config.size, config.size, geometry.pixel_mm)
+    objects = synthesis.scene_height("isolated", geometry)
     first: dict[str, Any] = {}
     for seed in range(config.seeds):
         rng = np.random.default_rng(4600 + seed)
@@ -395,24 +396,24 @@ def single_shot(config: StudyConfig, rows: Rows, progress: Progress) -> dict[str
     """Thesis ch. 2.3: one speckle-embedded image per scene, 25 dB, perfect calibration."""
     geometry = RIG.geometry(config.size)
     scene_maps = {
-        "hemisphere": scenes.hemisphere(config.size, config.size, geometry.pixel_mm, radius_mm=SINGLE_SHOT_HEMISPHERE_MM),
-        "two-hemispheres": scenes.two_hemispheres(config.size, config.size, geometry.pixel_mm),
+        "hemisphere": synthesis.scene_height("hemisphere", geometry, radius_mm=SINGLE_SHOT_HEMISPHERE_MM),
+        "two-hemispheres": synthesis.scene_height("two-hemispheres", geometry),
     }
-    look = synth.Appearance(snr_db=SINGLE_SHOT_SNR_DB)
+    look = Appearance(snr_db=SINGLE_SHOT_SNR_DB)
     f = SINGLE_SHOT_FREQUENCY
     figure: dict[str, Any] = {}
     for seed in range(config.seeds):
         rng = np.random.default_rng(2300 + seed)
-        ref_map = synth.projector_coordinates(np.zeros((config.size, config.size)), geometry)
-        ref_image = synth.render_frame(SPECKLE_PATTERN, ref_map, geometry, look, rng)
-        ref_truth = synth.true_absolute_phase(ref_map, geometry, f)
+        ref_frames, ref_map = synthesis.render_scene(np.zeros((config.size, config.size)), geometry, [SPECKLE_PATTERN], look, rng)
+        ref_image = ref_frames[0]
+        ref_truth = synthesis.true_absolute_phase(ref_map, geometry, f)
         # the reference is prepared once per seed for each variant: with and without RPCA separation
         references = {variant: prepare_reference(ref_image, ref_truth, f, separate=variant == "rpca")
                       for variant in ("rpca", "no-separation")}
         for name, height_mm in scene_maps.items():
-            obj_map = synth.projector_coordinates(height_mm, geometry)
-            image = synth.render_frame(SPECKLE_PATTERN, obj_map, geometry, look, rng)
-            truth = synth.true_absolute_phase(obj_map, geometry, f)
+            frames, obj_map = synthesis.render_scene(height_mm, geometry, [SPECKLE_PATTERN], look, rng)
+            image = frames[0]
+            truth = synthesis.true_absolute_phase(obj_map, geometry, f)
             for variant, reference in references.items():
                 result = single_shot_unwrap(image, reference, None, f, separate=variant == "rpca")
                 lit = np.isfinite(truth)
@@ -492,7 +493,6 @@ def _figures(out: Path, config: StudyConfig, rows: Rows, t41: dict[str, Any], de
              iso: dict[str, Any], ss: dict[str, Any]) -> list[tuple[str, str]]:
     """Draw every PNG; returns (file name, caption) pairs for the report."""
     written: list[tuple[str, str]] = []
-    labels = {k: v[0] for k, v in METHODS.items()}
     short = {"none": "none", "rpca-phase": "ch.4", "rpca-orders-nopost": "ch.3 no post", "rpca-orders": "ch.3 + post",
              "vote": "vote [119]", "auto": "auto", "oracle": "oracle"}
 
@@ -640,7 +640,7 @@ def write_report(out: Path, config: StudyConfig, rows: Rows, figures: list[tuple
             f"{_spread(rows.select('table-4.1', 'nmse_h', method=key))} | "
             f"{_spread(rows.select('table-4.1', 'order_errors', method=key))} | "
             f"{_spread(rows.select('table-4.1', 'seconds', method=key))} |")
-    thesis_rank = sorted(THESIS_TABLE_4_1, key=THESIS_TABLE_4_1.get)
+    thesis_rank = sorted(THESIS_TABLE_4_1, key=THESIS_TABLE_4_1.__getitem__)
     ours_rank = sorted(THESIS_TABLE_4_1, key=lambda k: np.median(rows.select("table-4.1", "nmse_h", method=k)))
     add("")
     add("Ranking, best first - thesis: " + " < ".join(thesis_rank) + "; ours: " + " < ".join(ours_rank)
@@ -765,14 +765,14 @@ def write_report(out: Path, config: StudyConfig, rows: Rows, figures: list[tuple
     if wrong and lit:
         fraction = float(np.median(wrong)) / lit[0]
         scored = {k: np.median(rows.select("isolated", "nmse_h", method=k)) for k in METHODS if k != "oracle"}
-        best = min(scored, key=scored.get)
+        best_key = min(scored, key=scored.__getitem__)
         add(f"Before correction {100 * fraction:.0f} % of the compared pixels have a wrong order: Ding's "
             "tolerance at (18, 25) is pi / 43 = 0.073 rad, below the phase noise of 6-step PSP at 18 dB "
             "(about 0.09 rad). " + (
                 "That is far denser than the sparse errors RPCA is built to separate (its guarantees, for "
                 "tau = 1 / sqrt(n), cover a few per cent of randomly placed errors)"
                 if fraction > 0.1 else "RPCA's sparse-error model still holds at this density")
-            + f"; the best correction here is {METHODS[best][0]} (NMSE_h {_fmt(scored[best])}).")
+            + f"; the best correction here is {METHODS[best_key][0]} (NMSE_h {_fmt(float(scored[best_key]))}).")
         add("")
 
     # Single shot

@@ -104,7 +104,7 @@ def _format(value: float, log: bool) -> str:
 
 
 def line_plot(
-    series: Sequence[tuple[str, Sequence[float], Sequence[float]]],
+    series: Sequence[tuple[str, Sequence[float] | np.ndarray, Sequence[float] | np.ndarray]],
     title: str,
     xlabel: str,
     ylabel: str,
