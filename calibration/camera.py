@@ -1,8 +1,11 @@
 """Camera intrinsics and lens distortion from views of a chessboard or ChArUco board (OpenCV).
 
 :func:`calibrate_camera` finds the board in every view, runs ``cv2.calibrateCamera`` and reports
-the RMS reprojection error overall and per view. :func:`undistort_stack` applies a calibration to
-captured frames. Coordinates follow OpenCV: pixel centres at integers, distortion in OpenCV's
+the RMS reprojection error overall and per view. Only corners the projector lights are trusted: a
+board view is taken under the projector's white (and its black, the room light alone); where the
+projector's footprint ends, the board sits at the ambient level and the corners there are biased
+or wrongly matched, so :func:`lit_corners` leaves them out. :func:`undistort_stack` applies a
+calibration to captured frames. Coordinates follow OpenCV: pixel centres at integers, distortion in OpenCV's
 order (k1, k2, p1, p2, k3[, ...]).
 """
 
@@ -21,6 +24,16 @@ log = logging.getLogger(__name__)
 
 #: Fewest usable views for a trustworthy camera calibration.
 MIN_VIEWS = 3
+#: Fewest lit corners for a view (or the board on the plane) to be used.
+MIN_CORNERS = 8
+#: Share of the board's bright level (white minus dark) from which the projector counts as lighting a pixel.
+LIT_FRACTION = 0.25
+#: A corner is trusted this many squares (its four squares and the refinement window) away from unlit pixels.
+LIT_MARGIN_SQUARES = 1.0
+#: Corners whose reprojection residual exceeds this many times the median residual (and OUTLIER_FLOOR_PX)
+#: are refitted without: a corner snapped to a wrong edge must not bend the lens model.
+OUTLIER_FACTOR = 5.0
+OUTLIER_FLOOR_PX = 0.25
 
 
 @dataclass(frozen=True)
@@ -83,6 +96,7 @@ class CameraCalibration:
     tvecs: tuple[np.ndarray, ...] = ()
     distortion_std: np.ndarray | None = None  # 1-sigma of the distortion coefficients (first fit)
     distortion_significant: bool = True       # False: no coefficient stood out of its noise, all set to 0
+    notes: tuple[str, ...] = ()               # views skipped, corners left out (unlit, outliers)
 
     def as_fields(self) -> dict:
         """calibration.json keys (capture-format.md: ``camera_matrix``, ``distortion``)."""
@@ -132,12 +146,67 @@ def detect_board(image: np.ndarray, board: BoardSpec, name: str = "view") -> Boa
     return BoardDetection(image_points.reshape(-1, 2).astype(np.float64), object_points.reshape(-1, 3).astype(np.float32))
 
 
+def projector_lit(white: np.ndarray, dark: np.ndarray | None, square_px: float) -> np.ndarray:
+    """Pixels of a board view the projector lights (bool), from the view under its white and its black.
+
+    ``white - dark`` is the projector's share of the light (``dark`` None: the white frame alone,
+    room light taken as weak); it is high on the board's white squares and the lit table, near 0
+    on unlit pixels and on black squares. Pixels above :data:`LIT_FRACTION` of the bright level
+    count as lit, and a closing a little wider than a square's diagonal fills the black squares
+    inside the lit area.
+    """
+    signal = np.asarray(white, dtype=np.float32)
+    if dark is not None:
+        signal = signal - np.asarray(dark, dtype=np.float32)
+    bright = float(np.percentile(signal, 99))
+    lit = (signal > LIT_FRACTION * bright).astype(np.uint8) if bright > 0 else np.zeros(signal.shape, np.uint8)
+    size = max(3, int(np.ceil(1.6 * square_px)) | 1)
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))
+    return cv2.morphologyEx(lit, cv2.MORPH_CLOSE, kernel, borderType=cv2.BORDER_REPLICATE).astype(bool)
+
+
+def lit_corners(found: BoardDetection, white: np.ndarray, dark: np.ndarray | None = None) -> np.ndarray:
+    """Which corners of ``found`` (bool, N) lie at least :data:`LIT_MARGIN_SQUARES` inside the lit area.
+
+    A corner next to the end of the projector's footprint is found on the illumination step or
+    matched to the wrong square; one whose squares are all lit is located as well as anywhere.
+    """
+    points = found.image_points
+    spacing = _corner_spacing(points)
+    lit = projector_lit(white, dark, spacing)
+    distance = cv2.distanceTransform(lit.astype(np.uint8), cv2.DIST_L2, 5)
+    cols = np.clip(np.rint(points[:, 0]).astype(int), 0, lit.shape[1] - 1)
+    rows = np.clip(np.rint(points[:, 1]).astype(int), 0, lit.shape[0] - 1)
+    return distance[rows, cols] >= LIT_MARGIN_SQUARES * spacing
+
+
+def _corner_spacing(points: np.ndarray) -> float:
+    """Typical distance (px) between a corner and its nearest neighbour."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    gaps = np.linalg.norm(pts[:, None, :] - pts[None, :, :], axis=2)
+    np.fill_diagonal(gaps, np.inf)
+    return float(np.median(gaps.min(axis=1)))
+
+
+def _reprojection_errors(
+    object_points: list[np.ndarray], image_points: list[np.ndarray], rvecs: Sequence[np.ndarray],
+    tvecs: Sequence[np.ndarray], matrix: np.ndarray, distortion: np.ndarray,
+) -> list[np.ndarray]:
+    """Per view, every corner's reprojection error (px)."""
+    errors = []
+    for obj, img, rvec, tvec in zip(object_points, image_points, rvecs, tvecs):
+        projected, _ = cv2.projectPoints(obj, rvec, tvec, matrix, distortion)
+        errors.append(np.linalg.norm((projected - img).reshape(-1, 2), axis=1))
+    return errors
+
+
 def calibrate_camera(
     views: Sequence[np.ndarray],
     board: BoardSpec,
     flags: int = 0,
     min_views: int = MIN_VIEWS,
     significance: float | None = 2.0,
+    darks: Sequence[np.ndarray | None] | None = None,
 ) -> CameraCalibration:
     """Intrinsics and distortion from views of a board (``cv2.calibrateCamera``).
 
@@ -154,18 +223,36 @@ def calibrate_camera(
         When no distortion coefficient differs from 0 by more than ``significance`` standard
         deviations (a narrow lens, few views), the camera is refitted without distortion, so that
         noise is not applied to every capture as a correction. None keeps the first fit.
+    darks : sequence of (H, W) images or None, optional
+        Each view under the projector's black (room light only), or None for a view without one.
+        When given, only corners the projector lights are used (:func:`lit_corners`); a view
+        with fewer than :data:`MIN_CORNERS` of them is skipped. Either way, corners whose
+        reprojection error stands out (:data:`OUTLIER_FACTOR`) are left out and the fit repeated.
     """
     if not views:
         raise CalibrationError("camera views: none given")
     shape = np.asarray(views[0]).shape
-    detections, used = [], []
+    if darks is not None and len(darks) != len(views):
+        raise CalibrationError(f"camera views: {len(views)} views but {len(darks)} dark frames")
+    detections, used, notes = [], [], []
     for index, view in enumerate(views):
         if np.asarray(view).shape != shape:
             raise CalibrationError(f"camera view {index}: size {np.asarray(view).shape} differs from view 0 {shape}")
         found = detect_board(view, board, name=f"camera view {index}")
         if found is None:
             log.warning("camera view %d: %s not found, skipped", index, board.kind)
+            notes.append(f"view {index}: {board.kind} not found, skipped")
             continue
+        if darks is not None:
+            keep = lit_corners(found, view, darks[index])
+            if keep.sum() < MIN_CORNERS:
+                notes.append(f"view {index}: {int(keep.sum())} of {keep.size} corners lit by the projector "
+                             f"(need {MIN_CORNERS}), skipped")
+                continue
+            if not keep.all():
+                notes.append(f"view {index}: {int((~keep).sum())} of {keep.size} corners near or beyond the "
+                             "projector's footprint left out")
+                found = BoardDetection(found.image_points[keep], found.object_points[keep])
         detections.append(found)
         used.append(index)
     if len(detections) < min_views:
@@ -173,11 +260,42 @@ def calibrate_camera(
             f"camera views: the {board.kind} was found in {len(detections)} of {len(views)} views, need at least {min_views}"
         )
     size = (int(shape[1]), int(shape[0]))
-    object_points = [d.object_points.astype(np.float32).reshape(-1, 1, 3) for d in detections]
-    image_points = [d.image_points.astype(np.float32).reshape(-1, 1, 2) for d in detections]
-    rms, matrix, distortion, rvecs, tvecs, std_intrinsics, _, _ = cv2.calibrateCameraExtended(
-        object_points, image_points, size, None, None, flags=flags
-    )
+    all_objects = [d.object_points.astype(np.float32).reshape(-1, 1, 3) for d in detections]
+    all_images = [d.image_points.astype(np.float32).reshape(-1, 1, 2) for d in detections]
+    # fit, then keep the corners within OUTLIER_FACTOR of the median residual under that fit, and
+    # refit until the set settles: a corner snapped to a wrong edge pulls its neighbours' residuals
+    # up under the first fit, so corners are judged again (and taken back) under each new one
+    inliers = [np.ones(len(obj), bool) for obj in all_objects]
+    for _ in range(4):
+        enough = [int(keep.sum()) >= MIN_CORNERS for keep in inliers]
+        views_in = [i for i, ok in enumerate(enough) if ok]
+        if len(views_in) < min_views:
+            raise CalibrationError(
+                f"camera views: {len(views_in)} of {len(views)} views fit one lens model, need at least {min_views}"
+            )
+        object_points = [all_objects[i][inliers[i]] for i in views_in]
+        image_points = [all_images[i][inliers[i]] for i in views_in]
+        rms, matrix, distortion, rvecs, tvecs, std_intrinsics, _, _ = cv2.calibrateCameraExtended(
+            object_points, image_points, size, None, None, flags=flags
+        )
+        errors = _reprojection_errors(
+            [all_objects[i] for i in views_in], [all_images[i] for i in views_in], rvecs, tvecs, matrix, distortion
+        )
+        limit = max(OUTLIER_FACTOR * float(np.median(np.concatenate([e[inliers[i]] for i, e in zip(views_in, errors)]))),
+                    OUTLIER_FLOOR_PX)
+        settled = [e <= limit for e in errors]
+        if all(np.array_equal(new, inliers[i]) for i, new in zip(views_in, settled)):
+            break
+        inliers = [np.zeros(len(obj), bool) for obj in all_objects]
+        for i, new in zip(views_in, settled):
+            inliers[i] = new
+    for i, keep in enumerate(inliers):
+        if i not in views_in:
+            notes.append(f"view {used[i]}: fewer than {MIN_CORNERS} corners fit the lens model, skipped")
+        elif not keep.all():
+            off = int((~keep).sum())
+            notes.append(f"view {used[i]}: {off} corner{'s' * (off != 1)} off the lens model by more than {limit:.2f} px left out")
+    used = [used[i] for i in views_in]
     distortion_std = np.asarray(std_intrinsics, dtype=np.float64).ravel()[4 : 4 + np.asarray(distortion).size]
     coefficients = np.asarray(distortion, dtype=np.float64).ravel()
     significant = True
@@ -190,10 +308,8 @@ def calibrate_camera(
             rms, matrix, distortion, rvecs, tvecs = cv2.calibrateCamera(
                 object_points, image_points, size, None, np.zeros(5), flags=flags | no_distortion
             )
-    per_view = []
-    for obj, img, rvec, tvec in zip(object_points, image_points, rvecs, tvecs):
-        projected, _ = cv2.projectPoints(obj, rvec, tvec, matrix, distortion)
-        per_view.append(float(np.sqrt(np.mean(np.sum((projected - img) ** 2, axis=2)))))
+    per_view = [float(np.sqrt(np.mean(e**2)))
+                for e in _reprojection_errors(object_points, image_points, rvecs, tvecs, matrix, distortion)]
     log.info("camera calibration: %d views, RMS reprojection error %.3f px", len(detections), rms)
     return CameraCalibration(
         camera_matrix=np.asarray(matrix, dtype=np.float64),
@@ -206,6 +322,7 @@ def calibrate_camera(
         tvecs=tuple(np.asarray(t).ravel() for t in tvecs),
         distortion_std=distortion_std,
         distortion_significant=significant,
+        notes=tuple(notes),
     )
 
 

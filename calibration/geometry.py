@@ -183,7 +183,9 @@ def fit_f0(
     )
 
 
-def pixel_mm_from_corners(corners_px: np.ndarray, pattern_size: tuple[int, int], square_mm: float) -> float:
+def pixel_mm_from_corners(
+    corners_px: np.ndarray, pattern_size: tuple[int, int], square_mm: float, keep: np.ndarray | None = None
+) -> float:
     """Size of one camera pixel on the plane from the inner corners of a chessboard lying on it.
 
     Parameters
@@ -194,6 +196,8 @@ def pixel_mm_from_corners(corners_px: np.ndarray, pattern_size: tuple[int, int],
         Inner corners per row and per column, as given to ``cv2.findChessboardCorners``.
     square_mm : float
         Side of one square.
+    keep : (N,) bool array, optional
+        Corners to trust (e.g. those the projector lights); steps between two kept neighbours only.
     """
     cols, rows = (int(v) for v in pattern_size)
     corners = np.asarray(corners_px, dtype=np.float64).reshape(-1, 2)
@@ -201,10 +205,13 @@ def pixel_mm_from_corners(corners_px: np.ndarray, pattern_size: tuple[int, int],
         raise CalibrationError(f"chessboard: expected {cols * rows} corners for {cols}x{rows}, found {corners.shape[0]}")
     if not square_mm > 0:
         raise CalibrationError(f"square_mm: expected > 0, found {square_mm}")
+    if keep is not None:
+        corners = np.where(np.asarray(keep, dtype=bool).reshape(-1, 1), corners, np.nan)
     grid = corners.reshape(rows, cols, 2)
     steps = np.concatenate(
         [np.linalg.norm(np.diff(grid, axis=1), axis=2).ravel(), np.linalg.norm(np.diff(grid, axis=0), axis=2).ravel()]
     )
+    steps = steps[np.isfinite(steps)]
     if steps.size == 0 or not np.all(steps > 0):
         raise CalibrationError("chessboard: corners coincide, cannot measure the pixel size")
     return float(square_mm / np.mean(steps))

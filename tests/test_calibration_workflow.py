@@ -70,12 +70,14 @@ def test_simulated_board_views_are_acquired_through_the_drivers(session):
     root, _ = session
     for name in ("plane", "view-01", "view-04"):
         capture = read_capture(root / "cal" / "board" / name)
-        assert capture.complete and capture.patterns == [{"kind": "flat", "level": 1.0}]
+        # under the projector's white, then its black (room light only: where the projector lights the board)
+        assert capture.complete and capture.patterns == [{"kind": "flat", "level": 1.0}, {"kind": "flat", "level": 0.0}]
         manifest = json.loads(capture.manifest_path.read_text())
         assert manifest["devices"]["camera"] == "simulated camera" and "simulation" in manifest
         image = capture.load_frame(0).astype(np.float64)
         # a printed board under white light: dark squares near the ambient floor, white ones near full scale
         assert np.percentile(image, 5) < 0.3 * np.percentile(image, 95)
+        assert capture.load_frame(1).mean() < 0.3 * image.mean()
 
 
 def test_scan_then_process_matches_the_virtual_scene(session, rig_text):

@@ -7,7 +7,9 @@ A calibration directory is also the record of the session that made it::
     CAL/reference/                the flat reference plane, with the scan's pattern set
     CAL/planes/plane-at-25mm/     the plane at each known height (scene label carries the height)
     CAL/board/plane/              a chessboard lying on the reference plane (pixel size on the plane)
-    CAL/board/view-01/ ...        more board views, tilted (camera intrinsics and distortion)
+    CAL/board/view-01/ ...        more board views, tilted (camera intrinsics and distortion); each
+                                  under the projector's white, then its black (room light only), so
+                                  that only the corners the projector lights are used
     CAL/gamma/                    flat levels 0 .. 1 (projector gamma); CAL/gamma-lut.npy its LUT
     CAL/stereo/pose-01/ ...       model "stereo": a board pose, white + fringes along x and y
 
@@ -33,10 +35,12 @@ import cv2
 import numpy as np
 
 from calibration.camera import (
+    MIN_CORNERS,
     BoardSpec,
     CameraCalibration,
     calibrate_camera,
     detect_board,
+    lit_corners,
     undistort_map,
     undistort_pixels,
 )
@@ -85,6 +89,9 @@ STEREO_DIR = "stereo"
 RIPPLE_COMPENSATION_RAD = 0.08
 PLANE_LABEL = re.compile(r"plane-at-(-?\d+(?:\.\d+)?)mm")
 MODELS = (REFERENCE_PLANE, POLYNOMIAL, STEREO)
+# A board view: under the projector's white (the board image), then its black (room light alone):
+# their difference shows where the projector lights the board, the only corners trusted.
+BOARD_PATTERNS = [{"kind": "flat", "level": 1.0}, {"kind": "flat", "level": 0.0}]
 
 
 def plane_label(height_mm: float) -> str:
@@ -185,7 +192,7 @@ def _frames_planned(config: RigConfig, plan: CalibrationPlan) -> int:
     if plan.model == STEREO:
         return plan.board_views * len(stereo_patterns(config)) + len(config.scan.patterns())
     frames = plan.gamma_levels + len(config.scan.patterns()) * (1 + len(plan.heights_mm))
-    return frames + (plan.board_views + 1 if plan.board is not None else 0)
+    return frames + (len(BOARD_PATTERNS) * (plan.board_views + 1) if plan.board is not None else 0)
 
 
 def acquire(
@@ -239,13 +246,12 @@ def _acquire_planes(session: _Acquisition, plan: CalibrationPlan) -> None:
         session.devices.projector.set_gamma_lut(lut)  # every later capture goes through the new LUT
     if plan.board is not None:
         (directory / BOARD_DIR).mkdir(exist_ok=True)
-        white = [{"kind": "flat", "level": 1.0}]
         for index in range(plan.board_views + 1):
             on_plane = index == 0
             step = "board flat on the reference plane" if on_plane else f"board view {index} of {plan.board_views}"
             session.setup(step, lambda hand: hand.board(index, on_plane))
             name, scene = ("plane", "board-on-reference") if on_plane else (f"view-{index:02d}", f"board-view-{index}")
-            session.capture(directory / BOARD_DIR / name, white, scene)
+            session.capture(directory / BOARD_DIR / name, BOARD_PATTERNS, scene)
     session.setup("reference plane", lambda hand: hand.plane(0.0))
     session.capture(directory / REFERENCE_DIR, patterns, "reference")
     (directory / PLANES_DIR).mkdir(exist_ok=True)
@@ -308,19 +314,47 @@ def _gamma_from(directory: Path) -> tuple[Any, np.ndarray]:
     return fit, inverse_lut(fit)
 
 
-def _board_images(directory: Path) -> tuple[np.ndarray | None, list[np.ndarray]]:
+@dataclass
+class BoardView:
+    """One stored board view: the image under the projector's white, and under its black (None
+    in sessions stored without it: the white frame alone then shows where the projector lights)."""
+
+    white: np.ndarray
+    dark: np.ndarray | None
+
+
+def _board_view(path: Path) -> BoardView:
+    capture = read_capture(path)
+    levels = [float(p.get("level", np.nan)) if p.get("kind") == "flat" else np.nan for p in capture.patterns]
+    if 1.0 not in levels:
+        raise CalibrationError(f"{capture.manifest_path}: a board view needs a white frame (flat level 1.0)")
+    dark = capture.load_frame(levels.index(0.0)) if 0.0 in levels else None
+    return BoardView(capture.load_frame(levels.index(1.0)), dark)
+
+
+def _board_images(directory: Path) -> tuple[BoardView | None, list[BoardView]]:
     """The board lying on the plane (or None) and the tilted views, from ``directory``'s captures."""
     on_plane = None
     views = []
     if not directory.is_dir():
         return None, []
     for sub in sorted(p for p in directory.iterdir() if (p / "capture.json").is_file()):
-        image = read_capture(sub).load_frame(0)
+        view = _board_view(sub)
         if sub.name == "plane":
-            on_plane = image
+            on_plane = view
         else:
-            views.append(image)
+            views.append(view)
     return on_plane, views
+
+
+def _board_note(note: str, first: int) -> str:
+    """A camera calibration note with its view index replaced by the stored view's name."""
+    match = re.match(r"view (\d+): ", note)
+    if not match:
+        return note
+    index = int(match.group(1)) + first
+    name = "board on the plane" if index == 0 else f"board view {index}"
+    return name + note[match.end() - 2:]
 
 
 def _planes(directory: Path) -> list[tuple[float, Path]]:
@@ -389,25 +423,35 @@ def compute(
         all_views = ([on_plane] if on_plane is not None else []) + views
         if len(views) >= 2:
             # k3 stays 0: a few views of a narrow-angle lens cannot tell it from k1, k2
-            camera = calibrate_camera(all_views, plan.board, flags=cv2.CALIB_FIX_K3)
+            camera = calibrate_camera([v.white for v in all_views], plan.board, flags=cv2.CALIB_FIX_K3,
+                                      darks=[v.dark for v in all_views])
             extra.update(camera.as_fields())
             lines.append(
                 f"camera: {len(camera.views_used)} views, reprojection RMS {camera.rms_px:.3f} px"
                 + ("" if camera.distortion_significant else ", no significant lens distortion")
             )
+            first = 0 if on_plane is not None else 1  # calibrate_camera's view 0 is the board on the plane
+            lines.extend("  " + _board_note(note, first) for note in camera.notes)
         if pixel_mm is None:
             if on_plane is None:
                 raise CalibrationError(f"{directory / BOARD_DIR / 'plane'}: missing (the board lying on the reference plane)")
             if plan.board.kind != "chessboard":
                 raise CalibrationError("pixel size: measure it with a chessboard (or give --pixel-mm)")
-            found = detect_board(on_plane, plan.board, name="board on the reference plane")
+            found = detect_board(on_plane.white, plan.board, name="board on the reference plane")
             if found is None:
                 raise CalibrationError(f"{directory / BOARD_DIR / 'plane'}: the {plan.board.kind} was not found")
+            lit = lit_corners(found, on_plane.white, on_plane.dark)
+            if lit.sum() < MIN_CORNERS:
+                raise CalibrationError(
+                    f"{directory / BOARD_DIR / 'plane'}: {int(lit.sum())} of {lit.size} board corners lit by the projector, "
+                    f"need {MIN_CORNERS}; lay the board inside the projected area"
+                )
             corners = found.image_points
             if camera is not None and camera.distortion_significant:
                 corners = undistort_pixels(corners, camera.camera_matrix, camera.distortion)
-            pixel_mm = pixel_mm_from_corners(corners, plan.board.inner_corners, plan.board.square_mm)
-            lines.append(f"pixel size on the plane {pixel_mm:.5f} mm (from the {plan.board.kind})")
+            pixel_mm = pixel_mm_from_corners(corners, plan.board.inner_corners, plan.board.square_mm, keep=lit)
+            used = "" if lit.all() else f", {int(lit.sum())} of {lit.size} corners lit by the projector"
+            lines.append(f"pixel size on the plane {pixel_mm:.5f} mm (from the {plan.board.kind}{used})")
     if pixel_mm is None:
         raise CalibrationError("pixel size: no board on the plane and no --pixel-mm")
     # `rig process` undistorts the frames of scans and reference alike: fit on the same geometry
