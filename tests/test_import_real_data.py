@@ -128,6 +128,34 @@ def test_file_count_mismatch_is_one_line_via_cli(tmp_path, capsys) -> None:
     assert not (tmp_path / "cap").exists()
 
 
+def test_a_path_that_does_not_exist_is_named_so(tmp_path, capsys) -> None:
+    missing = tmp_path / "no-such-folder"
+    code = main(["import", str(missing), "--patterns", "sin:f=4,steps=4", "-o", str(tmp_path / "cap")])
+    err = capsys.readouterr().err
+    assert code == 1 and len(err.strip().splitlines()) == 1
+    assert f"{missing}: does not exist" in err and "not a folder of images" not in err
+    assert not (tmp_path / "cap").exists()
+
+
+def test_a_parent_folder_points_at_the_subfolders_with_images(tmp_path, capsys) -> None:
+    _fringe_folder(tmp_path)  # tmp_path/theirs/ holds the images, tmp_path itself none
+    (tmp_path / "notes").mkdir()
+    (tmp_path / "notes" / "readme.txt").write_text("no images here")
+    code = main(["import", str(tmp_path), "--patterns", "sin:f=4,steps=4", "-o", str(tmp_path / "cap")])
+    err = capsys.readouterr().err
+    assert code == 1 and len(err.strip().splitlines()) == 1
+    assert "found no images" in err and "subfolders hold images: theirs/ (4 images)" in err and "notes" not in err
+    assert not (tmp_path / "cap").exists()
+
+
+@needs_real_data
+def test_the_eyes_parent_folder_points_at_l(tmp_path, capsys) -> None:
+    code = main(["import", str(REAL_DATA / "slmaster-eye"), "--patterns", "sin:f=32,steps=12,phase=pi; gray:bits=6",
+                 "-o", str(tmp_path / "eye")])
+    err = capsys.readouterr().err
+    assert code == 1 and "subfolders hold images: L/ (18 images)" in err
+
+
 def test_images_of_different_sizes_are_refused(tmp_path) -> None:
     folder = _fringe_folder(tmp_path)
     cv2.imwrite(str(folder / "20.png"), np.zeros((40, 64), np.uint8))

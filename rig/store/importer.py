@@ -222,9 +222,11 @@ def natural_key(name: str) -> list[Any]:
 
 def list_images(folder: Path, glob: str | None = None, order: str = "natural") -> list[Path]:
     """Image files of ``folder`` (optionally matching ``glob``) in ``order``: natural, name or mtime."""
+    if not folder.exists():
+        raise ConfigError(f"{folder}: does not exist; expected the folder that holds the fringe images")
     if not folder.is_dir():
-        raise ConfigError(f"{folder}: not a folder of images")
-    files = [p for p in folder.glob(glob or "*") if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES]
+        raise ConfigError(f"{folder}: is a file, not a folder; give the folder that holds the fringe images")
+    files = _images_in(folder, glob)
     if order == "natural":
         files.sort(key=lambda p: natural_key(p.name))
     elif order == "name":
@@ -234,6 +236,21 @@ def list_images(folder: Path, glob: str | None = None, order: str = "natural") -
     else:
         raise ConfigError(f"--order: expected natural, name or mtime, found {order!r}")
     return files
+
+
+def _images_in(folder: Path, glob: str | None = None) -> list[Path]:
+    return [p for p in folder.glob(glob or "*") if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES]
+
+
+def image_subfolders(folder: Path, glob: str | None = None) -> str:
+    """The subfolders of ``folder`` holding images, as ``L/ (18 images), R/ (18 images)`` ('' if none):
+    a user who names a data set's parent folder is pointed at the folders to import."""
+    found = []
+    for sub in sorted((p for p in folder.iterdir() if p.is_dir()), key=lambda p: natural_key(p.name)):
+        count = len(_images_in(sub, glob))
+        if count:
+            found.append(f"{sub.name}/ ({count} image{'s' * (count != 1)})")
+    return ", ".join(found)
 
 
 @dataclass
@@ -317,6 +334,13 @@ def import_folder(folder: str | os.PathLike[str], spec: str, output: str | os.Pa
             raise ConfigError(f"{folder}: files listed in the pattern file are missing: {', '.join(missing[:5])}")
     else:
         files = list_images(folder, options.glob, options.order)
+    if not files and listed is None:
+        matching = f" matching {options.glob!r}" if options.glob else ""
+        subfolders = image_subfolders(folder, options.glob)
+        raise ConfigError(
+            f"{folder}: found no images{matching} ({', '.join(IMAGE_SUFFIXES)})"
+            + (f"; its subfolders hold images: {subfolders}; import one of them" if subfolders else "")
+        )
     if len(files) != len(entries):
         kept = sum(e is not None for e in entries)
         raise ConfigError(
