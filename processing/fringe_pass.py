@@ -126,9 +126,11 @@ class FringePass:
         ``valid``; None without a method.
     orders : int32 map or None
         Fringe orders of ``phase_frequency`` (wrapped phase taken in [0, 2 pi)).
-    valid : bool map
+    modulated : bool map
         Lit and modulated in every group (:func:`processing.phase_shift.shadow_mask`'s test with
-        ``thresholds``) and, with a method, consistent for it (see processing.temporal).
+        ``thresholds``).
+    valid : bool map
+        ``modulated`` and, with a method, consistent for it (see processing.temporal).
     kept : list of int
         Groups whose ``wrapped``, ``modulation`` and ``background`` maps were kept (in order).
     wrapped, modulation, background : lists of float32 maps, one per kept group
@@ -143,6 +145,7 @@ class FringePass:
     method: str | None
     phase: np.ndarray | None
     orders: np.ndarray | None
+    modulated: np.ndarray
     valid: np.ndarray
     kept: list[int]
     wrapped: list[np.ndarray]
@@ -314,6 +317,7 @@ def fringe_pass(
         method=method,
         phase=None if out.phase is None else out.phase.reshape(shape),
         orders=None if out.orders is None else out.orders.reshape(shape),
+        modulated=out.valid.reshape(shape) if out.modulated is None else out.modulated.reshape(shape),
         valid=out.valid.reshape(shape),
         kept=kept,
         wrapped=[m.reshape(shape) for m in out.wrapped],
@@ -353,6 +357,7 @@ class _Outputs:
     phase: np.ndarray | None
     orders: np.ndarray | None
     valid: np.ndarray
+    modulated: np.ndarray | None  # the mask before the method's test (None: the same as valid)
     wrapped: list[np.ndarray]
     modulation: list[np.ndarray]
     background: list[np.ndarray]
@@ -368,6 +373,7 @@ class _Outputs:
             phase=rows.pop() if unwrapping else None,
             orders=np.empty(pixels, dtype=np.int32) if unwrapping else None,
             valid=np.empty(pixels, dtype=bool),
+            modulated=np.empty(pixels, dtype=bool) if unwrapping else None,
             wrapped=rows[:kept],
             modulation=rows[kept : 2 * kept],
             background=rows[2 * kept :],
@@ -419,7 +425,8 @@ class _Plan:
                 valid &= scratch.test
         if self.kernel is None:
             return
-        assert out.phase is not None and out.orders is not None
+        assert out.phase is not None and out.orders is not None and out.modulated is not None
+        np.copyto(out.modulated[window], valid)
         phase, orders = out.phase[window], out.orders[window]
         if self.tables is not None:
             self._ding_opencv(angles[self.used[0]], angles[self.used[1]], phase, orders, valid, scratch)

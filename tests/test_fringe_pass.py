@@ -88,7 +88,7 @@ def _stage_functions(stack, groups, frequencies, method, min_ratio=0.2):
         unwrapped = unwrap_hierarchical(phis, ints)
     else:
         unwrapped = unwrap_heterodyne(phis, ints)
-    return results, valid & unwrapped.valid, unwrapped
+    return results, valid, unwrapped
 
 
 CASES = [
@@ -107,12 +107,15 @@ def test_matches_stage_functions_and_truth(method: str, frequencies: list[int], 
     frequencies = sorted(frequencies)
     stack, groups, mapping, geometry = _scan(frequencies, steps=4 if method != "two-frequency" else 6)
     fused = fringe_pass(stack, groups, frequencies, method, opencv=opencv)
-    separate, valid, unwrapped = _stage_functions(stack, groups, frequencies, method)
+    separate, modulated, unwrapped = _stage_functions(stack, groups, frequencies, method)
+    valid = modulated & unwrapped.valid
     top = frequencies[-1]
     assert fused.phase_frequency == top
     assert fused.phase.dtype == np.float32 and fused.orders.dtype == np.int32
     # The mask: the same test with float32 modulation; at most a pixel or two sits on a threshold.
     assert np.mean(fused.valid != valid) < 1e-3
+    assert not (fused.valid & ~fused.modulated).any()
+    assert np.mean(fused.modulated != modulated) < 1e-3
     both = fused.valid & valid & mapping.lit
     assert both.mean() > 0.9
     np.testing.assert_array_equal(fused.orders[both], unwrapped.orders[both])
@@ -153,7 +156,8 @@ def test_large_image_uses_several_blocks_and_thread_ranges_cover_it() -> None:
     stack, groups, _, _ = _scan([7, 8])
     tall = np.concatenate([stack] * 3, axis=1)  # 360 x 160 = 57600 pixels: 3 full blocks and a partial one
     fused = fringe_pass(tall, groups, [7, 8], "two-frequency", threads=2)
-    _, valid, unwrapped = _stage_functions(tall, groups, [7, 8], "two-frequency")
+    _, modulated, unwrapped = _stage_functions(tall, groups, [7, 8], "two-frequency")
+    valid = modulated & unwrapped.valid
     both = fused.valid & valid
     np.testing.assert_array_equal(fused.orders[both], unwrapped.orders[both])
     assert np.mean(fused.valid != valid) < 1e-3
@@ -169,6 +173,7 @@ def test_arbitrary_shifts_interleaved_frames_and_keep_all() -> None:
     stack[0::2], stack[1::2] = frames, frames
     fused = fringe_pass(stack, [[0, 2, 4, 6, 8], [1, 3, 5, 7, 9]], [3, 3], None, shifts=[shifts, shifts], keep_all=True)
     assert fused.phase is None and fused.orders is None and fused.kept == [0, 1]
+    np.testing.assert_array_equal(fused.modulated, fused.valid)
     for wrapped in fused.wrapped:
         assert _circular_gap(wrapped, phi).max() <= ANGLE_TOLERANCE
     np.testing.assert_allclose(fused.modulation[1], 80.0, rtol=1e-5)

@@ -102,7 +102,8 @@ def run(args: argparse.Namespace) -> int:
     check_output_directory(out)  # an unwritable output fails now, not after the computation
     steps = total_steps(args.calibration is not None) + 1
     with Progress(f"process {args.capture}", total=steps, quiet=args.quiet) as progress:
-        result = process(args.capture, args.calibration, options, progress=progress, salvage=args.salvage)
+        result = process(args.capture, args.calibration, options, progress=progress, salvage=args.salvage,
+                         reference_cache_to_disk=True)
         report = write_outputs(result, out)
         progress.step("outputs")
     if args.json:

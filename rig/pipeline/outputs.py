@@ -164,6 +164,17 @@ def _texture(state: SceneState) -> np.ndarray | None:
     return np.clip(background / top * 255.0, 0, 255).astype(np.uint8)
 
 
+def _wrapped_maps(state: SceneState) -> np.ndarray:
+    """wrapped.npy: (F, H, W) float64 wrapped phase of each frequency in [-pi, pi)."""
+    assert state.wrapped is not None
+    maps = [m for m in state.wrapped.phase if m is not None]
+    if not maps:
+        return np.empty((0, *state.capture.shape))
+    wrapped = np.stack(maps).astype(np.float64)
+    wrapped[wrapped >= np.pi] -= 2.0 * np.pi  # the fused pass keeps [0, 2 pi)
+    return wrapped
+
+
 OUTPUT_FILES = ("height.npy", "phase.npy", "mask.npy", "wrapped.npy", "points.ply", "report.json", "preview.png")
 
 
@@ -244,8 +255,7 @@ def _write_files(result: ProcessResult, out: Path, t0: float) -> dict[str, Any]:
     files["phase"] = write_array(out / "phase.npy", phase.astype(np.float64)).name
     files["mask"] = write_array(out / "mask.npy", result.mask.astype(bool)).name
     if result.height is None:
-        wrapped = np.stack(obj.wrapped.phase) if obj.wrapped.phase else np.empty((0, *obj.capture.shape))
-        files["wrapped"] = write_array(out / "wrapped.npy", wrapped).name
+        files["wrapped"] = write_array(out / "wrapped.npy", _wrapped_maps(obj)).name
         low, high = write_preview(out / "preview.png", phase, "rad", "absolute phase" if obj.unwrapped.absolute else "phase")
         report["preview"] = {"shows": "phase", "unit": "rad", "range": [low, high]}
     else:

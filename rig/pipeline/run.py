@@ -16,6 +16,7 @@ from calibration.errors import CalibrationError
 from calibration.store import Calibration, read_calibration
 from rig.blas import rpca_blas
 from rig.errors import ProcessingError
+from rig.pipeline import reference_cache
 from rig.pipeline.fit import check_fit
 from rig.pipeline.corrections import REGISTRY as CORRECTIONS
 from rig.pipeline.outputs import write_outputs
@@ -125,11 +126,14 @@ def process(
     options: ProcessOptions | None = None,
     progress: Any = None,
     salvage: bool = False,
+    reference_cache_to_disk: bool = False,
 ) -> ProcessResult:
     """Run the stages on a capture and, with a calibration, on its reference plane; compute heights.
 
     ``progress`` (a :class:`rig.events.Reporter` or the CLI's :class:`rig.progress.Progress`) gets
     ``begin(total)`` and one ``step`` per stage; a cancelled reporter stops the run between stages.
+    The processed reference plane is reused from :mod:`rig.pipeline.reference_cache` (memory, and
+    the calibration directory's cache, which ``reference_cache_to_disk`` also writes).
     """
     options = ProcessOptions() if options is None else options
     _check_options(options)
@@ -150,6 +154,16 @@ def process(
     if progress is not None:
         progress.begin(total_steps(ref is not None))
     for state in ([ref] if ref is not None else []) + [obj]:
+        key = None
+        if state is ref and reference_cache.cacheable(state):
+            t0 = time.perf_counter()
+            key = reference_cache.cache_key(state, options)
+            if reference_cache.load(state, key, from_disk=True):
+                state.timings["cached"] = time.perf_counter() - t0
+                if progress is not None:
+                    for name, _ in SCENE_STAGES:
+                        progress.step(f"{state.name}: {name} (cached)")
+                continue
         for name, stage in SCENE_STAGES:
             t0 = time.perf_counter()
             try:
@@ -161,6 +175,8 @@ def process(
             if progress is not None:
                 progress.step(f"{state.name}: {name}")
         state.frames = None  # the frames are not needed any more; free them early
+        if key is not None:
+            reference_cache.store(state, key, to_disk=reference_cache_to_disk)
     notes: list[str] = []
     assert obj.unwrapped is not None
     height = points = None
@@ -236,6 +252,7 @@ def process_capture(
     progress: Any = None,
     salvage: bool = False,
 ) -> dict[str, Any]:
-    """:func:`process` then :func:`write_outputs`; returns the report."""
-    result = process(capture_path, calibration_path, options, progress=progress, salvage=salvage)
+    """:func:`process` (caching the processed reference in the calibration directory) then :func:`write_outputs`."""
+    result = process(capture_path, calibration_path, options, progress=progress, salvage=salvage,
+                     reference_cache_to_disk=True)
     return write_outputs(result, out_dir)

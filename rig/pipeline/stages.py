@@ -33,12 +33,17 @@ log = logging.getLogger(__name__)
 
 @dataclass
 class WrappedPhase:
-    """Wrapped phase per frequency (in [-pi, pi)), with the modulation and background of each."""
+    """Wrapped phase per frequency (any 2 pi representation), with the modulation and background of each.
+
+    The fused pass keeps these maps only for the highest frequency (what height, texture and
+    corrections read) unless the capture has no calibration (wrapped.npy has them all); the
+    other entries are then None.
+    """
 
     frequencies: list[float]
-    phase: list[np.ndarray]
-    modulation: list[np.ndarray]
-    background: list[np.ndarray]
+    phase: list[np.ndarray | None]
+    modulation: list[np.ndarray | None]
+    background: list[np.ndarray | None]
     valid: np.ndarray
 
 
@@ -153,12 +158,19 @@ def stage_denoise(state: SceneState, options: ProcessOptions) -> None:
 
 
 def stage_wrapped(state: SceneState, options: ProcessOptions) -> None:
-    """Wrapped phase of every sinusoid group along the fringe axis, and the valid-pixel mask."""
-    from processing.phase_shift import phase_shift, shadow_mask
+    """Wrapped phase of every sinusoid group along the fringe axis, and the valid-pixel mask.
 
+    With phase-shifting groups only and a temporal unwrapping method (the default path), the
+    fused float32 pass (:mod:`processing.fringe_pass`) also unwraps, in the same visit of the
+    frames; the unwrap stage then has nothing left to do.
+    """
     if state.groups.single_shot:
         return  # the single-shot handler computes its own phase in the unwrap stage
     assert state.frames is not None
+    if _fused_pass(state, options):
+        return
+    from processing.phase_shift import phase_shift, shadow_mask
+
     frames = state.frames
     out = WrappedPhase([], [], [], [], np.ones(state.capture.shape, dtype=bool))
     for group in state.groups.along(state.axis):
@@ -181,6 +193,54 @@ def stage_wrapped(state: SceneState, options: ProcessOptions) -> None:
     other = sorted({g.frequency for g in state.groups.sinusoids if g.axis != state.axis})
     if other:
         state.notes.append(f"sinusoids along the other axis (frequencies {other}) not used; choose them with --axis")
+
+
+def _fused_pass(state: SceneState, options: ProcessOptions) -> bool:
+    """Wrapped phases, mask and temporal unwrapping in one pass, when the capture allows it; False if not."""
+    from processing.temporal import TEMPORAL_METHODS
+
+    along = state.groups.along(state.axis)
+    if not along or any(group.steps < 3 for group in along):
+        return False
+    try:
+        method = options.unwrap if options.unwrap != "auto" else choose_unwrap(state.groups, state.axis)
+    except ProcessingError:
+        return False  # the unwrap stage reports it
+    freqs = [group.frequency for group in along]
+    if method not in TEMPORAL_METHODS or not _all_integers(freqs) or len(freqs) < _FREQUENCIES_NEEDED[method]:
+        return False
+    from processing.fringe_pass import fringe_pass
+
+    extra = {"max_residual": float(options.params["max_residual"])} if "max_residual" in options.params else {}
+    assert state.frames is not None
+    try:
+        scan = fringe_pass(
+            state.frames, [group.indices for group in along], freqs, method,
+            shifts=[np.asarray(group.shifts) for group in along], min_ratio=options.min_modulation_ratio,
+            keep_all=state.calibration is None, **extra,
+        )
+    except ValueError:
+        return False  # e.g. frequencies the method refuses: the stage-by-stage path reports it as before
+    maps = {index: slot for slot, index in enumerate(scan.kept)}
+
+    def kept(values: list[np.ndarray]) -> list[np.ndarray | None]:
+        return [values[maps[i]] if i in maps else None for i in range(len(freqs))]
+
+    state.wrapped = WrappedPhase(freqs, kept(scan.wrapped), kept(scan.modulation), kept(scan.background), scan.modulated)
+    assert scan.phase is not None
+    state.unwrapped = UnwrappedPhase(
+        phase=scan.phase, valid=scan.valid, frequency=freqs[-1], method=method, absolute=True, orders=scan.orders
+    )
+    state.info["valid_after_modulation"] = float(scan.modulated.mean())
+    state.info["fused_pass"] = "phase shifting, modulation mask and unwrapping in one float32 pass"
+    other = sorted({g.frequency for g in state.groups.sinusoids if g.axis != state.axis})
+    if other:
+        state.notes.append(f"sinusoids along the other axis (frequencies {other}) not used; choose them with --axis")
+    return True
+
+
+# Frequencies each temporal method needs (it takes the highest when more are captured).
+_FREQUENCIES_NEEDED = {"two-frequency": 2, "three-frequency": 3, "heterodyne": 2, "hierarchical": 2}
 
 
 def _ftp_frame(image: np.ndarray, axis: str, shift: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -376,11 +436,13 @@ def stage_unwrap(state: SceneState, options: ProcessOptions) -> None:
     if state.groups.single_shot:
         SINGLE_SHOT[state.groups.single_shot[0].kind](state, options)
         return
+    if state.unwrapped is not None:
+        return  # unwrapped by the fused pass of the wrapped stage
     wrapped = state.wrapped
     assert wrapped is not None
     method = options.unwrap if options.unwrap != "auto" else choose_unwrap(state.groups, state.axis)
     freqs, phis = wrapped.frequencies, wrapped.phase
-    need = {"two-frequency": 2, "three-frequency": 3, "heterodyne": 2, "hierarchical": 2}.get(method, 1)
+    need = _FREQUENCIES_NEEDED.get(method, 1)
     if len(freqs) < need:
         raise ProcessingError(f"--unwrap {method}: needs at least {need} sinusoid frequencies, the capture has {freqs}")
     absolute = True

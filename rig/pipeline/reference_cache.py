@@ -1,0 +1,194 @@
+"""The calibration's reference plane, processed once and reused by every scan it serves.
+
+A reference-plane or polynomial calibration subtracts the reference capture's absolute phase from
+each object's. That capture never changes between scans, yet every ``rig process`` used to load,
+phase, unwrap and correct it again (1.5 s of 3.5 s with the ``auto`` correction). Its processed
+phase and mask are kept:
+
+- in memory, for a long-running process (the console, a batch worker): the last few entries;
+- on disk, inside the calibration directory (``CAL/cache/reference-<key>.npz``), written
+  atomically (temporary file, fsync, rename) by ``rig process`` and ``rig scan --process``
+  (:func:`rig.pipeline.run.process_capture`), read by every run; a calibration directory that
+  cannot be written to just goes without (a log line says so). In-memory processing
+  (:func:`rig.api.process`) writes no file.
+
+The key is a SHA-256 of everything the result depends on: this cache's format, the program
+version, the reference capture's manifest (its frames' checksums, patterns and camera) and the
+size and modification time of each frame file, the calibration directory's files (calibration.json
+and any table beside it) and the processing options. Recapturing the reference, recalibrating or
+choosing another option misses the cache, and writing a new entry removes the stale ones.
+Single-shot references (which keep more than a phase) are not cached.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import os
+import tempfile
+from collections import OrderedDict
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rig import __version__
+from rig.pipeline.plan import ProcessOptions
+from rig.pipeline.stages import SceneState, UnwrappedPhase
+
+log = logging.getLogger(__name__)
+
+FORMAT = 1
+DIRECTORY = "cache"
+PREFIX = "reference-"
+_MEMORY: OrderedDict[str, dict[str, Any]] = OrderedDict()
+_MEMORY_ENTRIES = 4
+
+
+def cacheable(state: SceneState) -> bool:
+    """Whether the reference ``state`` can be cached (a phase-shifting capture in a calibration directory)."""
+    return not state.groups.single_shot and state.calibration is not None and state.calibration.path is not None
+
+
+def _stats(paths: list[Path]) -> list[list[Any]]:
+    out: list[list[Any]] = []
+    for path in paths:
+        try:
+            info = path.stat()
+        except OSError:
+            out.append([path.name, None])
+            continue
+        out.append([path.name, info.st_size, info.st_mtime_ns])
+    return out
+
+
+def cache_key(state: SceneState, options: ProcessOptions) -> str:
+    """Hex SHA-256 of what the processed reference depends on (see the module docstring)."""
+    calibration = state.calibration
+    assert calibration is not None and calibration.path is not None
+    capture = state.capture
+    cal_files = sorted(p for p in calibration.path.iterdir() if p.is_file())
+    frames = [capture.frame_path(frame) for frame in capture.frames]
+    content = {
+        "format": FORMAT,
+        "program": __version__,
+        "reference_manifest": capture.manifest,
+        "reference_frames": _stats(frames),
+        "calibration": calibration.to_dict(),
+        "calibration_files": _stats(cal_files),
+        "options": asdict(options),
+        "axis": state.axis,
+    }
+    text = json.dumps(content, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+def _cache_dir(state: SceneState) -> Path:
+    assert state.calibration is not None and state.calibration.path is not None
+    return state.calibration.path / DIRECTORY
+
+
+def load(state: SceneState, key: str, from_disk: bool = True) -> bool:
+    """Fill ``state`` (unwrapped phase, info, notes) from memory or the calibration's cache; False on a miss."""
+    entry = _MEMORY.get(key)
+    if entry is None:
+        if not from_disk:
+            return False
+        entry = _read(_cache_dir(state) / f"{PREFIX}{key[:32]}.npz", key)
+        if entry is None:
+            return False
+        _remember(key, entry)
+    else:
+        _MEMORY.move_to_end(key)
+    meta = entry["meta"]
+    state.unwrapped = UnwrappedPhase(
+        phase=entry["phase"], valid=entry["valid"], frequency=meta["frequency"], method=meta["method"],
+        absolute=meta["absolute"], orders=None,
+    )
+    state.info = {**meta["info"], "cached": True}
+    state.notes = list(meta["notes"])
+    state.timings = {"cached": 0.0}
+    return True
+
+
+def _read(path: Path, key: str) -> dict[str, Any] | None:
+    if path.is_symlink() or not path.is_file():
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            meta = json.loads(str(data["meta"]))
+            if meta.get("key") != key:
+                return None
+            entry = {"phase": data["phase"], "valid": data["valid"], "meta": meta}
+    except (OSError, ValueError, KeyError) as exc:
+        log.info("reference cache %s unreadable (%s); processing the reference again", path, exc)
+        return None
+    for name in ("phase", "valid"):
+        entry[name].flags.writeable = False  # shared between runs: nobody may change it in place
+    return entry
+
+
+def store(state: SceneState, key: str, to_disk: bool = True) -> None:
+    """Keep the processed reference in memory and, with ``to_disk`` when the directory allows it, on disk."""
+    unwrapped = state.unwrapped
+    assert unwrapped is not None
+    meta = {
+        "key": key, "frequency": unwrapped.frequency, "method": unwrapped.method, "absolute": unwrapped.absolute,
+        "info": state.info, "notes": state.notes,
+    }
+    try:
+        meta_text = json.dumps(meta, default=_json_default)
+    except TypeError:
+        return  # a stage recorded something JSON cannot hold: do not cache what we could not reload
+    phase, valid = np.array(unwrapped.phase), np.array(unwrapped.valid, dtype=bool)
+    for arr in (phase, valid):
+        arr.flags.writeable = False
+    _remember(key, {"phase": phase, "valid": valid, "meta": json.loads(meta_text)})
+    if not to_disk:
+        return
+    directory = _cache_dir(state)
+    try:
+        _write_atomic(directory, f"{PREFIX}{key[:32]}.npz", phase, valid, meta_text)
+    except OSError as exc:
+        log.info("reference cache not written in %s (%s); the reference is processed again next time", directory, exc)
+
+
+def _write_atomic(directory: Path, name: str, phase: np.ndarray, valid: np.ndarray, meta_text: str) -> None:
+    if directory.is_symlink():
+        raise OSError(f"{directory} is a link; not writing through it")
+    directory.mkdir(exist_ok=True)
+    handle, temp = tempfile.mkstemp(prefix=".tmp-", suffix=".npz", dir=directory)
+    try:
+        with os.fdopen(handle, "wb") as out:
+            np.savez(out, phase=phase, valid=valid, meta=np.array(meta_text))
+            out.flush()
+            os.fsync(out.fileno())
+        os.replace(temp, directory / name)
+    except BaseException:
+        Path(temp).unlink(missing_ok=True)
+        raise
+    for stale in directory.glob(f"{PREFIX}*.npz"):
+        if stale.name != name and not stale.is_symlink():
+            stale.unlink(missing_ok=True)
+
+
+def _remember(key: str, entry: dict[str, Any]) -> None:
+    _MEMORY[key] = entry
+    _MEMORY.move_to_end(key)
+    while len(_MEMORY) > _MEMORY_ENTRIES:
+        _MEMORY.popitem(last=False)
+
+
+def forget() -> None:
+    """Empty the in-memory cache (the files in calibration directories stay)."""
+    _MEMORY.clear()
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, Path):
+        return str(value)
+    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
