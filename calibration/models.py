@@ -86,11 +86,12 @@ def units_problem(calibration: CalibrationLike) -> str | None:
 def _delta(object_phase: np.ndarray, reference_phase: np.ndarray | None, calibration: CalibrationLike) -> np.ndarray:
     if reference_phase is None:
         raise CalibrationError(f"{calibration.where}: model {calibration.model!r} needs the reference-plane phase")
-    obj = np.asarray(object_phase, dtype=np.float64)
-    ref = np.asarray(reference_phase, dtype=np.float64)
+    obj, ref = np.asarray(object_phase), np.asarray(reference_phase)
     if obj.shape != ref.shape:
         raise CalibrationError(f"reference phase: shape {ref.shape} differs from the object's {obj.shape}")
-    return obj - ref
+    if obj.dtype == ref.dtype == np.float32:
+        return obj - ref  # the fused pass's phases: float32 keeps 1e-5 rad at 2 pi 64, far below their noise
+    return obj.astype(np.float64, copy=False) - ref.astype(np.float64, copy=False)
 
 
 def stereo_model(calibration: CalibrationLike) -> StereoModel:
@@ -127,7 +128,9 @@ def height_from_phase(
         delta = _delta(object_phase, reference_phase, calibration)
         assert calibration.l0_mm is not None and calibration.d0_mm is not None  # checked when read
         with np.errstate(invalid="ignore", divide="ignore"):
-            return phase_to_height(delta, calibration.l0_mm, calibration.d0_mm, calibration.per_mm(frequency))
+            return phase_to_height(
+                delta, calibration.l0_mm, calibration.d0_mm, calibration.per_mm(frequency), dtype=delta.dtype.type
+            )
     if calibration.model == POLYNOMIAL:
         polynomial = load_polynomial(calibration.to_dict(), getattr(calibration, "path", None), calibration.where)
         return polynomial.height(_delta(object_phase, reference_phase, calibration), frequency)
@@ -154,13 +157,51 @@ def points_from_phase(
         points = triangulate(model, object_phase, frequency, axis=axis, extent=extent)
         return points, model.heights(points)
     height = height_from_phase(calibration, object_phase, reference_phase, frequency)
+    points = plane_points(calibration, height).reshape(*height.shape, 3)
+    return np.where(np.isfinite(height)[..., None], points, np.nan), height
+
+
+def plane_points_finite(calibration: CalibrationLike, height: np.ndarray) -> np.ndarray:
+    """Where :func:`plane_points` of ``height`` is finite in float32: the height and both lateral coordinates."""
+    h = np.asarray(height)
     pixel = calibration.pixel_mm
     if pixel is None:
         raise CalibrationError(f"{calibration.where}: pixel_mm: missing (needed for lateral point coordinates)")
-    rows, cols = np.indices(height.shape, dtype=np.float64)
-    cx, cy = (height.shape[1] - 1) / 2.0, (height.shape[0] - 1) / 2.0
-    scale = np.full(height.shape, float(pixel))
+    reach = max(h.shape[1] - 1, h.shape[0] - 1) / 2.0 * abs(pixel)  # largest |x - cx| pixel_mm
+    limit = float(np.finfo(np.float32).max)
+    with np.errstate(over="ignore", invalid="ignore"):
+        if calibration.l0_mm:
+            lateral = np.abs(calibration.l0_mm - h.astype(np.float64)) * (reach / abs(calibration.l0_mm))
+            return np.isfinite(h) & (np.abs(h) <= limit) & (lateral < limit)
+        return np.isfinite(h) & (np.abs(h) <= limit) & (reach < limit)
+
+
+def plane_points(calibration: CalibrationLike, height: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
+    """Points (N, 3) in mm of a reference-plane or polynomial model's height map.
+
+    X = (x - cx) pixel_mm (l0 - h) / l0, the same for Y (pixel_mm alone without l0), Z = h, with
+    (cx, cy) the image centre; for the pixels of ``mask`` in C order (default every pixel), so
+    that no (H, W, 3) array is built for the points a caller keeps. The dtype is the height's
+    (float32 stays float32).
+    """
+    pixel = calibration.pixel_mm
+    if pixel is None:
+        raise CalibrationError(f"{calibration.where}: pixel_mm: missing (needed for lateral point coordinates)")
+    h = np.asarray(height)
+    dtype = h.dtype if h.dtype in (np.float32, np.float64) else np.dtype(np.float64)
+    if mask is None:
+        rows, cols = (index.reshape(-1) for index in np.indices(h.shape))
+        z = h.reshape(-1).astype(dtype, copy=False)
+    else:
+        rows, cols = np.nonzero(mask)
+        z = h[rows, cols].astype(dtype, copy=False)
+    cx, cy = (h.shape[1] - 1) / 2.0, (h.shape[0] - 1) / 2.0
     if calibration.l0_mm:
-        scale = pixel * (calibration.l0_mm - height) / calibration.l0_mm
-    points = np.stack([(cols - cx) * scale, (rows - cy) * scale, height], axis=2)
-    return np.where(np.isfinite(height)[..., None], points, np.nan), height
+        scale = (calibration.l0_mm - z) * dtype.type(pixel / calibration.l0_mm)
+    else:
+        scale = np.full(z.shape, pixel, dtype=dtype)
+    points = np.empty((z.shape[0], 3), dtype=dtype)
+    np.multiply(cols.astype(dtype) - dtype.type(cx), scale, out=points[:, 0])
+    np.multiply(rows.astype(dtype) - dtype.type(cy), scale, out=points[:, 1])
+    points[:, 2] = z
+    return points

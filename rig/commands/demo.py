@@ -7,15 +7,10 @@ import json
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from rig.commands._common import add_command, add_report_options, print_json, split_size
+from rig.commands._common import LazyChoices, add_command, add_report_options, print_json, split_size
 from rig.errors import ConfigError, OutputError
 from rig.hardware.scenes import scene_names
-from rig.hardware.synthesis import demo_appearance, demo_geometry, simulate_scan, simulated_paths, write_simulated_scan
-from rig.pipeline.outputs import write_outputs
 from rig.pipeline.plan import DEFAULT_CORRECTION, ProcessOptions
-from rig.pipeline.run import process, total_steps
 from rig.progress import Progress
 from rig.store import files
 
@@ -30,7 +25,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("-o", "--output", type=Path, default=Path("demo-output"), metavar="DIR",
                         help="output directory (default ./demo-output; replaced if it holds an earlier demo)")
-    parser.add_argument("--scene", default="hemisphere", choices=sorted(scene_names()), help="object to scan (default hemisphere)")
+    parser.add_argument("--scene", default="hemisphere", choices=LazyChoices(scene_names), metavar="NAME",
+                        help="object to scan: %(choices)s (default hemisphere)")
     parser.add_argument("--size", default="640x480", metavar="WxH", help="camera size (default 640x480)")
     parser.add_argument("--snr", type=float, default=35.0, metavar="DB", help="camera noise, SNR in dB (default 35)")
     parser.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
@@ -54,6 +50,8 @@ DEMO_KINDS = ("demo",)
 def _summary(args: argparse.Namespace, out: Path, width: int, height: int, scan: Any, result: Any,
              report: dict[str, Any], paths: Any) -> dict[str, Any]:
     """demo.json: what was simulated and how far the processed heights are from the truth."""
+    import numpy as np
+
     assert result.height is not None
     valid = result.mask & scan.lit
     error = result.height[valid].astype(np.float64) - scan.height_mm[valid]
@@ -75,6 +73,11 @@ def _summary(args: argparse.Namespace, out: Path, width: int, height: int, scan:
 
 
 def run(args: argparse.Namespace) -> int:
+    # numpy, the synthesiser and the pipeline: imported when the demo runs, not for `rig --help`
+    from rig.hardware.synthesis import demo_appearance, demo_geometry, simulate_scan, simulated_paths, write_simulated_scan
+    from rig.pipeline.outputs import write_outputs
+    from rig.pipeline.run import process, total_steps
+
     width, height = parse_size(args.size)
     out: Path = args.output
     # the whole demo directory is built beside OUT and renamed into place; an earlier demo is replaced

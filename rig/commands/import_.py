@@ -7,7 +7,6 @@ import sys
 from pathlib import Path
 
 from rig.commands._common import add_command
-from rig.store.importer import ImportOptions, import_folder, parse_crop
 
 SPEC_HELP = (
     "what the images show, in file order: groups separated by ';', e.g. "
@@ -42,6 +41,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from rig.store.importer import ImportOptions, import_folder, parse_crop
+
     options = ImportOptions(
         projector_width=args.projector_width,
         projector_height=args.projector_height,

@@ -6,8 +6,12 @@ import argparse
 from collections import Counter
 from typing import Any
 
+from typing import TYPE_CHECKING
+
 from rig.commands._common import add_capture_argument, add_command, print_json
-from rig.store.capture import Capture, read_capture
+
+if TYPE_CHECKING:
+    from rig.store.capture import Capture
 
 
 def describe_patterns(patterns: list[dict[str, Any]]) -> list[str]:
@@ -63,6 +67,8 @@ def facts(capture: Capture) -> dict[str, Any]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from rig.store.capture import read_capture
+
     capture = read_capture(args.capture, salvage=args.salvage, verify=False)
     for frame in capture.frames:  # sha256, then decoding: size, channels, bit depth
         capture.load_frame(int(frame["pattern"]))

@@ -7,6 +7,7 @@ import logging
 import os
 import time
 from collections.abc import Mapping
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -36,23 +37,23 @@ def write_array(path: Path, array: np.ndarray) -> Path:
 
 
 def write_ply(path: Path, points: np.ndarray, colors: np.ndarray | None = None) -> Path:
-    """Binary little-endian PLY of (N, 3) points in mm (float32), optional (N, 3) uint8 colours."""
-    pts = np.asarray(points, dtype=np.float32).reshape(-1, 3)
-    fields = [("x", "<f4"), ("y", "<f4"), ("z", "<f4")]
+    """Binary little-endian PLY of (N, 3) points in mm (float32), optional (N, 3) uint8 colours (or (N,) grey)."""
+    pts = np.asarray(points).reshape(-1, 3)
+    fields: list[tuple[str, str, tuple[int, ...]]] = [("xyz", "<f4", (3,))]
     header = ["ply", "format binary_little_endian 1.0", "comment fpp-rig point cloud, units mm", f"element vertex {len(pts)}",
               "property float x", "property float y", "property float z"]
     if colors is not None:
-        fields += [("red", "u1"), ("green", "u1"), ("blue", "u1")]
+        fields.append(("rgb", "u1", (3,)))
         header += ["property uchar red", "property uchar green", "property uchar blue"]
     header.append("end_header")
-    record = np.empty(len(pts), dtype=fields)
-    record["x"], record["y"], record["z"] = pts[:, 0], pts[:, 1], pts[:, 2]
+    record = np.empty(len(pts), dtype=fields)  # packed: 12 (or 15) bytes per vertex, as the header says
+    record["xyz"] = pts
     if colors is not None:
-        rgb = np.asarray(colors, dtype=np.uint8).reshape(-1, 3)
-        record["red"], record["green"], record["blue"] = rgb[:, 0], rgb[:, 1], rgb[:, 2]
+        rgb = np.asarray(colors, dtype=np.uint8)
+        record["rgb"] = rgb[:, None] if rgb.ndim == 1 else rgb.reshape(-1, 3)
     with open(path, "wb") as handle:
         handle.write(("\n".join(header) + "\n").encode("ascii"))
-        handle.write(record.tobytes())
+        handle.write(memoryview(record).cast("B"))
     return path
 
 
@@ -81,11 +82,16 @@ def _nice_step(span: float, ticks: int = 5) -> float:
 
 def colour_map(values: np.ndarray, low: float, high: float, invalid_bgr: tuple[int, int, int] = (40, 40, 40)) -> np.ndarray:
     """BGR uint8 image of ``values`` mapped through the turbo colour map over [low, high]; NaN grey."""
-    finite = np.isfinite(values)
+    values = np.asarray(values)
     scale = 255.0 / (high - low) if high > low else 0.0
-    levels = np.zeros(values.shape, dtype=np.uint8)
-    levels[finite] = np.clip((values[finite] - low) * scale, 0, 255).astype(np.uint8)
-    image = cv2.applyColorMap(levels, cv2.COLORMAP_TURBO)
+    work = values.dtype if values.dtype in (np.float32, np.float64) else np.dtype(np.float64)
+    levels = values.astype(work)  # a copy, scaled in place
+    levels -= work.type(low)
+    levels *= work.type(scale)
+    np.clip(levels, 0, 255, out=levels)
+    finite = np.isfinite(levels)
+    np.copyto(levels, 0, where=~finite)
+    image = cv2.applyColorMap(levels.astype(np.uint8), cv2.COLORMAP_TURBO)
     image[~finite] = invalid_bgr
     return image
 
@@ -96,7 +102,9 @@ def write_preview(path: Path, values: np.ndarray, unit: str, title: str = "") ->
     The colour range is the 1st..99th percentile of the finite values, so a few outliers do not
     flatten the picture. Returns (low, high) of the colour range.
     """
-    values = np.asarray(values, dtype=np.float64)
+    values = np.asarray(values)
+    if values.dtype not in (np.float32, np.float64):
+        values = values.astype(np.float64)
     finite = values[np.isfinite(values)]
     if finite.size:
         low, high = (float(v) for v in np.percentile(finite, [1.0, 99.0]))
@@ -156,12 +164,18 @@ def write_report(path: Path, report: Mapping[str, Any]) -> Path:
 # --------------------------------------------------------------------------- outputs
 
 
-def _texture(state: SceneState) -> np.ndarray | None:
+def _texture(state: SceneState, mask: np.ndarray) -> np.ndarray | None:
+    """Grey level (N,) of the valid pixels: A + B of the highest frequency, 255 at its 99.5th percentile."""
     if state.wrapped is None or not state.wrapped.background:
         return None
-    background = state.wrapped.background[-1] + state.wrapped.modulation[-1]
-    top = float(np.percentile(background, 99.5)) or 1.0
-    return np.clip(background / top * 255.0, 0, 255).astype(np.uint8)
+    background, modulation = state.wrapped.background[-1], state.wrapped.modulation[-1]
+    if background is None or modulation is None:
+        return None
+    bright = background + modulation
+    top = float(np.percentile(bright[::4, ::4], 99.5)) or 1.0  # a display scale: a 1/16 subsample is plenty
+    grey = bright[mask]
+    grey *= 255.0 / top
+    return np.clip(grey, 0, 255, out=grey).astype(np.uint8)
 
 
 def _wrapped_maps(state: SceneState) -> np.ndarray:
@@ -251,26 +265,28 @@ def _write_files(result: ProcessResult, out: Path, t0: float) -> dict[str, Any]:
     assert obj.unwrapped is not None and obj.wrapped is not None
     report = build_report(result)
     files: dict[str, str] = {}
-    phase = np.where(result.mask, obj.unwrapped.phase, np.nan)
-    files["phase"] = write_array(out / "phase.npy", phase.astype(np.float64)).name
-    files["mask"] = write_array(out / "mask.npy", result.mask.astype(bool)).name
-    if result.height is None:
-        files["wrapped"] = write_array(out / "wrapped.npy", _wrapped_maps(obj)).name
-        low, high = write_preview(out / "preview.png", phase, "rad", "absolute phase" if obj.unwrapped.absolute else "phase")
-        report["preview"] = {"shows": "phase", "unit": "rad", "range": [low, high]}
-    else:
-        files["height"] = write_array(out / "height.npy", result.height.astype(np.float32)).name
-        assert result.points is not None
-        points = result.points[result.mask]
-        texture = _texture(obj)
-        colours = None
-        if texture is not None:
-            grey = texture[result.mask]
-            colours = np.column_stack([grey, grey, grey])
-        files["points"] = write_ply(out / "points.ply", points, colours).name
-        quantity = report["quantity"]
-        low, high = write_preview(out / "preview.png", result.height, "mm", quantity)
-        report["preview"] = {"shows": quantity, "unit": "mm", "range": [low, high]}
+    phase = obj.unwrapped.phase.astype(np.float64)  # a copy: NaN outside the mask
+    np.copyto(phase, np.nan, where=~result.mask)
+    # The preview (colour map and PNG encoding, which release the GIL) is drawn on a thread while
+    # the arrays and the point cloud are written.
+    with ThreadPoolExecutor(1) as pool:
+        if result.height is None:
+            preview = pool.submit(
+                write_preview, out / "preview.png", phase, "rad", "absolute phase" if obj.unwrapped.absolute else "phase"
+            )
+            shows, unit = "phase", "rad"
+        else:
+            shows, unit = report["quantity"], "mm"
+            preview = pool.submit(write_preview, out / "preview.png", result.height, unit, shows)
+        files["phase"] = write_array(out / "phase.npy", phase).name
+        files["mask"] = write_array(out / "mask.npy", result.mask.astype(bool)).name
+        if result.height is None:
+            files["wrapped"] = write_array(out / "wrapped.npy", _wrapped_maps(obj)).name
+        else:
+            files["height"] = write_array(out / "height.npy", result.height.astype(np.float32)).name
+            files["points"] = write_ply(out / "points.ply", result.valid_points(), _texture(obj, result.mask)).name
+        low, high = preview.result()
+    report["preview"] = {"shows": shows, "unit": unit, "range": [low, high]}
     files["preview"] = "preview.png"
     files["report"] = "report.json"
     report["files"] = files

@@ -44,16 +44,16 @@ import logging
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
-
-from processing.patterns import Flat, Gray, Pattern, Sinusoid, SpeckleSinusoid, as_pattern
 from rig.errors import CaptureError, ProcessingError
+
+if TYPE_CHECKING:
+    from processing.patterns import Pattern
 
 log = logging.getLogger(__name__)
 
-TWO_PI = 2.0 * np.pi
+TWO_PI = 2.0 * math.pi
 # The correction a user gets without asking (rig process, rig scan --process, rig demo): the best
 # measured. ProcessOptions() itself corrects nothing, so calibration fits see the measured phase.
 DEFAULT_CORRECTION = "auto"
@@ -126,6 +126,8 @@ class PatternGroups:
 
 def group_patterns(patterns: Sequence[Pattern | Mapping[str, Any]], where: str = "capture.json") -> PatternGroups:
     """Group patterns by kind: sinusoids per (axis, frequency), Gray planes per axis, flats."""
+    from processing.patterns import Flat, Gray, Sinusoid, SpeckleSinusoid, as_pattern  # numpy: not for the parser
+
     sinusoids: dict[tuple[str, float], SinusoidGroup] = {}
     single: dict[tuple[str, float], SinusoidGroup] = {}
     gray: dict[str, GrayGroup] = {}

@@ -56,7 +56,24 @@ class ProcessResult:
     mask: np.ndarray
     timings: dict[str, Any]
     notes: list[str]
-    points: np.ndarray | None = None  # (H, W, 3) mm, NaN where invalid
+    point_grid: np.ndarray | None = None  # (H, W, 3) mm from the stereo model; else built on demand
+
+    @property
+    def points(self) -> np.ndarray | None:
+        """Points (H, W, 3) in mm, NaN where invalid; None without a calibration."""
+        if self.point_grid is None and self.height is not None:
+            assert self.calibration is not None
+            grid = calibration_models.plane_points(self.calibration, self.height).reshape(*self.height.shape, 3)
+            grid[~self.mask] = np.nan
+            self.point_grid = grid
+        return self.point_grid
+
+    def valid_points(self) -> np.ndarray:
+        """Points (N, 3) in mm of the valid pixels, in C order of ``mask`` (what points.ply holds)."""
+        if self.point_grid is not None:
+            return self.point_grid[self.mask]
+        assert self.calibration is not None and self.height is not None
+        return calibration_models.plane_points(self.calibration, self.height, self.mask)
 
     @property
     def report(self) -> dict[str, Any]:
@@ -186,13 +203,17 @@ def process(
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):  # absurd calibrations: masked below
             points, height = stage_height(obj, ref, calibration, notes)
             # valid only where the stored (float32) height and point are finite: no infinity in any output
-            height32 = np.asarray(height).astype(np.float32)
-            finite_points = np.isfinite(np.asarray(points).astype(np.float32)).all(axis=-1) if points is not None else True
+            height32 = np.asarray(height).astype(np.float32, copy=False)  # stage_height's own array
+            if points is not None:
+                finite_points = np.isfinite(np.asarray(points).astype(np.float32)).all(axis=-1)
+            else:  # plane models: points are made from the heights when written
+                finite_points = calibration_models.plane_points_finite(calibration, height32)
         if ref is not None:
             assert ref.unwrapped is not None
             mask &= ref.unwrapped.valid
         mask &= np.isfinite(height32) & finite_points
-        height = np.where(mask, height32, np.nan).astype(np.float32)
+        height = height32  # our own float32 array: masked in place
+        np.copyto(height, np.float32(np.nan), where=~mask)
     else:
         notes.append("no calibration: height, points and height preview skipped; phase, mask and wrapped phase written")
     height_time = time.perf_counter() - t0
@@ -224,7 +245,7 @@ def process(
         timings["reference"] = dict(ref.timings)
     timings["height"] = height_time
     timings["total"] = time.perf_counter() - started
-    return ProcessResult(obj, ref, calibration, options, height, mask, timings, notes + obj.notes, points)
+    return ProcessResult(obj, ref, calibration, options, height, mask, timings, notes + obj.notes, point_grid=points)
 
 
 def _check_options(options: ProcessOptions) -> None:

@@ -517,8 +517,13 @@ SCENE_STAGES: list[tuple[str, Callable[[SceneState, ProcessOptions], None]]] = [
 
 def stage_height(
     obj: SceneState, ref: SceneState | None, calibration: Calibration, notes: list[str]
-) -> tuple[np.ndarray, np.ndarray]:
-    """Points (H, W, 3) and heights (H, W) in mm from the object's (and reference's) absolute phase."""
+) -> tuple[np.ndarray | None, np.ndarray]:
+    """Points (H, W, 3) and heights (H, W) in mm from the object's (and reference's) absolute phase.
+
+    The points come back only from the stereo model, whose triangulation makes them; the plane
+    models' points follow from the heights (:func:`calibration.models.plane_points`) for the
+    pixels a caller keeps, without an (H, W, 3) array.
+    """
     assert obj.unwrapped is not None
     obj_phase = obj.unwrapped.phase
     ref_phase = None
@@ -544,7 +549,10 @@ def stage_height(
     width, height = obj.capture.projector_size
     extent = float(width if obj.axis == "x" else height)
     with np.errstate(invalid="ignore", divide="ignore"):
-        points, heights = calibration_models.points_from_phase(
+        if calibration.model == "stereo":
+            return calibration_models.points_from_phase(
+                calibration, obj_phase, ref_phase, obj.unwrapped.frequency, axis=obj.axis, extent=extent
+            )
+        return None, calibration_models.height_from_phase(
             calibration, obj_phase, ref_phase, obj.unwrapped.frequency, axis=obj.axis, extent=extent
         )
-    return points, heights

@@ -52,6 +52,9 @@ MANIFEST = "capture.json"
 INCOMPLETE_MARK = files.INCOMPLETE_MARK
 
 
+LOAD_THREADS = min(4, os.cpu_count() or 1)  # frame reading threads (I/O, sha256 and PNG decoding overlap)
+
+
 def utc_now() -> str:
     """Current UTC time in the manifest's ISO 8601 form (seconds, trailing Z)."""
     return datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
@@ -294,9 +297,10 @@ class Capture:
         for frame in self.frames:
             self.read_frame_bytes(frame)
 
-    def load_frame(self, pattern: int) -> np.ndarray:
+    def load_frame(self, pattern: int, frame: Mapping[str, Any] | None = None) -> np.ndarray:
         """Image of one pattern, checked for checksum, size, channels and bit depth: (H, W)."""
-        frame = self.frame_index().get(pattern)
+        if frame is None:
+            frame = self.frame_index().get(pattern)
         if frame is None:
             raise CaptureError(f"{self.manifest_path}: frames: no frame for pattern {pattern}")
         where = str(self.path / str(frame["file"]))
@@ -316,10 +320,33 @@ class Capture:
             )
         return image
 
-    def load_frames(self, patterns: Iterable[int] | None = None) -> np.ndarray:
-        """Frames of the given pattern indices (default all, in pattern order) as an (N, H, W) array."""
-        indices = range(len(self.patterns)) if patterns is None else list(patterns)
-        return np.stack([self.load_frame(i) for i in indices])
+    def load_frames(self, patterns: Iterable[int] | None = None, threads: int = LOAD_THREADS) -> np.ndarray:
+        """Frames of the given pattern indices (default all, in pattern order) as an (N, H, W) array.
+
+        Reading, checksums and decoding run on ``threads`` threads (hashlib and OpenCV release
+        the GIL: about twice as fast on two cores); each frame lands in its slot of the stack.
+        The first failing frame in pattern order is the one reported, as when loading in turn.
+        """
+        indices = list(range(len(self.patterns)) if patterns is None else patterns)
+        if not indices:
+            raise CaptureError(f"{self.manifest_path}: frames: no pattern to load")
+        index = self.frame_index()
+        stack = np.empty((len(indices), *self.shape), dtype=dtype_for_bit_depth(self.bit_depth))
+
+        def load(slot: int) -> None:
+            stack[slot] = self.load_frame(indices[slot], index.get(indices[slot]))
+
+        if threads <= 1 or len(indices) == 1:
+            for slot in range(len(indices)):
+                load(slot)
+            return stack
+        from concurrent.futures import ThreadPoolExecutor
+
+        with ThreadPoolExecutor(min(threads, len(indices))) as pool:
+            futures = [pool.submit(load, slot) for slot in range(len(indices))]
+            for future in futures:  # in pattern order: the first bad frame is the one named
+                future.result()
+        return stack
 
     def write_manifest(self) -> None:
         """Rewrite capture.json from ``manifest`` (extra keys kept), atomically."""
