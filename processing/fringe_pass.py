@@ -123,7 +123,8 @@ class FringePass:
         The temporal method applied, None for wrapped phases only.
     phase : float32 map or None
         Absolute phase at ``phase_frequency`` (= 2 pi (orders + wrapped / 2 pi)), NaN where not
-        ``valid``; None without a method.
+        ``modulated``; where the method's test failed it is kept (untrusted: ``valid`` is False),
+        for callers that re-examine those pixels. None without a method.
     orders : int32 map or None
         Fringe orders of ``phase_frequency`` (wrapped phase taken in [0, 2 pi)).
     modulated : bool map
@@ -436,7 +437,7 @@ class _Plan:
             np.copyto(phase, absolute, casting="same_kind")
             np.copyto(orders, k, casting="unsafe")
             valid &= consistent
-        np.logical_not(valid, out=scratch.test)
+        np.logical_not(out.modulated[window], out=scratch.test)
         np.copyto(phase, np.float32(np.nan), where=scratch.test)
 
     def _mask(

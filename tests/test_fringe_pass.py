@@ -121,7 +121,7 @@ def test_matches_stage_functions_and_truth(method: str, frequencies: list[int], 
     np.testing.assert_array_equal(fused.orders[both], unwrapped.orders[both])
     tolerance = 2 * ANGLE_TOLERANCE if opencv else 1e-4  # float32 of an absolute phase up to 2 pi 64
     np.testing.assert_allclose(fused.phase[both], unwrapped.phase[both], atol=tolerance)
-    assert np.isnan(fused.phase[~fused.valid]).all() and np.isfinite(fused.phase[fused.valid]).all()
+    assert np.isnan(fused.phase[~fused.modulated]).all() and np.isfinite(fused.phase[fused.modulated]).all()
     # Analytic truth: the absolute phase of the projector column each pixel sees.
     truth = synth.true_absolute_phase(mapping, geometry, top)
     assert np.abs(fused.phase[both] - truth[both]).max() < 0.3

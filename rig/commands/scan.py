@@ -14,7 +14,6 @@ import logging
 import sys
 from pathlib import Path
 
-from rig.config import load_config
 from rig.errors import ConfigError
 from rig.progress import Progress
 
@@ -48,6 +47,8 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("--process needs --calibration CAL (the calibration to turn phase into height)")
     if args.calibration is not None and not args.process:
         raise ConfigError("--calibration is used only with --process")
+    from rig.config import load_config  # the pattern model (numpy): not for `rig --help`
+
     config = load_config(args.config)
     if args.process:  # a wrong calibration should stop us before the scan, not after it
         from calibration.store import read_calibration

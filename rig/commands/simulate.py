@@ -18,10 +18,19 @@ import dataclasses
 import json
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from rig.config import PATTERN_SETS, RigConfig, load_config, parse_config
+from rig.commands._common import LazyChoices
 from rig.errors import ConfigError
+
+if TYPE_CHECKING:
+    from rig.config import RigConfig
+
+
+def _pattern_sets() -> tuple[str, ...]:
+    from rig.config import PATTERN_SETS  # the pattern model (numpy): not for `rig --help`
+
+    return PATTERN_SETS
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -49,7 +58,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--frequencies", type=float, nargs="+", metavar="F", help="sinusoid frequencies (fringes across the projector)")
     parser.add_argument("--steps", type=int, metavar="J", help="phase shifts per frequency")
     parser.add_argument(
-        "--pattern-set", choices=PATTERN_SETS,
+        "--pattern-set", choices=LazyChoices(_pattern_sets), metavar="SET",
         help="'phase-shifting' (sinusoids, the default) or 'speckle': one speckle-embedded fringe frame "
         "(single shot, [scan] speckle_* settings)",
     )
@@ -80,6 +89,8 @@ def config_with_overrides(config: RigConfig, args: argparse.Namespace) -> RigCon
         overrides["scan"]["pattern_set"] = args.pattern_set
     if args.size is not None:
         overrides["camera"]["size"] = list(args.size)
+    from rig.config import parse_config
+
     checked = parse_config(overrides, where="command line")
     replaced = {}
     for section, values in overrides.items():
@@ -114,6 +125,7 @@ SIMULATION_KINDS = ("simulation",)
 
 
 def run(args: argparse.Namespace) -> int:
+    from rig.config import load_config
     from rig.hardware.simulated import (
         appearance_from_config,
         geometry_from_config,

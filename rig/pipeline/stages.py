@@ -211,13 +211,16 @@ def _fused_pass(state: SceneState, options: ProcessOptions) -> bool:
         return False
     from processing.fringe_pass import fringe_pass
 
+    from rig.pipeline import convention_check
+
     extra = {"max_residual": float(options.params["max_residual"])} if "max_residual" in options.params else {}
+    check = method == "heterodyne" and convention_check.enabled(options)
     assert state.frames is not None
     try:
         scan = fringe_pass(
             state.frames, [group.indices for group in along], freqs, method,
             shifts=[np.asarray(group.shifts) for group in along], min_ratio=options.min_modulation_ratio,
-            keep_all=state.calibration is None, **extra,
+            keep_all=state.calibration is None or check, **extra,
         )
     except ValueError:
         return False  # e.g. frequencies the method refuses: the stage-by-stage path reports it as before
@@ -227,11 +230,18 @@ def _fused_pass(state: SceneState, options: ProcessOptions) -> bool:
         return [values[maps[i]] if i in maps else None for i in range(len(freqs))]
 
     state.wrapped = WrappedPhase(freqs, kept(scan.wrapped), kept(scan.modulation), kept(scan.background), scan.modulated)
-    assert scan.phase is not None
-    state.unwrapped = UnwrappedPhase(
-        phase=scan.phase, valid=scan.valid, frequency=freqs[-1], method=method, absolute=True, orders=scan.orders
-    )
     state.info["valid_after_modulation"] = float(scan.modulated.mean())
+    if check:
+        _check_convention(state, options, "heterodyne", scan.wrapped, [int(f) for f in freqs])
+    assert scan.phase is not None
+    mask = scan.valid
+    if options.params.get("neighbour_rescue", True) is not False:
+        mask = _rescue_rejected(state, scan.phase, mask, scan.modulated)
+    phase = scan.phase
+    np.copyto(phase, np.float32(np.nan), where=~mask)  # the pass's own array: NaN outside the mask
+    state.unwrapped = UnwrappedPhase(
+        phase=phase, valid=mask, frequency=freqs[-1], method=method, absolute=True, orders=scan.orders
+    )
     state.info["fused_pass"] = "phase shifting, modulation mask and unwrapping in one float32 pass"
     other = sorted({g.frequency for g in state.groups.sinusoids if g.axis != state.axis})
     if other:
