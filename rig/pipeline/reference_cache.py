@@ -107,7 +107,7 @@ def load(state: SceneState, key: str, from_disk: bool = True) -> bool:
         phase=entry["phase"], valid=entry["valid"], frequency=meta["frequency"], method=meta["method"],
         absolute=meta["absolute"], orders=None,
     )
-    state.info = {**meta["info"], "cached": True}
+    state.info = dict(meta["info"])  # the same report as when processed; timings say "cached"
     state.notes = list(meta["notes"])
     state.timings = {"cached": 0.0}
     return True
