@@ -12,7 +12,6 @@ from rig.errors import ConfigError, OutputError
 from rig.hardware.scenes import scene_names
 from rig.pipeline.plan import DEFAULT_CORRECTION, ProcessOptions
 from rig.progress import Progress
-from rig.store import files
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -77,6 +76,7 @@ def run(args: argparse.Namespace) -> int:
     from rig.hardware.synthesis import demo_appearance, demo_geometry, simulate_scan, simulated_paths, write_simulated_scan
     from rig.pipeline.outputs import write_outputs
     from rig.pipeline.run import process, total_steps
+    from rig.store import files
 
     width, height = parse_size(args.size)
     out: Path = args.output

@@ -8,19 +8,37 @@ import sys
 from pathlib import Path
 
 from rig.commands._common import (
+    LazyChoices,
+    LazyHelp,
     add_capture_argument,
     add_command,
     add_report_options,
     print_json,
 )
 from rig.errors import ConfigError
-from rig.pipeline.outputs import check_output_directory, write_outputs
 from rig.pipeline.plan import DEFAULT_CORRECTION, UNWRAP_METHODS, ProcessOptions
-from rig.pipeline.run import process, total_steps
-from rig.pipeline.corrections import REGISTRY as CORRECTIONS
-from rig.pipeline.corrections import help_text as correction_help
-from rig.pipeline.stages import DENOISERS
 from rig.progress import Progress
+
+# The pipeline (numpy, OpenCV) is imported when a command runs, not to build the parser: `rig --help`
+# and commands that do not process stay quick. Choices and help naming its registries load lazily.
+
+
+def _denoisers() -> list[str]:
+    from rig.pipeline.stages import DENOISERS
+
+    return list(DENOISERS)
+
+
+def _corrections() -> list[str]:
+    from rig.pipeline.corrections import REGISTRY
+
+    return list(REGISTRY)
+
+
+def _correction_help() -> str:
+    from rig.pipeline.corrections import help_text
+
+    return f"phase / fringe-order correction (default {DEFAULT_CORRECTION}); {help_text()}"
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -46,8 +64,10 @@ def add_processing_options(parser: argparse.ArgumentParser) -> None:
         help="phase unwrapping method (default auto: gray or spatial for one frequency, hierarchical when "
         "frequency 1 is present, two-frequency for 2 coprime, heterodyne or three-frequency for 3)",
     )
-    parser.add_argument("--denoise", default="none", choices=sorted(DENOISERS), help="fringe denoising before phase (default none)")
-    parser.add_argument("--correction", default=DEFAULT_CORRECTION, choices=sorted(CORRECTIONS), help=f"phase / fringe-order correction (default {DEFAULT_CORRECTION}); {correction_help()}")
+    parser.add_argument("--denoise", default="none", choices=LazyChoices(_denoisers), metavar="METHOD",
+                        help="fringe denoising before phase: %(choices)s (default none)")
+    parser.add_argument("--correction", default=DEFAULT_CORRECTION, choices=LazyChoices(_corrections), metavar="METHOD",
+                        help=LazyHelp(_correction_help))
     parser.add_argument(
         "--min-modulation", type=float, default=0.2, metavar="RATIO",
         help="valid pixels need fringe modulation B >= RATIO x background and x the image's 99th percentile of B (default 0.2)",
@@ -97,6 +117,9 @@ def parse_params(items: list[str]) -> dict[str, object]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from rig.pipeline.outputs import check_output_directory, write_outputs
+    from rig.pipeline.run import process, total_steps
+
     out = args.output or args.capture.with_name(args.capture.name + "-processed")
     options = processing_options(args)
     check_output_directory(out)  # an unwritable output fails now, not after the computation

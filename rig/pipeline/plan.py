@@ -166,7 +166,7 @@ def _check_separable(group: SinusoidGroup, where: str) -> None:
     if group.steps < 3:  # one frame goes to FTP; two are refused by the wrapped-phase stage
         return
     try:
-        shift_weights(group.steps, np.asarray(group.shifts))
+        shift_weights(group.steps, group.shifts)
     except ValueError as exc:
         names = ", ".join(f"patterns[{i}]" for i in group.indices[:8]) + (" ..." if len(group.indices) > 8 else "")
         raise CaptureError(
