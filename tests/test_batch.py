@@ -14,19 +14,18 @@ import json
 import os
 import random
 import signal
-import socket
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from benchmarks.dask_cluster import external_cluster, free_port, repo_env
 from rig.batch.commit import commit_dir, remove_stale, staging_dir
 from rig.batch.discovery import INCOMPLETE_REASON, discover
-from rig.batch.index import INDEX_COLUMNS, read_table
+from rig.batch.index import INDEX_COLUMNS, IndexRow, read_table, remove_stale_tables, write_index
 from rig.batch.resume import calibration_digest, fingerprint, options_key
 from rig.cli import main
 from rig.errors import ConfigError, ProcessingError
@@ -34,15 +33,10 @@ from rig.hardware.synthesis import write_simulated_archive
 from rig.pipeline.outputs import OUTPUT_FILES
 from rig.pipeline.plan import ProcessOptions
 
-REPO = Path(__file__).resolve().parents[1]
 GOOD = ["scan-000/object", "scan-001/object", "scan-002/object", "scan-004/object"]
 CORRUPT_FRAME, CORRUPT_MANIFEST, INCOMPLETE = "scan-003/object", "scan-005/object", "scan-006/object"
 ARRAYS = ("height.npy", "phase.npy", "mask.npy")
 SUBPROCESS_TIMEOUT_S = 120
-
-
-def _env() -> dict[str, str]:
-    return {**os.environ, "PYTHONPATH": str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", "")}
 
 
 @pytest.fixture(scope="module")
@@ -85,7 +79,7 @@ def expected(
             ],
             capture_output=True,
             text=True,
-            env=_env(),
+            env=repo_env(),
             check=False,
             timeout=SUBPROCESS_TIMEOUT_S,
         )
@@ -206,76 +200,10 @@ def test_changed_options_or_calibration_change_the_fingerprint(archive, tmp_path
 # ------------------------------------------------------------------ a real external scheduler
 
 
-def _free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
-
-
-@contextlib.contextmanager
-def _external_cluster(tmp_path: Path) -> Iterator[str]:
-    """`dask scheduler` and one `dask worker --nthreads 1` as subprocesses on 127.0.0.1; always killed after."""
-    from distributed import Client
-
-    port = _free_port()
-    address = f"tcp://127.0.0.1:{port}"
-    log = open(tmp_path / "dask.log", "wb")  # noqa: SIM115 - closed after the processes, in finally
-    procs = [
-        subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "distributed.cli.dask_scheduler",
-                "--host",
-                "127.0.0.1",
-                "--port",
-                str(port),
-                "--dashboard-address",
-                ":0",
-            ],
-            stdout=log,
-            stderr=subprocess.STDOUT,
-            env=_env(),
-            start_new_session=True,
-        )
-    ]
-    try:
-        procs.append(
-            subprocess.Popen(
-                [
-                    sys.executable,
-                    "-m",
-                    "distributed.cli.dask_worker",
-                    address,
-                    "--nthreads",
-                    "1",
-                    "--host",
-                    "127.0.0.1",
-                    "--no-dashboard",
-                    "--death-timeout",
-                    "60",
-                ],
-                stdout=log,
-                stderr=subprocess.STDOUT,
-                env=_env(),
-                start_new_session=True,
-            )
-        )
-        with Client(address, timeout=60) as client:
-            client.wait_for_workers(1, timeout=60)
-        yield address
-    finally:
-        for proc in reversed(procs):
-            with contextlib.suppress(ProcessLookupError):
-                os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait(timeout=30)
-        log.close()
-
-
 def test_external_scheduler_gives_the_same_results(archive, expected, tmp_path, capsys) -> None:
     root, calibration = archive
     out = tmp_path / "out"
-    with _external_cluster(tmp_path) as address:
+    with external_cluster(1, log=tmp_path / "dask.log") as address:
         code = main(
             ["batch", str(root), "--calibration", str(calibration), "-o", str(out), "--scheduler", address, "-q"]
         )
@@ -298,7 +226,7 @@ def test_unreachable_scheduler_is_one_line(archive, tmp_path, capsys, monkeypatc
             "-o",
             str(tmp_path / "out"),
             "--scheduler",
-            f"tcp://127.0.0.1:{_free_port()}",
+            f"tcp://127.0.0.1:{free_port()}",
             "-q",
         ]
     )
@@ -317,7 +245,7 @@ def test_killed_at_a_random_moment_then_rerun_completes(archive, expected, tmp_p
     rng = random.Random(14)
     proc = subprocess.Popen(
         [sys.executable, "-m", "rig.cli", *args],
-        env=_env(),
+        env=repo_env(),
         start_new_session=True,
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
@@ -392,3 +320,14 @@ def test_commit_replaces_outputs_whole_and_never_deletes_foreign_files(tmp_path)
         commit_dir(staging, target, OUTPUT_FILES)
     assert (target / "notes.txt").read_text() == "mine"
     assert remove_stale(tmp_path / "out") == 1 and not staging.exists()
+
+
+def test_a_table_is_replaced_whole_and_a_killed_write_is_cleaned_up(tmp_path) -> None:
+    rows = [
+        IndexRow(capture="b", status="ok", valid_fraction=0.5),
+        IndexRow(capture="a", status="error", message="x, y"),
+    ]
+    write_index(tmp_path / "index.csv", rows)
+    assert [(r["capture"], r["message"]) for r in read_table(tmp_path / "index.csv")] == [("a", "x, y"), ("b", "")]
+    (tmp_path / ".index.csv.abc123.tmp").write_text("capture,sta")  # a write cut short by a kill
+    assert remove_stale_tables(tmp_path) == 1 and sorted(p.name for p in tmp_path.iterdir()) == ["index.csv"]

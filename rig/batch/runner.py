@@ -20,9 +20,9 @@ from typing import Any
 
 from rig.batch.commit import remove_stale
 from rig.batch.discovery import FoundCapture, discover
-from rig.batch.index import CompareRow, IndexRow, write_compare, write_index
+from rig.batch.index import CompareRow, IndexRow, remove_stale_tables, write_compare, write_index
 from rig.batch.resume import calibration_digest, fingerprint, options_key, reusable_report
-from rig.batch.tasks import CaptureTask, TaskOutcome, kept_outcome, run_task
+from rig.batch.tasks import CaptureTask, TaskOutcome, kept_outcome, run_task, warm_up
 from rig.errors import ConfigError
 from rig.events import Reporter
 from rig.pipeline.plan import ProcessOptions
@@ -77,9 +77,26 @@ def _dashboard_available() -> bool:
     return True
 
 
+def worker_environ() -> dict[str, object]:
+    """Dask's environment for new worker processes, less ``MALLOC_TRIM_THRESHOLD_``.
+
+    Dask sets it (to hand memory back to the OS sooner); setting it also turns off glibc's
+    adaptive mmap threshold, so every array above 128 KiB is mapped and unmapped afresh: a 160x120
+    capture took about twice as long with it (the in-process loop row of
+    ``MALLOC_TRIM_THRESHOLD_=65536 python benchmarks/bench_batch.py`` against the same without it).
+    Its single-thread BLAS/OpenMP settings are kept.
+    """
+    import dask
+
+    environ = dict(dask.config.get("distributed.nanny.pre-spawn-environ", default={}) or {})
+    environ.pop("MALLOC_TRIM_THRESHOLD_", None)
+    return environ
+
+
 @contextmanager
 def dask_client(plan: BatchPlan) -> Iterator[Any]:
     """A connected ``distributed.Client``: to ``plan.scheduler``, or to a new local cluster it closes after."""
+    import dask
     from distributed import Client, LocalCluster
 
     if plan.scheduler is not None:
@@ -95,13 +112,17 @@ def dask_client(plan: BatchPlan) -> Iterator[Any]:
     workers = plan.workers or default_workers()
     if workers < 1:
         raise ConfigError(f"--workers: expected at least 1, found {workers}")
-    cluster = LocalCluster(
-        n_workers=workers,
-        threads_per_worker=1,
-        processes=True,
-        dashboard_address=":0",
-        silence_logs=logging.ERROR,  # any free port: several batches may run at once
-    )
+    try:
+        with dask.config.set({"distributed.nanny.pre-spawn-environ": worker_environ()}):
+            cluster = LocalCluster(
+                n_workers=workers,
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=":0",  # any free port: several batches may run at once
+                silence_logs=logging.ERROR,
+            )
+    except (OSError, RuntimeError, TimeoutError) as exc:
+        raise ConfigError(f"--workers {workers}: the local Dask cluster did not start: {exc}") from None
     try:
         client = Client(cluster, set_as_default=False)
         try:
@@ -192,6 +213,7 @@ def run_batch(plan: BatchPlan, progress: Reporter | None = None) -> BatchResult:
     found = discover(plan.archives, exclude=exclude)
     plan.output.mkdir(parents=True, exist_ok=True)
     remove_stale(plan.output)
+    remove_stale_tables(plan.output)
     tasks, known = plan_tasks(plan, found)
     outcomes: list[TaskOutcome] = list(known)
     index_path = plan.output / INDEX_FILE
@@ -205,7 +227,8 @@ def run_batch(plan: BatchPlan, progress: Reporter | None = None) -> BatchResult:
             process=len(tasks),
             kept=kept,
         )
-        progress.begin(len(tasks))
+        if not tasks:
+            progress.begin(0)
     try:
         if tasks:
             _run_on_dask(plan, tasks, outcomes, index_path, progress)
@@ -253,6 +276,9 @@ def _run_on_dask(
                 dashboard=link,
                 threads=threads,
             )
+        client.run(warm_up)
+        if progress is not None:
+            progress.begin(len(tasks))  # from here on, the rate is that of the work (cluster up, pipeline imported)
         window = max(2 * sum(client.nthreads().values()), 4)  # tasks in flight: workers busy, client memory bounded
         pending = iter(tasks)
         by_key: dict[str, tuple[Any, CaptureTask]] = {}

@@ -97,6 +97,12 @@ def compare_row(name: str, method: str, result: Any, seconds: float, truth: np.n
     )
 
 
+def warm_up() -> None:
+    """Import the pipeline in a worker before its first capture (a second or so), so that progress rates mean work."""
+    import rig.pipeline.outputs  # noqa: F401
+    import rig.pipeline.run  # noqa: F401
+
+
 def _process(task: CaptureTask, options: ProcessOptions) -> Any:
     from rig.pipeline.run import process
 
