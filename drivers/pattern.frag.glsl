@@ -1,11 +1,13 @@
 #version 330 core
-// Every pattern kind of capture-format.md; processing/patterns.py is the definition this follows.
+// Every pattern kind of capture-format.md, and the projector-only alignment grid;
+// processing/patterns.py is the definition this follows.
 // Image row 0 is the top of the screen: v = height - gl_FragCoord.y. Pixel centres are at k + 0.5.
 
 const int KIND_SINUSOID = 0;
 const int KIND_SPECKLE_SINUSOID = 1;
 const int KIND_GRAY = 2;
 const int KIND_FLAT = 3;
+const int KIND_GRID = 4;
 const float TWO_PI = 6.283185307179586;
 
 uniform ivec2 size;          // projector (width, height) in pixels
@@ -21,6 +23,10 @@ uniform int bits;
 uniform int bit;             // 0 = most significant
 uniform bool inverted;
 uniform float level;
+uniform int pitch_px;        // grid: line spacing, line and crosshair widths in pixels
+uniform int line_px;
+uniform int crosshair_px;
+uniform float background;
 uniform bool use_lut;
 uniform sampler2D lut;       // R32F (N x 1) drive level for intensity i / (N - 1)
 uniform int lut_size;
@@ -39,6 +45,24 @@ float gray(int index, int extent) {
     uint code = stripe ^ (stripe >> 1u);
     float value = float((code >> uint(bits - 1 - bit)) & 1u);
     return inverted ? 1.0 - value : value;
+}
+
+bool on_line(int offset, int width, int pitch) {
+    // (offset + width / 2) mod pitch < width, for offset >= -size / 2 (no negative % in GLSL)
+    int shifted = offset + width / 2 + pitch * (size.x / pitch + size.y / pitch + 2);
+    return shifted % pitch < width;
+}
+
+bool on_band(int offset, int width) {
+    int shifted = offset + width / 2;
+    return shifted >= 0 && shifted < width;
+}
+
+float grid(ivec2 pixel) {
+    ivec2 offset = pixel - size / 2;
+    bool lit = on_line(offset.x, line_px, pitch_px) || on_line(offset.y, line_px, pitch_px)
+        || on_band(offset.x, crosshair_px) || on_band(offset.y, crosshair_px);
+    return lit ? level : background;
 }
 
 float apply_lut(float x) {
@@ -62,6 +86,8 @@ void main() {
         intensity = (1.0 - speckle_gain) * sinusoid(coord, extent) + speckle_gain * z;
     } else if (kind == KIND_GRAY) {
         intensity = gray(axis == 0 ? pixel.x : pixel.y, axis == 0 ? size.x : size.y);
+    } else if (kind == KIND_GRID) {
+        intensity = grid(pixel);
     } else {
         intensity = level;
     }

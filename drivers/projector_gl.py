@@ -21,13 +21,13 @@ import numpy as np
 
 from drivers.errors import DeviceNotFoundError
 from drivers.projector import Projector
-from processing.patterns import Flat, Gray, Pattern, Sinusoid, SpeckleSinusoid
+from processing.patterns import Flat, Gray, Grid, Pattern, Sinusoid, SpeckleSinusoid
 from processing.speckle import speckle_field
 
 log = logging.getLogger(__name__)
 
 SHADER_DIR = Path(__file__).resolve().parent
-KIND_CODES = {"sinusoid": 0, "speckle-sinusoid": 1, "gray": 2, "flat": 3}
+KIND_CODES = {"sinusoid": 0, "speckle-sinusoid": 1, "gray": 2, "flat": 3, "grid": 4}
 FRAMEBUFFER_DTYPES = {8: "f1", 32: "f4"}  # bits per pixel -> moderngl dtype (f1: normalised 8-bit)
 
 
@@ -112,6 +112,12 @@ class PatternRenderer:
             self._set("inverted", bool(pattern.inverted))
         elif isinstance(pattern, Flat):
             self._set("level", float(pattern.level))
+        elif isinstance(pattern, Grid):
+            self._set("pitch_px", int(pattern.pitch_px))
+            self._set("line_px", int(pattern.line_px))
+            self._set("crosshair_px", int(pattern.crosshair_px))
+            self._set("level", float(pattern.level))
+            self._set("background", float(pattern.background))
         speckle.use(location=0)
         (self._lut_texture or self._blank).use(location=1)
         self.ctx.viewport = (0, 0, *self.size)

@@ -268,8 +268,43 @@ class Flat(Pattern):
         _check_number("level", self.level)
 
 
-PATTERN_TYPES: dict[str, type[Pattern]] = {cls.kind: cls for cls in (Sinusoid, SpeckleSinusoid, Gray, Flat)}
+@dataclass(frozen=True, kw_only=True, eq=False)
+class Grid(Pattern):
+    """Alignment grid with a centre crosshair: projector-only, not a capture-format v1 kind.
+
+    Lines ``line_px`` wide every ``pitch_px`` pixels along both axes, and two lines
+    ``crosshair_px`` wide, all through the projector's centre pixel (``width // 2``,
+    ``height // 2``); lines at ``level``, the rest at ``background``. In integer pixels a
+    column ``i`` is on a grid line when ``(i - width // 2 + line_px // 2) mod pitch_px < line_px``
+    (rows alike), so the shader draws exactly the same pixels. Captures refuse it (the capture
+    store names it); the projector and the console show it to align the rig.
+    """
+
+    kind: ClassVar[str] = "grid"
+    KEYS: ClassVar[tuple[str, ...]] = ("pitch_px", "line_px", "crosshair_px", "level", "background")
+    MAIN_KEYS: ClassVar[tuple[str, ...]] = ("pitch_px",)
+
+    pitch_px: int
+    line_px: int = 2
+    crosshair_px: int = 6
+    level: float = 1.0
+    background: float = 0.0
+
+    def validate(self) -> None:
+        _check_int("pitch_px", self.pitch_px, 2)
+        _check_int("line_px", self.line_px, 1)
+        if self.line_px >= self.pitch_px:
+            raise PatternError("line_px", f"1 .. {self.pitch_px - 1} (pitch_px = {self.pitch_px})", self.line_px)
+        _check_int("crosshair_px", self.crosshair_px, 0)
+        _check_number("level", self.level)
+        _check_number("background", self.background)
+
+
+PATTERN_TYPES: dict[str, type[Pattern]] = {cls.kind: cls for cls in (Sinusoid, SpeckleSinusoid, Gray, Flat, Grid)}
 PATTERN_KINDS = tuple(PATTERN_TYPES)
+# Kinds a projector shows but a capture never holds (capture-format v1 does not define them).
+PROJECTOR_ONLY_KINDS = (Grid.kind,)
+CAPTURE_KINDS = tuple(kind for kind in PATTERN_KINDS if kind not in PROJECTOR_ONLY_KINDS)
 
 # Keys of a pattern entry that change what is projected: two captures are comparable only if
 # these agree pattern by pattern (provenance and other extra keys may differ).
@@ -364,6 +399,23 @@ def gray_intensity(pattern: Gray | Mapping[str, Any], u: np.ndarray, extent: flo
     return 1.0 - value if gray_pattern.inverted else value
 
 
+def grid_intensity(
+    pattern: Grid | Mapping[str, Any], u: np.ndarray, v: np.ndarray, projector_size: tuple[int, int]
+) -> np.ndarray:
+    """Intensity of the alignment :class:`Grid` at projector coordinates (u, v); see the class for the rule."""
+    grid = as_pattern(pattern)
+    if not isinstance(grid, Grid):
+        raise PatternError("kind", "'grid'", grid.kind)
+    width, height = (int(projector_size[0]), int(projector_size[1]))
+    cols = np.clip(np.floor(np.asarray(u, dtype=np.float64)), 0, width - 1).astype(np.int64) - width // 2
+    rows = np.clip(np.floor(np.asarray(v, dtype=np.float64)), 0, height - 1).astype(np.int64) - height // 2
+    pitch, line, cross = int(grid.pitch_px), int(grid.line_px), int(grid.crosshair_px)
+    on_grid = ((cols + line // 2) % pitch < line) | ((rows + line // 2) % pitch < line)
+    on_cross = ((cols + cross // 2) >= 0) & ((cols + cross // 2) < cross)
+    on_cross |= ((rows + cross // 2) >= 0) & ((rows + cross // 2) < cross)
+    return np.where(on_grid | on_cross, float(grid.level), float(grid.background))
+
+
 def speckle_sinusoid_intensity(
     pattern: SpeckleSinusoid | Mapping[str, Any], u: np.ndarray, v: np.ndarray, projector_size: tuple[int, int]
 ) -> np.ndarray:
@@ -409,6 +461,8 @@ def pattern_intensity(
         return speckle_sinusoid_intensity(model, u, v, projector_size)
     if isinstance(model, Flat):
         return np.full(np.shape(u), float(model.level))
+    if isinstance(model, Grid):
+        return grid_intensity(model, u, v, projector_size)
     assert isinstance(model, (Sinusoid, Gray))
     coord, extent = (u, width) if model.axis == "x" else (v, height)
     if isinstance(model, Sinusoid):

@@ -23,7 +23,7 @@ from processing.patterns import pattern_image
 
 SIZE = (128, 96)
 
-# One pattern of every kind and option of capture-format.md.
+# One pattern of every kind and option of capture-format.md, and the projector-only alignment grid.
 PATTERNS = [
     {"kind": "sinusoid", "axis": "x", "frequency": 5, "steps": 6, "step": 1},
     {"kind": "sinusoid", "axis": "y", "frequency": 3, "steps": 4, "step": 3, "offset": 0.4, "amplitude": 0.3, "phase_rad": math.pi},
@@ -35,6 +35,8 @@ PATTERNS = [
     {"kind": "flat", "level": 0.3},
     {"kind": "flat", "level": 1.0},
     {"kind": "speckle-sinusoid", "axis": "x", "frequency": 8, "steps": 3, "step": 2, "seed": 4, "dot_px": 3, "speckle_gain": 0.3},
+    {"kind": "grid", "pitch_px": 16},
+    {"kind": "grid", "pitch_px": 7, "line_px": 3, "crosshair_px": 5, "level": 0.8, "background": 0.1},
 ]
 
 
@@ -146,7 +148,7 @@ class ProjectorContract:
         assert frame is not None and frame.shape == (SIZE[1], SIZE[0]) and frame.dtype == np.float32
         np.testing.assert_allclose(frame, expected, atol=self.tolerance, rtol=0)
 
-    @pytest.mark.parametrize("pattern", [PATTERNS[0], PATTERNS[1], PATTERNS[-1]], ids=pattern_id)
+    @pytest.mark.parametrize("pattern", [PATTERNS[0], PATTERNS[1], PATTERNS[-3], PATTERNS[-1]], ids=pattern_id)
     def test_gamma_lut_is_applied(self, projector: Projector, pattern: dict) -> None:
         if not self.renders_frames:
             pytest.skip(f"{type(projector).__name__} cannot hand back what it shows")

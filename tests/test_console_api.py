@@ -278,3 +278,142 @@ def test_calibration_wizard_runs_unattended_on_the_simulated_rig(console: TestCl
     job = console.post("/api/scan", json={"name": "after-cal", "options": {"correction": "none"}}).json()["job"]
     wait_job(console, job["id"])
     assert wait_saved(console, "after-cal")["shows"] == "height"
+
+
+def test_the_alignment_grid_shows_in_the_live_frame(console: TestClient) -> None:
+    """The projector's grid + crosshair, seen by the simulated camera: the live frame follows the grid's image."""
+    import cv2
+
+    from mock_devices.synth import projector_coordinates, sample_projector_image
+    from processing.patterns import pattern_image
+    from rig.hardware.simulated import geometry_from_config, scene_height
+
+    reply = console.put("/api/projector", json={"pattern": "grid", "pitch_px": 32})
+    assert reply.status_code == 200 and reply.json()["capture_pattern"] == {"kind": "grid", "pitch_px": 32}
+    console.put("/api/live", json={"overlay": False})
+    config = console.app.state.session.config
+    geometry = geometry_from_config(config)
+    mapping = projector_coordinates(scene_height(config, "object", geometry), geometry)
+
+    def seen(pitch: int, roll: int = 0) -> np.ndarray:
+        image = np.roll(pattern_image({"kind": "grid", "pitch_px": pitch}, config.projector.size), roll, axis=(0, 1))
+        return sample_projector_image(image, mapping)[mapping.lit]
+
+    with console.websocket_connect("/api/events") as socket:
+        socket.receive_text()
+        socket.send_text(json.dumps({"live": True}))
+        live_frames(socket, 2)  # frames taken before the pattern reached the camera are past
+        data = b""
+        while not data:
+            data = socket.receive().get("bytes") or b""
+    size = int.from_bytes(data[:4], "little")
+    frame = cv2.imdecode(np.frombuffer(data[4 + size :], dtype=np.uint8), cv2.IMREAD_GRAYSCALE)
+    assert frame.shape == (HEIGHT, WIDTH)
+    shown = frame[mapping.lit].astype(np.float64)
+    match = np.corrcoef(shown, seen(32))[0, 1]
+    half_pitch_off = np.corrcoef(shown, seen(32, roll=16))[0, 1]
+    print(f"grid in the live frame: correlation {match:.2f} with the grid's image, {half_pitch_off:.2f} half a pitch off")
+    assert match > 0.8 and half_pitch_off < 0.3, (match, half_pitch_off)
+    assert console.put("/api/projector", json={"pattern": "grid", "pitch_px": 2}).status_code == 400
+
+
+def test_a_trigger_timeout_is_reported_and_the_next_scan_works(console: TestClient) -> None:
+    with console.websocket_connect("/api/events") as socket:
+        socket.receive_text()
+        assert console.post("/api/simulation/fault", json={"fault": "trigger-timeout"}).status_code == 200
+        job = console.post("/api/scan", json={"name": "stalled", "process": False}).json()["job"]
+        errors = []
+        while not errors:
+            message = socket.receive()
+            if message.get("text"):
+                data = json.loads(message["text"])
+                if data["type"] == "error":
+                    errors.append(data["message"])
+    print(f"trigger-timeout error: {errors[0]}")
+    assert "trigger" in errors[0].lower() and "Traceback" not in errors[0] and "\n" not in errors[0], errors[0]
+    assert wait_job(console, job["id"])["state"] == "failed"
+    assert not (console.app.state.session.data.root / "captures" / "stalled").exists()
+    assert console.get("/api/status").json()["device_error"]
+    retry = console.post("/api/scan", json={"name": "after-timeout", "process": False}).json()["job"]
+    assert wait_job(console, retry["id"])["state"] == "done"
+    assert [c["name"] for c in console.get("/api/captures").json()["captures"] if c.get("complete", True)] == [
+        "after-timeout"
+    ]
+
+
+def test_calibration_wizard_options_model_and_gamma(console: TestClient) -> None:
+    stereo = console.post("/api/calibrate", json={"name": "st", "model": "stereo", "board_views": 3})
+    assert stereo.status_code == 400 and "simulated rig" in stereo.json()["error"] and "real rig" in stereo.json()["error"]
+    bad = console.post("/api/calibrate", json={"name": "g", "gamma_levels": 3})
+    assert bad.status_code == 400 and bad.json()["error"].startswith("gamma_levels: expected")
+    assert console.post("/api/calibrate", json={"model": "affine"}).status_code == 400
+    assert not (console.app.state.session.data.root / "calibrations" / "st").exists()
+    with console.websocket_connect("/api/events") as socket:
+        socket.receive_text()
+        reply = console.post("/api/calibrate", json={"name": "poly", "heights_mm": [25, 50, 100], "board_views": 0,
+                                                     "model": "polynomial", "gamma_levels": 5})
+        assert reply.status_code == 202
+        steps, result = [], None
+        while result is None:
+            message = socket.receive()
+            if message.get("text"):
+                data = json.loads(message["text"])
+                if data["type"] == "progress" and data["event"]["kind"] == "message":
+                    steps.append(data["event"]["note"])
+                elif data["type"] == "calibration":
+                    result = data
+                elif data["type"] == "error":
+                    raise AssertionError(data["message"])
+    assert steps[0].startswith("gamma ramp") and result["model"] == "polynomial"
+    assert any(line.startswith("projector gamma") for line in result["lines"])
+    assert any(line.startswith("polynomial degree") for line in result["lines"])
+    assert wait_job(console, reply.json()["job"]["id"])["state"] == "done"
+    stored = json.loads((console.app.state.session.data.root / "calibrations" / "poly" / "calibration.json").read_text())
+    assert stored["model"] == "polynomial" and "gamma" in stored
+
+
+def test_a_real_rig_prompt_waits_for_the_answer_from_the_page(console: TestClient) -> None:
+    """The operator flow of a real rig (the simulated rig sets its scenes up itself): each prompt
+    reaches the page, the session waits until the page answers Done, and Stop ends the wait."""
+    import threading
+
+    from rig.events import Cancelled
+
+    session = console.app.state.session
+    job = session._new_job("calibrate", "manual", None)
+    operator = session.operator(job)
+    done: list[str] = []
+
+    def plane() -> None:
+        try:
+            operator.plane(50.0)
+            done.append("answered")
+        except Cancelled as exc:
+            done.append(f"cancelled: {exc}")
+
+    assert console.post("/api/calibrate/answer").status_code == 400  # nothing asked yet
+    with console.websocket_connect("/api/events") as socket:
+        socket.receive_text()
+        worker = threading.Thread(target=plane)
+        worker.start()
+        while True:
+            message = socket.receive()
+            if message.get("text") and json.loads(message["text"])["type"] == "prompt":
+                prompt = json.loads(message["text"])
+                break
+        assert prompt == {"type": "prompt", "job": job.id, "text": "move the plane to 50 mm"}
+        assert console.get("/api/status").json()["prompt"]["text"] == "move the plane to 50 mm"
+        time.sleep(0.3)
+        assert worker.is_alive() and not done  # still waiting for the operator
+        assert console.post("/api/calibrate/answer").json() == {"answered": True}
+        worker.join(timeout=10)
+    assert done == ["answered"] and console.get("/api/status").json()["prompt"] is None
+    assert console.post("/api/calibrate/answer").status_code == 400  # answered once
+
+    worker = threading.Thread(target=plane)
+    worker.start()
+    while session.prompt is None:
+        time.sleep(0.01)
+    assert console.post("/api/stop", params={"job": job.id}).json()["stopped"] == [job.id]
+    worker.join(timeout=10)
+    assert done[-1].startswith("cancelled") and session.prompt is None

@@ -131,7 +131,7 @@ def test_patterns_built_in_code_write_the_main_keys_and_changed_options() -> Non
     ("entry", "key", "message"),
     [
         ({"kind": "flat"}, "level", "level: missing"),
-        ({"kind": "cross"}, "kind", "kind: expected one of sinusoid, speckle-sinusoid, gray, flat, found 'cross'"),
+        ({"kind": "cross"}, "kind", "kind: expected one of sinusoid, speckle-sinusoid, gray, flat"),
         ({"kind": "sinusoid", "frequency": 0, "steps": 4, "step": 0}, "frequency", "expected a positive number, found 0"),
         ({"kind": "sinusoid", "frequency": 4, "steps": 4, "step": 4}, "step", "expected 0 .. 3 (steps = 4), found 4"),
         ({"kind": "sinusoid", "frequency": 4, "steps": 4, "step": 0, "axis": "z"}, "axis", "expected 'x' or 'y', found 'z'"),

@@ -60,10 +60,11 @@ class ExposureBody(BaseModel):
 
 
 class ProjectorBody(BaseModel):
-    pattern: str = Field("black", description="black, white or fringe")
+    pattern: str = Field("black", description="black, white, fringe or grid (alignment: lines and a centre crosshair)")
     frequency: float = Field(8.0, description="fringes across the projector (fringe)")
     phase_deg: float = Field(0.0, description="fringe phase in degrees")
     axis: str = Field("x", description="x: fringes vary along the projector's width")
+    pitch_px: int = Field(64, description="grid line spacing in projector pixels (grid)")
 
 
 class LiveBody(BaseModel):
@@ -101,6 +102,8 @@ class CalibrateBody(BaseModel):
     name: str | None = Field(None, description="calibration name in DATA/calibrations (default cal-<time>)")
     heights_mm: list[float] = Field([25.0, 50.0, 100.0, 150.0], description="plane heights above the reference plane")
     board_views: int = Field(6, description="tilted board views for the camera intrinsics (0: pixel size only)")
+    model: str = Field("reference-plane", description="height model: reference-plane, polynomial (stereo: real rig)")
+    gamma_levels: int = Field(0, description="projector gamma ramp of this many flat levels first (0: none, else >= 5)")
 
 
 class FaultBody(BaseModel):
@@ -268,7 +271,7 @@ def create_app(
 
     @app.put("/api/projector", tags=["rig"], summary="what the projector shows between scans")
     async def projector(body: ProjectorBody) -> dict[str, Any]:
-        setting = ProjectorSetting(body.pattern, body.frequency, body.phase_deg, body.axis)
+        setting = ProjectorSetting(body.pattern, body.frequency, body.phase_deg, body.axis, body.pitch_px)
         return await run_in_threadpool(session.set_projector, setting)
 
     @app.get("/api/projector", tags=["rig"])
@@ -409,7 +412,8 @@ def create_app(
     @app.post("/api/calibrate", tags=["calibration"], status_code=202,
               summary="run the calibration session (prompts and steps on the websocket); 409 while acquiring")
     async def calibrate(body: CalibrateBody, request: Request) -> dict[str, Any]:
-        job = session.calibrate(body.name, tuple(body.heights_mm), body.board_views, client_of(request))
+        job = session.calibrate(body.name, tuple(body.heights_mm), body.board_views, client_of(request),
+                                model=body.model, gamma_levels=body.gamma_levels)
         return {"job": job.as_dict()}
 
     @app.post("/api/calibrate/answer", tags=["calibration"], summary="the operator did what the prompt asked")

@@ -50,7 +50,7 @@ from rig.pipeline.plan import DEFAULT_CORRECTION, ProcessOptions
 log = logging.getLogger(__name__)
 
 Publish = Callable[[dict[str, Any], bytes | None], None]
-PROJECTOR_PATTERNS = ("black", "white", "fringe")
+PROJECTOR_PATTERNS = ("black", "white", "fringe", "grid")
 REOPEN_AFTER_S = 2.0  # pause before the live view opens a rig again after a device error
 RESULTS_KEPT = 8  # results held in memory (older ones are read back from disk)
 JPEG_QUALITY = 80
@@ -98,12 +98,14 @@ class Job:
 
 @dataclass
 class ProjectorSetting:
-    """What the projector shows between scans: black, white, or a fringe of chosen frequency and phase."""
+    """What the projector shows between scans: black, white, a fringe of chosen frequency and phase,
+    or the alignment grid (lines every ``pitch_px`` projector pixels and a centre crosshair)."""
 
     pattern: str = "black"
     frequency: float = 8.0
     phase_deg: float = 0.0
     axis: str = "x"
+    pitch_px: int = 64
 
     def check(self) -> None:
         if self.pattern not in PROJECTOR_PATTERNS:
@@ -114,6 +116,8 @@ class ProjectorSetting:
             raise RigError(f"frequency: expected fringes across the projector in (0, 512], found {self.frequency}")
         if not math.isfinite(self.phase_deg):
             raise RigError(f"phase_deg: expected a finite angle, found {self.phase_deg}")
+        if isinstance(self.pitch_px, bool) or not isinstance(self.pitch_px, int) or not 4 <= self.pitch_px <= 4096:
+            raise RigError(f"pitch_px: expected grid line spacing in projector pixels, 4 .. 4096, found {self.pitch_px}")
 
     def capture_pattern(self) -> dict[str, Any]:
         """The capture-format pattern entry the projector shows."""
@@ -126,6 +130,8 @@ class ProjectorSetting:
                 "step": 0,
                 "phase_rad": math.radians(self.phase_deg),
             }
+        if self.pattern == "grid":
+            return {"kind": "grid", "pitch_px": self.pitch_px}
         return {"kind": "flat", "level": 1.0 if self.pattern == "white" else 0.0}
 
     @property
@@ -195,6 +201,8 @@ class ConsoleSession:
         self._reopen_at = 0.0
         self._idle = True
         self._frame_times: list[float] = []
+        self._answer: threading.Event | None = None
+        self.prompt: dict[str, str] | None = None  # the calibration prompt waiting for the operator
         self._worker = threading.Thread(target=self._run, name="rig-worker", daemon=True)
 
     # ------------------------------------------------------------------ life cycle
@@ -549,16 +557,33 @@ class ConsoleSession:
                 self._finish(job)
         self._publish_status()
 
-    def calibrate(self, name: str | None = None, heights_mm: tuple[float, ...] = (25.0, 50.0, 100.0, 150.0),
-                  board_views: int = 6, client: str | None = None) -> Job:
+    def calibrate(
+        self,
+        name: str | None = None,
+        heights_mm: tuple[float, ...] = (25.0, 50.0, 100.0, 150.0),
+        board_views: int = 6,
+        client: str | None = None,
+        model: str = "reference-plane",
+        gamma_levels: int = 0,
+    ) -> Job:
         """Run the calibration session into DATA/calibrations/NAME (an acquisition: :class:`Busy` if one runs).
 
-        The same steps and prompts as ``rig calibrate``: prompts reach the page as ``prompt``
-        messages and wait for :meth:`answer`; the simulated rig sets up each step by itself.
+        The same steps, prompts and options as ``rig calibrate``: ``model`` (reference-plane,
+        polynomial; stereo on a real rig only) and ``gamma_levels`` (a projector gamma ramp of that
+        many flat levels first, 0: none). Prompts reach the page as ``prompt`` messages and wait
+        for :meth:`answer`; the simulated rig sets up each step by itself.
         """
-        from rig.calibrate.session import CalibrationPlan
+        from rig.calibrate.session import MODELS, STEREO, CalibrationPlan
+        from rig.hardware.simulated import STEREO_REFUSAL
 
-        plan = CalibrationPlan(heights_mm=tuple(float(h) for h in heights_mm), board_views=int(board_views))
+        if model not in MODELS:
+            raise RigError(f"model: expected one of {', '.join(MODELS)}, found {model!r}")
+        if model == STEREO and self.config.simulated:
+            raise RigError(STEREO_REFUSAL)
+        if gamma_levels != 0 and gamma_levels < 5:
+            raise RigError(f"gamma_levels: expected 0 (no gamma ramp) or at least 5 levels, found {gamma_levels}")
+        plan = CalibrationPlan(heights_mm=tuple(float(h) for h in heights_mm), board_views=int(board_views),
+                               model=model, gamma_levels=int(gamma_levels))
         plan.check()
         if not self._acquiring.acquire(blocking=False):
             raise Busy("busy: an acquisition is running; one acquisition at a time")
@@ -578,14 +603,13 @@ class ConsoleSession:
 
     def _calibrate(self, job: Job, path: Path, plan: Any) -> None:
         """Worker thread: the session opens the rig itself, so the console's rig is closed meanwhile."""
-        from rig.calibrate.operator import ConsoleOperator
         from rig.calibrate.session import acquire, compute
 
         error: BaseException | None = None
         self._close_rig()
         try:
             reporter = Reporter(f"calibrate {job.name}", sink=self._sink(job), cancel=job.token)
-            operator = None if self.config.simulated else ConsoleOperator(ask=lambda text: self._ask(job, text))
+            operator = None if self.config.simulated else self.operator(job)
             acquire(self.config, plan, path, operator, progress=reporter)
             report = compute(path, progress=reporter)
             cal = report.calibration
@@ -601,18 +625,35 @@ class ConsoleSession:
         self._finish(job, error)
         self._publish_status()
 
-    def _ask(self, job: Job, text: str) -> str:
-        """A calibration prompt: shown in the page, answered by :meth:`answer` (or Stop)."""
-        self._answer = threading.Event()
-        self.publish({"type": "prompt", "job": job.id, "text": text}, None)
-        while not self._answer.wait(0.2):
-            job.token.check(job.kind)
+    def operator(self, job: Job) -> Any:
+        """The calibration operator of a real rig: each prompt goes to the page and waits for Done."""
+        from rig.calibrate.operator import ConsoleOperator
+
+        return ConsoleOperator(ask=lambda text: self.ask_operator(job, text))
+
+    def ask_operator(self, job: Job, text: str) -> str:
+        """Show a calibration prompt in the page and wait for :meth:`answer` (Stop cancels the job).
+
+        The terminal's "press Enter" becomes the page's Done button. The prompt waiting is part of
+        the status, so a page opened meanwhile shows it too.
+        """
+        answered = threading.Event()
+        text = text.strip().removesuffix(", press Enter").strip()
+        self._answer, self.prompt = answered, {"job": job.id, "text": text}
+        self.publish({"type": "prompt", **self.prompt}, None)
+        self._publish_status()
+        try:
+            while not answered.wait(0.2):
+                job.token.check(job.kind)
+        finally:
+            self.prompt = None
+            self._publish_status()
         return ""
 
     def answer(self) -> None:
         """The operator has done what the current calibration prompt asked."""
-        answer = getattr(self, "_answer", None)
-        if answer is None or answer.is_set():
+        answer = self._answer
+        if answer is None or answer.is_set() or self.prompt is None:
             raise RigError("no calibration prompt is waiting for an answer")
         answer.set()
 
@@ -760,6 +801,7 @@ class ConsoleSession:
             "projector": self.projector.__dict__,
             "live": {"watchers": self._watchers, "fps": round(self.fps, 1), **self.live.__dict__},
             "calibration": self.calibration,
+            "prompt": self.prompt,
             "calibrations": self.data.names("calibrations"),
             "process_options": process_choices(),
             "simulated": self.config.simulated,

@@ -238,6 +238,13 @@ def board_albedo(config: RigConfig, board: BoardSpec, index: int) -> np.ndarray:
     return image.astype(np.float64) / 255.0
 
 
+# Why the simulated rig cannot acquire a stereo session (rig calibrate and the console say it).
+STEREO_REFUSAL = (
+    "--model stereo: the built-in simulated rig's camera follows the reference-plane geometry, not a "
+    "pinhole; a stereo session needs a real rig (or --from a stored session)"
+)
+
+
 class WorldOperator:
     """The simulated rig's hands in a calibration session: it places planes and boards itself.
 
@@ -256,10 +263,7 @@ class WorldOperator:
         self.rig.place("board-on-reference" if on_plane else f"board-view-{index}", self.board_spec)
 
     def pose(self, index: int) -> None:
-        raise ConfigError(
-            "--model stereo: the built-in simulated rig's camera follows the reference-plane geometry, not a "
-            "pinhole; a stereo session needs a real rig (or --from a stored session)"
-        )
+        raise ConfigError(STEREO_REFUSAL)
 
     def clear(self) -> None:
         self.rig.place("reference")

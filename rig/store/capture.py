@@ -40,7 +40,15 @@ from typing import Any
 import numpy as np
 
 from calibration.jsonfile import write_json_atomic
-from processing.patterns import PROJECTION_KEYS, Pattern, PatternError, parse_pattern, same_projection
+from processing.patterns import (
+    CAPTURE_KINDS,
+    PROJECTION_KEYS,
+    PROJECTOR_ONLY_KINDS,
+    Pattern,
+    PatternError,
+    parse_pattern,
+    same_projection,
+)
 from rig.errors import CaptureError
 from rig.store import files
 
@@ -120,10 +128,19 @@ def _mapping(where: str, obj: Mapping[str, Any], key: str) -> Mapping[str, Any]:
 
 
 def validate_pattern(where: str, index: int, pattern: Any) -> Pattern:
-    """Check one ``patterns[index]`` entry against the pattern model; return it typed."""
+    """Check one ``patterns[index]`` entry against the pattern model; return it typed.
+
+    Only capture-format v1 kinds: a projector-only kind (the alignment grid) is refused by name.
+    """
     field = f"patterns[{index}]"
     if not isinstance(pattern, Mapping):
         raise _fail(where, field, "an object", pattern)
+    kind = pattern.get("kind")
+    if isinstance(kind, str) and kind in PROJECTOR_ONLY_KINDS:
+        raise CaptureError(
+            f"{where}: {field}.kind: {kind!r} is a projector-only alignment pattern, not part of capture-format v1 "
+            f"(expected one of {', '.join(CAPTURE_KINDS)})"
+        )
     try:
         return parse_pattern(pattern)
     except PatternError as exc:

@@ -111,10 +111,10 @@ $("exposure").onchange = () => api("PUT", "/api/exposure", { exposure_us: Number
 $("gain").onchange = () => api("PUT", "/api/exposure", { gain: Number($("gain").value) }).catch(() => {});
 $("overlay").onchange = () => api("PUT", "/api/live", { overlay: $("overlay").checked }).catch(() => {});
 $("live-mode").onchange = () => api("PUT", "/api/live", { view: $("live-mode").value }).catch(() => {});
-for (const id of ["projector-pattern", "fringe-frequency", "fringe-phase", "fringe-axis"]) {
+for (const id of ["projector-pattern", "fringe-frequency", "fringe-phase", "fringe-axis", "grid-pitch"]) {
   $(id).onchange = () => api("PUT", "/api/projector", {
     pattern: $("projector-pattern").value, frequency: Number($("fringe-frequency").value),
-    phase_deg: Number($("fringe-phase").value), axis: $("fringe-axis").value,
+    phase_deg: Number($("fringe-phase").value), axis: $("fringe-axis").value, pitch_px: Number($("grid-pitch").value),
   }).catch(() => {});
 }
 $("calibration").onchange = () => api("PUT", "/api/calibration", { name: $("calibration").value || null }).catch(() => {});
@@ -141,6 +141,7 @@ function updateStatus(status) {
     fillSelect(select, status.process_options.correction, select.value || status.process_options.default_correction);
   }
   renderDevices(status);
+  if (window.calibrationStatus) window.calibrationStatus(status);
 }
 
 function fillSelect(select, values, chosen, label) {
@@ -195,6 +196,7 @@ function updateProgress(message) {
 }
 
 function updateJob(job) {
+  if (window.calibrationJob) window.calibrationJob(job);
   if (job.state === "cancelled") $("scan-note").textContent = `${job.kind} ${job.name} stopped: ${job.error}`;
   else if (job.state === "failed") $("scan-note").textContent = `${job.kind} ${job.name} failed`;
   else if (job.state === "done") $("scan-note").textContent = `${job.kind} ${job.name} done`;
@@ -360,6 +362,13 @@ connect();
       <label>name <input id="cal-name" data-testid="calibration-name" placeholder="cal-<time>"></label>
       <label>plane heights (mm) <input id="cal-heights" value="25, 50, 100, 150"></label>
       <label>board views <input id="cal-views" type="number" min="0" value="6"></label>
+      <label>model <select id="cal-model" data-testid="calibration-model">
+        <option value="reference-plane">reference plane (l0, d0, f0)</option>
+        <option value="polynomial">polynomial (per-pixel height fit)</option>
+        <option value="stereo">stereo (projector-camera pair, real rig)</option>
+      </select></label>
+      <label><input id="cal-gamma" data-testid="calibration-gamma" type="checkbox"> measure the projector gamma first,
+        <input id="cal-gamma-levels" type="number" min="5" value="17"> levels</label>
       <button id="cal-start" data-testid="calibration-start" class="primary">Start</button>
     </fieldset>
     <div id="cal-prompt" data-testid="calibration-prompt" class="error" hidden><span></span>
@@ -370,15 +379,36 @@ connect();
   $("cal-start").onclick = async () => {
     $("cal-steps").innerHTML = ""; $("cal-result").textContent = "";
     const heights = $("cal-heights").value.split(",").map(Number);
+    delete $("cal-result").dataset.done;
     await api("POST", "/api/calibrate", { name: $("cal-name").value || null, heights_mm: heights,
-      board_views: Number($("cal-views").value) }).catch(() => {});
+      board_views: Number($("cal-views").value), model: $("cal-model").value,
+      gamma_levels: $("cal-gamma").checked ? Number($("cal-gamma-levels").value) : 0 }).catch(() => {});
   };
   $("cal-done").onclick = async () => { $("cal-prompt").hidden = true; await api("POST", "/api/calibrate/answer").catch(() => {}); };
+  const showPrompt = (prompt) => {
+    if (prompt) $("cal-prompt").querySelector("span").textContent = prompt.text;
+    $("cal-prompt").hidden = !prompt;
+  };
+  const finishSteps = (className) => {
+    document.querySelectorAll("#cal-steps li.current").forEach((li) => { li.className = className; });
+  };
   window.calibrationMessage = (m) => {
-    if (m.type === "prompt") { $("cal-prompt").querySelector("span").textContent = m.text; $("cal-prompt").hidden = false; }
+    if (m.type === "prompt") showPrompt(m);
     if (m.type === "calibration") {
-      $("cal-result").textContent = `${m.name}: ${m.model}\nl0 = ${m.l0_mm} mm, d0 = ${m.d0_mm} mm, f0 = ${m.f0_per_mm} /mm\n` + m.lines.join("\n");
+      finishSteps("done");
+      const figure = (label, value, unit) => (value === null || value === undefined ? "" : `${label} = ${value} ${unit}`);
+      $("cal-result").textContent = `${m.name}: ${m.model}\n` + [figure("l0", m.l0_mm, "mm"), figure("d0", m.d0_mm, "mm"),
+        figure("f0", m.f0_per_mm, "/mm")].filter(Boolean).join(", ") + "\n" + m.lines.join("\n");
       $("cal-result").dataset.done = "true";
+    }
+  };
+  window.calibrationStatus = (status) => showPrompt(status.prompt); // also a prompt waiting when the page opened
+  window.calibrationJob = (job) => {
+    if (job.kind !== "calibrate") return;
+    if (job.state === "failed" || job.state === "cancelled") {
+      finishSteps("failed");
+      showPrompt(null);
+      $("cal-result").textContent = `${job.name} ${job.state}: ${job.error}`;
     }
   };
   const previous = updateProgress;
