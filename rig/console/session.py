@@ -293,6 +293,7 @@ class ConsoleSession:
                 stack.close()
             except Exception as exc:  # noqa: BLE001 - a device that is gone may fail to close; the rig is closed anyway
                 log.warning("console: closing the rig: %s", exc)
+            log.info("console: rig closed")
 
     def _device_failed(self, exc: BaseException, during: str) -> None:
         """Close the rig after a device error and tell the page; the next use opens it again."""
