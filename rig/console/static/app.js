@@ -363,12 +363,12 @@ connect();
       <label>plane heights (mm) <input id="cal-heights" value="25, 50, 100, 150"></label>
       <label>board views <input id="cal-views" type="number" min="0" value="6"></label>
       <label>model <select id="cal-model" data-testid="calibration-model">
-        <option value="reference-plane">reference plane (l0, d0, f0)</option>
-        <option value="polynomial">polynomial (per-pixel height fit)</option>
-        <option value="stereo">stereo (projector-camera pair, real rig)</option>
+        <option value="reference-plane">reference plane</option>
+        <option value="polynomial">polynomial</option>
+        <option value="stereo">stereo (real rig)</option>
       </select></label>
-      <label><input id="cal-gamma" data-testid="calibration-gamma" type="checkbox"> measure the projector gamma first,
-        <input id="cal-gamma-levels" type="number" min="5" value="17"> levels</label>
+      <label>projector gamma ramp first (levels; 0: none) <input id="cal-gamma" data-testid="calibration-gamma"
+        type="number" min="0" value="0"></label>
       <button id="cal-start" data-testid="calibration-start" class="primary">Start</button>
     </fieldset>
     <div id="cal-prompt" data-testid="calibration-prompt" class="error" hidden><span></span>
@@ -382,7 +382,7 @@ connect();
     delete $("cal-result").dataset.done;
     await api("POST", "/api/calibrate", { name: $("cal-name").value || null, heights_mm: heights,
       board_views: Number($("cal-views").value), model: $("cal-model").value,
-      gamma_levels: $("cal-gamma").checked ? Number($("cal-gamma-levels").value) : 0 }).catch(() => {});
+      gamma_levels: Number($("cal-gamma").value) }).catch(() => {});
   };
   $("cal-done").onclick = async () => { $("cal-prompt").hidden = true; await api("POST", "/api/calibrate/answer").catch(() => {}); };
   const showPrompt = (prompt) => {
@@ -396,7 +396,7 @@ connect();
     if (m.type === "prompt") showPrompt(m);
     if (m.type === "calibration") {
       finishSteps("done");
-      const figure = (label, value, unit) => (value === null || value === undefined ? "" : `${label} = ${value} ${unit}`);
+      const figure = (label, value, unit) => (value === null || value === undefined ? "" : `${label} = ${Number(value).toPrecision(7)} ${unit}`);
       $("cal-result").textContent = `${m.name}: ${m.model}\n` + [figure("l0", m.l0_mm, "mm"), figure("d0", m.d0_mm, "mm"),
         figure("f0", m.f0_per_mm, "/mm")].filter(Boolean).join(", ") + "\n" + m.lines.join("\n");
       $("cal-result").dataset.done = "true";
