@@ -422,8 +422,9 @@ class TestTriggerBoxOnDevice(TriggerBoxContract):
 
 def test_open_waits_for_the_banner_of_a_board_that_resets_on_open():
     # the Uno reboots when the port opens (DTR); its bootloader drops what arrives meanwhile
-    with FakeTriggerBox(boot_s=0.3) as fake:
-        box = SerialTriggerBox(fake.port, command_timeouts={"HELLO": 0.2}, retries=0)
+    # (boot 1.5 s, HELLO deadline 1 s: margins wide enough for a loaded machine, the order kept)
+    with FakeTriggerBox(boot_s=1.5) as fake:
+        box = SerialTriggerBox(fake.port, command_timeouts={"HELLO": 1.0}, retries=0)
         box.open()  # no HELLO lost, no retry needed although HELLO's deadline is shorter
         assert fake.boots == 2 and fake.received[0] == tp.frame("1 HELLO 2")
         box.close()
@@ -441,7 +442,7 @@ def test_negative_polarity_idles_inactive_from_boot():
         with SerialTriggerBox(fake.port) as box:
             box.configure(pulse_width_us=100, polarity=Polarity.ACTIVE_LOW)
             assert fake.pin_level == 1
-        time.sleep(0.05)  # the fake notices a closed port by polling (10 ms)
+        time.sleep(0.3)  # the fake notices a closed port by polling (10 ms; margin for a loaded machine)
         with SerialTriggerBox(fake.port) as box:  # reopening resets the board
             assert fake.boots == 3
             assert fake.pin_level == 1  # idle high before any CONFIG
