@@ -23,15 +23,15 @@ import numpy as np
 import pytest
 
 from benchmarks.dask_cluster import external_cluster, free_port, repo_env
-from rig.batch.commit import commit_dir, remove_stale, staging_dir
 from rig.batch.discovery import INCOMPLETE_REASON, discover
-from rig.batch.index import INDEX_COLUMNS, IndexRow, read_table, remove_stale_tables, write_index
-from rig.batch.resume import calibration_digest, fingerprint, options_key
+from rig.batch.index import INDEX_COLUMNS, IndexRow, read_table, write_index
+from rig.batch.resume import calibration_digest, fingerprint, options_key, remove_stale
+from rig.batch.tasks import CaptureTask, run_task
 from rig.cli import main
-from rig.errors import ConfigError, ProcessingError
+from rig.errors import ConfigError
 from rig.hardware.synthesis import write_simulated_archive
-from rig.pipeline.outputs import OUTPUT_FILES
 from rig.pipeline.plan import ProcessOptions
+from rig.store.files import INCOMPLETE_MARK, REPLACED_MARK
 
 GOOD = ["scan-000/object", "scan-001/object", "scan-002/object", "scan-004/object"]
 CORRUPT_FRAME, CORRUPT_MANIFEST, INCOMPLETE = "scan-003/object", "scan-005/object", "scan-006/object"
@@ -130,7 +130,9 @@ def _assert_batch_results(out: Path, archive: Path, expected: dict[str, tuple[Pa
         assert rows[name]["message"] == expected[name][1]  # the line `rig process` prints
         assert not (out / name).exists()
     assert rows[INCOMPLETE]["status"] == "skipped" and rows[INCOMPLETE]["message"] == INCOMPLETE_REASON
-    leftovers = [p for p in out.rglob("*") if ".rig-batch-" in p.name or p.name.endswith(".tmp")]
+    leftovers = [
+        p for p in out.rglob("*") if INCOMPLETE_MARK in p.name or REPLACED_MARK in p.name or p.name.endswith(".tmp")
+    ]
     assert leftovers == []
 
 
@@ -306,28 +308,55 @@ def test_discovery_recurses_names_relative_and_skips_incomplete(tmp_path) -> Non
         discover([tmp_path / "missing"])
 
 
-def test_commit_replaces_outputs_whole_and_never_deletes_foreign_files(tmp_path) -> None:
+def test_a_task_never_replaces_what_rig_did_not_write(archive, tmp_path) -> None:
+    root, calibration = archive
     target = tmp_path / "out" / "part"
-    for content in (b"first", b"second"):
-        staging = staging_dir(target)
-        (staging / "height.npy").write_bytes(content)
-        commit_dir(staging, target, OUTPUT_FILES)
-        assert (target / "height.npy").read_bytes() == content
-    assert [p.name for p in target.parent.iterdir()] == ["part"]
+    target.mkdir(parents=True)
     (target / "notes.txt").write_text("mine")
-    staging = staging_dir(target)
-    with pytest.raises(ProcessingError, match="notes.txt"):
-        commit_dir(staging, target, OUTPUT_FILES)
-    assert (target / "notes.txt").read_text() == "mine"
-    assert remove_stale(tmp_path / "out") == 1 and not staging.exists()
+    task = CaptureTask(
+        name="part",
+        capture=str(root / GOOD[0]),
+        output=str(target),
+        calibration=str(calibration),
+        options=ProcessOptions(correction="none"),
+        fingerprint="f",
+    )
+    outcome = run_task(task)  # the function a worker runs, called here without Dask
+    assert outcome.row.status == "error" and "not written by this program" in outcome.row.message
+    assert [p.name for p in target.iterdir()] == ["notes.txt"]
+    (target / "notes.txt").unlink()
+    outcome = run_task(task)
+    assert outcome.row.status == "ok" and outcome.row.worker == "local"
+    report = json.loads((target / "report.json").read_text())
+    assert report["batch"]["fingerprint"] == "f" and sorted(report["files"].values()) == sorted(
+        p.name for p in target.iterdir()
+    )
 
 
-def test_a_table_is_replaced_whole_and_a_killed_write_is_cleaned_up(tmp_path) -> None:
+def test_stale_leftovers_of_a_killed_run_are_removed(tmp_path) -> None:
+    out = tmp_path / "out"
+    for name in (f"a/object{INCOMPLETE_MARK}x1", f"b/object{REPLACED_MARK}x2", "c/object"):
+        (out / name).mkdir(parents=True)
+    (out / ".index.csv.abc.tmp").write_text("capture,sta")
+    (out / "c" / "object" / "report.json").write_text("{}")
+    assert remove_stale(out) == 3
+    assert sorted(str(p.relative_to(out)) for p in out.rglob("*")) == [
+        "a",
+        "b",
+        "c",
+        "c/object",
+        "c/object/report.json",
+    ]
+
+
+def test_a_table_is_replaced_whole(tmp_path) -> None:
     rows = [
         IndexRow(capture="b", status="ok", valid_fraction=0.5),
         IndexRow(capture="a", status="error", message="x, y"),
     ]
     write_index(tmp_path / "index.csv", rows)
     assert [(r["capture"], r["message"]) for r in read_table(tmp_path / "index.csv")] == [("a", "x, y"), ("b", "")]
-    (tmp_path / ".index.csv.abc123.tmp").write_text("capture,sta")  # a write cut short by a kill
-    assert remove_stale_tables(tmp_path) == 1 and sorted(p.name for p in tmp_path.iterdir()) == ["index.csv"]
+    (tmp_path / "index.csv").write_text("capture,status\nz,ok\n")
+    write_index(tmp_path / "index.csv", rows[:1])
+    assert [r["capture"] for r in read_table(tmp_path / "index.csv")] == ["b"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["index.csv"]  # no temporary left

@@ -92,14 +92,6 @@ def write_table_atomic(path: Path, text: str) -> Path:
     return path
 
 
-def remove_stale_tables(directory: Path) -> int:
-    """Remove the temporary files of tables a killed run was writing in ``directory``; returns how many."""
-    stale = [p for p in directory.glob(".*.csv.*.tmp") if p.is_file()]
-    for path in stale:
-        path.unlink(missing_ok=True)
-    return len(stale)
-
-
 def write_index(path: Path, rows: Iterable[IndexRow]) -> Path:
     """``index.csv``: one row per capture, sorted by capture name."""
     ordered = sorted(rows, key=lambda r: r.capture)

@@ -12,12 +12,15 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import os
+import shutil
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from rig import __version__
 from rig.pipeline.plan import ProcessOptions
+from rig.store.files import INCOMPLETE_MARK, REPLACED_MARK
 
 BATCH_KEY = "batch"  # report.json key holding the batch's bookkeeping
 
@@ -87,3 +90,25 @@ def reusable_report(out_dir: Path, expected: str | None) -> dict[str, Any] | Non
     if not isinstance(files, dict) or not all(isinstance(f, str) and (out_dir / f).is_file() for f in files.values()):
         return None
     return report
+
+
+def remove_stale(root: Path) -> int:
+    """Remove what a killed run left under ``root``: staging (``NAME.incomplete-*``) and set-aside
+    (``NAME.replaced-*``) output directories, temporary report and table files; returns how many.
+
+    Only ever called on a batch's own output directory, where nothing else is written.
+    """
+    removed = 0
+    if not root.is_dir():
+        return 0
+    for here, dirs, files in os.walk(root):
+        for name in list(dirs):
+            if INCOMPLETE_MARK in name or REPLACED_MARK in name:
+                shutil.rmtree(Path(here) / name, ignore_errors=True)
+                dirs.remove(name)
+                removed += 1
+        for name in files:
+            if name.endswith(".tmp") and (name.startswith(".") or name == "report.json.tmp"):
+                (Path(here) / name).unlink(missing_ok=True)
+                removed += 1
+    return removed

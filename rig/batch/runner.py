@@ -18,10 +18,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from rig.batch.commit import remove_stale
 from rig.batch.discovery import FoundCapture, discover
-from rig.batch.index import CompareRow, IndexRow, remove_stale_tables, write_compare, write_index
-from rig.batch.resume import calibration_digest, fingerprint, options_key, reusable_report
+from rig.batch.index import CompareRow, IndexRow, write_compare, write_index
+from rig.batch.resume import calibration_digest, fingerprint, options_key, remove_stale, reusable_report
 from rig.batch.tasks import CaptureTask, TaskOutcome, kept_outcome, run_task, warm_up
 from rig.errors import ConfigError
 from rig.events import Reporter
@@ -213,7 +212,6 @@ def run_batch(plan: BatchPlan, progress: Reporter | None = None) -> BatchResult:
     found = discover(plan.archives, exclude=exclude)
     plan.output.mkdir(parents=True, exist_ok=True)
     remove_stale(plan.output)
-    remove_stale_tables(plan.output)
     tasks, known = plan_tasks(plan, found)
     outcomes: list[TaskOutcome] = list(known)
     index_path = plan.output / INDEX_FILE

@@ -1,8 +1,9 @@
 """The work of one capture, as a Dask worker runs it: paths in, a small row out.
 
-The task receives paths and options only (the scheduler never holds image data), runs the same
+The task receives paths and options only (the scheduler never holds image data) and runs the same
 :func:`rig.pipeline.run.process` and :func:`rig.pipeline.outputs.write_outputs` as ``rig process``
-into a staging directory and commits it in one rename. Every error a capture can cause becomes an
+(which commits the output directory in one rename, through :mod:`rig.store.files`), with the
+input fingerprint added to report.json in that same commit. Every error a capture can cause becomes an
 ``error`` row carrying the line ``rig process`` would print; the batch goes on.
 """
 
@@ -16,7 +17,6 @@ from typing import Any
 
 import numpy as np
 
-from rig.batch.commit import check_replaceable, commit_dir, staging_dir
 from rig.batch.index import CompareRow, IndexRow, height_stats
 from rig.batch.resume import BATCH_KEY
 from rig.errors import USER_ERRORS
@@ -139,7 +139,7 @@ def _compare(task: CaptureTask, main: Any, main_seconds: float) -> list[CompareR
 def run_task(task: CaptureTask) -> TaskOutcome:
     """Process one capture, commit its outputs and return its rows; never raises for a bad capture."""
     from rig.blas import blas_threads
-    from rig.pipeline.outputs import OUTPUT_FILES, write_outputs, write_report
+    from rig.pipeline.outputs import check_output_directory, write_outputs
 
     started = time.perf_counter()
     worker = worker_name()
@@ -148,39 +148,39 @@ def run_task(task: CaptureTask) -> TaskOutcome:
     main_seconds = 0.0
     with blas_threads(BLAS_THREADS):
         try:
-            target = Path(task.output)
-            check_replaceable(target, OUTPUT_FILES)
+            check_output_directory(task.output)  # before the work: never replace what rig did not write
             main = _process(task, task.options)
             main_seconds = time.perf_counter() - started
         except Exception as exc:  # noqa: BLE001 - isolate every failure to its capture
             row.message = error_message(exc)
         compare = _compare(task, main, main_seconds) if task.compare else []
         if main is not None:
-            staging = staging_dir(target)
             try:
-                report = write_outputs(main, staging)
-                seconds = time.perf_counter() - started
-                report[BATCH_KEY] = {
+                batch = {
                     "fingerprint": task.fingerprint,
                     "worker": worker,
-                    "seconds": seconds,
+                    "seconds": time.perf_counter() - started,
                     "compare": [dataclasses.asdict(r) for r in compare],
                 }
-                write_report(staging / "report.json", report)
-                commit_dir(staging, target, OUTPUT_FILES)
-                row.status, row.seconds = "ok", seconds
+                report = write_outputs(main, task.output, extra={BATCH_KEY: batch})
+                row.status, row.seconds = "ok", recorded_seconds(report)
                 row.valid_fraction = float(report["valid_fraction"])
                 row.message = "; ".join(report.get("notes", []))
                 for key, value in height_stats(report).items():
                     setattr(row, key, value)
             except Exception as exc:  # noqa: BLE001
-                import shutil
-
-                shutil.rmtree(staging, ignore_errors=True)
                 row.message = error_message(exc)
     if row.seconds is None:
         row.seconds = time.perf_counter() - started
     return TaskOutcome(row=row, compare=compare)
+
+
+def recorded_seconds(report: dict[str, Any]) -> float | None:
+    """A capture's seconds as report.json records them: processing (compare included) plus writing the files."""
+    try:
+        return float(report[BATCH_KEY]["seconds"]) + float(report["timings_s"]["outputs"])
+    except (KeyError, TypeError, ValueError):
+        return None
 
 
 def kept_outcome(name: str, report: dict[str, Any]) -> TaskOutcome:
@@ -192,7 +192,7 @@ def kept_outcome(name: str, report: dict[str, Any]) -> TaskOutcome:
         message="; ".join(report.get("notes", [])),
         valid_fraction=report.get("valid_fraction"),
         correction=str(report.get("methods", {}).get("correction", "")),
-        seconds=batch.get("seconds"),
+        seconds=recorded_seconds(report),
         worker=str(batch.get("worker", "")),
         **height_stats(report),
     )

@@ -244,23 +244,24 @@ def check_output_directory(out_dir: str | Path) -> None:
     safe_files.check_writable(Path(out_dir), OUTPUT_KINDS, True, OutputError)
 
 
-def write_outputs(result: ProcessResult, out_dir: str | Path) -> dict[str, Any]:
+def write_outputs(result: ProcessResult, out_dir: str | Path, extra: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """Write the outputs of capture-format.md as the directory ``out_dir``; returns the report (also in report.json).
 
     The files are written into a fresh temporary sibling and renamed into place, replacing an
     earlier output of this program (never anything else): after any interruption ``out_dir``
-    holds the complete old or the complete new result.
+    holds the complete old or the complete new result. ``extra`` keys are added to report.json
+    (``rig batch`` records its input fingerprint there, committed with the rest).
     """
     t0 = time.perf_counter()
     with safe_files.staged_directory(Path(out_dir), OUTPUT_KINDS, True, OutputError) as staging:
-        report = _write_files(result, staging, t0)
+        report = _write_files(result, staging, t0, extra or {})
     return report
 
 
 OUTPUT_KINDS = ("output",)
 
 
-def _write_files(result: ProcessResult, out: Path, t0: float) -> dict[str, Any]:
+def _write_files(result: ProcessResult, out: Path, t0: float, extra: Mapping[str, Any]) -> dict[str, Any]:
     obj = result.object
     assert obj.unwrapped is not None and obj.wrapped is not None
     report = build_report(result)
@@ -291,6 +292,7 @@ def _write_files(result: ProcessResult, out: Path, t0: float) -> dict[str, Any]:
     files["report"] = "report.json"
     report["files"] = files
     report["timings_s"]["outputs"] = time.perf_counter() - t0
+    report.update(extra)
     write_report(out / "report.json", report)
     return report
 
