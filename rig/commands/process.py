@@ -139,7 +139,7 @@ def run(args: argparse.Namespace) -> int:
 def print_summary(report: dict, out: Path) -> None:
     """The one-line summary of a processing run (and its notes) on stderr: `rig process`, `rig scan --process`."""
     line = f"{out}: valid {report['valid_fraction']:.1%}, unwrap {report['methods']['unwrap']}"
-    if "height_mm" in report:
+    if report.get("height_mm"):  # None when no valid height is finite
         h = report["height_mm"]
         line += f", {report.get('quantity', 'height')} {h['min']:.2f} .. {h['max']:.2f} mm, {report['points']} points"
     print(line, file=sys.stderr)

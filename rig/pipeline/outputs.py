@@ -86,32 +86,63 @@ def colour_map(values: np.ndarray, low: float, high: float, invalid_bgr: tuple[i
     scale = 255.0 / (high - low) if high > low else 0.0
     work = values.dtype if values.dtype in (np.float32, np.float64) else np.dtype(np.float64)
     levels = values.astype(work)  # a copy, scaled in place
-    levels -= work.type(low)
-    levels *= work.type(scale)
+    invalid = ~np.isfinite(levels)
+    with np.errstate(over="ignore", invalid="ignore"):  # values far outside [low, high] clip to the ends
+        levels -= work.type(low)
+        levels *= work.type(scale)
     np.clip(levels, 0, 255, out=levels)
-    finite = np.isfinite(levels)
-    np.copyto(levels, 0, where=~finite)
+    np.nan_to_num(levels, copy=False, nan=0.0)  # invalid inputs (coloured below), or inf * 0 for an empty range
     image = cv2.applyColorMap(levels.astype(np.uint8), cv2.COLORMAP_TURBO)
-    image[~finite] = invalid_bgr
+    image[invalid] = invalid_bgr
     return image
+
+
+# Largest magnitude of a colour range end: the span of two such ends is still a finite float.
+_RANGE_LIMIT = float(np.finfo(np.float64).max) / 4
+_MAX_TICKS = 12
+
+
+def preview_range(values: np.ndarray) -> tuple[float, float]:
+    """Colour range (low < high, both finite, high - low finite and resolvable) of a map's finite values.
+
+    The 1st..99th percentile, so that a few outliers do not flatten the picture; a constant map,
+    one without a finite value, or values so large that their span overflows or so close that
+    floats cannot tell them apart still give a usable range instead of a division by zero.
+    """
+    finite = values[np.isfinite(values)]
+    if not finite.size:
+        return 0.0, 1.0
+    low, high = (min(max(float(v), -_RANGE_LIMIT), _RANGE_LIMIT) for v in np.percentile(finite, [1.0, 99.0]))
+    magnitude = max(abs(low), abs(high))
+    if high - low <= 16 * float(np.spacing(magnitude)):  # constant to within float resolution: widen
+        pad = max(0.5, 1e-6 * magnitude)  # half a unit, or enough that ticks and colours can be told apart
+        low, high = low - pad, high + pad
+    return low, high
+
+
+def _ticks(low: float, high: float) -> tuple[np.ndarray, str]:
+    """Tick values in [low, high] at a round step (at most a dozen) and a format that tells them apart."""
+    step = _nice_step(high - low)
+    first = np.ceil(low / step)
+    count = int(min(np.floor(high / step) - first + 1, _MAX_TICKS)) if np.isfinite(first) else 0
+    ticks = np.unique((first + np.arange(max(count, 0))) * step)
+    ticks = ticks[np.isfinite(ticks) & (ticks >= low) & (ticks <= high)]
+    digits = int(np.clip(np.ceil(np.log10(max(abs(low), abs(high), step) / step)) + 2, 6, 17))  # 6: plain "%g"
+    return ticks, f"{{:.{digits}g}}"
 
 
 def write_preview(path: Path, values: np.ndarray, unit: str, title: str = "") -> tuple[float, float]:
     """Colour-mapped preview of a map with a vertical scale bar labelled in ``unit``.
 
-    The colour range is the 1st..99th percentile of the finite values, so a few outliers do not
-    flatten the picture. Returns (low, high) of the colour range.
+    The colour range is :func:`preview_range`; any map of finite, infinite or NaN values, also an
+    empty one, gives a picture. Returns (low, high) of the colour range.
     """
     values = np.asarray(values)
     if values.dtype not in (np.float32, np.float64):
         values = values.astype(np.float64)
-    finite = values[np.isfinite(values)]
-    if finite.size:
-        low, high = (float(v) for v in np.percentile(finite, [1.0, 99.0]))
-        if high <= low:
-            low, high = low - 0.5, high + 0.5
-    else:
-        low, high = 0.0, 1.0
+    if values.ndim != 2 or not values.size:
+        values = np.full((1, 1), np.nan)
+    low, high = preview_range(values)
     image = colour_map(values, low, high)
     rows = image.shape[0]
     panel = np.full((rows, PREVIEW_BAR_PX, 3), 255, dtype=np.uint8)
@@ -119,14 +150,12 @@ def write_preview(path: Path, values: np.ndarray, unit: str, title: str = "") ->
     ramp = np.linspace(high, low, bottom - top)[:, None].repeat(18, axis=1)
     panel[top:bottom, 8:26] = colour_map(ramp, low, high)
     font, font_scale = cv2.FONT_HERSHEY_SIMPLEX, 0.35 if rows < 300 else 0.45
-    step = _nice_step(high - low)
-    tick = np.ceil(low / step) * step
-    while tick <= high + 1e-9 * step:
+    ticks, label_format = _ticks(low, high)
+    for tick in ticks:
         y = int(round(top + (high - tick) / (high - low) * (bottom - top - 1)))
         cv2.line(panel, (26, y), (31, y), (0, 0, 0), 1)
-        label = f"{tick + 0.0:g}"  # no "-0"
+        label = label_format.format(tick + 0.0)  # no "-0"
         cv2.putText(panel, label, (34, y + 4), font, font_scale, (0, 0, 0), 1, cv2.LINE_AA)
-        tick += step
     cv2.putText(panel, unit, (8, min(rows - 2, bottom + 10)), font, font_scale, (0, 0, 0), 1, cv2.LINE_AA)
     if not np.isfinite(values).all():  # legend entry for the colour of invalid pixels
         grey = tuple(int(v) for v in colour_map(np.full((1, 1), np.nan), low, high)[0, 0])
@@ -225,9 +254,10 @@ def build_report(result: ProcessResult) -> dict[str, Any]:
     else:
         assert result.calibration is not None
         valid_h = result.height[result.mask]
+        valid_h = valid_h[np.isfinite(valid_h)]  # report.json is strict JSON: no NaN or Infinity
         report["height_mm"] = {
             "min": float(np.min(valid_h)), "max": float(np.max(valid_h)), "median": float(np.median(valid_h)),
-        }
+        } if valid_h.size else None
         report["points"] = int(np.count_nonzero(result.mask))
         report["calibration_model"] = result.calibration.model
         # stereo without a plane gives distance from the camera, not height above a plane
