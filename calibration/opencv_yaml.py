@@ -34,6 +34,20 @@ LAYOUT = {
 # How an OpenCV FileStorage file starts (YAML, XML, JSON): anything else is refused before OpenCV parses it.
 FILESTORAGE_HEADS = (b"%YAML", b"<?xml", b"{")
 
+# What OpenCV raises for a file it cannot parse. cv2.error: the documented type; node reads raise it
+# (a matrix whose data does not fit rows x cols, an unknown dt), and older OpenCV 4 releases raise
+# it from the constructor too. SystemError: the FileStorage constructor on a syntax error in
+# OpenCV 4.10, 4.14 and 5.0 alike ("returned a result with an exception set", the cv2.error as its
+# __cause__). tests/test_hardening_edges.py runs the same files under each OpenCV it is given.
+OPENCV_ERRORS: tuple[type[BaseException], ...] = (cv2.error, SystemError)
+
+
+def _opencv_message(exc: BaseException) -> str:
+    """The last line of OpenCV's message (or of its cause's), without the source location."""
+    cause = exc.__cause__ if isinstance(exc, SystemError) and exc.__cause__ is not None else exc
+    lines = str(cause).strip().splitlines() or [type(cause).__name__]
+    return lines[-1].split(" error: ", 1)[-1][:200]
+
 
 def read_filestorage(path: str | os.PathLike[str], names: tuple[str, ...]) -> dict[str, np.ndarray]:
     """Matrices ``names`` of an OpenCV FileStorage file; CalibrationError naming a missing one."""
@@ -49,27 +63,33 @@ def read_filestorage(path: str | os.PathLike[str], names: tuple[str, ...]) -> di
         raise CalibrationError(f"{path}: expected an OpenCV FileStorage file (starting with %YAML, <?xml or {{), found {head[:16]!r}")
     try:
         storage = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
-    except Exception as exc:  # cv2.error in OpenCV 4; OpenCV 5 raises SystemError and others for the same file
-        message = (str(exc).strip().splitlines() or [type(exc).__name__])[-1]
-        raise CalibrationError(f"{path}: not an OpenCV FileStorage file ({message})") from None
+    except OPENCV_ERRORS as exc:
+        raise CalibrationError(f"{path}: not an OpenCV FileStorage file ({_opencv_message(exc)})") from None
     if not storage.isOpened():
         raise CalibrationError(f"{path}: cannot be opened as an OpenCV FileStorage file")
     try:
-        out = {}
-        for name in names:
-            node = storage.getNode(name)
-            if node.empty():
-                raise CalibrationError(f"{path}: {name}: missing (expected keys {', '.join(names)})")
-            matrix = node.mat() if node.isMap() else None
-            if matrix is None:
-                if node.isSeq():
-                    matrix = np.array([node.at(i).real() for i in range(node.size())])
-                else:
-                    raise CalibrationError(f"{path}: {name}: expected a matrix")
-            out[name] = np.asarray(matrix, dtype=np.float64)
-        return out
+        return {name: _read_node(storage, name, path, names) for name in names}
     finally:
         storage.release()
+
+
+def _read_node(storage: Any, name: str, path: Path, names: tuple[str, ...]) -> np.ndarray:
+    """One matrix (an ``opencv-matrix`` map or a sequence of numbers) of an open FileStorage."""
+    try:
+        node = storage.getNode(name)
+        if node.empty():
+            raise CalibrationError(f"{path}: {name}: missing (expected keys {', '.join(names)})")
+        if node.isMap():
+            matrix = node.mat()
+        elif node.isSeq() and all(node.at(i).isReal() or node.at(i).isInt() for i in range(node.size())):
+            matrix = np.array([node.at(i).real() for i in range(node.size())])
+        else:
+            matrix = None
+    except OPENCV_ERRORS as exc:
+        raise CalibrationError(f"{path}: {name}: not a readable matrix ({_opencv_message(exc)})") from None
+    if matrix is None:
+        raise CalibrationError(f"{path}: {name}: expected a matrix or a list of numbers")
+    return np.asarray(matrix, dtype=np.float64)
 
 
 def import_opencv_calibration(

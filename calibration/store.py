@@ -17,6 +17,8 @@ from datetime import datetime, timezone
 from pathlib import Path, PurePosixPath
 from typing import Any
 
+import numpy as np
+
 from calibration.errors import CalibrationError
 from calibration.jsonfile import read_json, write_json_atomic
 
@@ -124,6 +126,58 @@ def _check_reference(where: str, reference: Any) -> None:
         )
 
 
+# (matrix, distortion) keys of the pinhole cameras a calibration may hold (the projector is an inverse camera)
+_CAMERA_KEYS = (("camera_matrix", "distortion"), ("projector_matrix", "projector_distortion"))
+DISTORTION_SIZES = (0, 4, 5, 8, 12, 14)  # OpenCV's lens models
+_MAX_CONDITION = 1e12  # beyond this a camera matrix cannot be inverted to any useful precision
+
+
+def _check_camera_matrix(where: str, key: str, value: Any) -> None:
+    """A pinhole matrix [[fx, s, cx], [0, fy, cy], [0, 0, 1]]: finite, fx, fy > 0, invertible."""
+    try:
+        matrix = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        matrix = np.zeros(0)
+    if matrix.shape != (3, 3):
+        found = f"shape {matrix.shape}" if matrix.size else repr(value)[:60]
+        raise CalibrationError(f"{where}: {key}: expected a 3x3 matrix [[fx, s, cx], [0, fy, cy], [0, 0, 1]], found {found}")
+    if not np.isfinite(matrix).all():
+        raise CalibrationError(f"{where}: {key}: expected finite numbers, found NaN or infinity")
+    if not (matrix[0, 0] > 0 and matrix[1, 1] > 0):
+        raise CalibrationError(f"{where}: {key}: expected focal lengths fx, fy > 0, found {matrix[0, 0]:g}, {matrix[1, 1]:g}")
+    if matrix[1, 0] != 0 or not np.array_equal(matrix[2], [0.0, 0.0, 1.0]):
+        raise CalibrationError(
+            f"{where}: {key}: expected the form [[fx, s, cx], [0, fy, cy], [0, 0, 1]], found rows 2 and 3 "
+            f"{matrix[1].tolist()}, {matrix[2].tolist()}"
+        )
+    condition = float(np.linalg.cond(matrix))
+    if not condition < _MAX_CONDITION:
+        raise CalibrationError(f"{where}: {key}: expected an invertible matrix, found condition number {condition:.3g}")
+
+
+def _check_distortion(where: str, key: str, value: Any) -> None:
+    """OpenCV distortion coefficients: 0, 4, 5, 8, 12 or 14 finite numbers."""
+    try:
+        coefficients = np.asarray(value, dtype=np.float64).ravel()
+    except (TypeError, ValueError):
+        raise CalibrationError(f"{where}: {key}: expected a list of numbers, found {repr(value)[:60]}") from None
+    if coefficients.size not in DISTORTION_SIZES:
+        raise CalibrationError(
+            f"{where}: {key}: expected 0, 4, 5, 8, 12 or 14 OpenCV coefficients, found {coefficients.size}"
+        )
+    if not np.isfinite(coefficients).all():
+        raise CalibrationError(f"{where}: {key}: expected finite coefficients, found NaN or infinity")
+
+
+def _check_cameras(where: str, data: Mapping[str, Any]) -> None:
+    """Camera and projector intrinsics, where present: checked when read, not found as an empty map later."""
+    for matrix_key, distortion_key in _CAMERA_KEYS:
+        if matrix_key in data:
+            _check_camera_matrix(where, matrix_key, data[matrix_key])
+        if distortion_key in data:
+            _check_distortion(where, distortion_key, data[distortion_key])
+
+
 def validate(data: Any, where: str = FILENAME) -> None:
     """Check a parsed calibration.json; raise CalibrationError naming the field on the first problem."""
     if not isinstance(data, Mapping):
@@ -148,6 +202,7 @@ def validate(data: Any, where: str = FILENAME) -> None:
             if key in data:
                 _number(where, data, key, rule)
     _check_reference(where, data.get("reference"))
+    _check_cameras(where, data)
 
 
 def read_calibration(path: str | os.PathLike[str]) -> Calibration:

@@ -92,3 +92,32 @@ def test_killed_processing_leaves_the_old_or_the_new_result(tmp_path, small_capt
                            "-o", str(out), "-q", cwd=tmp_path), delay)
         seen.add(_assert_complete_output(out))
     assert "none" in seen
+
+
+OLD_HEIGHTS, NEW_HEIGHTS = "25,50,100,150", "20,40,80,120"
+
+
+def _complete_calibration(cal: Path) -> str:
+    """The plane heights of the complete calibration at ``cal`` (every capture in it verifies)."""
+    from calibration.store import read_calibration
+
+    calibration = read_calibration(cal)
+    assert calibration.reference_path is not None and read_capture(calibration.reference_path).complete
+    heights = json.loads((cal / "session.json").read_text())["heights_mm"]
+    planes = sorted(cal.glob("planes/*"))
+    assert len(planes) == len(heights) and all(read_capture(plane).complete for plane in planes)
+    assert calibration.extra["heights_mm"] == heights  # calibration.json was fitted to these very captures
+    return ",".join(f"{h:g}" for h in heights)
+
+
+def test_killed_calibrate_overwrite_keeps_the_old_or_the_new_calibration(tmp_path) -> None:
+    (tmp_path / "rig.toml").write_text(SMALL_RIG)
+    common = ("calibrate", "--config", "rig.toml", "-o", "cal", "--board", "none", "--pixel-mm", "1.6", "-q")
+    assert _start(*common, "--heights", OLD_HEIGHTS, cwd=tmp_path).wait() == 0
+    seen = {_complete_calibration(tmp_path / "cal")}
+    for delay in _delays(13, 0.3, 3.0):
+        _kill_after(_start(*common, "--heights", NEW_HEIGHTS, "--overwrite", cwd=tmp_path), delay)
+        seen.add(_complete_calibration(tmp_path / "cal"))
+    assert OLD_HEIGHTS in seen and seen <= {OLD_HEIGHTS, NEW_HEIGHTS}
+    assert _start(*common, "--heights", NEW_HEIGHTS, "--overwrite", cwd=tmp_path).wait() == 0
+    assert _complete_calibration(tmp_path / "cal") == NEW_HEIGHTS

@@ -22,11 +22,12 @@ calibration from stored data and tries another model on the same captures.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import re
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -195,6 +196,10 @@ def _frames_planned(config: RigConfig, plan: CalibrationPlan) -> int:
     return frames + (len(BOARD_PATTERNS) * (plan.board_views + 1) if plan.board is not None else 0)
 
 
+# What `rig calibrate --overwrite` may replace: a calibration, or the session directory of one.
+CALIBRATION_KINDS = ("calibration", "calibration-session")
+
+
 def acquire(
     config: RigConfig,
     plan: CalibrationPlan,
@@ -203,23 +208,66 @@ def acquire(
     progress: Reporter | None = None,
     overwrite: bool = False,
 ) -> None:
-    """Capture everything ``plan`` needs into ``directory`` (see the module docstring).
+    """Capture everything ``plan`` needs as the session directory ``directory`` (see the module docstring).
 
     The rig is opened once for the session. Before each capture ``operator`` (a person, a stage)
     and, on the simulated rig, the simulated world set up the scene; a session with neither is
-    refused. ``progress`` gets one step per frame and a message naming each step.
+    refused. ``progress`` gets one step per frame and a message naming each step. The session is
+    captured beside ``directory`` and committed as a whole (:func:`calibrate` also computes before
+    the commit); ``overwrite`` replaces only a calibration or a session directory.
     """
+    with _staged_session(Path(directory), overwrite) as staging:
+        _acquire_into(config, plan, staging, Path(directory), operator, progress)
+
+
+def calibrate(
+    config: RigConfig,
+    plan: CalibrationPlan,
+    directory: Path,
+    operator: Operator | None = None,
+    progress: Reporter | None = None,
+    overwrite: bool = False,
+) -> CalibrationReport:
+    """:func:`acquire` and :func:`compute` in a temporary sibling of ``directory``, then commit it.
+
+    Whatever interrupts the session (an error, Stop, a kill), ``directory`` holds the complete
+    old calibration or the complete new one: the old one is replaced by an atomic exchange only
+    once the new calibration.json is written.
+    """
+    directory = Path(directory)
+    with _staged_session(directory, overwrite) as staging:
+        _acquire_into(config, plan, staging, directory, operator, progress)
+        report = compute(staging, plan, progress=progress)
+    report.calibration.path = directory
+    return report
+
+
+@contextlib.contextmanager
+def _staged_session(directory: Path, overwrite: bool) -> Iterator[Path]:
+    """A staging directory committed as ``directory`` on success (removed on any error)."""
+    from rig.store import files
+
+    if directory.is_dir() and not directory.is_symlink() and not files.is_empty_directory(directory):
+        if not overwrite:
+            raise CaptureError(f"{directory}: already exists and is not empty; choose another -o or pass --overwrite")
+        if files.kind_of(directory) not in CALIBRATION_KINDS:
+            raise CaptureError(f"{directory}: not a calibration directory; --overwrite replaces only those")
+    with files.staged_directory(directory, CALIBRATION_KINDS, overwrite, CaptureError) as staging:
+        yield staging
+
+
+def _acquire_into(
+    config: RigConfig,
+    plan: CalibrationPlan,
+    staging: Path,
+    directory: Path,
+    operator: Operator | None,
+    progress: Reporter | None,
+) -> None:
+    """The captures of :func:`acquire`, written into ``staging`` (which becomes ``directory``)."""
     from rig.hardware.assembly import open_rig, world_operator
 
     plan.check()
-    if directory.exists() and any(directory.iterdir()):
-        if not overwrite:
-            raise CaptureError(f"{directory}: already exists and is not empty; choose another -o or pass --overwrite")
-        if not ((directory / SESSION_FILE).is_file() or (directory / "calibration.json").is_file()):
-            raise CaptureError(f"{directory}: not a calibration directory; --overwrite replaces only those")
-        import shutil
-
-        shutil.rmtree(directory)
     if progress is not None:
         progress.begin(_frames_planned(config, plan), f"calibrate {directory}")
     with open_rig(config, scene="reference") as devices:
@@ -227,9 +275,8 @@ def acquire(
         hands = [hand for hand in (operator, world) if hand is not None]
         if not hands:
             raise ConfigError("calibration needs an operator: a person at the console or --stage-command")
-        directory.mkdir(parents=True, exist_ok=True)
-        (directory / SESSION_FILE).write_text(json.dumps(plan.to_json(), indent=2) + "\n", encoding="utf-8")
-        session = _Acquisition(devices, directory, hands, progress)
+        (staging / SESSION_FILE).write_text(json.dumps(plan.to_json(), indent=2) + "\n", encoding="utf-8")
+        session = _Acquisition(devices, staging, hands, progress)
         if plan.model == STEREO:
             _acquire_stereo(session, plan)
         else:

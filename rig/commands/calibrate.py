@@ -100,15 +100,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def _import_opencv(args: argparse.Namespace) -> int:
     from calibration.opencv_yaml import import_opencv_calibration
     from calibration.store import Calibration, write_calibration
-
-    if args.projector_size is None:
-        raise ConfigError("--import-opencv needs --projector-size WxH (the FileStorage file does not record it)")
-    fields = import_opencv_calibration(args.import_opencv, args.projector_size, pixel_centre=args.pixel_centre)
-    fields.pop("model")
-    output = args.output or Path("calibration")
     from rig.errors import OutputError
     from rig.store import files
 
+    if args.projector_size is None:
+        raise ConfigError("--import-opencv needs --projector-size WxH (the FileStorage file does not record it)")
+    output = args.output or Path("calibration")
+    files.check_writable(output, ("calibration",), args.overwrite, OutputError)  # before reading anything
+    fields = import_opencv_calibration(args.import_opencv, args.projector_size, pixel_centre=args.pixel_centre)
+    fields.pop("model")
     with files.staged_directory(output, ("calibration",), args.overwrite, OutputError) as staging:
         write_calibration(staging, Calibration(model="stereo", extra=fields))
     target = output / "calibration.json"
@@ -136,7 +136,7 @@ def _plan(args: argparse.Namespace, base=None):
 
 def run(args: argparse.Namespace) -> int:
     from rig.calibrate.operator import ConsoleOperator, StageCommand
-    from rig.calibrate.session import CalibrationPlan, acquire, compute
+    from rig.calibrate.session import CALIBRATION_KINDS, CalibrationPlan, calibrate, compute
     from rig.progress import Progress
 
     if args.import_opencv is not None:
@@ -144,8 +144,12 @@ def run(args: argparse.Namespace) -> int:
     from rig.errors import OutputError
     from rig.store import files
 
-    if args.output is not None and args.from_dir is None:  # unwritable or foreign: say so before the session
-        files.check_writable(args.output, ("calibration", "calibration-session"), args.overwrite, OutputError)
+    in_place = args.from_dir is not None and (args.output is None or files.same_path(args.output, args.from_dir))
+    # unwritable or foreign: say so before the session or the computation
+    if in_place:
+        files.check_writable_directory(args.from_dir, OutputError)
+    elif args.output is not None:
+        files.check_writable(args.output, CALIBRATION_KINDS, args.overwrite, OutputError)
     if args.from_dir is not None:
         session = args.from_dir / "session.json"
         base = None
@@ -156,7 +160,12 @@ def run(args: argparse.Namespace) -> int:
         plan = _plan(args, base)
         plan.check()
         with Progress(f"calibrate --from {args.from_dir}", total=1, quiet=args.quiet) as bar:
-            report = compute(args.from_dir, plan, output=args.output, progress=bar.reporter())
+            if in_place:
+                report = compute(args.from_dir, plan, progress=bar.reporter())
+            else:  # a new calibration directory (with a copy of the reference), committed as a whole
+                with files.staged_directory(args.output, CALIBRATION_KINDS, args.overwrite, OutputError) as staging:
+                    report = compute(args.from_dir, plan, output=staging, progress=bar.reporter())
+                report.calibration.path = args.output
     else:
         from rig.config import load_config
 
@@ -170,8 +179,8 @@ def run(args: argparse.Namespace) -> int:
             stage = StageCommand(args.stage_command) if args.stage_command else None
             operator = ConsoleOperator(stage=stage)
         with Progress(f"calibrate {output}", total=1, quiet=args.quiet) as bar:
-            acquire(config, plan, output, operator, progress=bar.reporter(), overwrite=args.overwrite)
-            report = compute(output, plan, progress=bar.reporter())
+            # captured and computed beside OUTPUT, then committed: a kill keeps the old calibration
+            report = calibrate(config, plan, output, operator, progress=bar.reporter(), overwrite=args.overwrite)
     cal = report.calibration
     for line in report.lines:
         print(f"  {line}", file=sys.stderr)

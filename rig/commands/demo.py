@@ -92,7 +92,7 @@ def run(args: argparse.Namespace) -> int:
         staged = write_simulated_scan(scan, staging / "scan")
         progress.step("captures written")
         result = process(staged.capture, staged.calibration, ProcessOptions(correction=DEFAULT_CORRECTION), progress=progress)
-        report = write_outputs(result, staging / "processed")
+        report = write_outputs(result, staging / "processed", staged_inputs=(staging, out))  # names the final paths
         progress.step("outputs")
         paths = simulated_paths(out / "scan")
         summary = _summary(args, out, width, height, scan, result, report, paths)

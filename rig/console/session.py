@@ -604,15 +604,14 @@ class ConsoleSession:
 
     def _calibrate(self, job: Job, path: Path, plan: Any) -> None:
         """Worker thread: the session opens the rig itself, so the console's rig is closed meanwhile."""
-        from rig.calibrate.session import acquire, compute
+        from rig.calibrate.session import calibrate
 
         error: BaseException | None = None
         self._close_rig()
         try:
             reporter = Reporter(f"calibrate {job.name}", sink=self._sink(job), cancel=job.token)
             operator = None if self.config.simulated else self.operator(job)
-            acquire(self.config, plan, path, operator, progress=reporter)
-            report = compute(path, progress=reporter)
+            report = calibrate(self.config, plan, path, operator, progress=reporter)  # committed only when computed
             cal = report.calibration
             self.publish({"type": "calibration", "name": job.name, "job": job.id, "lines": list(report.lines),
                           "l0_mm": cal.l0_mm, "d0_mm": cal.d0_mm, "f0_per_mm": cal.f0_per_mm, "model": cal.model}, None)

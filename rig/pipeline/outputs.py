@@ -221,15 +221,25 @@ def _wrapped_maps(state: SceneState) -> np.ndarray:
 OUTPUT_FILES = ("height.npy", "phase.npy", "mask.npy", "wrapped.npy", "points.ply", "report.json", "preview.png")
 
 
-def build_report(result: ProcessResult) -> dict[str, Any]:
-    """The report of a processing run (report.json without its ``files`` and output timing)."""
+def build_report(result: ProcessResult, staged_inputs: tuple[Path, Path] | None = None) -> dict[str, Any]:
+    """The report of a processing run (report.json without its ``files`` and output timing).
+
+    ``staged_inputs`` (staging, final): the inputs were written into a staging directory that is
+    committed as ``final`` (``rig demo``); the report names them where they will be.
+    """
     obj = result.object
     assert obj.unwrapped is not None and obj.wrapped is not None
+
+    def where(path: Path | None) -> str | None:
+        if path is None:
+            return None
+        return str(safe_files.committed_path(path, *staged_inputs) if staged_inputs else path)
+
     report: dict[str, Any] = {
         "program": f"fpp-rig {__version__}",
-        "capture": str(obj.capture.path),
-        "calibration": str(result.calibration.path) if result.calibration is not None else None,
-        "reference": str(result.reference.capture.path) if result.reference is not None else None,
+        "capture": where(obj.capture.path),
+        "calibration": where(result.calibration.path if result.calibration is not None else None),
+        "reference": where(result.reference.capture.path if result.reference is not None else None),
         "methods": {
             "wrapped_phase": "phase-shifting" if obj.groups.sinusoids else "single-shot",
             "unwrap": obj.unwrapped.method,
@@ -274,27 +284,35 @@ def check_output_directory(out_dir: str | Path) -> None:
     safe_files.check_writable(Path(out_dir), OUTPUT_KINDS, True, OutputError)
 
 
-def write_outputs(result: ProcessResult, out_dir: str | Path, extra: Mapping[str, Any] | None = None) -> dict[str, Any]:
+def write_outputs(
+    result: ProcessResult,
+    out_dir: str | Path,
+    extra: Mapping[str, Any] | None = None,
+    staged_inputs: tuple[Path, Path] | None = None,
+) -> dict[str, Any]:
     """Write the outputs of capture-format.md as the directory ``out_dir``; returns the report (also in report.json).
 
     The files are written into a fresh temporary sibling and renamed into place, replacing an
     earlier output of this program (never anything else): after any interruption ``out_dir``
     holds the complete old or the complete new result. ``extra`` keys are added to report.json
-    (``rig batch`` records its input fingerprint there, committed with the rest).
+    (``rig batch`` records its input fingerprint there, committed with the rest). ``staged_inputs``:
+    see :func:`build_report`.
     """
     t0 = time.perf_counter()
     with safe_files.staged_directory(Path(out_dir), OUTPUT_KINDS, True, OutputError) as staging:
-        report = _write_files(result, staging, t0, extra or {})
+        report = _write_files(result, staging, t0, extra or {}, staged_inputs)
     return report
 
 
 OUTPUT_KINDS = ("output",)
 
 
-def _write_files(result: ProcessResult, out: Path, t0: float, extra: Mapping[str, Any]) -> dict[str, Any]:
+def _write_files(
+    result: ProcessResult, out: Path, t0: float, extra: Mapping[str, Any], staged_inputs: tuple[Path, Path] | None
+) -> dict[str, Any]:
     obj = result.object
     assert obj.unwrapped is not None and obj.wrapped is not None
-    report = build_report(result)
+    report = build_report(result, staged_inputs)
     files: dict[str, str] = {}
     phase = obj.unwrapped.phase.astype(np.float64)  # a copy: NaN outside the mask
     np.copyto(phase, np.nan, where=~result.mask)

@@ -486,6 +486,34 @@ def check_writable(target: Path, kinds: tuple[str, ...], replace: bool, error: E
     os.rmdir(staging)
 
 
+def check_writable_directory(directory: Path, error: ErrorType) -> None:
+    """Before any work: files can be created in the existing ``directory`` (a probe file, removed)."""
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".write-probe-", dir=directory)
+    except OSError as exc:
+        raise error(f"{directory}: cannot write in it: {exc.strerror or exc}") from None
+    os.close(fd)
+    os.unlink(probe)
+
+
+def committed_path(path: Path, staging: Path, target: Path) -> Path:
+    """Where ``path``, written inside ``staging``, lies once ``staging`` is committed as ``target``.
+
+    A path outside ``staging`` is returned as it is; relative and absolute spellings both work.
+    """
+    path, staging, target = Path(path), Path(staging), Path(target)
+    for base, final in ((staging, target), (staging.absolute(), target.absolute()),
+                        (staging.resolve(), staging.resolve().parent / target.name)):
+        if path.is_relative_to(base):
+            return final / path.relative_to(base)
+    return path
+
+
+def same_path(first: Path, second: Path) -> bool:
+    """Whether two paths name the same place (after resolving links)."""
+    return Path(first).resolve() == Path(second).resolve()
+
+
 @contextlib.contextmanager
 def parent_lock(parent: Path) -> Iterator[None]:
     """Exclusive lock on a directory (flock on its descriptor; no file is created)."""
