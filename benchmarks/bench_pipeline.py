@@ -3,25 +3,31 @@
 Rows, timed in the same interleaved runs (run i times every row once, in turn, so a change of
 load hits all rows alike):
 
-- ``fused``: :func:`processing.fringe_pass.fringe_pass` (phase shifting of both frequencies,
-  modulation mask and Ding's two-frequency unwrapping in one float32 pass, OpenCV's angle and
-  look-up kernels) then eq. 1.15 in float32 against a reference phase precomputed as the
-  calibration would; what ``rig process --correction none`` computes;
-- ``fused, numpy kernels``: the same with ``opencv=False`` (numpy's arctan2);
-- ``stage functions``: the float64 public functions one after the other (``phase_shift`` per
-  frequency, ``shadow_mask``, ``unwrap_two_frequency``, ``phase_to_height``);
+- ``rig pipeline, correction none``: :func:`rig.pipeline.run.process` given the 12 frames in
+  memory (``frames=``) with its calibration: manifest and calibration read, the reference plane
+  from the reference cache (processed once, as every scan after the first finds it), the stages
+  (the fused pass, correction none), eq. 1.15 and the mask: what ``rig process --correction none``
+  computes between decoding the PNGs and writing the outputs;
+- ``rig pipeline, default``: the same with the default correction (``auto``);
+- ``fused kernel``: :func:`processing.fringe_pass.fringe_pass` (phase shifting of both
+  frequencies, modulation mask and Ding's two-frequency unwrapping in one float32 pass, OpenCV's
+  angle and look-up kernels) then eq. 1.15 in float32 against the reference phase;
+- ``fused kernel, numpy only``: the same with ``opencv=False`` (numpy's arctan2);
+- ``float64 stage functions``: the public float64 functions one after the other (``phase_shift``
+  per frequency, ``shadow_mask``, ``unwrap_two_frequency``, ``phase_to_height``), the path
+  ``rig process`` ran before the fused pass;
 - the peer, OpenCV contrib's ``cv2.structured_light.SinusoidalPattern`` (PSP): three-step phase
   maps of both frequencies from frames 0, 2, 4 of each six-step set (shifts of 2 pi / 3) with
   ``computePhaseMap``, then ``unwrapPhaseMap`` of the high frequency (its histogram-based spatial
   unwrapper; it has no temporal unwrapping and no height).
 
 Per row: median wall time, its spread over the runs (min - max), the median CPU time of the
-process, and ``peer / this``: the median over runs of the peer's time divided by the row's time
-in the same run (with its min - max). The header gives the CPU model, its SIMD level as numpy and
+process, and ``peer/this``: the median over runs of the peer's time divided by the row's time in
+the same run (with its min - max). The header gives the CPU model, its SIMD level as numpy and
 OpenCV see it, and the load average before and after. A check against the simulated truth ends
 the report.
 
-    python benchmarks/bench_pipeline.py [--runs 11] [--frequencies 15 16] [--snr-db 30]
+    python benchmarks/bench_pipeline.py [--runs 11] [--frequencies 15 16] [--snr-db 30] [--no-auto]
 
 To see a CPU without AVX-512 on one that has it (numpy's arctan2 and others get 5-10x slower):
 ``NPY_DISABLE_CPU_FEATURES="AVX512F AVX512CD AVX512_SKX AVX512_CLX AVX512_CNL AVX512_ICL
@@ -32,10 +38,8 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
-import statistics
 import sys
-import time
+import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
@@ -48,6 +52,12 @@ from processing.fringe_pass import fringe_pass  # noqa: E402
 from processing.height import phase_to_height  # noqa: E402
 from processing.phase_shift import phase_shift, shadow_mask  # noqa: E402
 from processing.temporal import unwrap_two_frequency  # noqa: E402
+from rig.hardware.synthesis import simulate_scan, write_simulated_scan  # noqa: E402
+from rig.pipeline.plan import DEFAULT_CORRECTION, ProcessOptions  # noqa: E402
+from rig.pipeline.run import process  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from measure import cpu_description, interleaved, load_line, print_table  # noqa: E402
 
 STEPS = 6
 PEER = "OpenCV PSP 2x computePhaseMap + unwrapPhaseMap"
@@ -56,15 +66,10 @@ PEER = "OpenCV PSP 2x computePhaseMap + unwrapPhaseMap"
 def simulate(frequencies: tuple[int, int], snr_db: float, seed: int = 0):
     """Object and reference captures of the thesis' sphere cap on the default 1024 x 768 rig."""
     geometry = synth.RigGeometry()
-    rng = np.random.default_rng(seed)
     appearance = synth.Appearance(ambient=0.05, snr_db=snr_db, bit_depth=8)
     patterns = synth.sinusoid_patterns(frequencies, STEPS)
     heights = scenes.sphere_cap(geometry.camera_height, geometry.camera_width, geometry.pixel_mm)
-    obj_map = synth.projector_coordinates(heights, geometry)
-    ref_map = synth.projector_coordinates(np.zeros_like(heights), geometry)
-    obj = synth.render_stack(patterns, obj_map, geometry, appearance, rng)
-    ref = synth.render_stack(patterns, ref_map, geometry, appearance, rng)
-    return geometry, heights, obj_map, obj, ref
+    return simulate_scan(heights, geometry=geometry, patterns=patterns, appearance=appearance, seed=seed)
 
 
 GROUPS = [list(range(STEPS)), list(range(STEPS, 2 * STEPS))]
@@ -108,110 +113,67 @@ def opencv_pipeline(stack, frequencies, geometry):
     return low_phase, pattern.unwrapPhaseMap(high_phase, size, shadowMask=high_mask)
 
 
-def timed(funcs: dict[str, Callable[[], object]], runs: int) -> dict[str, list[tuple[float, float]]]:
-    """(wall, CPU) seconds of each function, interleaved run by run so load changes hit all alike."""
-    times: dict[str, list[tuple[float, float]]] = {name: [] for name in funcs}
-    for func in funcs.values():
-        func()  # warm-up: caches, look-up tables, first page faults, lazy imports
-    for _ in range(runs):
-        for name, func in funcs.items():
-            wall, cpu = time.perf_counter(), time.process_time()
-            func()
-            times[name].append((time.perf_counter() - wall, time.process_time() - cpu))
-    return times
-
-
-def cpu_description() -> list[str]:
-    """CPU model and SIMD level, as the OS, numpy and OpenCV see them."""
-    model, flags = platform.processor() or "unknown", set()
-    try:
-        with open("/proc/cpuinfo", encoding="ascii", errors="replace") as info:
-            for line in info:
-                if line.startswith("model name") and model in ("unknown", platform.processor()):
-                    model = line.split(":", 1)[1].strip()
-                elif line.startswith("flags"):
-                    flags = set(line.split(":", 1)[1].split())
-    except OSError:
-        pass
-    simd = [f for f in ("sse4_2", "avx", "avx2", "fma", "avx512f", "avx512bw", "avx512_fp16") if f in flags]
-    from numpy._core._multiarray_umath import __cpu_features__ as npy_features  # type: ignore[import-not-found]
-
-    numpy_simd = [f for f in ("AVX2", "FMA3", "AVX512F", "AVX512_SKX", "AVX512_SPR") if npy_features.get(f)]
-    lines = [
-        f"CPU: {model}, {os.cpu_count()} logical CPUs; flags: {' '.join(simd) or 'none of interest'}",
-        f"numpy {np.__version__} dispatches to: {' '.join(numpy_simd) or 'baseline only'}",
-    ]
-    try:
-        import cv2
-
-        lines.append(f"OpenCV {cv2.__version__}: {cv2.getCPUFeaturesLine()}")
-    except ImportError:
-        lines.append("OpenCV: not installed")
-    return lines
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=11, help="interleaved timed runs (median reported; >= 5)")
     parser.add_argument("--frequencies", type=int, nargs=2, default=(15, 16), metavar=("F1", "F2"))
     parser.add_argument("--snr-db", type=float, default=30.0)
+    parser.add_argument("--no-auto", action="store_true", help="leave out the default-correction (auto) row")
     args = parser.parse_args(argv)
     if args.runs < 5:
         parser.error("--runs: expected at least 5")
     freqs = tuple(args.frequencies)
     print(f"simulating 1024x768, frequencies {freqs}, {STEPS} steps, SNR {args.snr_db} dB ...", file=sys.stderr)
-    geometry, heights, obj_map, obj, ref = simulate(freqs, args.snr_db)
+    scan = simulate(freqs, args.snr_db)
+    geometry, heights, obj_map = scan.geometry, scan.height_mm, scan.object_map
+    obj, ref = scan.object_frames, scan.reference_frames
     reference_phase = fringe_pass(ref, GROUPS, freqs, "two-frequency").phase  # the calibration's job, done once
     reference_phase64 = reference_phase.astype(np.float64)
+    workdir = tempfile.TemporaryDirectory(prefix="bench-pipeline-")
+    paths = write_simulated_scan(scan, Path(workdir.name) / "scan")
 
-    rows: dict[str, Callable[[], object]] = {
-        "fpp-rig fused (fringe_pass + eq. 1.15)": lambda: fused_pipeline(obj, freqs, reference_phase, geometry),
-        "fpp-rig fused, numpy kernels": lambda: fused_pipeline(obj, freqs, reference_phase, geometry, opencv=False),
-        "fpp-rig float64 stage functions": lambda: stage_pipeline(obj, freqs, reference_phase64, geometry),
+    def pipeline(correction: str) -> np.ndarray:
+        result = process(paths.capture, paths.calibration, ProcessOptions(correction=correction), frames=obj)
+        assert result.height is not None
+        return result.height
+
+    rows: dict[str, Callable[[], object]] = {"rig pipeline in memory, correction none": lambda: pipeline("none")}
+    if not args.no_auto:
+        rows[f"rig pipeline in memory, default ({DEFAULT_CORRECTION})"] = lambda: pipeline(DEFAULT_CORRECTION)
+    rows.update({
+        "fused kernel (fringe_pass + eq. 1.15)": lambda: fused_pipeline(obj, freqs, reference_phase, geometry),
+        "fused kernel, numpy only": lambda: fused_pipeline(obj, freqs, reference_phase, geometry, opencv=False),
+        "float64 stage functions": lambda: stage_pipeline(obj, freqs, reference_phase64, geometry),
         PEER: lambda: opencv_pipeline(obj, freqs, geometry),
-    }
+    })
 
     # Check against the simulated truth: right fringe orders (phase within pi) and height error.
     height = fused_pipeline(obj, freqs, reference_phase, geometry)
-    scan = fringe_pass(obj, GROUPS, freqs, "two-frequency")
+    fused = fringe_pass(obj, GROUPS, freqs, "two-frequency")
     truth_phase = synth.true_absolute_phase(obj_map, geometry, freqs[1])
     valid = np.isfinite(height)
     lit = obj_map.lit & valid
-    order_errors = int(np.sum(np.abs(scan.phase[lit] - truth_phase[lit]) >= np.pi))
+    order_errors = int(np.sum(np.abs(fused.phase[lit] - truth_phase[lit]) >= np.pi))
     rms = float(np.sqrt(np.mean((height[lit] - heights[lit]) ** 2)))
     stage_gap = float(np.nanmax(np.abs(stage_pipeline(obj, freqs, reference_phase64, geometry) - height)))
+    product = pipeline("none")
+    product_rms = float(np.sqrt(np.nanmean((product[lit] - heights[lit]) ** 2)))
 
     load_before = os.getloadavg()
-    print(
-        f"timing {args.runs} interleaved runs of {len(rows)} rows (the OpenCV peer takes ~0.3-1 s each) ...",
-        file=sys.stderr,
-    )
-    times = timed(rows, args.runs)
+    print(f"timing {args.runs} interleaved runs of {len(rows)} rows (the OpenCV peer takes ~0.3-1 s each) ...",
+          file=sys.stderr)
+    times = interleaved(rows, args.runs)
     load_after = os.getloadavg()
 
     print("12 uint8 frames 1024x768 (2 frequencies x 6 steps) -> height map, in memory, single process")
     for line in cpu_description():
         print(line)
-    print(
-        f"load average (1/5/15 min): {' '.join(f'{x:.2f}' for x in load_before)} before, "
-        f"{' '.join(f'{x:.2f}' for x in load_after)} after"
-    )
-    peer_walls = [t[0] for t in times[PEER]]
-    header = f"{'row':<48} {'median ms':>10} {'min-max ms':>15} {'CPU ms':>7} {'peer/this (min-max)':>22}"
-    print(header)
-    for name, samples in times.items():
-        walls = [t[0] for t in samples]
-        ratios = [p / w for p, w in zip(peer_walls, walls)]
-        spread = f"{min(walls) * 1e3:.1f}-{max(walls) * 1e3:.1f}"
-        ratio = f"{statistics.median(ratios):.1f}x ({min(ratios):.1f}-{max(ratios):.1f})"
-        print(
-            f"{name:<48} {statistics.median(walls) * 1e3:>10.1f} {spread:>15} "
-            f"{statistics.median(t[1] for t in samples) * 1e3:>7.1f} {ratio:>22}"
-        )
-    print(
-        f"runs: {args.runs} interleaved; check: {order_errors} wrong fringe orders among {lit.sum()} valid lit pixels, "
-        f"height RMS error {rms:.3f} mm, valid {100 * valid.mean():.1f}%, fused vs float64 stages {stage_gap:.1e} mm"
-    )
+    print(load_line(load_before, load_after))
+    print_table(times, PEER)
+    print(f"runs: {args.runs} interleaved; check: {order_errors} wrong fringe orders among {lit.sum()} valid lit pixels, "
+          f"height RMS error {rms:.3f} mm (rig pipeline {product_rms:.3f} mm), valid {100 * valid.mean():.1f}%, "
+          f"fused vs float64 stages {stage_gap:.1e} mm")
+    workdir.cleanup()
     return 0
 
 

@@ -169,11 +169,15 @@ def plane_points_finite(calibration: CalibrationLike, height: np.ndarray) -> np.
         raise CalibrationError(f"{calibration.where}: pixel_mm: missing (needed for lateral point coordinates)")
     reach = max(h.shape[1] - 1, h.shape[0] - 1) / 2.0 * abs(pixel)  # largest |x - cx| pixel_mm
     limit = float(np.finfo(np.float32).max)
+    finite = np.isfinite(h) & (np.abs(h) <= limit)
+    if not calibration.l0_mm:
+        return finite if reach < limit else np.zeros_like(finite)
+    # |X| <= reach |l0 - h| / l0: finite while |l0 - h| stays under this bound (always, for real rigs)
+    bound = limit / (reach / abs(calibration.l0_mm)) if reach > 0 else np.inf
+    if bound >= 2.0 * limit:
+        return finite
     with np.errstate(over="ignore", invalid="ignore"):
-        if calibration.l0_mm:
-            lateral = np.abs(calibration.l0_mm - h.astype(np.float64)) * (reach / abs(calibration.l0_mm))
-            return np.isfinite(h) & (np.abs(h) <= limit) & (lateral < limit)
-        return np.isfinite(h) & (np.abs(h) <= limit) & (reach < limit)
+        return finite & (np.abs(calibration.l0_mm - h.astype(np.float64)) < bound)
 
 
 def plane_points(calibration: CalibrationLike, height: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:

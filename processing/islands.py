@@ -7,12 +7,16 @@ behind the object. They form small islands not connected to the object's valid r
 Criterion: the valid pixels are split into 8-connected regions; a region with fewer pixels than
 ``min_fraction`` of the largest region is dropped. Scale-free (the same fraction at any image
 size or downsampling); several objects of comparable size all stay.
+
+The regions come from OpenCV's ``connectedComponents`` when it is installed (imported on first use:
+as fast as ``scipy.ndimage.label``, and the default path of ``rig process`` then never imports
+scipy, 0.1-0.4 s of start-up), else from ``scipy.ndimage.label``; both label the same 8-connected
+regions.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from scipy import ndimage
 
 DEFAULT_MIN_FRACTION = 0.005
 
@@ -33,11 +37,25 @@ def island_mask(valid: np.ndarray, min_fraction: float = DEFAULT_MIN_FRACTION) -
     if not 0.0 <= min_fraction <= 1.0:
         raise ValueError(f"min_fraction: expected a fraction in [0, 1], found {min_fraction}")
     valid = np.asarray(valid, dtype=bool)
-    labels, count = ndimage.label(valid, structure=np.ones((3, 3), dtype=bool))
-    if count <= 1:
+    labels, sizes = _regions(valid)
+    if sizes.shape[0] <= 2:  # background and at most one region
         return np.zeros_like(valid)
-    sizes = np.bincount(labels.ravel(), minlength=count + 1)
     sizes[0] = 0
     small = sizes < min_fraction * sizes.max()
     small[0] = False
     return small[labels]
+
+
+def _regions(valid: np.ndarray, opencv: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """8-connected region labels of ``valid`` (0 = background) and the pixel count of each label."""
+    try:
+        import cv2
+    except ImportError:
+        cv2 = None
+    if opencv and cv2 is not None:
+        count, labels = cv2.connectedComponents(np.ascontiguousarray(valid).view(np.uint8), connectivity=8)
+        return labels, np.bincount(labels.ravel(), minlength=count)
+    from scipy import ndimage
+
+    labels, count = ndimage.label(valid, structure=np.ones((3, 3), dtype=bool))
+    return labels, np.bincount(labels.ravel(), minlength=count + 1)

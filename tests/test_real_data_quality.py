@@ -74,6 +74,22 @@ def test_island_mask_drops_small_regions_only() -> None:
         island_mask(valid, 2.0)
 
 
+def test_island_regions_same_with_opencv_and_scipy() -> None:
+    """Both labelings find the same 8-connected regions: same region sizes per pixel (diagonal links count)."""
+    from processing.islands import _regions
+
+    valid = np.random.default_rng(4).random((120, 90)) < 0.45
+    valid[10:12, 10:12] = False
+    valid[10, 10] = valid[11, 11] = True  # a diagonal pair: one region under 8-connectivity
+    sizes = []
+    for opencv in (True, False):
+        labels, counts = _regions(valid, opencv=opencv)
+        size_map = np.where(valid, counts[labels], 0)
+        sizes.append(size_map)
+    np.testing.assert_array_equal(sizes[0], sizes[1])
+    assert island_mask(valid[::-1].T, 0.3).shape == (90, 120)  # a non-contiguous view works too
+
+
 # ------------------------------------------------------------------ real data
 
 

@@ -73,7 +73,13 @@ def test_any_change_misses_and_replaces_the_stale_entry(small_capture, tmp_path:
     process_capture(small_capture.capture, small_capture.calibration, tmp_path / "b", options)
     assert not _reference_cached(tmp_path / "b")
     after = _entries(small_capture.calibration)
-    assert len(after) == 1 and after != before
+    if change == "options":  # both option sets stay usable side by side
+        assert len(after) == 2 and set(before) < set(after)
+        reference_cache.forget()
+        process_capture(small_capture.capture, small_capture.calibration, tmp_path / "c", ProcessOptions(correction="none"))
+        assert _reference_cached(tmp_path / "c")
+    else:  # another reference capture or calibration: the old entry is stale and removed
+        assert len(after) == 1 and after != before
 
 
 def test_corrupt_entry_is_processed_again_and_rewritten(small_capture, tmp_path: Path) -> None:
@@ -105,3 +111,18 @@ def test_unwritable_cache_path_goes_without(small_capture, tmp_path: Path) -> No
     (small_capture.calibration / reference_cache.DIRECTORY).write_text("in the way")
     process_capture(small_capture.capture, small_capture.calibration, tmp_path / "a", ProcessOptions(correction="none"))
     assert (tmp_path / "a" / "height.npy").exists()
+
+
+def test_frames_in_memory_give_the_same_result_and_are_checked(small_capture) -> None:
+    from rig.errors import ProcessingError
+    from rig.store.capture import read_capture
+
+    options = ProcessOptions(correction="none")
+    frames = read_capture(small_capture.capture).load_frames()
+    from_disk = process(small_capture.capture, small_capture.calibration, options)
+    in_memory = process(small_capture.capture, small_capture.calibration, options, frames=frames)
+    np.testing.assert_array_equal(from_disk.height, in_memory.height)
+    with pytest.raises(ProcessingError, match="frames: expected shape"):
+        process(small_capture.capture, small_capture.calibration, options, frames=frames[1:])
+    with pytest.raises(ProcessingError, match="frames: expected dtype"):
+        process(small_capture.capture, small_capture.calibration, options, frames=frames.astype(np.float64))

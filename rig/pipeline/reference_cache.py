@@ -6,7 +6,7 @@ phase, unwrap and correct it again (1.5 s of 3.5 s with the ``auto`` correction)
 phase and mask are kept:
 
 - in memory, for a long-running process (the console, a batch worker): the last few entries;
-- on disk, inside the calibration directory (``CAL/cache/reference-<key>.npz``), written
+- on disk, inside the calibration directory (``CAL/cache/reference-<source>-<options>.npz``), written
   atomically (temporary file, fsync, rename) by ``rig process`` and ``rig scan --process``
   (:func:`rig.pipeline.run.process_capture`), read by every run; a calibration directory that
   cannot be written to just goes without (a log line says so). In-memory processing
@@ -16,7 +16,8 @@ The key is a SHA-256 of everything the result depends on: this cache's format, t
 version, the reference capture's manifest (its frames' checksums, patterns and camera) and the
 size and modification time of each frame file, the calibration directory's files (calibration.json
 and any table beside it) and the processing options. Recapturing the reference, recalibrating or
-choosing another option misses the cache, and writing a new entry removes the stale ones.
+choosing another option misses the cache. Writing an entry removes those of another reference
+capture or calibration, and keeps the four latest option sets of the current one.
 Single-shot references (which keep more than a phase) are not cached.
 """
 
@@ -45,6 +46,7 @@ DIRECTORY = "cache"
 PREFIX = "reference-"
 _MEMORY: OrderedDict[str, dict[str, Any]] = OrderedDict()
 _MEMORY_ENTRIES = 4
+_DISK_ENTRIES = 4  # entries of one reference and calibration (different options) kept on disk
 
 
 def cacheable(state: SceneState) -> bool:
@@ -65,24 +67,31 @@ def _stats(paths: list[Path]) -> list[list[Any]]:
 
 
 def cache_key(state: SceneState, options: ProcessOptions) -> str:
-    """Hex SHA-256 of what the processed reference depends on (see the module docstring)."""
+    """The entry's key: ``<source>-<options>``, two hex SHA-256 prefixes (see the module docstring).
+
+    ``source`` covers the program, the reference capture and the calibration: when it changes,
+    every entry of the directory is stale. ``options`` covers the processing options and the fringe
+    axis: runs with other options (``--correction none`` and the default) keep entries side by side.
+    """
     calibration = state.calibration
     assert calibration is not None and calibration.path is not None
     capture = state.capture
     cal_files = sorted(p for p in calibration.path.iterdir() if p.is_file())
     frames = [capture.frame_path(frame) for frame in capture.frames]
-    content = {
+    source = {
         "format": FORMAT,
         "program": __version__,
         "reference_manifest": capture.manifest,
         "reference_frames": _stats(frames),
         "calibration": calibration.to_dict(),
         "calibration_files": _stats(cal_files),
-        "options": asdict(options),
-        "axis": state.axis,
     }
-    text = json.dumps(content, sort_keys=True, default=str)
-    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+    chosen = {"options": asdict(options), "axis": state.axis}
+    return f"{_digest(source)}-{_digest(chosen)}"
+
+
+def _digest(content: dict[str, Any]) -> str:
+    return hashlib.sha256(json.dumps(content, sort_keys=True, default=str).encode("utf-8")).hexdigest()[:32]
 
 
 def _cache_dir(state: SceneState) -> Path:
@@ -96,7 +105,7 @@ def load(state: SceneState, key: str, from_disk: bool = True) -> bool:
     if entry is None:
         if not from_disk:
             return False
-        entry = _read(_cache_dir(state) / f"{PREFIX}{key[:32]}.npz", key)
+        entry = _read(_cache_dir(state) / f"{PREFIX}{key}.npz", key)
         if entry is None:
             return False
         _remember(key, entry)
@@ -150,15 +159,17 @@ def store(state: SceneState, key: str, to_disk: bool = True) -> None:
         return
     directory = _cache_dir(state)
     try:
-        _write_atomic(directory, f"{PREFIX}{key[:32]}.npz", phase, valid, meta_text)
+        _write_atomic(directory, key, phase, valid, meta_text)
     except OSError as exc:
         log.info("reference cache not written in %s (%s); the reference is processed again next time", directory, exc)
 
 
-def _write_atomic(directory: Path, name: str, phase: np.ndarray, valid: np.ndarray, meta_text: str) -> None:
+def _write_atomic(directory: Path, key: str, phase: np.ndarray, valid: np.ndarray, meta_text: str) -> None:
+    """Write the entry of ``key`` (temporary file, fsync, rename); drop stale entries and the oldest beyond a few."""
     if directory.is_symlink():
         raise OSError(f"{directory} is a link; not writing through it")
     directory.mkdir(exist_ok=True)
+    name = f"{PREFIX}{key}.npz"
     handle, temp = tempfile.mkstemp(prefix=".tmp-", suffix=".npz", dir=directory)
     try:
         with os.fdopen(handle, "wb") as out:
@@ -169,9 +180,18 @@ def _write_atomic(directory: Path, name: str, phase: np.ndarray, valid: np.ndarr
     except BaseException:
         Path(temp).unlink(missing_ok=True)
         raise
-    for stale in directory.glob(f"{PREFIX}*.npz"):
-        if stale.name != name and not stale.is_symlink():
-            stale.unlink(missing_ok=True)
+    source = key.split("-")[0]
+    current = []
+    for entry in directory.glob(f"{PREFIX}*.npz"):
+        if entry.is_symlink() or entry.name == name:
+            continue
+        if not entry.name.startswith(f"{PREFIX}{source}-"):
+            entry.unlink(missing_ok=True)  # another reference capture or calibration: stale
+        else:
+            current.append(entry)
+    current.sort(key=lambda p: p.stat().st_mtime_ns, reverse=True)
+    for entry in current[_DISK_ENTRIES - 1 :]:
+        entry.unlink(missing_ok=True)
 
 
 def _remember(key: str, entry: dict[str, Any]) -> None:

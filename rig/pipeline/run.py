@@ -41,6 +41,15 @@ log = logging.getLogger(__name__)
 # they run with single-threaded BLAS (rig.blas); the others keep the process's BLAS threads.
 RPCA_STAGES = frozenset({"denoise", "unwrap", "correction"})
 
+
+def _solves_rpca(stage: str, state: SceneState, options: ProcessOptions) -> bool:
+    """Whether ``stage`` may solve RPCA problems in this run (setting the BLAS limit costs a few ms)."""
+    if stage == "denoise":
+        return options.denoise != "none"
+    if stage == "correction":
+        return options.correction != "none"
+    return stage in RPCA_STAGES and bool(state.groups.single_shot)  # unwrap: the single shot's separation
+
 # --------------------------------------------------------------------------- the whole run
 
 
@@ -144,6 +153,7 @@ def process(
     progress: Any = None,
     salvage: bool = False,
     reference_cache_to_disk: bool = False,
+    frames: np.ndarray | None = None,
 ) -> ProcessResult:
     """Run the stages on a capture and, with a calibration, on its reference plane; compute heights.
 
@@ -151,16 +161,18 @@ def process(
     ``begin(total)`` and one ``step`` per stage; a cancelled reporter stops the run between stages.
     The processed reference plane is reused from :mod:`rig.pipeline.reference_cache` (memory, and
     the calibration directory's cache, which ``reference_cache_to_disk`` also writes).
+    ``frames``: the object's (N, H, W) frames already in memory (one per pattern, in pattern
+    order), used instead of decoding the capture's files.
     """
     options = ProcessOptions() if options is None else options
     _check_options(options)
     started = time.perf_counter()
     capture = read_capture(capture_path, salvage=salvage, verify=False)  # the load stage checks every frame
     calibration, reference_capture = (None, None)
-    if calibration_path is not None:
-        obj_axis = _fringe_axis(group_patterns(capture.patterns, str(capture.manifest_path)), options, str(capture.manifest_path))
-        calibration, reference_capture = load_calibration_for(capture, calibration_path, obj_axis)
     obj = _scene("object", capture, options)
+    if calibration_path is not None:
+        calibration, reference_capture = load_calibration_for(capture, calibration_path, obj.axis)
+    obj.frames = None if frames is None else np.asarray(frames)
     ref = _scene("reference", reference_capture, options) if reference_capture is not None else None
     for state in (obj, ref):
         if state is not None:
@@ -184,7 +196,7 @@ def process(
         for name, stage in SCENE_STAGES:
             t0 = time.perf_counter()
             try:
-                with rpca_blas() if name in RPCA_STAGES else contextlib.nullcontext():
+                with rpca_blas() if _solves_rpca(name, state, options) else contextlib.nullcontext():
                     stage(state, options)
             except ValueError as exc:  # the numeric kernels name the argument that does not fit
                 raise ProcessingError(f"{state.capture.manifest_path}: {name}: {exc}") from None

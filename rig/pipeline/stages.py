@@ -24,7 +24,7 @@ from rig.pipeline.plan import (
     _all_integers,
     choose_unwrap,
 )
-from rig.store.capture import Capture
+from rig.store.capture import Capture, dtype_for_bit_depth
 
 log = logging.getLogger(__name__)
 
@@ -79,8 +79,21 @@ class SceneState:
 
 
 def stage_load(state: SceneState, options: ProcessOptions) -> None:
-    """Decode every frame (checksums, size and bit depth checked) into an (N, H, W) stack."""
-    state.frames = state.capture.load_frames()
+    """Decode every frame (checksums, size and bit depth checked) into an (N, H, W) stack.
+
+    Frames given in memory (:func:`rig.pipeline.run.process`'s ``frames``) are checked against the
+    manifest instead: one per pattern, the camera's size and the bit depth's dtype.
+    """
+    if state.frames is None:
+        state.frames = state.capture.load_frames()
+        return
+    capture, frames = state.capture, state.frames
+    expected = (len(capture.patterns), *capture.shape)
+    if frames.shape != expected:
+        raise ProcessingError(f"frames: expected shape {expected} (one frame per pattern of {capture.manifest_path}), found {frames.shape}")
+    dtype = dtype_for_bit_depth(capture.bit_depth)
+    if frames.dtype != dtype:
+        raise ProcessingError(f"frames: expected dtype {dtype} for camera.bit_depth {capture.bit_depth}, found {frames.dtype}")
 
 
 def stage_undistort(state: SceneState, options: ProcessOptions) -> None:
@@ -414,6 +427,9 @@ def _rescue_rejected(state: SceneState, phase: np.ndarray, mask: np.ndarray, mod
     """Take back modulated pixels a temporal residual test rejected where neighbours vouch for their phase."""
     from processing.neighbour_rescue import rescue
 
+    if not np.any(modulated > mask):  # no modulated pixel was rejected: nothing to take back
+        state.info["neighbour_rescue"] = {"readmitted": 0, "off": "--param neighbour_rescue=false"}
+        return mask
     rescued = rescue(phase, mask, modulated & np.isfinite(phase))
     state.info["neighbour_rescue"] = {"readmitted": int(np.count_nonzero(rescued & ~mask)), "off": "--param neighbour_rescue=false"}
     return rescued
