@@ -75,7 +75,15 @@ def shift_weights(steps: int, shifts: np.ndarray | None = None) -> np.ndarray:
     delta = _validate.finite_array(shifts, "shifts", ndim=1).astype(np.float64)
     if delta.shape[0] != steps:
         raise ValueError(f"shifts: expected {steps} values (one per frame), found {delta.shape[0]}")
-    design = np.column_stack([np.ones(steps), np.cos(delta), np.sin(delta)])
+    return _least_squares_weights(tuple(delta.tolist())).copy()
+
+
+@lru_cache(maxsize=256)
+def _least_squares_weights(delta: tuple[float, ...]) -> np.ndarray:
+    """shift_weights of explicit shifts, cached: every capture of a rig repeats the same few sets."""
+    steps = len(delta)
+    shifts = np.asarray(delta)
+    design = np.column_stack([np.ones(steps), np.cos(shifts), np.sin(shifts)])
     singular = np.linalg.svd(design, compute_uv=False)
     if singular[-1] < 1e-6 * singular[0]:
         raise ValueError("shifts: need at least three distinct shifts modulo 2 pi to separate A, B and phi")
