@@ -77,18 +77,36 @@ def fringe_regions(
     return core, labels, int(count)
 
 
+def _drop_small_regions(labels: np.ndarray, core: np.ndarray, count: int, min_size: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """Regions of fewer than ``min_size`` pixels removed from ``core`` (label 0), the rest relabelled 1 .. n.
+
+    Such a region can hold no square with ``min_size`` votes, so it never votes; noisy maps have
+    thousands of them (kinks cut by noise), which would otherwise size every per-region table.
+    """
+    areas = np.bincount(labels.ravel(), minlength=count)
+    big = areas >= min_size
+    big[0] = False
+    relabel = (np.cumsum(big) * big).astype(np.int32)
+    kept = relabel[labels]
+    return kept, core & (kept > 0), int(relabel.max()) + 1
+
+
 def _tile_pieces(labels: np.ndarray, core: np.ndarray, count: int, tile: int) -> tuple[np.ndarray, int]:
     """Each region cut into ``tile`` x ``tile`` squares: compact piece labels (0 outside ``core``)."""
     rows, cols = labels.shape
     across = -(-cols // tile)
     tiles = (np.arange(rows)[:, None] // tile) * across + (np.arange(cols)[None, :] // tile)
-    key = labels.astype(np.int64) * int(tiles.max() + 1) + tiles
-    used = np.zeros(count * int(tiles.max() + 1), dtype=bool)
-    used[key[core]] = True
-    compact = np.cumsum(used) - 1
+    key = (labels.astype(np.int64) * int(tiles.max() + 1) + tiles)[core]
     pieces = np.zeros(labels.shape, dtype=np.int64)
-    pieces[core] = compact[key[core]] + 1
-    return pieces, int(compact[-1]) + 2
+    if count * int(tiles.max() + 1) <= 1 << 24:
+        used = np.zeros(count * int(tiles.max() + 1), dtype=bool)
+        used[key] = True
+        compact = np.cumsum(used) - 1
+        pieces[core] = compact[key] + 1
+        return pieces, int(compact[-1]) + 2
+    unique, inverse = np.unique(key, return_inverse=True)
+    pieces[core] = inverse + 1
+    return pieces, unique.size + 1
 
 
 def _tally(pieces: np.ndarray, orders: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
@@ -165,26 +183,32 @@ def fill_from_neighbours(
     from the neighbour q whose wrapped phase is closest to its own (most likely the same
     surface); pixels reached by no pass stay NaN. ``phase`` is filled in place and returned.
     """
+    padded = np.pad(phase, 1, constant_values=np.nan)
+    padded_phi = np.pad(wrapped_phase, 1)
+    flat, flat_phi = padded.reshape(-1), padded_phi.reshape(-1)
+    stride = padded.shape[1]
+    ys, xs = np.nonzero(todo & np.isnan(phase))
+    at = (ys + 1) * stride + (xs + 1)  # flat indices into the padded maps
     for _ in range(passes):
-        missing = todo & np.isnan(phase)
-        if not missing.any():
+        if not at.size:
             break
-        ys, xs = np.nonzero(missing)
-        padded = np.pad(phase, 1, constant_values=np.nan)
-        padded_phi = np.pad(wrapped_phase, 1)
-        phi = wrapped_phase[ys, xs]
-        best = np.full(ys.size, np.nan)
-        distance = np.full(ys.size, np.inf)
+        phi = flat_phi[at]
+        best = np.full(at.size, np.nan)
+        distance = np.full(at.size, np.inf)
         for dy, dx in NEIGHBOURS:
-            value = padded[ys + 1 + dy, xs + 1 + dx]
-            gap = np.abs(np.mod(padded_phi[ys + 1 + dy, xs + 1 + dx] - phi + np.pi, TWO_PI) - np.pi)
-            closer = np.isfinite(value) & (gap < distance)
+            near = at + (dy * stride + dx)
+            value = flat[near]
+            gap = np.abs(np.mod(flat_phi[near] - phi + np.pi, TWO_PI) - np.pi)
+            closer = (gap < distance) & np.isfinite(value)
             best[closer] = value[closer]
             distance[closer] = gap[closer]
         found = np.isfinite(best)
         if not found.any():
             break
-        phase[ys[found], xs[found]] = phi[found] + TWO_PI * np.rint((best[found] - phi[found]) / TWO_PI)
+        # Every pixel of a pass reads its neighbours before any of them is written (one sweep).
+        flat[at[found]] = phi[found] + TWO_PI * np.rint((best[found] - phi[found]) / TWO_PI)
+        at = at[~found]
+    phase[...] = padded[1:-1, 1:-1]
     return phase
 
 
@@ -231,6 +255,7 @@ def pool_region_orders(
     orders[valid] = np.rint((phase[valid] - phi[valid]) / TWO_PI)
     core, labels, count = fringe_regions(phi, valid, region_cut(phi, valid) if cut is None else cut, bend)
     out = np.full(phase.shape, np.nan)
+    labels, core, count = _drop_small_regions(labels, core, count, min_votes)
     if count > 1:
         pieces, piece_count = _tile_pieces(labels, core, count, tile)
         winners, sizes = _tally(pieces[core], orders[core], piece_count)
