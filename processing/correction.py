@@ -31,8 +31,16 @@ from processing.correction_method import CorrectionMethod
 from processing.fringe_regions import pool_region_orders
 from processing.order_correction import correct_orders_rpca
 from processing.phase_correction import (
-    accept_if_consistent, correct_phase_rpca, decimated_low_rank, low_rank_misfit, order_breaks, phase_noise_sigma, phase_pair,
-    reorder_from_low_rank, restore_detail, settle_orders,
+    accept_if_consistent,
+    correct_phase_rpca,
+    decimated_low_rank,
+    low_rank_misfit,
+    order_breaks,
+    phase_noise_sigma,
+    phase_pair,
+    reorder_from_low_rank,
+    restore_detail,
+    settle_orders,
 )
 from processing.rpca import RPCAResult, default_tau
 from processing.voting import vote_row_orders
@@ -142,24 +150,25 @@ def correct_auto(
        pool_region_orders`: one order per region that no wrapped-phase jump or kink crosses,
        voted per 16 x 16 square, re-voted pixel by pixel where squares disagree);
     2. L = low-rank part of that phase (stable inexact ALM, thesis ch. 4, stopped at the noise
-       level of :func:`~processing.phase_correction.phase_noise_sigma`, blind to order errors);
-       the measured phase is used instead if pooling left more order breaks;
-    3. candidate order maps: the pooled orders; the pooled orders where L misfits the wrapped
-       phase (|wrap(phi - L)| > pi / 2 nearby) and L's re-derived orders elsewhere; only if both
-       leave more order breaks than the measured phase (fringes too dense to pool), also L's
-       orders guarded where L misfits by the measured phase or by Ding's row vote, then settled
-       from their neighbours (the earlier ``auto``);
+       level of :func:`~processing.phase_correction.phase_noise_sigma`, blind to order errors),
+       solved on 4 x 4 block means from :data:`DECIMATE_FROM` pixels on (``decimate``) and
+       interpolated back; the measured phase is used instead if pooling left more order breaks;
+    3. candidate order maps (only if the pooled orders still break somewhere): the pooled
+       orders; the pooled orders where L misfits the wrapped phase (|wrap(phi - L)| > pi / 2
+       nearby, or an edge the block solve blurred) and L's re-derived orders elsewhere; only if
+       both leave more order breaks than the measured phase (fringes too dense to pool), also
+       L's orders guarded where L misfits by the measured phase or by Ding's row vote, then
+       settled from their neighbours (the earlier ``auto``);
     4. keep the candidate with fewest order breaks (second differences beyond pi, truth-free);
     5. keep L (denoised) except where the result departs from it coherently beyond the noise
        (:func:`~processing.phase_correction.restore_detail`, ``k_sigma`` standard deviations
        of the 3 x 3 mean residual).
 
     Measured (rig study's cases at 1000 x 1000, seeds 0-2, NMSE_h; ``python -m rig.cli study``):
-    isolated objects, f = (18, 25), 18 dB, a quarter of the orders wrong: 3.7e-4 - 6.1e-4, 0.30 -
-    0.49x the true orders' 1.24e-3 (``rpca-phase`` 0.09 - 0.12, vote 0.09); the same at 16 dB
-    (35 % wrong) 7.1e-4 and 15 dB (41 % wrong) 7.7e-4, 0.36x and 0.31x the true orders; sphere
-    cap 10 dB 9.0e-5 (``rpca-phase`` 3.1e-3 - 3.8e-3); Table 4.1 4.0e-5, on par with
-    ``rpca-phase`` (4.0e-5 - 4.7e-5); at 25 dB 5.2e-6 (``rpca-phase`` 6.9e-6).
+    isolated objects, f = (18, 25), 18 dB, a quarter of the orders wrong: 3.4e-4 - 4.5e-4, 0.28 -
+    0.36x the true orders' 1.24e-3 (``rpca-phase`` 0.09 - 0.12, vote 0.09); sphere cap 10 dB
+    3.3e-5 (``rpca-phase`` 3.1e-3 - 3.8e-3); Table 4.1 2.2e-5, 0.5x ``rpca-phase`` (4.0e-5 -
+    4.7e-5); at 25 dB 3.4e-6 (``rpca-phase`` 6.9e-6). About 0.2 - 0.3 s of CPU per map there.
     """
     start = time.perf_counter()
     phase, wrapped, valid = _inputs(absolute_phase, wrapped_phase, mask)
@@ -175,15 +184,20 @@ def correct_auto(
     else:
         low_rank, result = correct_phase_rpca(base, valid, tau=tau, stable=True, svd=svd, noise_sigma=sigma)
         rough = np.zeros(valid.shape, dtype=bool)
-    proposed = reorder_from_low_rank(low_rank, wrapped, valid)
-    misfit = low_rank_misfit(low_rank, wrapped, valid) | (rough & valid)
     # Candidate order maps, the one with fewest order breaks kept: the pooled orders, alone and
     # with L's orders where L fits the wrapped phase. Only where pooling left more order breaks
     # than the measured phase (fringes too dense for regions) are L's orders also guarded (where
     # L misfits, an order change must fit the neighbours of the measured phase or of the row
-    # vote) and settled, as the earlier auto did.
-    candidates = {"regions": pooled, "regions+low-rank": np.where(misfit, pooled, proposed)}
-    breaks = {"regions": base_breaks["regions"], "regions+low-rank": order_breaks(candidates["regions+low-rank"], valid)}
+    # vote) and settled, as the earlier auto did. Pooled orders without any break cannot lose
+    # (ties keep them), so then L only denoises.
+    candidates = {"regions": pooled}
+    breaks = {"regions": base_breaks["regions"]}
+    misfit = np.zeros(valid.shape, dtype=bool)
+    if breaks["regions"] > 0:
+        proposed = reorder_from_low_rank(low_rank, wrapped, valid)
+        misfit = low_rank_misfit(low_rank, wrapped, valid) | (rough & valid)
+        candidates["regions+low-rank"] = np.where(misfit, pooled, proposed)
+        breaks["regions+low-rank"] = order_breaks(candidates["regions+low-rank"], valid)
     if min(breaks.values()) > base_breaks["measured"]:
         for guard_name, guard in (("measured", phase), ("vote", vote_row_orders(phase, wrapped, valid))):
             guarded = np.where(misfit, accept_if_consistent(proposed, guard, valid), proposed)

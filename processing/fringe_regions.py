@@ -26,6 +26,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from processing.angles import wrap_to_pi
+
 TWO_PI = 2.0 * np.pi
 # The 8 neighbours, as (row, column) offsets.
 NEIGHBOURS = ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1))
@@ -44,9 +46,10 @@ def region_cut(wrapped_phase: np.ndarray, valid: np.ndarray) -> float:
     for axis in (0, 1):
         step = np.diff(wrapped_phase, axis=axis)
         pair = valid[1:, :] & valid[:-1, :] if axis == 0 else valid[:, 1:] & valid[:, :-1]
-        steps = np.abs(np.mod(step[pair] + np.pi, TWO_PI) - np.pi)
+        steps = step[pair]
         if steps.size:
-            typical = max(typical, float(np.median(steps[:: max(1, steps.size // 100_000)])))
+            sample = np.abs(wrap_to_pi(steps[:: max(1, steps.size // 100_000)]))
+            typical = max(typical, float(np.median(sample)))
     return float(np.clip(2.0 * typical, np.pi / 2, np.pi))
 
 
@@ -70,8 +73,8 @@ def fringe_regions(
     step[:, :-1] = np.abs(np.diff(phi, axis=1)) > cut
     step[:-1, :] |= np.abs(np.diff(phi, axis=0)) > cut
     # A kink: the wrapped slope changes by more than ``bend`` (second difference, wrapped).
-    step[:, 1:-1] |= np.abs(np.mod(np.diff(phi, n=2, axis=1) + np.pi, TWO_PI) - np.pi) > bend
-    step[1:-1, :] |= np.abs(np.mod(np.diff(phi, n=2, axis=0) + np.pi, TWO_PI) - np.pi) > bend
+    step[:, 1:-1] |= np.abs(wrap_to_pi(np.diff(phi, n=2, axis=1))) > bend
+    step[1:-1, :] |= np.abs(wrap_to_pi(np.diff(phi, n=2, axis=0))) > bend
     core = valid & ~step
     count, labels = cv2.connectedComponents(core.view(np.uint8), connectivity=4, ltype=cv2.CV_32S)
     return core, labels, int(count)
@@ -198,7 +201,7 @@ def fill_from_neighbours(
         for dy, dx in NEIGHBOURS:
             near = at + (dy * stride + dx)
             value = flat[near]
-            gap = np.abs(np.mod(flat_phi[near] - phi + np.pi, TWO_PI) - np.pi)
+            gap = np.abs(wrap_to_pi(flat_phi[near] - phi))
             closer = (gap < distance) & np.isfinite(value)
             best[closer] = value[closer]
             distance[closer] = gap[closer]

@@ -25,8 +25,9 @@ from __future__ import annotations
 import numpy as np
 
 from processing import _validate
+from processing.angles import wrap_to_pi
 from processing.fringe_regions import order_break_pixels
-from processing.rpca import RPCAResult, robust_noise_sigma, rpca_ialm, second_differences
+from processing.rpca import RPCAResult, robust_noise_sigma, rpca_ialm
 from processing.shadow_fill import fill_shadows, valid_mask
 
 TWO_PI = 2.0 * np.pi
@@ -215,7 +216,7 @@ def low_rank_misfit(
     difference |wrap(phi - L)| grows past ``limit``. True at such pixels and their 8 neighbours
     (a misfit band sweeps through multiples of 2 pi, where single pixels look fine).
     """
-    residual = np.mod(wrapped_phase - low_rank_phase + np.pi, TWO_PI) - np.pi
+    residual = wrap_to_pi(wrapped_phase - low_rank_phase)
     bad = valid & ~(np.abs(np.nan_to_num(residual, nan=np.pi)) < limit)
     return valid & _dilate_3x3(bad)
 
@@ -252,7 +253,14 @@ def order_breaks(phase: np.ndarray, valid: np.ndarray) -> int:
     steep but continuous phase keeps well below pi (real steps also count, equally for all
     candidates of one map).
     """
-    return sum(int(np.count_nonzero(np.abs(second) > np.pi)) for second in second_differences(phase, valid))
+    masked = np.where(valid, phase, np.nan)
+    breaks = 0
+    for second in (
+        masked[:, 2:] - 2.0 * masked[:, 1:-1] + masked[:, :-2], masked[2:, :] - 2.0 * masked[1:-1, :] + masked[:-2, :]
+    ):
+        np.abs(second, out=second)
+        breaks += int(np.count_nonzero(second > np.pi))  # NaN (an invalid pixel of the three) never counts
+    return breaks
 
 
 def restore_detail(
@@ -343,30 +351,36 @@ def upsample_blocks(blocks: np.ndarray, factor: int, shape: tuple[int, int]) -> 
 
 def decimated_low_rank(
     phase: np.ndarray, valid: np.ndarray, factor: int, noise_sigma: float, tau: float | None = None, svd: str = "auto",
-) -> tuple[np.ndarray, RPCAResult]:
+    bend: float = 1.0,
+) -> tuple[np.ndarray, RPCAResult, np.ndarray]:
     """Low-rank part of a phase map solved on its ``factor`` x ``factor`` block means, interpolated back.
 
-    The low-rank part of a smooth phase is smooth: solving stable RPCA (thesis ch. 4) on block
-    means, whose noise is ``noise_sigma / factor``, costs ``factor ** 2`` times less per iteration
-    and finds the same surface; where it misses a sharp edge, :func:`restore_detail` keeps the
-    measured phase. Returns (H, W) float64, NaN outside ``valid``, and the solver's result.
+    The low-rank part of a smooth phase is smooth: stable RPCA (thesis ch. 4) on the block means,
+    whose noise is ``noise_sigma / factor``, costs ``factor ** 2`` times less per iteration and
+    stops on a cleaner surface (measured: see :data:`processing.correction.DECIMATION`). Bilinear
+    interpolation blurs the surface's sharp edges, so the pixels near blocks where it bends by
+    more than ``bend`` radians (second difference between blocks) are returned as ``rough``:
+    the interpolated value there may be off by more than pi and must not set fringe orders.
+
+    Returns
+    -------
+    low_rank : (H, W) float64, NaN outside ``valid``
+    result : RPCAResult of the block solve
+    rough : (H, W) bool
     """
     means, inside = block_means(phase, valid, factor)
     filled = fill_shadows(means, inside)
     result = rpca_ialm(filled, tau=tau, svd=svd, stable=True, noise_sigma=noise_sigma / factor, dtype=np.float32)
-    low_rank = upsample_blocks(result.low_rank, factor, phase.shape)
-    return np.where(valid, low_rank.astype(np.float64), np.nan), result, _rough_pixels(result.low_rank, factor, phase.shape, ROUGH)
+    low_rank = np.where(valid, upsample_blocks(result.low_rank, factor, phase.shape).astype(np.float64), np.nan)
+    return low_rank, result, _bent_pixels(result.low_rank, factor, phase.shape, bend)
 
 
-ROUGH = 1.0
-
-
-def _rough_pixels(blocks: np.ndarray, factor: int, shape: tuple[int, int], limit: float) -> np.ndarray:
-    """Pixels near blocks where the low-rank surface bends by more than ``limit`` per block (an edge)."""
+def _bent_pixels(blocks: np.ndarray, factor: int, shape: tuple[int, int], bend: float) -> np.ndarray:
+    """Pixels of the blocks (and their 8 neighbours) where the block surface bends by more than ``bend``."""
     bent = np.zeros(blocks.shape, dtype=bool)
     if blocks.shape[1] > 2:
-        bent[:, 1:-1] |= np.abs(np.diff(blocks, n=2, axis=1)) > limit
+        bent[:, 1:-1] |= np.abs(np.diff(blocks, n=2, axis=1)) > bend
     if blocks.shape[0] > 2:
-        bent[1:-1, :] |= np.abs(np.diff(blocks, n=2, axis=0)) > limit
+        bent[1:-1, :] |= np.abs(np.diff(blocks, n=2, axis=0)) > bend
     bent = _dilate_3x3(bent)
     return np.repeat(np.repeat(bent, factor, axis=0), factor, axis=1)[: shape[0], : shape[1]]

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from processing.angles import wrap_to_pi
 from processing.svd import SubspaceState, check_svd_method, singular_value_threshold
 
 log = logging.getLogger(__name__)
@@ -149,11 +150,20 @@ def robust_noise_sigma(d: np.ndarray, mask: np.ndarray | None = None, wrap: bool
     estimates = []
     for second in second_differences(d, mask):
         if wrap:
-            second = np.mod(second + np.pi, 2.0 * np.pi) - np.pi
+            second = wrap_to_pi(second)
         if second.size:
-            mad = float(np.median(np.abs(second - np.median(second))))
+            mad = _median(np.abs(second - _median(second)))
             estimates.append(1.4826 * mad / np.sqrt(6.0))
     return min(estimates) if estimates else 0.0
+
+
+def _median(values: np.ndarray) -> float:
+    """``np.median`` of a 1-D array without NaN, by one partition (np.median partitions twice)."""
+    middle = values.size // 2
+    part = np.partition(values, middle)
+    if values.size % 2:
+        return float(part[middle])
+    return float((part[:middle].max() + part[middle]) / 2.0)
 
 
 def rpca_ialm(
