@@ -193,19 +193,22 @@ def plane_points(calibration: CalibrationLike, height: np.ndarray, mask: np.ndar
         raise CalibrationError(f"{calibration.where}: pixel_mm: missing (needed for lateral point coordinates)")
     h = np.asarray(height)
     dtype = h.dtype if h.dtype in (np.float32, np.float64) else np.dtype(np.float64)
-    if mask is None:
-        rows, cols = (index.reshape(-1) for index in np.indices(h.shape))
-        z = h.reshape(-1).astype(dtype, copy=False)
-    else:
-        rows, cols = np.nonzero(mask)
-        z = h[rows, cols].astype(dtype, copy=False)
-    cx, cy = (h.shape[1] - 1) / 2.0, (h.shape[0] - 1) / 2.0
+    h = h.astype(dtype, copy=False)
+    rows, cols = h.shape
     if calibration.l0_mm:
-        scale = (calibration.l0_mm - z) * dtype.type(pixel / calibration.l0_mm)
+        scale = (dtype.type(calibration.l0_mm) - h) * dtype.type(pixel / calibration.l0_mm)
     else:
-        scale = np.full(z.shape, pixel, dtype=dtype)
-    points = np.empty((z.shape[0], 3), dtype=dtype)
-    np.multiply(cols.astype(dtype) - dtype.type(cx), scale, out=points[:, 0])
-    np.multiply(rows.astype(dtype) - dtype.type(cy), scale, out=points[:, 1])
-    points[:, 2] = z
+        scale = np.full(h.shape, pixel, dtype=dtype)
+    xs = np.arange(cols, dtype=dtype) - dtype.type((cols - 1) / 2.0)
+    ys = np.arange(rows, dtype=dtype) - dtype.type((rows - 1) / 2.0)
+    keep = None if mask is None else np.asarray(mask, dtype=bool)
+
+    def kept(values: np.ndarray) -> np.ndarray:
+        return values.reshape(-1) if keep is None else values[keep]
+
+    # Whole-image products, then the kept pixels: cheaper than gathering pixel indices first.
+    points = np.empty((h.size if keep is None else int(np.count_nonzero(keep)), 3), dtype=dtype)
+    points[:, 0] = kept(scale * xs[None, :])
+    points[:, 1] = kept(scale * ys[:, None])
+    points[:, 2] = kept(h)
     return points

@@ -109,3 +109,24 @@ def test_bad_polynomial_input(planes, tmp_path):
         height_from_phase(read_calibration(tmp_path), deltas[0], deltas[0], FREQUENCY)
     with pytest.raises(CalibrationError, match="model: expected one of"):
         height_from_phase(Calibration(model="mystery"), deltas[0], deltas[0], FREQUENCY)
+
+
+def test_plane_points_of_kept_pixels_follow_the_lateral_formula() -> None:
+    """X = (x - cx) pixel_mm (l0 - h) / l0, Y likewise, Z = h, for the masked pixels in C order."""
+    from calibration.models import plane_points, plane_points_finite
+    from calibration.store import Calibration
+
+    cal = Calibration(l0_mm=1000.0, d0_mm=250.0, f0_per_mm=0.0125, f0_frequency=8.0, pixel_mm=0.4)
+    h = np.random.default_rng(2).uniform(-50.0, 150.0, (6, 9)).astype(np.float32)
+    mask = np.random.default_rng(3).random(h.shape) < 0.6
+    rows, cols = np.nonzero(mask)
+    scale = 0.4 * (1000.0 - h[rows, cols].astype(np.float64)) / 1000.0
+    expected = np.column_stack([(cols - 4.0) * scale, (rows - 2.5) * scale, h[rows, cols]])
+    points = plane_points(cal, h, mask)
+    assert points.dtype == np.float32
+    np.testing.assert_allclose(points, expected, rtol=1e-6, atol=1e-4)
+    np.testing.assert_array_equal(plane_points(cal, h).reshape(6, 9, 3)[mask], points)
+    huge = h.copy()
+    huge[0, 0] = 3e38  # finite in float32, but its lateral coordinates are not
+    assert not plane_points_finite(Calibration(l0_mm=1e-3, pixel_mm=1e6), huge)[0, 0]
+    assert plane_points_finite(cal, h).all()
