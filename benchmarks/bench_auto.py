@@ -34,7 +34,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.bench_pipeline import GROUPS, STEPS, cpu_description, fused_pipeline, timed  # noqa: E402
+from benchmarks.bench_pipeline import GROUPS, STEPS, fused_pipeline  # noqa: E402
+from benchmarks.measure import cpu_description, interleaved  # noqa: E402
 from mock_devices import scenes, synth  # noqa: E402
 from processing.correction import correct_auto, correct_rpca_phase  # noqa: E402
 from processing.fringe_pass import fringe_pass  # noqa: E402
@@ -87,7 +88,7 @@ def run_case(case: str, runs: int) -> None:
         "rpca-phase (correction only)": lambda: correct_rpca_phase(phase, wrapped, mask=valid),
         "none path + auto": lambda: auto_pipeline(obj, freqs, reference_phase, geometry),
     }
-    times = timed(rows, runs)
+    times = interleaved(rows, runs)
     peer = [wall for wall, _ in times["none path (fringe_pass + eq. 1.15)"]]
     print(f"\n{label}, 1024 x 768, {runs} interleaved runs")
     print(f"{'row':38s} {'wall s: median (min - max)':>30s} {'CPU s':>8s} {'row / none: median (min - max)':>34s}")

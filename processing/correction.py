@@ -34,12 +34,12 @@ from processing.phase_correction import (
     accept_if_consistent,
     correct_phase_rpca,
     decimated_low_rank,
+    keep_coherent_detail,
     low_rank_misfit,
     order_breaks,
     phase_noise_sigma,
     phase_pair,
     reorder_from_low_rank,
-    restore_detail,
     settle_orders,
 )
 from processing.rpca import RPCAResult, default_tau
@@ -175,7 +175,9 @@ def correct_auto(
     sigma = phase_noise_sigma(phase, valid)
     pooled = pool_region_orders(phase, wrapped, valid)
     # RPCA on the pooled phase (far sparser errors) unless pooling left more order breaks.
-    base_breaks = {"regions": order_breaks(pooled, valid), "measured": order_breaks(phase, valid)}
+    base_breaks = {"regions": order_breaks(pooled, valid)}
+    # Measured breaks only matter if pooling left some (ties keep the pooled phase).
+    base_breaks["measured"] = order_breaks(phase, valid) if base_breaks["regions"] else base_breaks["regions"]
     base_name = min(base_breaks, key=base_breaks.__getitem__)  # ties: the pooled phase
     base = pooled if base_name == "regions" else phase
     decimate = default_decimation(phase.shape) if decimate is None else int(decimate)
@@ -205,7 +207,9 @@ def correct_auto(
             breaks[guard_name] = order_breaks(candidates[guard_name], valid)
     guard_name = min(breaks, key=breaks.__getitem__)  # ties: the first
     reordered = candidates[guard_name]
-    out = restore_detail(low_rank, reordered, valid, k_sigma=k_sigma, noise_sigma=sigma)
+    if not float(k_sigma) > 0:
+        raise ValueError(f"k_sigma: expected > 0, found {k_sigma}")
+    out = keep_coherent_detail(low_rank, reordered, valid, float(k_sigma), sigma)
     changed = valid & (np.abs(reordered - phase) > np.pi)
     parameters = {
         "tau": tau if tau is not None else default_tau(phase.shape),

@@ -42,13 +42,21 @@ def region_cut(wrapped_phase: np.ndarray, valid: np.ndarray) -> float:
     neighbours on a steep fringe differ by the slope itself, so the cut is at least twice the
     median step along the axis the fringes vary on (and at most pi, Ding's jump).
     """
+    return _region_cut(_steps(wrapped_phase), valid)
+
+
+def _steps(phi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Differences of neighbours down the columns and along the rows (shared by the cut and the regions)."""
+    return np.diff(phi, axis=0), np.diff(phi, axis=1)
+
+
+def _region_cut(steps: tuple[np.ndarray, np.ndarray], valid: np.ndarray) -> float:
     typical = 0.0
-    for axis in (0, 1):
-        step = np.diff(wrapped_phase, axis=axis)
+    for axis, step in enumerate(steps):
         pair = valid[1:, :] & valid[:-1, :] if axis == 0 else valid[:, 1:] & valid[:, :-1]
-        steps = step[pair]
-        if steps.size:
-            sample = np.abs(wrap_to_pi(steps[:: max(1, steps.size // 100_000)]))
+        chosen = step[pair]
+        if chosen.size:
+            sample = np.abs(wrap_to_pi(chosen[:: max(1, chosen.size // 100_000)]))
             typical = max(typical, float(np.median(sample)))
     return float(np.clip(2.0 * typical, np.pi / 2, np.pi))
 
@@ -66,15 +74,22 @@ def fringe_regions(
     phase at 15 dB). Returns ``(core, labels, count)``: the pixels in a region, their
     labels 1 .. count - 1 (0 elsewhere, int32) and the number of labels including 0.
     """
+    return _fringe_regions(_steps(np.where(valid, wrapped_phase, 0.0)), valid, cut, bend)
+
+
+def _fringe_regions(
+    steps: tuple[np.ndarray, np.ndarray], valid: np.ndarray, cut: float, bend: float
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """:func:`fringe_regions` from the :func:`_steps` of the masked wrapped phase."""
     import cv2  # lazily: only the commands that correct orders pay for it
 
-    phi = np.where(valid, wrapped_phase, 0.0)
+    down, across = steps
     step = np.zeros(valid.shape, dtype=bool)
-    step[:, :-1] = np.abs(np.diff(phi, axis=1)) > cut
-    step[:-1, :] |= np.abs(np.diff(phi, axis=0)) > cut
+    step[:, :-1] = np.abs(across) > cut
+    step[:-1, :] |= np.abs(down) > cut
     # A kink: the wrapped slope changes by more than ``bend`` (second difference, wrapped).
-    step[:, 1:-1] |= np.abs(wrap_to_pi(np.diff(phi, n=2, axis=1))) > bend
-    step[1:-1, :] |= np.abs(wrap_to_pi(np.diff(phi, n=2, axis=0))) > bend
+    step[:, 1:-1] |= np.abs(wrap_to_pi(np.diff(across, axis=1))) > bend
+    step[1:-1, :] |= np.abs(wrap_to_pi(np.diff(down, axis=0))) > bend
     core = valid & ~step
     count, labels = cv2.connectedComponents(core.view(np.uint8), connectivity=4, ltype=cv2.CV_32S)
     return core, labels, int(count)
@@ -97,16 +112,16 @@ def _drop_small_regions(labels: np.ndarray, core: np.ndarray, count: int, min_si
 def _tile_pieces(labels: np.ndarray, core: np.ndarray, count: int, tile: int) -> tuple[np.ndarray, int]:
     """Each region cut into ``tile`` x ``tile`` squares: compact piece labels (0 outside ``core``)."""
     rows, cols = labels.shape
-    across = -(-cols // tile)
-    tiles = (np.arange(rows)[:, None] // tile) * across + (np.arange(cols)[None, :] // tile)
-    key = (labels.astype(np.int64) * int(tiles.max() + 1) + tiles)[core]
-    pieces = np.zeros(labels.shape, dtype=np.int64)
-    if count * int(tiles.max() + 1) <= 1 << 24:
-        used = np.zeros(count * int(tiles.max() + 1), dtype=bool)
+    across, down = -(-cols // tile), -(-rows // tile)
+    tiles = (np.arange(rows, dtype=np.int32)[:, None] // tile) * across + (np.arange(cols, dtype=np.int32)[None, :] // tile)
+    key = labels[core].astype(np.int64 if count * down * across >= 1 << 31 else np.int32) * (down * across) + tiles[core]
+    pieces = np.zeros(labels.shape, dtype=np.int32)
+    if count * down * across <= 1 << 24:
+        used = np.zeros(count * down * across, dtype=bool)
         used[key] = True
-        compact = np.cumsum(used) - 1
-        pieces[core] = compact[key] + 1
-        return pieces, int(compact[-1]) + 2
+        compact = np.cumsum(used, dtype=np.int32)
+        pieces[core] = compact[key]
+        return pieces, int(compact[-1]) + 1
     unique, inverse = np.unique(key, return_inverse=True)
     pieces[core] = inverse + 1
     return pieces, unique.size + 1
@@ -119,7 +134,7 @@ def _tally(pieces: np.ndarray, orders: np.ndarray, count: int) -> tuple[np.ndarr
     if count * span <= 1 << 25:
         tally = np.bincount(pieces * span + (orders - low), minlength=count * span).reshape(count, span)
         return np.argmax(tally, axis=1) + low, tally.sum(axis=1)
-    key = pieces * span + (orders - low)
+    key = pieces.astype(np.int64) * span + (orders - low)
     unique, votes = np.unique(key, return_counts=True)
     piece_of = unique // span
     order = np.lexsort((-votes, piece_of))
@@ -254,16 +269,17 @@ def pool_region_orders(
     """
     phase = np.asarray(absolute_phase, dtype=np.float64)
     phi = np.where(valid, np.asarray(wrapped_phase, dtype=np.float64), 0.0)
-    orders = np.zeros(phase.shape, dtype=np.int64)
-    orders[valid] = np.rint((phase[valid] - phi[valid]) / TWO_PI)
-    core, labels, count = fringe_regions(phi, valid, region_cut(phi, valid) if cut is None else cut, bend)
+    with np.errstate(invalid="ignore"):
+        orders = np.where(valid, np.rint((phase - phi) / TWO_PI), 0.0).astype(np.int32)
+    steps = _steps(phi)
+    core, labels, count = _fringe_regions(steps, valid, _region_cut(steps, valid) if cut is None else cut, bend)
     out = np.full(phase.shape, np.nan)
     labels, core, count = _drop_small_regions(labels, core, count, min_votes)
     if count > 1:
         pieces, piece_count = _tile_pieces(labels, core, count, tile)
         winners, sizes = _tally(pieces[core], orders[core], piece_count)
         voted = core & (sizes >= min_votes)[pieces]
-        out[voted] = phi[voted] + TWO_PI * winners[pieces[voted]]
+        out = np.where(voted, phi + TWO_PI * winners[pieces], np.nan)
         # Squares that disagree with a neighbour may straddle a hidden edge: vote them pixel by pixel.
         suspect_piece = np.zeros(piece_count, dtype=bool)
         suspect_piece[pieces[order_break_pixels(out) & voted]] = True

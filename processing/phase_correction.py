@@ -288,6 +288,13 @@ def restore_detail(
     if not k_sigma > 0:
         raise ValueError(f"k_sigma: expected > 0, found {k_sigma}")
     sigma = phase_noise_sigma(measured, valid) if noise_sigma is None else float(noise_sigma)
+    return keep_coherent_detail(estimate, measured, valid, k_sigma, sigma)
+
+
+def keep_coherent_detail(
+    estimate: np.ndarray, measured: np.ndarray, valid: np.ndarray, k_sigma: float, sigma: float
+) -> np.ndarray:
+    """:func:`restore_detail` on maps already validated (finite wherever ``valid``), ``k_sigma`` > 0."""
     residual = np.where(valid, measured - estimate, 0.0).astype(np.float32)
     mean = _box_sum_3x3(residual) / 9.0
     departing = _box_sum_3x3((np.abs(residual) > 2.0 * sigma).astype(np.float32))
