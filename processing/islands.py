@@ -8,7 +8,7 @@ Criterion: the valid pixels are split into 8-connected regions; a region with fe
 ``min_fraction`` of the largest region is dropped. Scale-free (the same fraction at any image
 size or downsampling); several objects of comparable size all stay.
 
-The regions come from OpenCV's ``connectedComponentsWithStats`` when it is installed (imported on first use:
+The regions come from OpenCV's ``connectedComponents`` when it is installed (imported on first use:
 as fast as ``scipy.ndimage.label``, and the default path of ``rig process`` then never imports
 scipy, 0.1-0.4 s of start-up), else from ``scipy.ndimage.label``; both label the same 8-connected
 regions.
@@ -37,27 +37,28 @@ def island_mask(valid: np.ndarray, min_fraction: float = DEFAULT_MIN_FRACTION) -
     if not 0.0 <= min_fraction <= 1.0:
         raise ValueError(f"min_fraction: expected a fraction in [0, 1], found {min_fraction}")
     valid = np.asarray(valid, dtype=bool)
-    labels, sizes = _regions(valid)
-    if sizes.shape[0] <= 2:  # background and at most one region
+    labels, count = _regions(valid)
+    if count <= 2:  # background and at most one region: nothing to count
         return np.zeros_like(valid)
+    sizes = np.bincount(labels.ravel(), minlength=count)
     sizes[0] = 0
     small = sizes < min_fraction * sizes.max()
     small[0] = False
-    if not small.any():  # the usual case: no island, no per-pixel look-up
+    if not small.any():  # no island: no per-pixel look-up
         return np.zeros_like(valid)
     return small[labels]
 
 
-def _regions(valid: np.ndarray, opencv: bool = True) -> tuple[np.ndarray, np.ndarray]:
-    """8-connected region labels of ``valid`` (0 = background) and the pixel count of each label."""
+def _regions(valid: np.ndarray, opencv: bool = True) -> tuple[np.ndarray, int]:
+    """8-connected region labels of ``valid`` (0 = background) and the number of labels (background included)."""
     try:
         import cv2
     except ImportError:
         cv2 = None
     if opencv and cv2 is not None:
-        count, labels, stats, _ = cv2.connectedComponentsWithStats(np.ascontiguousarray(valid).view(np.uint8), connectivity=8)
-        return labels, stats[:count, cv2.CC_STAT_AREA].astype(np.int64)
+        count, labels = cv2.connectedComponents(np.ascontiguousarray(valid).view(np.uint8), connectivity=8)
+        return labels, int(count)
     from scipy import ndimage
 
     labels, count = ndimage.label(valid, structure=np.ones((3, 3), dtype=bool))
-    return labels, np.bincount(labels.ravel(), minlength=count + 1)
+    return labels, int(count) + 1

@@ -83,7 +83,9 @@ def test_island_regions_same_with_opencv_and_scipy() -> None:
     valid[10, 10] = valid[11, 11] = True  # a diagonal pair: one region under 8-connectivity
     sizes = []
     for opencv in (True, False):
-        labels, counts = _regions(valid, opencv=opencv)
+        labels, count = _regions(valid, opencv=opencv)
+        counts = np.bincount(labels.ravel(), minlength=count)
+        assert counts.shape[0] == count
         size_map = np.where(valid, counts[labels], 0)
         sizes.append(size_map)
     np.testing.assert_array_equal(sizes[0], sizes[1])
