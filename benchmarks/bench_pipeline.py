@@ -30,8 +30,9 @@ the report.
     python benchmarks/bench_pipeline.py [--runs 11] [--frequencies 15 16] [--snr-db 30] [--no-auto]
 
 To see a CPU without AVX-512 on one that has it (numpy's arctan2 and others get 5-10x slower):
-``NPY_DISABLE_CPU_FEATURES="AVX512F AVX512CD AVX512_SKX AVX512_CLX AVX512_CNL AVX512_ICL
-AVX512_SPR" python benchmarks/bench_pipeline.py``.
+``NPY_DISABLE_CPU_FEATURES="X86_V4 AVX512F AVX512CD AVX512_SKX AVX512_CLX AVX512_CNL
+AVX512_ICL AVX512_SPR" python benchmarks/bench_pipeline.py`` (numpy 2.4 names; the header line
+"numpy dispatches to" shows what is left).
 """
 
 from __future__ import annotations
