@@ -56,6 +56,7 @@ from rig.hardware.synthesis import write_simulated_archive  # noqa: E402
 from rig.pipeline.outputs import write_outputs  # noqa: E402
 from rig.pipeline.plan import DEFAULT_CORRECTION, ProcessOptions  # noqa: E402
 from rig.pipeline.run import process  # noqa: E402
+from rig.store.files import INCOMPLETE_MARK, REPLACED_MARK  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 ARRAYS = ("height.npy", "phase.npy", "mask.npy")
@@ -189,9 +190,16 @@ def check_results(out: Path, status: dict[str, str], references: list[tuple[str,
     return problems
 
 
-def kill_and_rerun(archive: Path, calibration: Path, out: Path, good: int, seed: int) -> tuple[int, int]:
+def committed(out: Path) -> tuple[int, int]:
+    """(outputs in place, staging directories being written) under a batch's output directory."""
+    reports = [p.parent.name for p in out.glob("*/*/report.json")]
+    staging = sum(1 for name in reports if INCOMPLETE_MARK in name or REPLACED_MARK in name)
+    return len(reports) - staging, staging
+
+
+def kill_and_rerun(archive: Path, calibration: Path, out: Path, good: int, seed: int) -> tuple[int, int, int]:
     """`rig batch --workers 2` killed (SIGKILL to its whole process group) once a seeded random share of the
-    captures is done, then rerun; returns (outputs in place at the kill, outputs the rerun kept)."""
+    captures is done, then rerun; returns (outputs in place at the kill, staging directories, outputs kept)."""
     shutil.rmtree(out, ignore_errors=True)
     target = round(random.Random(seed).uniform(0.05, 0.95) * good)
     proc = subprocess.Popen(
@@ -215,13 +223,13 @@ def kill_and_rerun(archive: Path, calibration: Path, out: Path, good: int, seed:
         stderr=subprocess.DEVNULL,
     )
     try:
-        while proc.poll() is None and sum(1 for _ in out.glob("*/*/report.json")) < target:
+        while proc.poll() is None and committed(out)[0] < target:
             time.sleep(0.01)
     finally:
         with contextlib.suppress(ProcessLookupError):
             os.killpg(proc.pid, signal.SIGKILL)
         proc.wait(timeout=60)
-    in_place = sum(1 for _ in out.glob("*/*/report.json"))
+    in_place, staging = committed(out)
     events: list[Event] = []
     run_batch(
         BatchPlan(
@@ -234,7 +242,7 @@ def kill_and_rerun(archive: Path, calibration: Path, out: Path, good: int, seed:
         progress=Reporter("batch", sink=events.append),
     )
     kept = next(e.data.get("kept", 0) for e in events if e.kind == "message")
-    return in_place, kept
+    return in_place, staging, kept
 
 
 def summary(values: list[float]) -> str:
@@ -325,10 +333,11 @@ def main(argv: list[str] | None = None) -> int:
             f"{'yes' if not problems else 'NO: ' + '; '.join(problems[:5])}"
         )
         if args.check:
-            in_place, kept = kill_and_rerun(archive, calibration, root / "killed", len(good), seed=14)
+            in_place, staging, kept = kill_and_rerun(archive, calibration, root / "killed", len(good), seed=14)
             problems_k = check_results(root / "killed", status, refs)
             print(
-                f"check: killed (SIGKILL) with {in_place} of {len(good)} outputs in place, rerun kept {kept} "
+                f"check: killed (SIGKILL) with {in_place} of {len(good)} outputs in place and {staging} being written, "
+                f"rerun kept {kept} "
                 f"and completed: {'yes' if not problems_k else 'NO: ' + '; '.join(problems_k[:5])}"
             )
             with external_cluster(2) as address:

@@ -80,9 +80,8 @@ def worker_environ() -> dict[str, object]:
     """Dask's environment for new worker processes, less ``MALLOC_TRIM_THRESHOLD_``.
 
     Dask sets it (to hand memory back to the OS sooner); setting it also turns off glibc's
-    adaptive mmap threshold, so every array above 128 KiB is mapped and unmapped afresh: a 160x120
-    capture took about twice as long with it (the in-process loop row of
-    ``MALLOC_TRIM_THRESHOLD_=65536 python benchmarks/bench_batch.py`` against the same without it).
+    adaptive mmap threshold, so every array above 128 KiB is mapped and unmapped afresh: 1.3x to
+    2x the time per capture, depending on load (docs/benchmarks.md, "Archive batches on Dask").
     Its single-thread BLAS/OpenMP settings are kept.
     """
     import dask
