@@ -156,15 +156,15 @@ def _window_majority(
     lab = np.pad(labels, radius)
     winners = np.zeros(rows.size, dtype=np.int64)
     support = np.zeros(rows.size, dtype=np.int64)
+    stride = lab.shape[1]
+    offsets = (np.arange(-radius, radius + 1)[:, None] * stride + np.arange(-radius, radius + 1)[None, :]).ravel()
+    flat_k, flat_lab = k.reshape(-1), lab.reshape(-1)
     for start in range(0, rows.size, _CHUNK):
         r = rows[start : start + _CHUNK] + radius
         c = cols[start : start + _CHUNK] + radius
-        own = lab[r, c]
-        window = np.empty((r.size, side * side), dtype=np.int32)
-        for i, (dy, dx) in enumerate(
-            (dy, dx) for dy in range(-radius, radius + 1) for dx in range(-radius, radius + 1)
-        ):
-            window[:, i] = np.where(lab[r + dy, c + dx] == own, k[r + dy, c + dx], _NO_VOTE)
+        at = r * stride + c
+        near = at[:, None] + offsets[None, :]  # the window's flat indices, row by row
+        window = np.where(flat_lab[near] == flat_lab[at][:, None], flat_k[near], _NO_VOTE).astype(np.int32)
         window.sort(axis=1)
         # Length of the run each sorted entry ends; the longest run is the majority.
         index = np.broadcast_to(np.arange(side * side), window.shape)

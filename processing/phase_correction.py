@@ -119,10 +119,8 @@ def reorder_from_low_rank(
     (H, W) float64, NaN outside the mask
     """
     estimate, wrapped, valid = phase_pair(low_rank_phase, wrapped_phase, mask, ("low_rank_phase", "wrapped_phase"))
-    out = np.full(estimate.shape, np.nan)
-    phi = wrapped[valid]
-    out[valid] = phi + TWO_PI * np.rint((estimate[valid] - phi) / TWO_PI)
-    return out
+    with np.errstate(invalid="ignore"):
+        return np.where(valid, wrapped + TWO_PI * np.rint((estimate - wrapped) / TWO_PI), np.nan)
 
 
 def phase_pair(
