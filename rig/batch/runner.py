@@ -69,11 +69,10 @@ def default_workers() -> int:
 
 
 def _dashboard_available() -> bool:
-    try:
-        import bokeh  # noqa: F401
-    except ImportError:
-        return False
-    return True
+    """Whether the dashboard's plots can be drawn here (Dask needs bokeh for them)."""
+    import importlib.util
+
+    return importlib.util.find_spec("bokeh") is not None
 
 
 def worker_environ() -> dict[str, object]:
@@ -267,8 +266,9 @@ def _run_on_dask(
             link = dashboard_link(client)
             threads = sum(client.nthreads().values())
             where = plan.scheduler or "a local cluster"
+            workers = len(client.nthreads())
             progress.message(
-                f"dask: {len(client.nthreads())} workers, {threads} threads on {where}"
+                f"dask: {workers} worker{'' if workers == 1 else 's'}, {threads} thread{'' if threads == 1 else 's'} on {where}"
                 + (f"; dashboard {link}" if link else ""),
                 dashboard=link,
                 threads=threads,

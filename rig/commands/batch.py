@@ -91,7 +91,8 @@ class ProgressView:
     def __call__(self, event: Event) -> None:
         if event.kind == "message":
             if not self.quiet:
-                print(f"batch: {event.note}", file=self.stream)
+                clear = "\r\033[K" if self.bar.tty else ""  # the bar's line, on a terminal
+                print(f"{clear}batch: {event.note}", file=self.stream)
         elif event.kind == "begin":
             self.bar.begin(event.total)
             self.started = event.time
