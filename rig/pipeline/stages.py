@@ -226,14 +226,14 @@ def _fused_pass(state: SceneState, options: ProcessOptions) -> bool:
 
     from rig.pipeline import convention_check
 
-    extra = {"max_residual": float(options.params["max_residual"])} if "max_residual" in options.params else {}
+    max_residual = float(options.params.get("max_residual", np.pi / 2))  # e.g. 3.14 for drifting beats
     check = method == "heterodyne" and convention_check.enabled(options)
     assert state.frames is not None
     try:
         scan = fringe_pass(
             state.frames, [group.indices for group in along], freqs, method,
             shifts=[np.asarray(group.shifts) for group in along], min_ratio=options.min_modulation_ratio,
-            keep_all=state.calibration is None or check, **extra,
+            max_residual=max_residual, keep_all=state.calibration is None or check,
         )
     except ValueError:
         return False  # e.g. frequencies the method refuses: the stage-by-stage path reports it as before
@@ -467,7 +467,9 @@ def stage_unwrap(state: SceneState, options: ProcessOptions) -> None:
     wrapped = state.wrapped
     assert wrapped is not None
     method = options.unwrap if options.unwrap != "auto" else choose_unwrap(state.groups, state.axis)
-    freqs, phis = wrapped.frequencies, wrapped.phase
+    freqs = wrapped.frequencies
+    phis = [p for p in wrapped.phase if p is not None]  # all of them: only the fused pass leaves some out
+    assert len(phis) == len(freqs)
     need = _FREQUENCIES_NEEDED.get(method, 1)
     if len(freqs) < need:
         raise ProcessingError(f"--unwrap {method}: needs at least {need} sinusoid frequencies, the capture has {freqs}")
