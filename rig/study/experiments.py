@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from processing.correction import DECIMATE_FROM, DECIMATION
 from processing.denoise import rpca_denoise_stack
 from processing.height import nmse, phase_mse, phase_to_height
 from processing.order_correction import postprocess_orders
@@ -655,7 +656,9 @@ def write_report(out: Path, config: StudyConfig, rows: Rows, figures: list[tuple
         "crosses lies within one fringe and has one order, so it takes the majority of its pixels' orders, voted "
         "per 16 x 16 square and re-voted pixel by pixel over a 9 x 9 window of the region where squares "
         "disagree (a hidden object edge inside the region); then ch. 4's low-rank phase L of that phase (stable "
-        "inexact ALM, stopped at a noise level estimated from wrapped second differences); the pooled orders, "
+        "inexact ALM, stopped at a noise level estimated from wrapped second differences; on maps of "
+        f"{DECIMATE_FROM} px and more solved on {DECIMATION} x {DECIMATION} block means and interpolated back, "
+        "about 40x cheaper, with L's orders not used near blocks where L bends sharply); the pooled orders, "
         "alone and with L's re-derived orders k = round((L - phi) / 2 pi) where L fits the wrapped phase, are "
         "ranked by order breaks (second differences beyond pi; no ground truth), with the earlier guarded "
         "re-derivation as a fallback where pooling leaves more breaks than the measured phase; finally L, except "
@@ -674,6 +677,10 @@ def write_report(out: Path, config: StudyConfig, rows: Rows, figures: list[tuple
             why = ("on this smooth synthetic cap the low-rank phase is nearly exact except along the cap's rim "
                    "(the ringing in the ch. 4 error map), where auto falls back to the measured, noisier phase: "
                    "it pays a little noise for never replacing measured detail by a low-rank guess.")
+        elif ratio < 0.95 and config.size >= DECIMATE_FROM:
+            why = (f"auto solves L on {DECIMATION} x {DECIMATION} block means, which carry 1/{DECIMATION} of the "
+                   "noise, so stopping at the noise level leaves a cleaner surface, and keeps the measured phase "
+                   "where the low-rank model departs from it.")
         elif ratio < 0.95:
             why = "keeping the measured phase where the low-rank model departs from it pays off here."
         else:
