@@ -88,8 +88,13 @@ def prepare(directory: Path, size: tuple[int, int]) -> tuple[Path, Path]:
     base = synth.RigGeometry()  # the same field of view at the requested size
     geometry = dataclasses.replace(base.with_camera(*size), pixel_mm=base.pixel_mm * base.camera_width / size[0])
     heights = scenes.sphere_cap(geometry.camera_height, geometry.camera_width, geometry.pixel_mm)
-    scan = simulate_scan(heights, geometry=geometry, patterns=synth.sinusoid_patterns((15, 16), 6),
-                         appearance=synth.Appearance(ambient=0.05, snr_db=30.0, bit_depth=8), seed=0)
+    scan = simulate_scan(
+        heights,
+        geometry=geometry,
+        patterns=synth.sinusoid_patterns((15, 16), 6),
+        appearance=synth.Appearance(ambient=0.05, snr_db=30.0, bit_depth=8),
+        seed=0,
+    )
     paths = write_simulated_scan(scan, directory / "scan")
     return paths.capture, paths.calibration
 

@@ -76,8 +76,17 @@ def calibrate(session: ConsoleSession, config: Any) -> None:
     cal = session.data.root / "calibrations" / "cal"
     scan(config, cal / "reference", scene="reference")
     g = geometry_from_config(config)
-    write_calibration(cal, Calibration(l0_mm=g.l0_mm, d0_mm=g.d0_mm, f0_per_mm=g.f0_per_mm, f0_frequency=g.f0_frequency,
-                                       pixel_mm=g.pixel_mm, reference="reference"))
+    write_calibration(
+        cal,
+        Calibration(
+            l0_mm=g.l0_mm,
+            d0_mm=g.d0_mm,
+            f0_per_mm=g.f0_per_mm,
+            f0_frequency=g.f0_frequency,
+            pixel_mm=g.pixel_mm,
+            reference="reference",
+        ),
+    )
     session.set_calibration("cal")
 
 
@@ -112,7 +121,9 @@ def scan_to_result(width: int, height: int, runs: int) -> tuple[list[float], lis
             for run in range(runs):
                 job = session.scan(name=f"run-{run}", options=ProcessOptions(correction="none"))
                 with recorder.event:
-                    recorder.event.wait_for(lambda job=job: any(r["job"] == job.id for r in recorder.results), timeout=120)
+                    recorder.event.wait_for(
+                        lambda job=job: any(r["job"] == job.id for r in recorder.results), timeout=120
+                    )
                 result = next(r for r in recorder.results if r["job"] == job.id)
                 console_s.append(float(result["since_last_frame_s"]))
                 while job.state == "running":
@@ -139,8 +150,10 @@ def main() -> None:
     args = parser.parse_args()
     print(f"CPU: {cpu_model()} ({os.cpu_count()} logical); load average before: {os.getloadavg()}")
     fps = live_fps(*args.live_size, args.live_seconds)
-    print(f"live view {args.live_size[0]}x{args.live_size[1]}, fringe shown (modulation map computed): {fps:.1f} fps "
-          f"(uncapped; the console caps it at 20)")
+    print(
+        f"live view {args.live_size[0]}x{args.live_size[1]}, fringe shown (modulation map computed): {fps:.1f} fps "
+        f"(uncapped; the console caps it at 20)"
+    )
     console_s, peer_s = scan_to_result(*args.scan_size, args.runs)
     ratios = [c / p for c, p in zip(console_s, peer_s)]
     print(f"scan to result published, {args.scan_size[0]}x{args.scan_size[1]}, correction none, {args.runs} runs:")

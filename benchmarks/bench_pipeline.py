@@ -141,12 +141,14 @@ def main(argv: list[str] | None = None) -> int:
     rows: dict[str, Callable[[], object]] = {"rig pipeline in memory, correction none": lambda: pipeline("none")}
     if not args.no_auto:
         rows[f"rig pipeline in memory, default ({DEFAULT_CORRECTION})"] = lambda: pipeline(DEFAULT_CORRECTION)
-    rows.update({
-        "fused kernel (fringe_pass + eq. 1.15)": lambda: fused_pipeline(obj, freqs, reference_phase, geometry),
-        "fused kernel, numpy only": lambda: fused_pipeline(obj, freqs, reference_phase, geometry, opencv=False),
-        "float64 stage functions": lambda: stage_pipeline(obj, freqs, reference_phase64, geometry),
-        PEER: lambda: opencv_pipeline(obj, freqs, geometry),
-    })
+    rows.update(
+        {
+            "fused kernel (fringe_pass + eq. 1.15)": lambda: fused_pipeline(obj, freqs, reference_phase, geometry),
+            "fused kernel, numpy only": lambda: fused_pipeline(obj, freqs, reference_phase, geometry, opencv=False),
+            "float64 stage functions": lambda: stage_pipeline(obj, freqs, reference_phase64, geometry),
+            PEER: lambda: opencv_pipeline(obj, freqs, geometry),
+        }
+    )
 
     # Check against the simulated truth: right fringe orders (phase within pi) and height error.
     height = fused_pipeline(obj, freqs, reference_phase, geometry)
@@ -161,8 +163,10 @@ def main(argv: list[str] | None = None) -> int:
     product_rms = float(np.sqrt(np.nanmean((product[lit] - heights[lit]) ** 2)))
 
     load_before = os.getloadavg()
-    print(f"timing {args.runs} interleaved runs of {len(rows)} rows (the OpenCV peer takes ~0.3-1 s each) ...",
-          file=sys.stderr)
+    print(
+        f"timing {args.runs} interleaved runs of {len(rows)} rows (the OpenCV peer takes ~0.3-1 s each) ...",
+        file=sys.stderr,
+    )
     times = interleaved(rows, args.runs)
     load_after = os.getloadavg()
 
@@ -171,9 +175,11 @@ def main(argv: list[str] | None = None) -> int:
         print(line)
     print(load_line(load_before, load_after))
     print_table(times, PEER)
-    print(f"runs: {args.runs} interleaved; check: {order_errors} wrong fringe orders among {lit.sum()} valid lit pixels, "
-          f"height RMS error {rms:.3f} mm (rig pipeline {product_rms:.3f} mm), valid {100 * valid.mean():.1f}%, "
-          f"fused vs float64 stages {stage_gap:.1e} mm")
+    print(
+        f"runs: {args.runs} interleaved; check: {order_errors} wrong fringe orders among {lit.sum()} valid lit pixels, "
+        f"height RMS error {rms:.3f} mm (rig pipeline {product_rms:.3f} mm), valid {100 * valid.mean():.1f}%, "
+        f"fused vs float64 stages {stage_gap:.1e} mm"
+    )
     workdir.cleanup()
     return 0
 

@@ -54,11 +54,13 @@ def main() -> int:
         for name, pattern in PATTERNS.items():
             projector.show(pattern)  # warm-up: shader compile, speckle texture upload
             numpy_frame = apply_gamma_lut(pattern_image(pattern, size), lut)
-            gl_s = median_time(lambda: (projector.show(pattern), projector.wait_shown()), args.runs)
-            np_s = median_time(lambda: apply_gamma_lut(pattern_image(pattern, size), lut), args.runs)
+            gl_s = median_time(lambda pattern=pattern: (projector.show(pattern), projector.wait_shown()), args.runs)
+            np_s = median_time(lambda pattern=pattern: apply_gamma_lut(pattern_image(pattern, size), lut), args.runs)
             diff = float(np.max(np.abs(projector.last_frame() - numpy_frame))) * 255
-            print(f"{name:17s} moderngl {gl_s * 1e3:7.2f} ms   numpy {np_s * 1e3:7.2f} ms   "
-                  f"numpy/moderngl {np_s / gl_s:5.1f}x   max diff {diff:.2f}/255")
+            print(
+                f"{name:17s} moderngl {gl_s * 1e3:7.2f} ms   numpy {np_s * 1e3:7.2f} ms   "
+                f"numpy/moderngl {np_s / gl_s:5.1f}x   max diff {diff:.2f}/255"
+            )
     return 0
 
 

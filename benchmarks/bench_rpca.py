@@ -60,12 +60,14 @@ def plain_full_ialm_phase(maps) -> tuple[np.ndarray, Any]:
     return np.where(maps.mask, result.low_rank, np.nan), result
 
 
-def time_rows(case: ProtocolCase, rows: list[tuple[str, Callable[[Any], tuple[np.ndarray, Any]], int]]) -> dict[str, float]:
+def time_rows(
+    case: ProtocolCase, rows: list[tuple[str, Callable[[Any], tuple[np.ndarray, Any]], int]]
+) -> dict[str, float]:
     """Median seconds of each (label, method, repeats) row on the object map, printed with the
     solver's iterations and rank and the NMSE of the heights it gives (reference corrected alike)."""
     medians = {}
     for label, method, count in rows:
-        median, times, (phase, result) = median_seconds(lambda: method(case.object), count)
+        median, times, (phase, result) = median_seconds(lambda method=method: method(case.object), count)
         ref_phase, _ = method(case.reference)
         medians[label] = median
         print(
@@ -80,12 +82,18 @@ def bench_ch4(case: ProtocolCase, repeats: int, peer_repeats: int) -> None:
     print(f"\n== ch. 4 absolute phase correction, one {obj.absolute.shape[1]}x{obj.absolute.shape[0]} map ==")
     rows = [
         ("ours: stable iALM, partial SVD", lambda m: correct_phase_rpca(m.absolute, m.mask), repeats),
-        ("full-SVD reference (same method)", lambda m: correct_phase_rpca(m.absolute, m.mask, svd="full"), peer_repeats),
+        (
+            "full-SVD reference (same method)",
+            lambda m: correct_phase_rpca(m.absolute, m.mask, svd="full"),
+            peer_repeats,
+        ),
         ("peer: plain full-SVD iALM (thesis)", plain_full_ialm_phase, peer_repeats),
     ]
     medians = time_rows(case, rows)
     ours = medians[rows[0][0]]
-    print(f"ratio peer / ours: {medians[rows[2][0]] / ours:.1f}x;  full-SVD reference / ours: {medians[rows[1][0]] / ours:.1f}x")
+    print(
+        f"ratio peer / ours: {medians[rows[2][0]] / ours:.1f}x;  full-SVD reference / ours: {medians[rows[1][0]] / ours:.1f}x"
+    )
 
 
 def bench_ch3(case: ProtocolCase, repeats: int, peer_repeats: int) -> None:
@@ -115,7 +123,9 @@ def bench_ch3(case: ProtocolCase, repeats: int, peer_repeats: int) -> None:
     print(f"ratio peer / ours: {medians[rows[2][0]] / medians[rows[0][0]]:.1f}x")
     start = time.perf_counter()
     _, _, adm = correct_orders_rpca(orders_of(obj), obj.wrapped, obj.mask, solver="adm")
-    print(f"thesis' fixed-penalty ADM (partial SVD), one run: {time.perf_counter() - start:.2f} s, {adm.iterations} iterations")
+    print(
+        f"thesis' fixed-penalty ADM (partial SVD), one run: {time.perf_counter() - start:.2f} s, {adm.iterations} iterations"
+    )
 
 
 def table41(width: int, height: int, seeds: list[int]) -> None:
@@ -132,8 +142,10 @@ def table41(width: int, height: int, seeds: list[int]) -> None:
     ]
     for seed in seeds:
         case = table41_case(width, height, snr_db=15.0, seed=seed)
-        print(f"seed {seed}: wrong orders object {case.object.order_errors()}, reference {case.reference.order_errors()} "
-              f"of {case.mask.size} pixels")
+        print(
+            f"seed {seed}: wrong orders object {case.object.order_errors()}, reference {case.reference.order_errors()} "
+            f"of {case.mask.size} pixels"
+        )
         print(f"  {'oracle (true orders)':28s} NMSE_h {case.nmse_h(case.object.oracle(), case.reference.oracle()):.6f}")
         for label, name, params in methods:
             phases, seconds = [], 0.0
@@ -173,7 +185,9 @@ def denoise_experiments(size: int, exact: bool) -> None:
         ("two-frequency (5, 8) 6-step, two hemispheres (thesis 0.6786 -> 0.0025)", "two-hemispheres", [5, 8], 6),
     ]
     for label, scene, freqs, steps in experiments:
-        scan = simulate_scan(scene, geometry, synth.sinusoid_patterns(freqs, steps), synth.Appearance(snr_db=15.0), seed=3)
+        scan = simulate_scan(
+            scene, geometry, synth.sinusoid_patterns(freqs, steps), synth.Appearance(snr_db=15.0), seed=3
+        )
         before = heights(scan, scan.object_frames, scan.reference_frames, freqs, steps)
         print(label)
         for stable in (True, False) if exact else (True,):
@@ -183,8 +197,10 @@ def denoise_experiments(size: int, exact: bool) -> None:
             seconds = time.perf_counter() - start
             after = heights(scan, obj, ref, freqs, steps)
             mode = "stable" if stable else "exact"
-            print(f"  {mode:6s}: NMSE_h {before:.6f} -> {after:.6f}   {seconds:.1f} s for {2 * len(results)} frames, "
-                  f"ranks {min(r.rank for r in results)}-{max(r.rank for r in results)}")
+            print(
+                f"  {mode:6s}: NMSE_h {before:.6f} -> {after:.6f}   {seconds:.1f} s for {2 * len(results)} frames, "
+                f"ranks {min(r.rank for r in results)}-{max(r.rank for r in results)}"
+            )
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -195,8 +211,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--table-size", type=int, nargs=2, default=(1000, 1000), metavar=("W", "H"))
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1])
     parser.add_argument("--denoise-size", type=int, default=1000)
-    parser.add_argument("--exact-denoise", action="store_true",
-                        help="also denoise with exact decomposition (the thesis' rule; minutes at 1000x1000)")
+    parser.add_argument(
+        "--exact-denoise",
+        action="store_true",
+        help="also denoise with exact decomposition (the thesis' rule; minutes at 1000x1000)",
+    )
     args = parser.parse_args(argv)
     with rpca_blas():
         if args.only in (None, "timing"):

@@ -33,10 +33,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from mock_devices.camera import SimulatedCamera  # noqa: E402
 from rig.acquisition.loop import AcquisitionSettings, run_scan  # noqa: E402
-from rig.hardware.assembly import trigger_path  # noqa: E402
-from rig.store.capture import read_capture  # noqa: E402
 from rig.config import CameraConfig, RigConfig, TriggerConfig  # noqa: E402
+from rig.hardware.assembly import trigger_path  # noqa: E402
 from rig.hardware.simulated import SimulatedRig  # noqa: E402
+from rig.store.capture import read_capture  # noqa: E402
 
 
 class CameraClock:
@@ -62,8 +62,14 @@ def one_scan(rig: SimulatedRig, config: RigConfig, out: Path, background: bool, 
     clock.seconds = 0.0
     started = time.perf_counter()
     result = run_scan(
-        out, patterns, rig.projector, rig.camera, trigger_path(rig.camera, rig.trigger_box), settings,
-        exposure_us=config.camera.exposure_us, background_writer=background,
+        out,
+        patterns,
+        rig.projector,
+        rig.camera,
+        trigger_path(rig.camera, rig.trigger_box),
+        settings,
+        exposure_us=config.camera.exposure_us,
+        background_writer=background,
     )
     wall = time.perf_counter() - started
     device = result.times.show_s + clock.seconds
@@ -119,15 +125,19 @@ def main() -> int:
                     results[label].append(one_scan(rig, config, out, background, clock))
                     shutil.rmtree(out)
             read_capture(work / "warm-up")  # the capture is complete and its checksums hold
-        print(f"simulated scan: {len(config.scan.patterns())} frames, camera {width}x{height}, projector "
-              f"{config.projector.width}x{config.projector.height}, trigger {args.trigger}, {args.runs} runs (medians)")
+        print(
+            f"simulated scan: {len(config.scan.patterns())} frames, camera {width}x{height}, projector "
+            f"{config.projector.width}x{config.projector.height}, trigger {args.trigger}, {args.runs} runs (medians)"
+        )
         # Everything here is CPU time on this machine's cores: compare figures taken at a similar load.
         print(f"load average (1 min) {load_before:.1f} before, {os.getloadavg()[0]:.1f} after, {os.cpu_count()} CPUs")
         ours = summarise("writer thread", results["writer thread"])
         peer = summarise("inline writer (peer)", results["inline writer (peer)"])
         print(f"ratio wall inline / thread: {peer['wall_s'] / ours['wall_s']:.2f}")
-        print(f"targets: overhead <= 10 ms/frame: {'met' if ours['overhead_ms_per_frame'] <= 10 else 'MISSED'}; "
-              f"scan <= 1.5 s: {'met' if ours['wall_s'] <= 1.5 else 'MISSED'}")
+        print(
+            f"targets: overhead <= 10 ms/frame: {'met' if ours['overhead_ms_per_frame'] <= 10 else 'MISSED'}; "
+            f"scan <= 1.5 s: {'met' if ours['wall_s'] <= 1.5 else 'MISSED'}"
+        )
     finally:
         shutil.rmtree(work, ignore_errors=True)
     return 0

@@ -76,18 +76,28 @@ def main() -> int:
         plain = rpca_ialm(scaled, svd="full")
         peer_rpca.append(time.perf_counter() - start)
         iterations = plain.iterations
-        print(f"  peer run {i + 1}: plain full-SVD IALM {peer_rpca[-1]:.2f} s ({plain.iterations} iterations, "
-              f"rank {plain.rank})", file=sys.stderr, flush=True)
+        print(
+            f"  peer run {i + 1}: plain full-SVD IALM {peer_rpca[-1]:.2f} s ({plain.iterations} iterations, "
+            f"rank {plain.rank})",
+            file=sys.stderr,
+            flush=True,
+        )
     peer = statistics.median(peer_rpca) + (ours - ours_rpca)
 
-    print(f"single-shot unwrap, {size}x{size}, frequency {f}, 25 dB hemisphere (radius {SINGLE_SHOT_HEMISPHERE_MM:g} mm)")
+    print(
+        f"single-shot unwrap, {size}x{size}, frequency {f}, 25 dB hemisphere (radius {SINGLE_SHOT_HEMISPHERE_MM:g} mm)"
+    )
     print(f"reference preparation (once per calibration): {prepare_s:.2f} s")
     print(f"ours: median {ours:.2f} s over {args.repeats} runs (target <= 5 s: {'met' if ours <= 5.0 else 'MISSED'})")
     for stage in ("rpca", "ftp", "correlation", "voting", "segments"):
         print(f"  {stage:12s} median {statistics.median(s[stage] for s in stages):.3f} s")
-    print(f"  exact fringe orders on valid pixels: {exact:.4f} (valid {valid.sum() / np.isfinite(truth).sum():.3f} of lit)")
-    print(f"peer (plain full-SVD inexact ALM, tol 1e-7, {iterations} iterations): RPCA median "
-          f"{statistics.median(peer_rpca):.2f} s over {args.peer_repeats} runs, pipeline {peer:.2f} s")
+    print(
+        f"  exact fringe orders on valid pixels: {exact:.4f} (valid {valid.sum() / np.isfinite(truth).sum():.3f} of lit)"
+    )
+    print(
+        f"peer (plain full-SVD inexact ALM, tol 1e-7, {iterations} iterations): RPCA median "
+        f"{statistics.median(peer_rpca):.2f} s over {args.peer_repeats} runs, pipeline {peer:.2f} s"
+    )
     print(f"ratio peer / ours: pipeline {peer / ours:.1f}x, RPCA stage {statistics.median(peer_rpca) / ours_rpca:.1f}x")
     return 0
 

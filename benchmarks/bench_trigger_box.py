@@ -84,8 +84,11 @@ def main() -> int:
         bare.append(bare_echo_round_trip(args.count))
     peer = statistics.median(bare)
     print(f"{'exchange':<28}{'median us':>12}{'x bare':>10}")
-    for name, values in (("FIRE (SerialTriggerBox)", fire), ("PING (SerialTriggerBox)", ping),
-                         ("bare pty write+readline", bare)):
+    for name, values in (
+        ("FIRE (SerialTriggerBox)", fire),
+        ("PING (SerialTriggerBox)", ping),
+        ("bare pty write+readline", bare),
+    ):
         median = statistics.median(values)
         print(f"{name:<28}{median * 1e6:>12.0f}{median / peer:>10.2f}")
     print(f"({args.runs} runs x {args.count} exchanges)", file=sys.stderr)

@@ -28,10 +28,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from calibration.errors import CalibrationError  # noqa: E402
 from calibration.geometry import fit_f0, fit_l0_d0  # noqa: E402
 from calibration.polynomial import fit_polynomial  # noqa: E402
 from calibration.stereo import StereoModel, board_phase_view, calibrate_stereo, fit_plane, triangulate  # noqa: E402
-from calibration.errors import CalibrationError  # noqa: E402
 from mock_devices import scenes, stereo_synth, synth  # noqa: E402
 from processing.height import phase_to_height  # noqa: E402
 from processing.phase_shift import phase_shift  # noqa: E402
@@ -42,7 +42,7 @@ HEIGHTS = (25.0, 50.0, 100.0, 150.0)
 
 
 def unwrap(frames: np.ndarray, steps: int) -> np.ndarray:
-    phases = [phase_shift(frames[i * steps:(i + 1) * steps]).phase for i in range(len(FREQUENCIES))]
+    phases = [phase_shift(frames[i * steps : (i + 1) * steps]).phase for i in range(len(FREQUENCIES))]
     result = unwrap_hierarchical(phases, list(FREQUENCIES))
     return np.where(result.valid, result.phase, np.nan)
 
@@ -54,8 +54,15 @@ def error_stats(height: np.ndarray, truth: np.ndarray) -> str:
 
 
 def ideal_rig(snr_db: float, seed: int) -> None:
-    g = synth.RigGeometry(l0_mm=1000.0, d0_mm=250.0, f0_per_mm=0.015625, f0_frequency=8.0, pixel_mm=0.8,
-                          camera_width=512, camera_height=384)
+    g = synth.RigGeometry(
+        l0_mm=1000.0,
+        d0_mm=250.0,
+        f0_per_mm=0.015625,
+        f0_frequency=8.0,
+        pixel_mm=0.8,
+        camera_width=512,
+        camera_height=384,
+    )
     app = synth.Appearance(gain=200.0, ambient=0.1, snr_db=snr_db, bit_depth=8)
     rng = np.random.default_rng(seed)
     patterns = synth.sinusoid_patterns(FREQUENCIES, 4)
@@ -69,10 +76,12 @@ def ideal_rig(snr_db: float, seed: int) -> None:
     f0 = fit_f0(ref, g.pixel_mm)
     fit = fit_l0_d0(HEIGHTS, deltas, f0.f0_per_mm, f0_std_per_mm=f0.f0_std_per_mm)
     f0_true = g.per_mm(64)
-    print(f"ideal rig, {snr_db:g} dB: f0 {100 * (f0.f0_per_mm / f0_true - 1):+.3f} %, "
-          f"l0 {100 * (fit.l0_mm / g.l0_mm - 1):+.3f} % (+-{100 * fit.l0_std_mm / g.l0_mm:.3f}), "
-          f"d0 {100 * (fit.d0_mm / g.d0_mm - 1):+.3f} % (+-{100 * fit.d0_std_mm / g.d0_mm:.3f}), "
-          f"residual RMS {fit.residual_rms_mm:.4f} mm")
+    print(
+        f"ideal rig, {snr_db:g} dB: f0 {100 * (f0.f0_per_mm / f0_true - 1):+.3f} %, "
+        f"l0 {100 * (fit.l0_mm / g.l0_mm - 1):+.3f} % (+-{100 * fit.l0_std_mm / g.l0_mm:.3f}), "
+        f"d0 {100 * (fit.d0_mm / g.d0_mm - 1):+.3f} % (+-{100 * fit.d0_std_mm / g.d0_mm:.3f}), "
+        f"residual RMS {fit.residual_rms_mm:.4f} mm"
+    )
     poly = fit_polynomial(HEIGHTS, deltas, 64, degree=3)
     block = np.zeros(g.camera_shape)
     block[120:264, 160:352] = 25.0
@@ -90,8 +99,9 @@ def ideal_rig(snr_db: float, seed: int) -> None:
 
 def pinhole_rig(snr_db: float, seed: int) -> None:
     rig = stereo_synth.demo_rig(320, 256)
-    g = synth.RigGeometry(camera_width=320, camera_height=256, projector_width=rig.projector.width,
-                          projector_height=rig.projector.height)
+    g = synth.RigGeometry(
+        camera_width=320, camera_height=256, projector_width=rig.projector.width, projector_height=rig.projector.height
+    )
     app = synth.Appearance(gain=200.0, ambient=0.05, snr_db=snr_db, bit_depth=8)
     rng = np.random.default_rng(seed)
     patterns = synth.sinusoid_patterns(FREQUENCIES, 6)
@@ -126,15 +136,19 @@ def pinhole_rig(snr_db: float, seed: int) -> None:
     rms_3d = np.sqrt(np.nanmean(np.sum((recovered - points) ** 2, axis=2)[lit]))
     print(f"  sphere 40 mm: reference-plane {error_stats(h_ref, truth)}")
     print(f"  sphere 40 mm: polynomial (fit residual {poly.residual_rms_mm:.3f} mm) {error_stats(h_poly, truth)}")
-    print(f"  sphere 40 mm: stereo (true parameters) {error_stats(h_stereo, truth)}; 3-D point RMS {rms_3d:.3f} mm over the view")
+    print(
+        f"  sphere 40 mm: stereo (true parameters) {error_stats(h_stereo, truth)}; 3-D point RMS {rms_3d:.3f} mm over the view"
+    )
     calibrated = calibrated_stereo(rig, g, snr_db, seed)
     recovered = triangulate(calibrated.model, obj, 64)
     background = (truth < 0.01) & np.isfinite(recovered[..., 2])
     plane = fit_plane(recovered, background)
     h_cal = recovered @ plane[:3] + plane[3]
-    print(f"  stereo calibrated from 8 board views (stereoCalibrate RMS {calibrated.rms_px:.3f} px, baseline "
-          f"{100 * (calibrated.model.baseline_mm / np.linalg.norm(rig.translation_mm) - 1):+.3f} %): "
-          f"sphere 40 mm {error_stats(h_cal, truth)}")
+    print(
+        f"  stereo calibrated from 8 board views (stereoCalibrate RMS {calibrated.rms_px:.3f} px, baseline "
+        f"{100 * (calibrated.model.baseline_mm / np.linalg.norm(rig.translation_mm) - 1):+.3f} %): "
+        f"sphere 40 mm {error_stats(h_cal, truth)}"
+    )
 
 
 def calibrated_stereo(rig, g, snr_db: float, seed: int):
@@ -146,11 +160,16 @@ def calibrated_stereo(rig, g, snr_db: float, seed: int):
     views = []
     for image, mapping in stereo_synth.board_session(rig, count=8, seed=seed + 3):
         app = synth.Appearance(reflectivity=image / 220.0, gain=200.0, ambient=0.05, snr_db=snr_db, bit_depth=8)
-        stacks = [synth.render_stack(synth.sinusoid_patterns(FREQUENCIES, 4, axis=axis), mapping, g, app, rng) for axis in ("x", "y")]
+        stacks = [
+            synth.render_stack(synth.sinusoid_patterns(FREQUENCIES, 4, axis=axis), mapping, g, app, rng)
+            for axis in ("x", "y")
+        ]
         view = board_phase_view(image, BoardSpec("chessboard", (9, 7), 30.0), stacks[0], stacks[1], FREQUENCIES, 4)
         if view is not None:
             views.append(view)
-    return calibrate_stereo(views, (g.camera_width, g.camera_height), (g.projector_width, g.projector_height), flags=cv2.CALIB_FIX_K3)
+    return calibrate_stereo(
+        views, (g.camera_width, g.camera_height), (g.projector_width, g.projector_height), flags=cv2.CALIB_FIX_K3
+    )
 
 
 def camera(seed: int) -> None:
@@ -159,14 +178,20 @@ def camera(seed: int) -> None:
 
     truth = PinholeCamera.simple(640, 480, 600.0, (-0.2, 0.05, 0.0, 0.0, 0.0))
     for kind, marker in (("chessboard", None), ("charuco", 21.0)):
-        images, _ = calibration_views(truth, kind, (9, 7), 30.0, marker_mm=marker, count=10, distance_mm=450.0, seed=seed)
+        images, _ = calibration_views(
+            truth, kind, (9, 7), 30.0, marker_mm=marker, count=10, distance_mm=450.0, seed=seed
+        )
         result = calibrate_camera(images, BoardSpec(kind, (9, 7), 30.0, marker))
         m = result.camera_matrix
         grid = np.array([[x, y] for x in (0.0, 319.5, 639.0) for y in (0.0, 239.5, 479.0)])
-        shift = np.abs(undistort_points(grid, m, result.distortion) - undistort_points(grid, truth.camera_matrix, truth.distortion))
-        print(f"camera 640x480, {kind}, 10 views: reprojection RMS {result.rms_px:.3f} px, "
-              f"fx {100 * (m[0, 0] / 600 - 1):+.2f} %, principal point off by ({m[0, 2] - 319.5:+.2f}, {m[1, 2] - 239.5:+.2f}) px, "
-              f"distortion model off by <= {600 * shift.max():.2f} px over the image")
+        shift = np.abs(
+            undistort_points(grid, m, result.distortion) - undistort_points(grid, truth.camera_matrix, truth.distortion)
+        )
+        print(
+            f"camera 640x480, {kind}, 10 views: reprojection RMS {result.rms_px:.3f} px, "
+            f"fx {100 * (m[0, 0] / 600 - 1):+.2f} %, principal point off by ({m[0, 2] - 319.5:+.2f}, {m[1, 2] - 239.5:+.2f}) px, "
+            f"distortion model off by <= {600 * shift.max():.2f} px over the image"
+        )
 
 
 def main() -> int:

@@ -27,11 +27,11 @@ TWO_PI = 2.0 * np.pi
 class PhaseMaps:
     """One scene's phases at the high frequency f2."""
 
-    absolute: np.ndarray   # unwrapped, with whatever order errors the noise caused
-    wrapped: np.ndarray    # measured, in [-pi, pi)
-    orders: np.ndarray     # as unwrap_two_frequency returns them
-    truth: np.ndarray      # true absolute phase (NaN where unlit)
-    mask: np.ndarray       # lit and unwrapped
+    absolute: np.ndarray  # unwrapped, with whatever order errors the noise caused
+    wrapped: np.ndarray  # measured, in [-pi, pi)
+    orders: np.ndarray  # as unwrap_two_frequency returns them
+    truth: np.ndarray  # true absolute phase (NaN where unlit)
+    mask: np.ndarray  # lit and unwrapped
 
     def oracle(self) -> np.ndarray:
         """The measured wrapped phase with the true fringe orders."""
@@ -62,8 +62,13 @@ class ProtocolCase:
         return nmse(self.height(object_phase, reference_phase), self.height_mm, self.mask)
 
 
-def _phase_maps(frames: np.ndarray, mapping: synth.ProjectorMap, geometry: synth.RigGeometry,
-                frequencies: tuple[int, int], steps: int) -> PhaseMaps:
+def _phase_maps(
+    frames: np.ndarray,
+    mapping: synth.ProjectorMap,
+    geometry: synth.RigGeometry,
+    frequencies: tuple[int, int],
+    steps: int,
+) -> PhaseMaps:
     f1, f2 = frequencies
     phi1 = phase_shift(frames[:steps]).phase
     phi2 = phase_shift(frames[steps:]).phase

@@ -67,17 +67,27 @@ def cpu_description() -> list[str]:
 
 
 def load_line(before: Sequence[float], after: Sequence[float]) -> str:
-    return (f"load average (1/5/15 min): {' '.join(f'{x:.2f}' for x in before)} before, "
-            f"{' '.join(f'{x:.2f}' for x in after)} after")
+    return (
+        f"load average (1/5/15 min): {' '.join(f'{x:.2f}' for x in before)} before, "
+        f"{' '.join(f'{x:.2f}' for x in after)} after"
+    )
 
 
-def print_table(times: Mapping[str, list[Sample]], peer: str, unit: str = "ms", scale: float = 1e3,
-                digits: int = 1, extra: Mapping[str, str] | None = None) -> None:
+def print_table(
+    times: Mapping[str, list[Sample]],
+    peer: str,
+    unit: str = "ms",
+    scale: float = 1e3,
+    digits: int = 1,
+    extra: Mapping[str, str] | None = None,
+) -> None:
     """Median, min-max, CPU median and the per-run ratio peer/row (median and min-max) of each row."""
     peer_walls = [t[0] for t in times[peer]]
     width = max(len(name) for name in times) + 2
-    print(f"{'row':<{width}} {'median ' + unit:>10} {'min-max ' + unit:>17} {'CPU ' + unit:>8} "
-          f"{'peer/this (min-max)':>22}  {'' if extra is None else 'note'}")
+    print(
+        f"{'row':<{width}} {'median ' + unit:>10} {'min-max ' + unit:>17} {'CPU ' + unit:>8} "
+        f"{'peer/this (min-max)':>22}  {'' if extra is None else 'note'}"
+    )
     for name, samples in times.items():
         walls = [t[0] for t in samples]
         ratios = [p / w for p, w in zip(peer_walls, walls)]
@@ -85,5 +95,7 @@ def print_table(times: Mapping[str, list[Sample]], peer: str, unit: str = "ms", 
         ratio = f"{statistics.median(ratios):.2f}x ({min(ratios):.2f}-{max(ratios):.2f})"
         cpu = statistics.median(t[1] for t in samples) * scale
         note = "" if extra is None else extra.get(name, "")
-        print(f"{name:<{width}} {statistics.median(walls) * scale:>10.{digits}f} {spread:>17} {cpu:>8.{digits}f} "
-              f"{ratio:>22}  {note}")
+        print(
+            f"{name:<{width}} {statistics.median(walls) * scale:>10.{digits}f} {spread:>17} {cpu:>8.{digits}f} "
+            f"{ratio:>22}  {note}"
+        )

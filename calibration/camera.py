@@ -68,10 +68,12 @@ class BoardSpec:
         gx, gy = np.meshgrid(np.arange(1, cols + 1), np.arange(1, rows + 1))
         return np.column_stack((gx.ravel(), gy.ravel(), np.zeros(gx.size))).astype(np.float32) * self.square_mm
 
-    def charuco_board(self) -> "cv2.aruco.CharucoBoard":
+    def charuco_board(self) -> cv2.aruco.CharucoBoard:
         """The OpenCV ChArUco board of this spec (markers 0.7 of a square unless ``marker_mm`` is given)."""
         dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, self.dictionary))
-        return cv2.aruco.CharucoBoard(tuple(self.squares), self.square_mm, self.marker_mm or 0.7 * self.square_mm, dictionary)
+        return cv2.aruco.CharucoBoard(
+            tuple(self.squares), self.square_mm, self.marker_mm or 0.7 * self.square_mm, dictionary
+        )
 
 
 @dataclass(frozen=True)
@@ -88,15 +90,15 @@ class CameraCalibration:
 
     camera_matrix: np.ndarray
     distortion: np.ndarray
-    image_size: tuple[int, int]       # (width, height)
-    rms_px: float                     # RMS reprojection error over every corner
+    image_size: tuple[int, int]  # (width, height)
+    rms_px: float  # RMS reprojection error over every corner
     per_view_rms_px: tuple[float, ...]
-    views_used: tuple[int, ...]       # indices of the views in which the board was found
+    views_used: tuple[int, ...]  # indices of the views in which the board was found
     rvecs: tuple[np.ndarray, ...] = ()
     tvecs: tuple[np.ndarray, ...] = ()
     distortion_std: np.ndarray | None = None  # 1-sigma of the distortion coefficients (first fit)
-    distortion_significant: bool = True       # False: no coefficient stood out of its noise, all set to 0
-    notes: tuple[str, ...] = ()               # views skipped, corners left out (unlit, outliers)
+    distortion_significant: bool = True  # False: no coefficient stood out of its noise, all set to 0
+    notes: tuple[str, ...] = ()  # views skipped, corners left out (unlit, outliers)
 
     def as_fields(self) -> dict:
         """calibration.json keys (capture-format.md: ``camera_matrix``, ``distortion``)."""
@@ -134,7 +136,10 @@ def detect_board(image: np.ndarray, board: BoardSpec, name: str = "view") -> Boa
         spacing = float(np.median(np.linalg.norm(np.diff(points, axis=0), axis=1)))
         half = int(np.clip(spacing / 4.0, 2, 11))
         corners = cv2.cornerSubPix(
-            gray, corners.astype(np.float32), (half, half), (-1, -1),
+            gray,
+            corners.astype(np.float32),
+            (half, half),
+            (-1, -1),
             (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-6),
         )
         return BoardDetection(corners.reshape(-1, 2).astype(np.float64), board.object_points())
@@ -143,7 +148,9 @@ def detect_board(image: np.ndarray, board: BoardSpec, name: str = "view") -> Boa
     if ids is None or len(ids) < 6:
         return None
     object_points, image_points = charuco.matchImagePoints(corners, ids)
-    return BoardDetection(image_points.reshape(-1, 2).astype(np.float64), object_points.reshape(-1, 3).astype(np.float32))
+    return BoardDetection(
+        image_points.reshape(-1, 2).astype(np.float64), object_points.reshape(-1, 3).astype(np.float32)
+    )
 
 
 def projector_lit(white: np.ndarray, dark: np.ndarray | None, square_px: float) -> np.ndarray:
@@ -189,8 +196,12 @@ def _corner_spacing(points: np.ndarray) -> float:
 
 
 def _reprojection_errors(
-    object_points: list[np.ndarray], image_points: list[np.ndarray], rvecs: Sequence[np.ndarray],
-    tvecs: Sequence[np.ndarray], matrix: np.ndarray, distortion: np.ndarray,
+    object_points: list[np.ndarray],
+    image_points: list[np.ndarray],
+    rvecs: Sequence[np.ndarray],
+    tvecs: Sequence[np.ndarray],
+    matrix: np.ndarray,
+    distortion: np.ndarray,
 ) -> list[np.ndarray]:
     """Per view, every corner's reprojection error (px)."""
     errors = []
@@ -246,12 +257,16 @@ def calibrate_camera(
         if darks is not None:
             keep = lit_corners(found, view, darks[index])
             if keep.sum() < MIN_CORNERS:
-                notes.append(f"view {index}: {int(keep.sum())} of {keep.size} corners lit by the projector "
-                             f"(need {MIN_CORNERS}), skipped")
+                notes.append(
+                    f"view {index}: {int(keep.sum())} of {keep.size} corners lit by the projector "
+                    f"(need {MIN_CORNERS}), skipped"
+                )
                 continue
             if not keep.all():
-                notes.append(f"view {index}: {int((~keep).sum())} of {keep.size} corners near or beyond the "
-                             "projector's footprint left out")
+                notes.append(
+                    f"view {index}: {int((~keep).sum())} of {keep.size} corners near or beyond the "
+                    "projector's footprint left out"
+                )
                 found = BoardDetection(found.image_points[keep], found.object_points[keep])
         detections.append(found)
         used.append(index)
@@ -281,8 +296,10 @@ def calibrate_camera(
         errors = _reprojection_errors(
             [all_objects[i] for i in views_in], [all_images[i] for i in views_in], rvecs, tvecs, matrix, distortion
         )
-        limit = max(OUTLIER_FACTOR * float(np.median(np.concatenate([e[inliers[i]] for i, e in zip(views_in, errors)]))),
-                    OUTLIER_FLOOR_PX)
+        limit = max(
+            OUTLIER_FACTOR * float(np.median(np.concatenate([e[inliers[i]] for i, e in zip(views_in, errors)]))),
+            OUTLIER_FLOOR_PX,
+        )
         settled = [e <= limit for e in errors]
         if all(np.array_equal(new, inliers[i]) for i, new in zip(views_in, settled)):
             break
@@ -294,7 +311,9 @@ def calibrate_camera(
             notes.append(f"view {used[i]}: fewer than {MIN_CORNERS} corners fit the lens model, skipped")
         elif not keep.all():
             off = int((~keep).sum())
-            notes.append(f"view {used[i]}: {off} corner{'s' * (off != 1)} off the lens model by more than {limit:.2f} px left out")
+            notes.append(
+                f"view {used[i]}: {off} corner{'s' * (off != 1)} off the lens model by more than {limit:.2f} px left out"
+            )
     used = [used[i] for i in views_in]
     distortion_std = np.asarray(std_intrinsics, dtype=np.float64).ravel()[4 : 4 + np.asarray(distortion).size]
     coefficients = np.asarray(distortion, dtype=np.float64).ravel()
@@ -308,8 +327,10 @@ def calibrate_camera(
             rms, matrix, distortion, rvecs, tvecs = cv2.calibrateCamera(
                 object_points, image_points, size, None, np.zeros(5), flags=flags | no_distortion
             )
-    per_view = [float(np.sqrt(np.mean(e**2)))
-                for e in _reprojection_errors(object_points, image_points, rvecs, tvecs, matrix, distortion)]
+    per_view = [
+        float(np.sqrt(np.mean(e**2)))
+        for e in _reprojection_errors(object_points, image_points, rvecs, tvecs, matrix, distortion)
+    ]
     log.info("camera calibration: %d views, RMS reprojection error %.3f px", len(detections), rms)
     return CameraCalibration(
         camera_matrix=np.asarray(matrix, dtype=np.float64),
@@ -349,7 +370,9 @@ def undistort_points(pixels: np.ndarray, camera_matrix: np.ndarray, distortion: 
     """Normalised, undistorted image coordinates (N, 2) of pixel positions (N, 2) (OpenCV centres)."""
     pts = np.asarray(pixels, dtype=np.float64).reshape(-1, 1, 2)
     return cv2.undistortPoints(
-        pts, np.asarray(camera_matrix, np.float64).reshape(3, 3), np.asarray(distortion, np.float64).ravel(),
+        pts,
+        np.asarray(camera_matrix, np.float64).reshape(3, 3),
+        np.asarray(distortion, np.float64).ravel(),
         criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 1e-10),
     ).reshape(-1, 2)
 

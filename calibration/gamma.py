@@ -57,7 +57,9 @@ def _power(level: np.ndarray, offset: float, gain: float, gamma: float) -> np.nd
     return offset + gain * np.power(np.clip(level, 0.0, 1.0), gamma)
 
 
-def fit_gamma(levels: Sequence[float], responses: Sequence[float] | np.ndarray, saturation: float | None = None) -> GammaFit:
+def fit_gamma(
+    levels: Sequence[float], responses: Sequence[float] | np.ndarray, saturation: float | None = None
+) -> GammaFit:
     """Fit I = offset + gain * level ** gamma to mean camera intensities at flat levels.
 
     Parameters
@@ -150,7 +152,7 @@ class PhaseErrorTable:
     """Mean wrapped-phase error as a function of the measured wrapped phase."""
 
     centers: np.ndarray  # (B,) bin centres in [-pi, pi)
-    error: np.ndarray    # (B,) mean error in rad
+    error: np.ndarray  # (B,) mean error in rad
 
     def as_fields(self) -> dict:
         return {"phase_error_centers": self.centers.tolist(), "phase_error_rad": self.error.tolist()}
@@ -222,7 +224,9 @@ def smooth_plane_phase(phase: np.ndarray, mask: np.ndarray | None = None, degree
     return np.where(keep, design @ coef, np.nan)
 
 
-def ripple_table_from_plane(phase: np.ndarray, mask: np.ndarray | None = None, bins: int = 64) -> tuple[PhaseErrorTable, float]:
+def ripple_table_from_plane(
+    phase: np.ndarray, mask: np.ndarray | None = None, bins: int = 64
+) -> tuple[PhaseErrorTable, float]:
     """Phase-error table of a plane's absolute phase against its smooth fit, and the ripple's RMS (rad)."""
     smooth = smooth_plane_phase(phase, mask)
     table = phase_error_table(phase, smooth, mask=mask, bins=bins)
@@ -237,5 +241,7 @@ def table_from_fields(fields: dict) -> PhaseErrorTable:
     except (KeyError, TypeError, ValueError):
         raise CalibrationError("phase_error: expected phase_error_centers and phase_error_rad lists") from None
     if centers.shape != error.shape or centers.ndim != 1 or centers.size < 4:
-        raise CalibrationError(f"phase_error: expected two equal lists of >= 4 numbers, found {centers.shape} and {error.shape}")
+        raise CalibrationError(
+            f"phase_error: expected two equal lists of >= 4 numbers, found {centers.shape} and {error.shape}"
+        )
     return PhaseErrorTable(centers=centers, error=error)

@@ -202,7 +202,9 @@ def pixel_mm_from_corners(
     cols, rows = (int(v) for v in pattern_size)
     corners = np.asarray(corners_px, dtype=np.float64).reshape(-1, 2)
     if corners.shape[0] != cols * rows:
-        raise CalibrationError(f"chessboard: expected {cols * rows} corners for {cols}x{rows}, found {corners.shape[0]}")
+        raise CalibrationError(
+            f"chessboard: expected {cols * rows} corners for {cols}x{rows}, found {corners.shape[0]}"
+        )
     if not square_mm > 0:
         raise CalibrationError(f"square_mm: expected > 0, found {square_mm}")
     if keep is not None:

@@ -48,7 +48,9 @@ def needs_reference(calibration: CalibrationLike) -> bool:
 
 def _check_model(calibration: CalibrationLike) -> None:
     if calibration.model not in MODELS:
-        raise CalibrationError(f"{calibration.where}: model: expected one of {', '.join(MODELS)}, found {calibration.model!r}")
+        raise CalibrationError(
+            f"{calibration.where}: model: expected one of {', '.join(MODELS)}, found {calibration.model!r}"
+        )
 
 
 # Shortest plausible lengths in millimetres: a value below is almost surely in metres (or cm).

@@ -60,7 +60,9 @@ def read_filestorage(path: str | os.PathLike[str], names: tuple[str, ...]) -> di
     except OSError as exc:
         raise CalibrationError(f"{path}: cannot read: {exc.strerror or exc}") from None
     if not head.startswith(FILESTORAGE_HEADS):
-        raise CalibrationError(f"{path}: expected an OpenCV FileStorage file (starting with %YAML, <?xml or {{), found {head[:16]!r}")
+        raise CalibrationError(
+            f"{path}: expected an OpenCV FileStorage file (starting with %YAML, <?xml or {{), found {head[:16]!r}"
+        )
     try:
         storage = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
     except OPENCV_ERRORS as exc:
@@ -110,7 +112,9 @@ def import_opencv_calibration(
     fields: dict[str, Any] = {"model": STEREO}
     for key, name in LAYOUT.items():
         value = nodes[name]
-        fields[key] = value.reshape(3, 3).tolist() if key.endswith("matrix") or key == "rotation" else value.ravel().tolist()
+        fields[key] = (
+            value.reshape(3, 3).tolist() if key.endswith("matrix") or key == "rotation" else value.ravel().tolist()
+        )
     fields["camera_size"] = [int(round(v)) for v in fields["camera_size"]]
     fields["projector_size"] = [int(v) for v in projector_size]
     fields["pixel_centre"] = float(pixel_centre)

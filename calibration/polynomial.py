@@ -34,8 +34,8 @@ COEFFICIENTS_FILE = "polynomial.npy"
 class PolynomialModel:
     """Per-pixel polynomial h = sum_i c_i dPhi^i (no constant term) in the phase difference to the reference."""
 
-    coefficients: np.ndarray   # (degree, H, W): c_1 .. c_n, NaN where unfitted
-    phase_frequency: float     # the fringe frequency the phase differences are at
+    coefficients: np.ndarray  # (degree, H, W): c_1 .. c_n, NaN where unfitted
+    phase_frequency: float  # the fringe frequency the phase differences are at
     residual_rms_mm: float = float("nan")
     residuals_mm: tuple[float, ...] = ()
 
@@ -79,7 +79,9 @@ class PolynomialModel:
         return self.fields(file)
 
 
-def load_polynomial(fields: Mapping[str, Any], directory: str | Path | None, where: str = "calibration.json") -> PolynomialModel:
+def load_polynomial(
+    fields: Mapping[str, Any], directory: str | Path | None, where: str = "calibration.json"
+) -> PolynomialModel:
     """The model described by calibration.json's ``polynomial`` entry, coefficients read beside it."""
     entry = fields.get("polynomial")
     if not isinstance(entry, Mapping):
@@ -101,8 +103,12 @@ def load_polynomial(fields: Mapping[str, Any], directory: str | Path | None, whe
         raise CalibrationError(f"{path}: expected coefficients of shape (degree, H, W), found {coefficients.shape}")
     degree = entry.get("degree", coefficients.shape[0])
     if degree != coefficients.shape[0]:
-        raise CalibrationError(f"{where}: polynomial.degree = {degree} but {path} holds {coefficients.shape[0]} coefficients")
-    return PolynomialModel(coefficients.astype(np.float64), float(frequency), float(entry.get("residual_rms_mm", np.nan)))
+        raise CalibrationError(
+            f"{where}: polynomial.degree = {degree} but {path} holds {coefficients.shape[0]} coefficients"
+        )
+    return PolynomialModel(
+        coefficients.astype(np.float64), float(frequency), float(entry.get("residual_rms_mm", np.nan))
+    )
 
 
 def fit_polynomial(
@@ -147,13 +153,15 @@ def fit_polynomial(
                 valid &= np.asarray(mask, dtype=bool)
     if not valid.any():
         raise CalibrationError("phase maps: no pixel is valid in every plane")
-    dphi = stack[:, valid].T                                           # (N, P)
+    dphi = stack[:, valid].T  # (N, P)
     scale = np.max(np.abs(dphi), axis=1, keepdims=True)
     if np.any(scale == 0):
-        raise CalibrationError("phase maps: some pixels show no phase change across the planes (the plane did not move)")
+        raise CalibrationError(
+            "phase maps: some pixels show no phase change across the planes (the plane did not move)"
+        )
     x = dphi / scale
     powers = np.arange(1, degree + 1)
-    design = x[:, :, None] ** powers[None, None, :]                    # (N, P, n)
+    design = x[:, :, None] ** powers[None, None, :]  # (N, P, n)
     normal = np.einsum("npk,npj->nkj", design, design)
     rhs = np.einsum("npk,p->nk", design, heights)
     conditions = np.linalg.cond(normal)
@@ -161,7 +169,7 @@ def fit_polynomial(
         raise CalibrationError(
             f"polynomial fit: singular for some pixels (heights too few or too close for degree {degree})"
         )
-    scaled = np.linalg.solve(normal, rhs[..., None])[..., 0]            # (N, n)
+    scaled = np.linalg.solve(normal, rhs[..., None])[..., 0]  # (N, n)
     coefficients = scaled / scale ** powers[None, :]
     fitted = np.einsum("npk,nk->np", design, scaled)
     residual_per_height = np.sqrt(np.mean((fitted - heights[None, :]) ** 2, axis=0))

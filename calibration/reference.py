@@ -41,4 +41,3 @@ def phase_frequency(patterns: Sequence[Mapping[str, Any]]) -> float:
     if not frequencies:
         raise CalibrationError("patterns: no sinusoid pattern, cannot calibrate a phase-based model")
     return max(frequencies)
-

@@ -37,7 +37,9 @@ def _matrix(data: Mapping[str, Any], key: str, shape: tuple[int, ...], where: st
     except (TypeError, ValueError):
         raise CalibrationError(f"{where}: {key}: expected numbers, found {data[key]!r}") from None
     if value.size != int(np.prod(shape)) or not np.all(np.isfinite(value)):
-        raise CalibrationError(f"{where}: {key}: expected {'x'.join(map(str, shape))} finite numbers, found {value.size}")
+        raise CalibrationError(
+            f"{where}: {key}: expected {'x'.join(map(str, shape))} finite numbers, found {value.size}"
+        )
     return value.reshape(shape)
 
 
@@ -56,15 +58,15 @@ class StereoModel:
     camera_distortion: np.ndarray
     projector_matrix: np.ndarray
     projector_distortion: np.ndarray
-    rotation: np.ndarray          # camera -> projector
-    translation_mm: np.ndarray    # camera -> projector
+    rotation: np.ndarray  # camera -> projector
+    translation_mm: np.ndarray  # camera -> projector
     camera_size: tuple[int, int]  # (width, height)
     projector_size: tuple[int, int]
     plane: np.ndarray | None = None
     pixel_centre: float = 0.5
 
     @classmethod
-    def from_fields(cls, data: Mapping[str, Any], where: str = "calibration.json") -> "StereoModel":
+    def from_fields(cls, data: Mapping[str, Any], where: str = "calibration.json") -> StereoModel:
         """Build and validate from calibration.json keys (see the module docstring)."""
         rotation = _matrix(data, "rotation", (3, 3), where)
         if not np.allclose(rotation @ rotation.T, np.eye(3), atol=1e-5) or np.linalg.det(rotation) < 0:
@@ -73,7 +75,9 @@ class StereoModel:
         projector_matrix = _matrix(data, "projector_matrix", (3, 3), where)
         for key, m in (("camera_matrix", camera_matrix), ("projector_matrix", projector_matrix)):
             if not (m[0, 0] > 0 and m[1, 1] > 0 and np.allclose(m[2], [0, 0, 1])):
-                raise CalibrationError(f"{where}: {key}: expected [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0")
+                raise CalibrationError(
+                    f"{where}: {key}: expected [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0"
+                )
         camera_size = tuple(int(v) for v in _matrix(data, "camera_size", (2,), where))
         projector_size = tuple(int(v) for v in _matrix(data, "projector_size", (2,), where))
         if min(camera_size) < 1 or min(projector_size) < 1:
@@ -123,7 +127,9 @@ class StereoModel:
         if pts.shape[0] == 0:
             return np.empty((0, 3))
         normalized = cv2.undistortPoints(
-            pts, self.camera_matrix, self.camera_distortion,
+            pts,
+            self.camera_matrix,
+            self.camera_distortion,
             criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 1e-10),
         ).reshape(-1, 2)
         return np.column_stack([normalized, np.ones(len(normalized))])
@@ -145,7 +151,9 @@ def _distort_normalised(x: np.ndarray, y: np.ndarray, distortion: np.ndarray) ->
     return out[:, 0].reshape(x.shape), out[:, 1].reshape(x.shape)
 
 
-def projector_coordinate(absolute_phase: np.ndarray, frequency: float, extent: float, pixel_centre: float = 0.5) -> np.ndarray:
+def projector_coordinate(
+    absolute_phase: np.ndarray, frequency: float, extent: float, pixel_centre: float = 0.5
+) -> np.ndarray:
     """Projector pixel coordinate (OpenCV convention) named by the absolute phase 2 pi f u / W."""
     if not frequency > 0:
         raise CalibrationError(f"frequency: expected > 0, found {frequency}")
@@ -271,7 +279,11 @@ class BoardPhaseView:
 
 
 def projector_corners(
-    view: BoardPhaseView, projector_size: tuple[int, int], window_px: int = 7, pixel_centre: float = 0.5, min_pixels: int = 12
+    view: BoardPhaseView,
+    projector_size: tuple[int, int],
+    window_px: int = 7,
+    pixel_centre: float = 0.5,
+    min_pixels: int = 12,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Projector pixel coordinates (OpenCV convention) of a view's corners, and which were found.
 
@@ -306,7 +318,7 @@ class StereoCalibration:
     """Result of :func:`calibrate_stereo`: the model and its reprojection errors."""
 
     model: StereoModel
-    rms_px: float                 # stereoCalibrate's RMS reprojection error (camera and projector)
+    rms_px: float  # stereoCalibrate's RMS reprojection error (camera and projector)
     camera_rms_px: float
     projector_rms_px: float
     views_used: int
@@ -332,7 +344,9 @@ def calibrate_stereo(
     for index, view in enumerate(views):
         expected = (camera_size[1], camera_size[0])
         if view.phase_x.shape != expected or view.phase_y.shape != expected:
-            raise CalibrationError(f"stereo view {index}: phase maps {view.phase_x.shape} do not match the camera {expected}")
+            raise CalibrationError(
+                f"stereo view {index}: phase maps {view.phase_x.shape} do not match the camera {expected}"
+            )
         corners, found = projector_corners(view, projector_size, pixel_centre=pixel_centre)
         if found.sum() < 6:
             raise CalibrationError(
@@ -341,24 +355,42 @@ def calibrate_stereo(
         object_points.append(view.object_points[found].astype(np.float32).reshape(-1, 1, 3))
         camera_points.append(view.image_points[found].astype(np.float32).reshape(-1, 1, 2))
         projector_points.append(corners[found].astype(np.float32).reshape(-1, 1, 2))
-    cam_rms, cam_matrix, cam_dist, _, _ = cv2.calibrateCamera(object_points, camera_points, tuple(camera_size), None, None, flags=flags)
-    proj_rms, proj_matrix, proj_dist, _, _ = cv2.calibrateCamera(object_points, projector_points, tuple(projector_size), None, None, flags=flags)
+    cam_rms, cam_matrix, cam_dist, _, _ = cv2.calibrateCamera(
+        object_points, camera_points, tuple(camera_size), None, None, flags=flags
+    )
+    proj_rms, proj_matrix, proj_dist, _, _ = cv2.calibrateCamera(
+        object_points, projector_points, tuple(projector_size), None, None, flags=flags
+    )
     criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-12)
     rms, cam_matrix, cam_dist, proj_matrix, proj_dist, rotation, translation, _, _ = cv2.stereoCalibrate(
-        object_points, camera_points, projector_points, cam_matrix, cam_dist, proj_matrix, proj_dist,
-        tuple(camera_size), criteria=criteria, flags=flags | cv2.CALIB_USE_INTRINSIC_GUESS,
+        object_points,
+        camera_points,
+        projector_points,
+        cam_matrix,
+        cam_dist,
+        proj_matrix,
+        proj_dist,
+        tuple(camera_size),
+        criteria=criteria,
+        flags=flags | cv2.CALIB_USE_INTRINSIC_GUESS,
     )
     model = StereoModel(
-        camera_matrix=np.asarray(cam_matrix, float), camera_distortion=np.asarray(cam_dist, float).ravel(),
-        projector_matrix=np.asarray(proj_matrix, float), projector_distortion=np.asarray(proj_dist, float).ravel(),
-        rotation=np.asarray(rotation, float), translation_mm=np.asarray(translation, float).ravel(),
-        camera_size=tuple(int(v) for v in camera_size), projector_size=tuple(int(v) for v in projector_size),  # type: ignore[arg-type]
+        camera_matrix=np.asarray(cam_matrix, float),
+        camera_distortion=np.asarray(cam_dist, float).ravel(),
+        projector_matrix=np.asarray(proj_matrix, float),
+        projector_distortion=np.asarray(proj_dist, float).ravel(),
+        rotation=np.asarray(rotation, float),
+        translation_mm=np.asarray(translation, float).ravel(),
+        camera_size=(int(camera_size[0]), int(camera_size[1])),
+        projector_size=tuple(int(v) for v in projector_size),  # type: ignore[arg-type]
         pixel_centre=pixel_centre,
     )
     return StereoCalibration(model, float(rms), float(cam_rms), float(proj_rms), len(views))
 
 
-def hierarchical_phase(frames: np.ndarray, frequencies: Sequence[int], steps: int, min_modulation_ratio: float = 0.15) -> np.ndarray:
+def hierarchical_phase(
+    frames: np.ndarray, frequencies: Sequence[int], steps: int, min_modulation_ratio: float = 0.15
+) -> np.ndarray:
     """Absolute phase at the last frequency from ``steps``-step stacks at ``frequencies`` (1 first),
     NaN where the fringe modulation is below ``min_modulation_ratio`` of its 99th percentile."""
     from processing.phase_shift import phase_shift
@@ -367,7 +399,7 @@ def hierarchical_phase(frames: np.ndarray, frequencies: Sequence[int], steps: in
     stack = np.asarray(frames)
     if stack.ndim != 3 or stack.shape[0] != steps * len(frequencies):
         raise CalibrationError(f"board fringes: expected {steps * len(frequencies)} frames, found shape {stack.shape}")
-    results = [phase_shift(stack[i * steps:(i + 1) * steps]) for i in range(len(frequencies))]
+    results = [phase_shift(stack[i * steps : (i + 1) * steps]) for i in range(len(frequencies))]
     unwrapped = unwrap_hierarchical([r.phase for r in results], list(frequencies))
     modulation = results[-1].modulation
     lit = modulation > min_modulation_ratio * np.percentile(modulation, 99)
@@ -375,7 +407,12 @@ def hierarchical_phase(frames: np.ndarray, frequencies: Sequence[int], steps: in
 
 
 def board_phase_view(
-    board_image: np.ndarray, board: Any, frames_x: np.ndarray, frames_y: np.ndarray, frequencies: Sequence[int], steps: int
+    board_image: np.ndarray,
+    board: Any,
+    frames_x: np.ndarray,
+    frames_y: np.ndarray,
+    frequencies: Sequence[int],
+    steps: int,
 ) -> BoardPhaseView | None:
     """A :class:`BoardPhaseView` from a board image and vertical / horizontal fringe stacks on it
     (hierarchical frequencies, 1 first); None when the board is not found in the image."""
@@ -386,6 +423,10 @@ def board_phase_view(
         return None
     frequency = float(frequencies[-1])
     return BoardPhaseView(
-        found.image_points, found.object_points,
-        hierarchical_phase(frames_x, frequencies, steps), hierarchical_phase(frames_y, frequencies, steps), frequency, frequency,
+        found.image_points,
+        found.object_points,
+        hierarchical_phase(frames_x, frequencies, steps),
+        hierarchical_phase(frames_y, frequencies, steps),
+        frequency,
+        frequency,
     )

@@ -140,11 +140,15 @@ def _check_camera_matrix(where: str, key: str, value: Any) -> None:
         matrix = np.zeros(0)
     if matrix.shape != (3, 3):
         found = f"shape {matrix.shape}" if matrix.size else repr(value)[:60]
-        raise CalibrationError(f"{where}: {key}: expected a 3x3 matrix [[fx, s, cx], [0, fy, cy], [0, 0, 1]], found {found}")
+        raise CalibrationError(
+            f"{where}: {key}: expected a 3x3 matrix [[fx, s, cx], [0, fy, cy], [0, 0, 1]], found {found}"
+        )
     if not np.isfinite(matrix).all():
         raise CalibrationError(f"{where}: {key}: expected finite numbers, found NaN or infinity")
     if not (matrix[0, 0] > 0 and matrix[1, 1] > 0):
-        raise CalibrationError(f"{where}: {key}: expected focal lengths fx, fy > 0, found {matrix[0, 0]:g}, {matrix[1, 1]:g}")
+        raise CalibrationError(
+            f"{where}: {key}: expected focal lengths fx, fy > 0, found {matrix[0, 0]:g}, {matrix[1, 1]:g}"
+        )
     if matrix[1, 0] != 0 or not np.array_equal(matrix[2], [0.0, 0.0, 1.0]):
         raise CalibrationError(
             f"{where}: {key}: expected the form [[fx, s, cx], [0, fy, cy], [0, 0, 1]], found rows 2 and 3 "
@@ -196,7 +200,9 @@ def validate(data: Any, where: str = FILENAME) -> None:
             _number(where, data, key, rule)
         reference = data.get("reference")
         if not isinstance(reference, str) or not reference:
-            raise CalibrationError(f"{where}: reference: expected the path of the reference-plane capture, found {reference!r}")
+            raise CalibrationError(
+                f"{where}: reference: expected the path of the reference-plane capture, found {reference!r}"
+            )
     else:  # other models validate their own keys; the shared numbers must still be sane if present
         for key, rule in _REFERENCE_PLANE_NUMBERS.items():
             if key in data:

@@ -65,7 +65,7 @@ class PixelFormat(enum.Enum):
 class FrameSequenceError(DeviceError):
     """The frame sequence is broken; ``frame`` is the frame that revealed it (still usable)."""
 
-    def __init__(self, message: str, frame: "Frame") -> None:
+    def __init__(self, message: str, frame: Frame) -> None:
         super().__init__(message)
         self.frame = frame
 
@@ -73,7 +73,7 @@ class FrameSequenceError(DeviceError):
 class DroppedFrameError(FrameSequenceError):
     """One or more frames were lost before ``frame`` (gap in frame ids); ``missing`` says how many."""
 
-    def __init__(self, message: str, frame: "Frame", missing: int) -> None:
+    def __init__(self, message: str, frame: Frame, missing: int) -> None:
         super().__init__(message, frame)
         self.missing = missing
 

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import collections
 import logging
-
 from typing import Any
 
 import numpy as np

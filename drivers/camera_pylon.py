@@ -249,7 +249,8 @@ class PylonCamera(Camera):
             self._cam = None
 
     def _read_roi(self) -> tuple[int, int, int, int] | None:
-        return tuple(int(self._read(n)) for n in ("OffsetX", "OffsetY", "Width", "Height"))
+        x, y, w, h = (int(self._read(n)) for n in ("OffsetX", "OffsetY", "Width", "Height"))
+        return x, y, w, h
 
     def _read_exposure_us(self) -> float | None:
         return float(self._read(self._exposure_node))

@@ -93,7 +93,7 @@ class Device(abc.ABC):
     def _close(self) -> None:
         """Release the device."""
 
-    def _after_open(self) -> None:
+    def _after_open(self) -> None:  # noqa: B027  (an optional hook, not abstract)
         """Work that needs the open connection (read settings, negotiate); default nothing."""
 
 

@@ -195,11 +195,9 @@ def check_sequence(sequence: PatternSequence) -> None:
     """Raise DlpLimitError / ExposureError if ``sequence`` breaks a DLPC350 limit or rule."""
     entries = sequence.entries
     if not 1 <= len(entries) <= dp.MAX_LUT_ENTRIES:
-        raise DlpLimitError(f"pattern LUT holds 1..{dp.MAX_LUT_ENTRIES} entries, "
-                            f"got {len(entries)}")
+        raise DlpLimitError(f"pattern LUT holds 1..{dp.MAX_LUT_ENTRIES} entries, got {len(entries)}")
     if not 1 <= sequence.n_display <= dp.MAX_PATTERNS_TO_DISPLAY:
-        raise DlpLimitError(f"patterns_to_display must be in 1..{dp.MAX_PATTERNS_TO_DISPLAY}, "
-                            f"got {sequence.n_display}")
+        raise DlpLimitError(f"patterns_to_display must be in 1..{dp.MAX_PATTERNS_TO_DISPLAY}, got {sequence.n_display}")
     per_image = 0
     for k, entry in enumerate(entries):
         if entry.bit_depth not in dp.PATTERNS_PER_IMAGE:
@@ -210,23 +208,24 @@ def check_sequence(sequence: PatternSequence) -> None:
             raise DlpLimitError(
                 f"entry {k}: pattern_number {entry.pattern_number} invalid for "
                 f"{entry.bit_depth}-bit patterns (a 24-bit image holds {limit}: 0..{limit - 1}"
-                + (f"; {dp.BLACK_FILL_PATTERN} is the black fill)" if entry.bit_depth == 1 else ")"))
+                + (f"; {dp.BLACK_FILL_PATTERN} is the black fill)" if entry.bit_depth == 1 else ")")
+            )
         if entry.insert_black and entry.trigger_out_prev:
-            raise DlpLimitError(f"entry {k}: insert_black cannot be combined with "
-                                "trigger_out_prev")
+            raise DlpLimitError(f"entry {k}: insert_black cannot be combined with trigger_out_prev")
         per_image = 1 if (entry.buffer_swap or k == 0) else per_image + 1
         if per_image > dp.MAX_PATTERNS_PER_IMAGE:
-            raise DlpLimitError(f"entry {k}: more than {dp.MAX_PATTERNS_PER_IMAGE} patterns from "
-                                "one 24-bit image; set buffer_swap to move to the next image")
+            raise DlpLimitError(
+                f"entry {k}: more than {dp.MAX_PATTERNS_PER_IMAGE} patterns from "
+                "one 24-bit image; set buffer_swap to move to the next image"
+            )
     if sequence.source is PatternSource.FLASH:
         if not 1 <= len(sequence.image_indexes) <= dp.MAX_IMAGE_INDEXES:
-            raise DlpLimitError(f"image_indexes holds 1..{dp.MAX_IMAGE_INDEXES} flash images, "
-                                f"got {len(sequence.image_indexes)}")
+            raise DlpLimitError(
+                f"image_indexes holds 1..{dp.MAX_IMAGE_INDEXES} flash images, got {len(sequence.image_indexes)}"
+            )
         if any(not 0 <= i <= 255 for i in sequence.image_indexes):
-            raise DlpLimitError(f"flash image indexes must be 0..255, got "
-                                f"{list(sequence.image_indexes)}")
-    check_exposure(sequence.exposure_us, sequence.frame_period_us,
-                   max(e.bit_depth for e in entries))
+            raise DlpLimitError(f"flash image indexes must be 0..255, got {list(sequence.image_indexes)}")
+    check_exposure(sequence.exposure_us, sequence.frame_period_us, max(e.bit_depth for e in entries))
     if sequence.loads_flash_images:
         dark_us = sequence.frame_period_us - sequence.exposure_us
         if dark_us < dp.FLASH_IMAGE_LOAD_US:
@@ -236,24 +235,24 @@ def check_sequence(sequence: PatternSequence) -> None:
                 f"flash, so the frame period must exceed the exposure by at least "
                 f"{dp.FLASH_IMAGE_LOAD_US} us (got {dark_us} us); use a frame period of at "
                 f"least {sequence.exposure_us + dp.FLASH_IMAGE_LOAD_US} us or at most "
-                f"{dp.FRAME_BUFFERS} images")
+                f"{dp.FRAME_BUFFERS} images"
+            )
 
 
 def check_exposure(exposure_us: int, frame_period_us: int, bit_depth: int) -> None:
     """Raise ExposureError naming the rule that ``exposure_us`` / ``frame_period_us`` break."""
     minimum = dp.MIN_EXPOSURE_US[bit_depth]
     if exposure_us < minimum:
-        raise ExposureError(f"exposure {exposure_us} us below the {minimum} us minimum for "
-                            f"{bit_depth}-bit patterns")
+        raise ExposureError(f"exposure {exposure_us} us below the {minimum} us minimum for {bit_depth}-bit patterns")
     if frame_period_us > dp.MAX_PERIOD_US:
         raise ExposureError(f"frame period {frame_period_us} us does not fit 32 bits")
     if exposure_us > frame_period_us:
-        raise ExposureError(f"exposure {exposure_us} us exceeds the frame period "
-                            f"{frame_period_us} us")
+        raise ExposureError(f"exposure {exposure_us} us exceeds the frame period {frame_period_us} us")
     if 0 < frame_period_us - exposure_us < dp.MIN_DARK_TIME_US:
         raise ExposureError(
             f"exposure {exposure_us} us must equal the frame period {frame_period_us} us or be "
-            f"at least {dp.MIN_DARK_TIME_US} us shorter")
+            f"at least {dp.MIN_DARK_TIME_US} us shorter"
+        )
 
 
 class DlpController(Device):
@@ -284,8 +283,13 @@ class DlpController(Device):
     def _after_open(self) -> None:
         self._standby, self._mode, running = self._do_read_state()
         self._state = SequenceState.RUNNING if running else SequenceState.STOPPED
-        log.info("%s opened: %s, %s mode, sequence %s", self,
-                 "standby" if self._standby else "awake", self._mode.name, self._state.value)
+        log.info(
+            "%s opened: %s, %s mode, sequence %s",
+            self,
+            "standby" if self._standby else "awake",
+            self._mode.name,
+            self._state.value,
+        )
 
     # -- power and mode -------------------------------------------------------------------------
     def standby(self) -> None:
@@ -323,14 +327,20 @@ class DlpController(Device):
         """
         self._require_awake("configure a pattern sequence")
         if self._mode is not DisplayMode.PATTERN:
-            raise IncompatibleStateError(f"{self}: pattern sequences need pattern display mode; "
-                                         "call set_display_mode(DisplayMode.PATTERN) first")
+            raise IncompatibleStateError(
+                f"{self}: pattern sequences need pattern display mode; call set_display_mode(DisplayMode.PATTERN) first"
+            )
         check_sequence(sequence)
         if self._state is not SequenceState.STOPPED:
             self.stop()
-        log.info("%s: %d LUT entries, exposure %d us, period %d us, %s", self,
-                 len(sequence.entries), sequence.exposure_us, sequence.frame_period_us,
-                 "repeat" if sequence.repeat else "once")
+        log.info(
+            "%s: %d LUT entries, exposure %d us, period %d us, %s",
+            self,
+            len(sequence.entries),
+            sequence.exposure_us,
+            sequence.frame_period_us,
+            "repeat" if sequence.repeat else "once",
+        )
         self._sequence, self._validated = None, False
         self._do_write_sequence(sequence)
         self._sequence = sequence
@@ -359,16 +369,16 @@ class DlpController(Device):
             log.warning("%s: validation: %s", self, message)
         self._validated = result.ok
         if not result.ok:
-            raise DlpValidationError(f"{self}: pattern sequence rejected: "
-                                     + "; ".join(result.messages))
+            raise DlpValidationError(f"{self}: pattern sequence rejected: " + "; ".join(result.messages))
         return result
 
     def start(self) -> None:
         """Start the validated sequence."""
         self._require_awake("start")
         if not self._validated:
-            raise IncompatibleStateError(f"{self}: start needs a validated sequence; "
-                                         "configure_sequence and validate first")
+            raise IncompatibleStateError(
+                f"{self}: start needs a validated sequence; configure_sequence and validate first"
+            )
         log.info("%s: start sequence", self)
         self._do_sequence(dp.SequenceAction.START)
         self._state = SequenceState.RUNNING
@@ -377,8 +387,7 @@ class DlpController(Device):
         """Pause the running sequence."""
         self._require_open("pause")
         if self._state is not SequenceState.RUNNING:
-            raise IncompatibleStateError(f"{self}: pause needs a running sequence "
-                                         f"(it is {self._state.value})")
+            raise IncompatibleStateError(f"{self}: pause needs a running sequence (it is {self._state.value})")
         self._do_sequence(dp.SequenceAction.PAUSE)
         self._state = SequenceState.PAUSED
 
@@ -473,9 +482,11 @@ def _action_name(value: int) -> str:
     return names.get(value, f"0x{value:02X}")
 
 
-_UDEV_HINT = ('add a udev rule, e.g. /etc/udev/rules.d/70-lightcrafter.rules: '
-              'SUBSYSTEM=="usb", ATTR{idVendor}=="0451", ATTR{idProduct}=="6401", MODE="0660", '
-              'GROUP="plugdev"')
+_UDEV_HINT = (
+    "add a udev rule, e.g. /etc/udev/rules.d/70-lightcrafter.rules: "
+    'SUBSYSTEM=="usb", ATTR{idVendor}=="0451", ATTR{idProduct}=="6401", MODE="0660", '
+    'GROUP="plugdev"'
+)
 
 
 class LightCrafter4500(DlpController):
@@ -504,15 +515,19 @@ class LightCrafter4500(DlpController):
     EP_IN = 0x81
     INTERFACE = 0
 
-    def __init__(self, backend: object | None = None, timeout_s: float = 1.0,
-                 settle_s: float = 0.1, settle_timeout_s: float = 2.0,
-                 name: str | None = None) -> None:
+    def __init__(
+        self,
+        backend: object | None = None,
+        timeout_s: float = 1.0,
+        settle_s: float = 0.1,
+        settle_timeout_s: float = 2.0,
+        name: str | None = None,
+    ) -> None:
         super().__init__(name or "DLP LightCrafter 4500 (USB 0451:6401)")
         if timeout_s <= 0:
             raise ValueError(f"timeout_s must be > 0, got {timeout_s}")
         if settle_s < 0 or settle_timeout_s <= 0:
-            raise ValueError(f"settle_s must be >= 0 and settle_timeout_s > 0, got {settle_s}, "
-                             f"{settle_timeout_s}")
+            raise ValueError(f"settle_s must be >= 0 and settle_timeout_s > 0, got {settle_s}, {settle_timeout_s}")
         self._backend = backend
         self.timeout_s = float(timeout_s)
         self.settle_s = float(settle_s)
@@ -524,15 +539,13 @@ class LightCrafter4500(DlpController):
     # -- hooks ----------------------------------------------------------------------------------
     def _open(self) -> None:
         try:
-            dev = usb.core.find(idVendor=dp.USB_VENDOR_ID, idProduct=dp.USB_PRODUCT_ID,
-                                backend=self._backend)
+            dev = usb.core.find(idVendor=dp.USB_VENDOR_ID, idProduct=dp.USB_PRODUCT_ID, backend=self._backend)
         except usb.core.NoBackendError as exc:
             raise DeviceNotFoundError(
-                f"{self}: pyusb found no libusb backend; install libusb "
-                "(Debian/Ubuntu: apt install libusb-1.0-0)") from exc
+                f"{self}: pyusb found no libusb backend; install libusb (Debian/Ubuntu: apt install libusb-1.0-0)"
+            ) from exc
         except usb.core.USBError as exc:
-            raise DeviceNotFoundError(f"{self}: USB enumeration failed ({exc}); {_UDEV_HINT}") \
-                from exc
+            raise DeviceNotFoundError(f"{self}: USB enumeration failed ({exc}); {_UDEV_HINT}") from exc
         if dev is None:
             raise DeviceNotFoundError(f"{self} not found: plug it in and power it on")
         try:
@@ -546,8 +559,7 @@ class LightCrafter4500(DlpController):
         except usb.core.USBError as exc:
             usb.util.dispose_resources(dev)
             if exc.errno in (errno.EACCES, errno.EPERM):
-                raise DeviceNotFoundError(f"{self}: no permission to open it; {_UDEV_HINT}") \
-                    from exc
+                raise DeviceNotFoundError(f"{self}: no permission to open it; {_UDEV_HINT}") from exc
             raise DeviceError(f"{self}: cannot claim its HID interface: {exc}") from exc
         self._dev = dev
 
@@ -573,14 +585,14 @@ class LightCrafter4500(DlpController):
         self._write(Command.POWER_CONTROL, bytes([int(standby)]))
 
     def _do_set_display_mode(self, mode: DisplayMode) -> None:
-        self._write_and_confirm(Command.DISPLAY_MODE, int(mode), "display mode",
-                                lambda value: DisplayMode(value & 0x01).name, resend=False)
+        self._write_and_confirm(
+            Command.DISPLAY_MODE, int(mode), "display mode", lambda value: DisplayMode(value & 0x01).name, resend=False
+        )
 
     def _do_write_sequence(self, sequence: PatternSequence) -> None:
         self._write(Command.PATTERN_SOURCE, bytes([int(sequence.source)]))
         self._write(Command.PATTERN_TRIGGER_MODE, bytes([int(sequence.trigger_mode)]))
-        self._write(Command.EXPOSURE_FRAME_PERIOD,
-                    dp.pack_exposure(sequence.exposure_us, sequence.frame_period_us))
+        self._write(Command.EXPOSURE_FRAME_PERIOD, dp.pack_exposure(sequence.exposure_us, sequence.frame_period_us))
         self._write(Command.LUT_CONTROL, sequence.lut_control().pack())
         # as TI's host: each LUT in one message from mailbox offset 0 (long ones continue in
         # headerless reports)
@@ -606,11 +618,11 @@ class LightCrafter4500(DlpController):
     def _do_sequence(self, action: dp.SequenceAction) -> None:
         # TI's hosts re-send stop until the sequencer reads stopped; pycrafter sends start twice
         # after leaving video mode (the first one may be dropped)
-        self._write_and_confirm(Command.PATTERN_START_STOP, int(action), "sequencer",
-                                _action_name, resend=True)
+        self._write_and_confirm(Command.PATTERN_START_STOP, int(action), "sequencer", _action_name, resend=True)
 
-    def _write_and_confirm(self, command: Command, value: int, what: str,
-                           name: Callable[[int], str], resend: bool) -> None:
+    def _write_and_confirm(
+        self, command: Command, value: int, what: str, name: Callable[[int], str], resend: bool
+    ) -> None:
         """Write ``value``, then read ``command`` back (after ``settle_s``) until it reads
         ``value``; re-send meanwhile if ``resend``. A re-send the controller refuses while it
         is still busy is not an error; the deadline is."""
@@ -624,7 +636,8 @@ class LightCrafter4500(DlpController):
             if time.monotonic() > deadline:
                 raise DeviceTimeoutError(
                     f"{self}: {what} still reads {name(found)} {self.settle_timeout_s:.3g} s after "
-                    f"setting {name(value)}")
+                    f"setting {name(value)}"
+                )
             if resend:
                 log.info("%s: %s reads %s, sending %s again", self, what, name(found), name(value))
                 try:
@@ -633,8 +646,11 @@ class LightCrafter4500(DlpController):
                     log.info("%s: %s", self, exc)
 
     def _do_read_status(self) -> tuple[int, int, int]:
-        return (self._read_byte(Command.HARDWARE_STATUS), self._read_byte(Command.SYSTEM_STATUS),
-                self._read_byte(Command.MAIN_STATUS))
+        return (
+            self._read_byte(Command.HARDWARE_STATUS),
+            self._read_byte(Command.SYSTEM_STATUS),
+            self._read_byte(Command.MAIN_STATUS),
+        )
 
     # -- transport ------------------------------------------------------------------------------
     def _write(self, command: Command, data: bytes) -> None:
@@ -669,23 +685,20 @@ class LightCrafter4500(DlpController):
                     raise ProtocolError(f"{self}: {what}: malformed reply: {exc}") from exc
                 if self._echoes is None:  # the first reply tells whether sequences are echoed
                     self._echoes = reply.sequence == sequence
-                    log.info("%s: the controller %s sequence bytes", self,
-                             "echoes" if self._echoes else "does not echo")
+                    log.info(
+                        "%s: the controller %s sequence bytes", self, "echoes" if self._echoes else "does not echo"
+                    )
                 if not self._echoes or reply.sequence == sequence:
                     break
-                log.info("%s: dropping reply with sequence %d while waiting for %d", self,
-                         reply.sequence, sequence)
+                log.info("%s: dropping reply with sequence %d while waiting for %d", self, reply.sequence, sequence)
             else:
                 raise ProtocolError(f"{self}: {what}: no reply carried sequence {sequence}")
         except usb.core.USBTimeoutError as exc:
-            raise DeviceTimeoutError(f"{self}: {what}: no answer within "
-                                     f"{self.timeout_s:.3g} s") from exc
+            raise DeviceTimeoutError(f"{self}: {what}: no answer within {self.timeout_s:.3g} s") from exc
         except usb.core.USBError as exc:
             if exc.errno == errno.ENODEV:
-                raise DeviceNotFoundError(f"{self} disconnected during {what}; reconnect it and "
-                                          "open again") from exc
+                raise DeviceNotFoundError(f"{self} disconnected during {what}; reconnect it and open again") from exc
             raise DeviceError(f"{self}: USB error during {what}: {exc}") from exc
         if reply.error:
-            raise DlpCommandError(f"{self}: controller refused {what} with data "
-                                  f"{data.hex() or '(none)'}")
+            raise DlpCommandError(f"{self}: controller refused {what} with data {data.hex() or '(none)'}")
         return reply.data

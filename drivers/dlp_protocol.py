@@ -102,12 +102,9 @@ class Validation(enum.IntFlag):
 VALIDATION_TEXT = {
     Validation.EXPOSURE_OR_PERIOD_INVALID: "selected exposure or frame period settings are invalid",
     Validation.PATTERN_NUMBER_INVALID: "selected pattern numbers in the LUT are invalid",
-    Validation.TRIGGER_OUT1_WARNING:
-        "warning: continuous TRIG_OUT_1 request or overlapping black sectors",
-    Validation.POST_VECTOR_WARNING:
-        "warning: post vector not inserted before an externally triggered vector",
-    Validation.PERIOD_EXPOSURE_DIFFERENCE_WARNING:
-        "warning: frame period and exposure differ by less than 230 us",
+    Validation.TRIGGER_OUT1_WARNING: "warning: continuous TRIG_OUT_1 request or overlapping black sectors",
+    Validation.POST_VECTOR_WARNING: "warning: post vector not inserted before an externally triggered vector",
+    Validation.PERIOD_EXPOSURE_DIFFERENCE_WARNING: "warning: frame period and exposure differ by less than 230 us",
 }
 VALIDATION_ERRORS = Validation.EXPOSURE_OR_PERIOD_INVALID | Validation.PATTERN_NUMBER_INVALID
 
@@ -167,26 +164,25 @@ class Reply:
         return bool(self.flags & FLAG_ERROR)
 
 
-def encode_request(command: int, sequence: int, data: bytes = b"", read: bool = False,
-                   reply: bool = True) -> bytes:
+def encode_request(command: int, sequence: int, data: bytes = b"", read: bool = False, reply: bool = True) -> bytes:
     """One 64-byte report carrying ``command`` with ``data`` (at most 58 bytes)."""
     if len(data) > MAX_DATA_IN_REQUEST:
-        raise PacketError(f"{len(data)} data bytes do not fit one report "
-                          f"(at most {MAX_DATA_IN_REQUEST}); use encode_message")
+        raise PacketError(
+            f"{len(data)} data bytes do not fit one report (at most {MAX_DATA_IN_REQUEST}); use encode_message"
+        )
     return encode_message(command, sequence, data, read=read, reply=reply)[0]
 
 
-def encode_message(command: int, sequence: int, data: bytes = b"", read: bool = False,
-                   reply: bool = True) -> list[bytes]:
+def encode_message(
+    command: int, sequence: int, data: bytes = b"", read: bool = False, reply: bool = True
+) -> list[bytes]:
     """The 64-byte reports carrying ``command`` with ``data``: the first has the header, the
     command and up to 58 data bytes; continuation reports carry the next 64 bytes each."""
     if len(data) > MAX_MESSAGE_DATA:
-        raise PacketError(f"{len(data)} data bytes exceed the longest message "
-                          f"({MAX_MESSAGE_DATA})")
+        raise PacketError(f"{len(data)} data bytes exceed the longest message ({MAX_MESSAGE_DATA})")
     flags = (FLAG_READ if read else 0) | (FLAG_REPLY if reply else 0) | DESTINATION_MAIN
     message = struct.pack("<BBHH", flags, sequence & 0xFF, len(data) + 2, command) + bytes(data)
-    return [message[k:k + REPORT_SIZE].ljust(REPORT_SIZE, b"\x00")
-            for k in range(0, len(message), REPORT_SIZE)]
+    return [message[k : k + REPORT_SIZE].ljust(REPORT_SIZE, b"\x00") for k in range(0, len(message), REPORT_SIZE)]
 
 
 def message_size(first_report: bytes) -> int:
@@ -207,7 +203,7 @@ def decode_request(report: bytes) -> Request:
     if length < 2 or HEADER_SIZE + length > len(report):
         raise PacketError(f"request length field {length} does not fit a {len(report)}-byte report")
     (command,) = struct.unpack_from("<H", report, HEADER_SIZE)
-    return Request(flags, sequence, command, bytes(report[HEADER_SIZE + 2:HEADER_SIZE + length]))
+    return Request(flags, sequence, command, bytes(report[HEADER_SIZE + 2 : HEADER_SIZE + length]))
 
 
 def encode_reply(sequence: int, data: bytes = b"", error: bool = False, read: bool = True) -> bytes:
@@ -224,7 +220,7 @@ def decode_reply(report: bytes) -> Reply:
     flags, sequence, length = struct.unpack_from("<BBH", report)
     if HEADER_SIZE + length > len(report):
         raise PacketError(f"reply length field {length} exceeds the {len(report)}-byte report")
-    return Reply(flags, sequence, bytes(report[HEADER_SIZE:HEADER_SIZE + length]))
+    return Reply(flags, sequence, bytes(report[HEADER_SIZE : HEADER_SIZE + length]))
 
 
 @dataclass(frozen=True)
@@ -253,8 +249,12 @@ class PatternEntry:
             raise PacketError(f"bit_depth {self.bit_depth} outside 1..8")
         byte0 = (self.pattern_number << 2) | int(self.trigger)
         byte1 = (int(self.leds) << 4) | self.bit_depth
-        byte2 = (int(self.invert) | int(self.insert_black) << 1 | int(self.buffer_swap) << 2
-                 | int(self.trigger_out_prev) << 3)
+        byte2 = (
+            int(self.invert)
+            | int(self.insert_black) << 1
+            | int(self.buffer_swap) << 2
+            | int(self.trigger_out_prev) << 3
+        )
         return bytes((byte0, byte1, byte2))
 
     @classmethod
@@ -262,10 +262,15 @@ class PatternEntry:
         if len(data) != 3:
             raise PacketError(f"pattern LUT entry has {len(data)} bytes, expected 3")
         return cls(
-            pattern_number=data[0] >> 2, trigger=TriggerType(data[0] & 0x03),
-            bit_depth=data[1] & 0x0F, leds=Led((data[1] >> 4) & 0x07),
-            invert=bool(data[2] & 1), insert_black=bool(data[2] & 2),
-            buffer_swap=bool(data[2] & 4), trigger_out_prev=bool(data[2] & 8))
+            pattern_number=data[0] >> 2,
+            trigger=TriggerType(data[0] & 0x03),
+            bit_depth=data[1] & 0x0F,
+            leds=Led((data[1] >> 4) & 0x07),
+            invert=bool(data[2] & 1),
+            insert_black=bool(data[2] & 2),
+            buffer_swap=bool(data[2] & 4),
+            trigger_out_prev=bool(data[2] & 8),
+        )
 
 
 @dataclass(frozen=True)
@@ -278,15 +283,18 @@ class LutControl:
     image_indexes: int = 1
 
     def pack(self) -> bytes:
-        return bytes((self.lut_entries - 1, int(self.repeat), self.patterns_to_display - 1,
-                      self.image_indexes - 1))
+        return bytes((self.lut_entries - 1, int(self.repeat), self.patterns_to_display - 1, self.image_indexes - 1))
 
     @classmethod
     def unpack(cls, data: bytes) -> LutControl:
         if len(data) != 4:
             raise PacketError(f"LUT control has {len(data)} bytes, expected 4")
-        return cls(lut_entries=(data[0] & 0x7F) + 1, repeat=bool(data[1] & 1),
-                   patterns_to_display=data[2] + 1, image_indexes=(data[3] & 0x3F) + 1)
+        return cls(
+            lut_entries=(data[0] & 0x7F) + 1,
+            repeat=bool(data[1] & 1),
+            patterns_to_display=data[2] + 1,
+            image_indexes=(data[3] & 0x3F) + 1,
+        )
 
 
 def pack_exposure(exposure_us: int, frame_period_us: int) -> bytes:

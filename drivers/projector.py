@@ -180,4 +180,3 @@ class Projector(Device):
 
     def _set_gamma_lut(self, lut: np.ndarray | None) -> None:
         """Upload a validated LUT (float32 (N,)) or None; default: nothing to upload."""
-

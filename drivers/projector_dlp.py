@@ -35,7 +35,9 @@ class DlpVideoProjector(Projector):
         Read the controller's status after each pattern is shown (default).
     """
 
-    def __init__(self, display: Projector, controller: DlpController, *, check_health: bool = True, name: str | None = None) -> None:
+    def __init__(
+        self, display: Projector, controller: DlpController, *, check_health: bool = True, name: str | None = None
+    ) -> None:
         super().__init__(display.size, name or "DLP LightCrafter 4500 (video mode)")
         self.display = display
         self.controller = controller

@@ -52,8 +52,7 @@ log = logging.getLogger(__name__)
 try:  # pyserial's POSIX backend lets termios errors through when a tty vanishes
     import termios
 
-    _PORT_ERRORS: tuple[type[BaseException], ...] = (serial.SerialException, OSError,
-                                                     termios.error)
+    _PORT_ERRORS: tuple[type[BaseException], ...] = (serial.SerialException, OSError, termios.error)
 except ImportError:  # Windows
     _PORT_ERRORS = (serial.SerialException, OSError)
 
@@ -104,13 +103,11 @@ class TriggerBox(Device):
         self._do_ping()
         return time.monotonic() - start
 
-    def configure(self, pulse_width_us: int, delay_us: int = 0,
-                  polarity: Polarity = Polarity.ACTIVE_HIGH) -> None:
+    def configure(self, pulse_width_us: int, delay_us: int = 0, polarity: Polarity = Polarity.ACTIVE_HIGH) -> None:
         """Set the exposure pulse: width and delay (after FIRE or sync edge) in microseconds."""
         self._require_open("CONFIG")
         if not 1 <= int(pulse_width_us) <= tp.MAX_PULSE_WIDTH_US:
-            raise ValueError(f"pulse_width_us must be in 1..{tp.MAX_PULSE_WIDTH_US}, "
-                             f"got {pulse_width_us}")
+            raise ValueError(f"pulse_width_us must be in 1..{tp.MAX_PULSE_WIDTH_US}, got {pulse_width_us}")
         if not 0 <= int(delay_us) <= tp.MAX_DELAY_US:
             raise ValueError(f"delay_us must be in 0..{tp.MAX_DELAY_US}, got {delay_us}")
         log.info("%s: pulse %d us after %d us, %s", self, pulse_width_us, delay_us, polarity.name)
@@ -203,9 +200,16 @@ class SerialTriggerBox(TriggerBox):
 
     HELLO_TIMEOUT_S = 2.0
 
-    def __init__(self, url: str, baudrate: int = 115200, timeout_s: float = 0.5,
-                 retries: int = 2, command_timeouts: Mapping[str, float] | None = None,
-                 boot_timeout_s: float = 3.0, name: str | None = None) -> None:
+    def __init__(
+        self,
+        url: str,
+        baudrate: int = 115200,
+        timeout_s: float = 0.5,
+        retries: int = 2,
+        command_timeouts: Mapping[str, float] | None = None,
+        boot_timeout_s: float = 3.0,
+        name: str | None = None,
+    ) -> None:
         super().__init__(name or f"trigger box on {url}")
         if timeout_s <= 0:
             raise ValueError(f"timeout_s must be > 0, got {timeout_s}")
@@ -213,8 +217,10 @@ class SerialTriggerBox(TriggerBox):
         self.command_timeouts.update(command_timeouts or {})
         for command, seconds in self.command_timeouts.items():
             if command not in tp.COMMANDS or seconds <= 0:
-                raise ValueError(f"command_timeouts: expected positive seconds for one of "
-                                 f"{', '.join(tp.COMMANDS)}, got {command}={seconds}")
+                raise ValueError(
+                    f"command_timeouts: expected positive seconds for one of "
+                    f"{', '.join(tp.COMMANDS)}, got {command}={seconds}"
+                )
         if retries < 0:
             raise ValueError(f"retries must be >= 0, got {retries}")
         if boot_timeout_s < 0:
@@ -254,20 +260,21 @@ class SerialTriggerBox(TriggerBox):
 
     def missed_edges(self) -> int:
         """Sync edges the box reported missed (``! MISSED <total>``) since the last ARM."""
-        totals = [int(e.tokens[0]) for e in self.events if e.name == "MISSED" and e.tokens
-                  and e.tokens[0].isdigit()]
+        totals = [int(e.tokens[0]) for e in self.events if e.name == "MISSED" and e.tokens and e.tokens[0].isdigit()]
         return max(totals, default=0)
 
     # -- hooks ----------------------------------------------------------------------------------
     def _open(self) -> None:
         try:
-            self._port = serial.serial_for_url(self.url, baudrate=self.baudrate,
-                                               timeout=self.timeout_s, write_timeout=self.timeout_s)
+            self._port = serial.serial_for_url(
+                self.url, baudrate=self.baudrate, timeout=self.timeout_s, write_timeout=self.timeout_s
+            )
             self._port.reset_input_buffer()
-        except (*_PORT_ERRORS, ValueError) as exc:
+        except (serial.SerialException, OSError, ValueError) as exc:  # _PORT_ERRORS and bad settings
             raise DeviceNotFoundError(
                 f"cannot open trigger box port {self.url}: {exc}; check the cable, the port name "
-                "and that you may open it (Linux: be in the 'dialout' group)") from exc
+                "and that you may open it (Linux: be in the 'dialout' group)"
+            ) from exc
         if self.boot_timeout_s > 0:
             self._wait_ready(self.boot_timeout_s)
 
@@ -301,14 +308,16 @@ class SerialTriggerBox(TriggerBox):
         try:
             tokens = self._command("HELLO", version)
         except DeviceTimeoutError as exc:
-            raise DeviceTimeoutError(f"{exc}; is the trigger box (firmware/trigger_box) on this "
-                                     "port and powered?") from exc
+            raise DeviceTimeoutError(
+                f"{exc}; is the trigger box (firmware/trigger_box) on this port and powered?"
+            ) from exc
         if not tokens or not tokens[0].isdigit():
             raise ProtocolError(f"{self}: HELLO reply without version: {tokens!r}")
         box_version = int(tokens[0])
         if box_version != version:
             raise UnsupportedFeatureError(
-                f"{self}: box speaks trigger protocol {box_version}, this host speaks {version}")
+                f"{self}: box speaks trigger protocol {box_version}, this host speaks {version}"
+            )
         self.firmware = tokens[1] if len(tokens) > 1 else ""
         return box_version
 
@@ -339,15 +348,19 @@ class SerialTriggerBox(TriggerBox):
         try:
             kv = tp.parse_key_values(tuple(tokens))
             status = TriggerBoxStatus(
-                state=kv["st"], armed=int(kv["n"]), fired=int(kv["fired"]),
-                pulse_width_us=int(kv["w"]), delay_us=int(kv["d"]),
-                polarity=Polarity(kv["pol"]), source=ExposureSource(kv["src"]),
-                missed=int(kv["miss"]))
+                state=kv["st"],
+                armed=int(kv["n"]),
+                fired=int(kv["fired"]),
+                pulse_width_us=int(kv["w"]),
+                delay_us=int(kv["d"]),
+                polarity=Polarity(kv["pol"]),
+                source=ExposureSource(kv["src"]),
+                missed=int(kv["miss"]),
+            )
         except (tp.LineError, KeyError, ValueError) as exc:
             raise ProtocolError(f"{self}: malformed STATUS reply {tokens!r}: {exc}") from exc
         if status.missed:
-            log.warning("%s: %d sync edge(s) missed since ARM (arrived while a pulse was pending)",
-                        self, status.missed)
+            log.warning("%s: %d sync edge(s) missed since ARM (arrived while a pulse was pending)", self, status.missed)
         return status
 
     def _do_reset(self) -> None:
@@ -370,8 +383,7 @@ class SerialTriggerBox(TriggerBox):
             try:
                 reply = self._read_reply(request_id, command, timeout_s)
             except _NoReply as exc:
-                failure = DeviceTimeoutError(f"{self}: no reply to {command} within "
-                                             f"{timeout_s:.3g} s ({exc})")
+                failure = DeviceTimeoutError(f"{self}: no reply to {command} within {timeout_s:.3g} s ({exc})")
                 continue
             except _Garbled as exc:
                 failure = ProtocolError(f"{self}: garbled reply to {command}: {exc}")
@@ -379,8 +391,9 @@ class SerialTriggerBox(TriggerBox):
             if reply.ok:
                 return list(reply.tokens)
             if reply.id == 0:  # the box could not parse our request: it was garbled on the way
-                failure = ProtocolError(f"{self}: box could not read {command}: "
-                                        f"{reply.code.name if reply.code else '?'}")
+                failure = ProtocolError(
+                    f"{self}: box could not read {command}: {reply.code.name if reply.code else '?'}"
+                )
                 continue
             raise self._error_for(command, reply)
         assert failure is not None
@@ -417,8 +430,7 @@ class SerialTriggerBox(TriggerBox):
             self._port.timeout = remaining
             return self._port.read_until(b"\n", tp.MAX_LINE_BYTES)
         except _PORT_ERRORS as exc:
-            raise DeviceError(f"{self}: lost the box (unplugged or reset?) while waiting for "
-                              f"{command}: {exc}") from exc
+            raise DeviceError(f"{self}: lost the box (unplugged or reset?) while waiting for {command}: {exc}") from exc
 
     def _read_reply(self, request_id: int, command: str, timeout_s: float) -> tp.Reply:
         deadline = time.monotonic() + timeout_s
@@ -436,8 +448,7 @@ class SerialTriggerBox(TriggerBox):
                 self._record_event(message)
                 continue
             if message.id not in (request_id, 0):
-                log.info("%s: dropping stale reply to request %d while waiting for %d",
-                         self, message.id, request_id)
+                log.info("%s: dropping stale reply to request %d while waiting for %d", self, message.id, request_id)
                 continue
             return message
 
@@ -463,6 +474,7 @@ class SerialTriggerBox(TriggerBox):
             log.warning("%s: the box disarmed itself after heartbeat silence", self)
             self._armed_count = 0
         elif event.name == "MISSED":
-            log.warning("%s: sync edges missed since ARM: %s (edge while a pulse was pending)",
-                        self, " ".join(event.tokens))
+            log.warning(
+                "%s: sync edges missed since ARM: %s (edge while a pulse was pending)", self, " ".join(event.tokens)
+            )
         self.events.append(event)

@@ -27,7 +27,7 @@ class PinholeCamera:
     height: int
 
     @classmethod
-    def simple(cls, width: int, height: int, focal_px: float, distortion=(0.0, 0.0, 0.0, 0.0, 0.0)) -> "PinholeCamera":
+    def simple(cls, width: int, height: int, focal_px: float, distortion=(0.0, 0.0, 0.0, 0.0, 0.0)) -> PinholeCamera:
         matrix = np.array([[focal_px, 0, (width - 1) / 2.0], [0, focal_px, (height - 1) / 2.0], [0, 0, 1]], float)
         return cls(matrix, np.asarray(distortion, float), width, height)
 
@@ -47,7 +47,11 @@ def chessboard_texture(squares: tuple[int, int], square_mm: float, px_per_mm: fl
 
 
 def charuco_texture(
-    squares: tuple[int, int], square_mm: float, marker_mm: float, px_per_mm: float, margin_mm: float,
+    squares: tuple[int, int],
+    square_mm: float,
+    marker_mm: float,
+    px_per_mm: float,
+    margin_mm: float,
     dictionary: str = ARUCO_DICTIONARY,
 ) -> np.ndarray:
     """ChArUco board image (OpenCV's own ``generateImage``) with a white margin, float in [0, 1]."""
@@ -79,7 +83,9 @@ def render_board_view(
     xs, ys = np.meshgrid(np.arange(camera.width, dtype=np.float64), np.arange(camera.height, dtype=np.float64))
     pixels = np.stack([xs.ravel(), ys.ravel()], axis=1).reshape(-1, 1, 2)
     normalized = cv2.undistortPoints(
-        pixels, camera.camera_matrix, camera.distortion,
+        pixels,
+        camera.camera_matrix,
+        camera.distortion,
         criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 1e-10),
     ).reshape(-1, 2)
     rotation, _ = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64))
@@ -97,8 +103,7 @@ def render_board_view(
     source = texture.astype(np.float32)
     if sigma > 0.3:
         source = cv2.GaussianBlur(source, (0, 0), sigma)
-    seen = cv2.remap(source, map_x, map_y, cv2.INTER_LINEAR,
-                     borderMode=cv2.BORDER_CONSTANT, borderValue=-1.0)
+    seen = cv2.remap(source, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=-1.0)
     seen = np.where((seen < 0) | ~facing.reshape(seen.shape), background, seen)
     if blur_px > 0:
         seen = cv2.GaussianBlur(seen, (0, 0), blur_px)
@@ -106,8 +111,13 @@ def render_board_view(
     return np.clip(np.rint(image), 0, 255).astype(np.uint8)
 
 
-def board_pose(tilt_x_deg: float, tilt_y_deg: float, spin_deg: float, center_mm: tuple[float, float, float],
-               board_size_mm: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+def board_pose(
+    tilt_x_deg: float,
+    tilt_y_deg: float,
+    spin_deg: float,
+    center_mm: tuple[float, float, float],
+    board_size_mm: tuple[float, float],
+) -> tuple[np.ndarray, np.ndarray]:
     """Pose (rvec, tvec) placing the board's centre at ``center_mm`` in the camera frame, tilted."""
     rx, _ = cv2.Rodrigues(np.array([np.radians(tilt_x_deg), 0.0, 0.0]))
     ry, _ = cv2.Rodrigues(np.array([0.0, np.radians(tilt_y_deg), 0.0]))
@@ -143,12 +153,14 @@ def calibration_views(
     else:
         raise ValueError(f"kind: expected 'chessboard' or 'charuco', found {kind!r}")
     images, poses = [], []
-    for i in range(count):
+    for _ in range(count):
         tilt_x = rng.uniform(-25, 25)
         tilt_y = rng.uniform(-25, 25)
         spin = rng.uniform(-10, 10)
         shift = rng.uniform(-0.12, 0.12, size=2) * view_mm
-        rvec, tvec = board_pose(tilt_x, tilt_y, spin, (shift[0], shift[1] * 0.75, distance_mm * rng.uniform(0.9, 1.1)), board_mm)
+        rvec, tvec = board_pose(
+            tilt_x, tilt_y, spin, (shift[0], shift[1] * 0.75, distance_mm * rng.uniform(0.9, 1.1)), board_mm
+        )
         images.append(render_board_view(texture, px_per_mm, margin, camera, rvec, tvec, rng=rng))
         poses.append((rvec, tvec))
     return images, poses

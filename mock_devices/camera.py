@@ -25,7 +25,14 @@ import numpy as np
 from drivers.camera import Camera, Frame, PixelFormat, TriggerMode, TriggerSource
 from drivers.errors import DeviceNotFoundError, DeviceTimeoutError
 from drivers.projector import Projector, apply_gamma_lut
-from mock_devices.synth import Appearance, ProjectorMap, RigGeometry, expose, projector_coordinates, sample_projector_image
+from mock_devices.synth import (
+    Appearance,
+    ProjectorMap,
+    RigGeometry,
+    expose,
+    projector_coordinates,
+    sample_projector_image,
+)
 from processing.patterns import pattern_image
 
 log = logging.getLogger(__name__)

@@ -52,34 +52,71 @@ EP_IN = 0x81
 
 def _device_descriptor(vid: int, pid: int) -> SimpleNamespace:
     return SimpleNamespace(
-        bLength=18, bDescriptorType=usb.util.DESC_TYPE_DEVICE, bcdUSB=0x0200,
-        bDeviceClass=0, bDeviceSubClass=0, bDeviceProtocol=0, bMaxPacketSize0=64,
-        idVendor=vid, idProduct=pid, bcdDevice=0x0100, iManufacturer=0, iProduct=0,
-        iSerialNumber=0, bNumConfigurations=1, address=7, bus=1, port_number=3,
-        port_numbers=(3,), speed=usb.util.SPEED_FULL)
+        bLength=18,
+        bDescriptorType=usb.util.DESC_TYPE_DEVICE,
+        bcdUSB=0x0200,
+        bDeviceClass=0,
+        bDeviceSubClass=0,
+        bDeviceProtocol=0,
+        bMaxPacketSize0=64,
+        idVendor=vid,
+        idProduct=pid,
+        bcdDevice=0x0100,
+        iManufacturer=0,
+        iProduct=0,
+        iSerialNumber=0,
+        bNumConfigurations=1,
+        address=7,
+        bus=1,
+        port_number=3,
+        port_numbers=(3,),
+        speed=usb.util.SPEED_FULL,
+    )
 
 
 def _configuration_descriptor() -> SimpleNamespace:
     return SimpleNamespace(
-        bLength=9, bDescriptorType=usb.util.DESC_TYPE_CONFIG, wTotalLength=41, bNumInterfaces=1,
-        bConfigurationValue=1, iConfiguration=0, bmAttributes=0x80, bMaxPower=50,
-        extra_descriptors=[])
+        bLength=9,
+        bDescriptorType=usb.util.DESC_TYPE_CONFIG,
+        wTotalLength=41,
+        bNumInterfaces=1,
+        bConfigurationValue=1,
+        iConfiguration=0,
+        bmAttributes=0x80,
+        bMaxPower=50,
+        extra_descriptors=[],
+    )
 
 
 def _interface_descriptor() -> SimpleNamespace:
     # HID class; the 9-byte HID class descriptor follows the interface descriptor
     hid = [9, 0x21, 0x11, 0x01, 0x00, 0x01, 0x22, 0x1D, 0x00]
     return SimpleNamespace(
-        bLength=9, bDescriptorType=usb.util.DESC_TYPE_INTERFACE, bInterfaceNumber=0,
-        bAlternateSetting=0, bNumEndpoints=2, bInterfaceClass=0x03, bInterfaceSubClass=0,
-        bInterfaceProtocol=0, iInterface=0, extra_descriptors=hid)
+        bLength=9,
+        bDescriptorType=usb.util.DESC_TYPE_INTERFACE,
+        bInterfaceNumber=0,
+        bAlternateSetting=0,
+        bNumEndpoints=2,
+        bInterfaceClass=0x03,
+        bInterfaceSubClass=0,
+        bInterfaceProtocol=0,
+        iInterface=0,
+        extra_descriptors=hid,
+    )
 
 
 def _endpoint_descriptor(address: int) -> SimpleNamespace:
     return SimpleNamespace(
-        bLength=7, bDescriptorType=usb.util.DESC_TYPE_ENDPOINT, bEndpointAddress=address,
-        bmAttributes=usb.util.ENDPOINT_TYPE_INTR, wMaxPacketSize=dp.REPORT_SIZE, bInterval=1,
-        bRefresh=0, bSynchAddress=0, extra_descriptors=[])
+        bLength=7,
+        bDescriptorType=usb.util.DESC_TYPE_ENDPOINT,
+        bEndpointAddress=address,
+        bmAttributes=usb.util.ENDPOINT_TYPE_INTR,
+        wMaxPacketSize=dp.REPORT_SIZE,
+        bInterval=1,
+        bRefresh=0,
+        bSynchAddress=0,
+        extra_descriptors=[],
+    )
 
 
 class VirtualHidBackend(usb.backend.IBackend):
@@ -104,8 +141,7 @@ class VirtualHidBackend(usb.backend.IBackend):
     def _before_transfer(self, direction: str) -> None:
         """Hook for faults; raise usb.core.USBError to fail the transfer."""
         if not self.present:
-            raise usb.core.USBError("No such device (it may have been disconnected)",
-                                    error_code=-4, errno=errno.ENODEV)
+            raise usb.core.USBError("No such device (it may have been disconnected)", error_code=-4, errno=errno.ENODEV)
 
     # -- enumeration and descriptors ------------------------------------------------------------
     def enumerate_devices(self):
@@ -184,8 +220,7 @@ class VirtualHidBackend(usb.backend.IBackend):
         reply = self._on_out_report(report)
         if reply is not None:  # one or more IN reports
             for k in range(0, max(len(reply), 1), dp.REPORT_SIZE):
-                self._in_queue.append(bytes(reply[k:k + dp.REPORT_SIZE]).ljust(dp.REPORT_SIZE,
-                                                                               b"\x00"))
+                self._in_queue.append(bytes(reply[k : k + dp.REPORT_SIZE]).ljust(dp.REPORT_SIZE, b"\x00"))
         return len(report)
 
     def intr_read(self, dev_handle, ep, intf, buff, timeout):
@@ -193,8 +228,7 @@ class VirtualHidBackend(usb.backend.IBackend):
         if ep != EP_IN:
             raise usb.core.USBError("Pipe error", error_code=-9, errno=errno.EPIPE)
         if not self._in_queue:
-            raise usb.core.USBTimeoutError("Operation timed out", error_code=-7,
-                                           errno=errno.ETIMEDOUT)
+            raise usb.core.USBTimeoutError("Operation timed out", error_code=-7, errno=errno.ETIMEDOUT)
         report = self._in_queue.popleft()
         n = min(len(buff), len(report))
         buff[:n] = type(buff)(buff.typecode, report[:n])
@@ -233,8 +267,9 @@ class Dlpc350Faults:
                 try:
                     Command(command)
                 except ValueError:
-                    raise ValueError(f"Dlpc350Faults.{name}: 0x{command:04X} is not a command "
-                                     "the fake controller knows") from None
+                    raise ValueError(
+                        f"Dlpc350Faults.{name}: 0x{command:04X} is not a command the fake controller knows"
+                    ) from None
 
 
 @dataclass
@@ -247,8 +282,7 @@ class Dlpc350State:
     trigger_mode: int = 0
     exposure_us: int = 8333
     frame_period_us: int = 8333
-    lut_control: dp.LutControl = field(
-        default_factory=lambda: dp.LutControl(1, True, 1, 1))
+    lut_control: dp.LutControl = field(default_factory=lambda: dp.LutControl(1, True, 1, 1))
     mailbox: int = dp.Mailbox.CLOSED
     mailbox_address: int = 0
     pattern_lut: dict[int, dp.PatternEntry] = field(default_factory=dict)
@@ -261,18 +295,30 @@ class Dlpc350State:
 
 
 _DATA_LENGTH = {
-    Command.POWER_CONTROL: 1, Command.DISPLAY_MODE: 1, Command.PATTERN_SOURCE: 1,
-    Command.PATTERN_TRIGGER_MODE: 1, Command.PATTERN_START_STOP: 1,
-    Command.EXPOSURE_FRAME_PERIOD: 8, Command.LUT_CONTROL: 4, Command.MAILBOX_ADDRESS: 1,
-    Command.MAILBOX_CONTROL: 1, Command.LUT_VALIDATE: 1,
+    Command.POWER_CONTROL: 1,
+    Command.DISPLAY_MODE: 1,
+    Command.PATTERN_SOURCE: 1,
+    Command.PATTERN_TRIGGER_MODE: 1,
+    Command.PATTERN_START_STOP: 1,
+    Command.EXPOSURE_FRAME_PERIOD: 8,
+    Command.LUT_CONTROL: 4,
+    Command.MAILBOX_ADDRESS: 1,
+    Command.MAILBOX_CONTROL: 1,
+    Command.LUT_VALIDATE: 1,
 }
 
 
 class FakeDlpc350Backend(VirtualHidBackend):
     """pyusb backend emulating a LightCrafter 4500's DLPC350 controller."""
 
-    def __init__(self, faults: Dlpc350Faults | None = None, *, echo_sequence: bool = False,
-                 busy_s: float = 0.1, clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(
+        self,
+        faults: Dlpc350Faults | None = None,
+        *,
+        echo_sequence: bool = False,
+        busy_s: float = 0.1,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
         super().__init__()
         self.faults = faults or Dlpc350Faults()
         self.echo_sequence = echo_sequence
@@ -379,7 +425,8 @@ class FakeDlpc350Backend(VirtualHidBackend):
             main = (0x01 if s.standby else 0) | (0x02 if s.sequencer == "running" else 0)
             return bytes([main]), True
         simple = {
-            Command.POWER_CONTROL: int(s.standby), Command.DISPLAY_MODE: s.display_mode,
+            Command.POWER_CONTROL: int(s.standby),
+            Command.DISPLAY_MODE: s.display_mode,
             Command.PATTERN_SOURCE: s.pattern_source,
             Command.PATTERN_TRIGGER_MODE: s.trigger_mode,
             Command.PATTERN_START_STOP: {"stopped": 0, "paused": 1, "running": 2}[s.sequencer],
@@ -406,8 +453,13 @@ class FakeDlpc350Backend(VirtualHidBackend):
             return True
         if command is Command.PATTERN_START_STOP:
             return self._start_stop(data[0])
-        if command in (Command.DISPLAY_MODE, Command.PATTERN_SOURCE, Command.PATTERN_TRIGGER_MODE,
-                       Command.EXPOSURE_FRAME_PERIOD, Command.LUT_CONTROL):
+        if command in (
+            Command.DISPLAY_MODE,
+            Command.PATTERN_SOURCE,
+            Command.PATTERN_TRIGGER_MODE,
+            Command.EXPOSURE_FRAME_PERIOD,
+            Command.LUT_CONTROL,
+        ):
             if s.sequencer != "stopped":
                 return False  # the guide: stop the sequence before changing it
             s.validated = False
@@ -453,7 +505,7 @@ class FakeDlpc350Backend(VirtualHidBackend):
             if not data or len(data) % 3 or s.mailbox_address + len(data) // 3 > dp.MAX_LUT_ENTRIES:
                 return False
             for k in range(0, len(data), 3):
-                s.pattern_lut[s.mailbox_address] = dp.PatternEntry.unpack(data[k:k + 3])
+                s.pattern_lut[s.mailbox_address] = dp.PatternEntry.unpack(data[k : k + 3])
                 s.mailbox_address = (s.mailbox_address + 1) % dp.MAX_LUT_ENTRIES
         elif s.mailbox == dp.Mailbox.IMAGE_INDEX:
             if s.mailbox_address != 0 or not 1 <= len(data) <= dp.MAX_IMAGE_INDEXES:
@@ -487,8 +539,7 @@ class FakeDlpc350Backend(VirtualHidBackend):
     def _run(self) -> None:
         s = self.state
         s.sequencer = "running"
-        loads_images = (s.pattern_source == 3
-                        and s.lut_control.image_indexes > dp.FRAME_BUFFERS)
+        loads_images = s.pattern_source == 3 and s.lut_control.image_indexes > dp.FRAME_BUFFERS
         if loads_images and s.frame_period_us - s.exposure_us < dp.FLASH_IMAGE_LOAD_US:
             s.hardware_status |= 0x08  # forced swap error: the next image was not loaded in time
 
@@ -496,8 +547,9 @@ class FakeDlpc350Backend(VirtualHidBackend):
         """The controller's checks of the programmed sequence (DLPU010, validate command)."""
         s = self.state
         bits = 0
-        entries = [s.pattern_lut.get(k) for k in range(s.lut_control.lut_entries)]
-        if any(e is None for e in entries):
+        found = [s.pattern_lut.get(k) for k in range(s.lut_control.lut_entries)]
+        entries = [e for e in found if e is not None]
+        if len(entries) < len(found):
             return int(dp.Validation.PATTERN_NUMBER_INVALID)
         for e in entries:
             limit = dp.PATTERNS_PER_IMAGE.get(e.bit_depth, 0) + (e.bit_depth == 1)  # black fill

@@ -69,9 +69,7 @@ class _Enum(_Node):
     def SetValue(self, value: str) -> None:
         self._check(write=True)
         if value not in self.Symbolics:
-            raise genicam.InvalidArgumentException(
-                f"{value} not in {self.Symbolics}", __file__, 0
-            )
+            raise genicam.InvalidArgumentException(f"{value} not in {self.Symbolics}", __file__, 0)
         self._set(value)
 
     def ToString(self) -> str:
@@ -116,11 +114,7 @@ class _NodeMap:
         self._inner, self._overrides = inner, overrides
 
     def GetNode(self, name: str) -> Any:
-        return (
-            self._overrides[name]
-            if name in self._overrides
-            else self._inner.GetNode(name)
-        )
+        return self._overrides[name] if name in self._overrides else self._inner.GetNode(name)
 
 
 class _Result:
@@ -184,9 +178,7 @@ class UsbCameraQuirks:
                     lambda: self._selector,
                     self._select_trigger,
                 ),
-                "TriggerMode": _Enum(
-                    ["Off", "On"], self._trigger_mode, self._set_trigger_mode
-                ),
+                "TriggerMode": _Enum(["Off", "On"], self._trigger_mode, self._set_trigger_mode),
             }
             if not self._keep_gain_raw:
                 overrides["GainRaw"] = _Absent()
@@ -221,9 +213,7 @@ class UsbCameraQuirks:
 
     def WaitForFrameTriggerReady(self, timeout_ms: int, handling: Any) -> bool:
         if not self.can_wait:
-            raise genicam.RuntimeException(
-                "the camera cannot report trigger readiness", __file__, 0
-            )
+            raise genicam.RuntimeException("the camera cannot report trigger readiness", __file__, 0)
         return self._inner.WaitForFrameTriggerReady(timeout_ms, handling)
 
     def ExecuteSoftwareTrigger(self) -> None:
@@ -239,11 +229,7 @@ class UsbCameraQuirks:
         result = self._inner.RetrieveResult(timeout_ms, handling)
         if result is None or not self._clock:
             return result
-        ticks = (
-            self._trigger_ticks.popleft()
-            if self._trigger_ticks
-            else time.monotonic_ns()
-        )
+        ticks = self._trigger_ticks.popleft() if self._trigger_ticks else time.monotonic_ns()
         if self.stale_frames > 0:
             self.stale_frames -= 1
             ticks -= 1_000_000_000

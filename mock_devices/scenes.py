@@ -56,9 +56,7 @@ def two_hemispheres(height: int, width: int, pixel_mm: float, radius_mm: float |
     return np.maximum(_cap(x, y, -offset, 0.0, r, r), _cap(x, y, offset, 0.0, r, r))
 
 
-def steps(
-    height: int, width: int, pixel_mm: float, step_mm: float = 10.0, count: int = 4
-) -> np.ndarray:
+def steps(height: int, width: int, pixel_mm: float, step_mm: float = 10.0, count: int = 4) -> np.ndarray:
     """A staircase along x: ``count`` treads of ``step_mm`` each, on the central half of the view."""
     x, y = _grid_mm(height, width, pixel_mm)
     half_w, half_h = width * pixel_mm / 4.0, height * pixel_mm / 4.0

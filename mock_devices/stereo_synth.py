@@ -31,7 +31,7 @@ class Pinhole:
 class StereoRig:
     camera: Pinhole
     projector: Pinhole
-    rotation: np.ndarray       # camera -> projector
+    rotation: np.ndarray  # camera -> projector
     translation_mm: np.ndarray
 
     @property
@@ -49,21 +49,27 @@ class Scene:
     spheres: tuple[tuple[tuple[float, float, float], float], ...] = field(default=())
 
 
-def demo_rig(camera_width: int = 160, camera_height: int = 128, projector_width: int = 912, projector_height: int = 684) -> StereoRig:
+def demo_rig(
+    camera_width: int = 160, camera_height: int = 128, projector_width: int = 912, projector_height: int = 684
+) -> StereoRig:
     """A small rig: camera at the origin, projector 150 mm to its right and toed in by 14 degrees,
     both with mild distortion, focused around 600 mm."""
     fc = 1.25 * camera_width
     camera = Pinhole(
         np.array([[fc, 0, (camera_width - 1) / 2 + 1.5], [0, fc * 1.001, (camera_height - 1) / 2 - 1.0], [0, 0, 1]]),
-        np.array([-0.08, 0.05, 0.0005, -0.0003, 0.0]), camera_width, camera_height,
+        np.array([-0.08, 0.05, 0.0005, -0.0003, 0.0]),
+        camera_width,
+        camera_height,
     )
     fp = 1.1 * projector_width
     projector = Pinhole(
         np.array([[fp, 0, (projector_width - 1) / 2], [0, fp, (projector_height - 1) / 2], [0, 0, 1]]),
-        np.array([-0.05, 0.08, 0.0, 0.0, 0.0]), projector_width, projector_height,
+        np.array([-0.05, 0.08, 0.0, 0.0, 0.0]),
+        projector_width,
+        projector_height,
     )
     rotation, _ = cv2.Rodrigues(np.array([0.02, np.radians(14.0), 0.01]))
-    centre = np.array([150.0, -5.0, 10.0])     # projector centre in the camera frame
+    centre = np.array([150.0, -5.0, 10.0])  # projector centre in the camera frame
     translation = -rotation @ centre
     return StereoRig(camera, projector, rotation, translation)
 
@@ -77,8 +83,9 @@ def camera_rays(camera: Pinhole) -> np.ndarray:
     """Unit-z ray directions (H, W, 3) of every camera pixel (lens distortion removed)."""
     xs, ys = np.meshgrid(np.arange(camera.width, dtype=np.float64), np.arange(camera.height, dtype=np.float64))
     pts = np.stack([xs.ravel(), ys.ravel()], axis=1).reshape(-1, 1, 2)
-    n = cv2.undistortPoints(pts, camera.matrix, camera.distortion,
-                            criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-12))
+    n = cv2.undistortPoints(
+        pts, camera.matrix, camera.distortion, criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-12)
+    )
     n = n.reshape(camera.height, camera.width, 2)
     return np.concatenate([n, np.ones((camera.height, camera.width, 1))], axis=2)
 
@@ -122,7 +129,9 @@ def trace(rig: StereoRig, scene: Scene) -> tuple[np.ndarray, ProjectorMap]:
         blocked = _sphere_hits(centre_p, towards, np.asarray(centre, float), radius)
         lit &= ~(blocked < 1.0 - 1e-6)
     rvec, _ = cv2.Rodrigues(rig.rotation)
-    projected, _ = cv2.projectPoints(safe.reshape(-1, 1, 3), rvec, rig.translation_mm, rig.projector.matrix, rig.projector.distortion)
+    projected, _ = cv2.projectPoints(
+        safe.reshape(-1, 1, 3), rvec, rig.translation_mm, rig.projector.matrix, rig.projector.distortion
+    )
     projected = projected.reshape(rig.camera.height, rig.camera.width, 2) + 0.5
     u, v = projected[..., 0], projected[..., 1]
     in_front = (np.einsum("ij,hwj->hwi", rig.rotation, safe) + rig.translation_mm)[..., 2] > 0
@@ -156,8 +165,12 @@ def board_scene(rvec: np.ndarray, tvec: np.ndarray) -> Scene:
 
 
 def board_session(
-    rig: StereoRig, count: int = 8, squares: tuple[int, int] = (9, 7), square_mm: float = 30.0,
-    distance_mm: float = 600.0, seed: int = 0,
+    rig: StereoRig,
+    count: int = 8,
+    squares: tuple[int, int] = (9, 7),
+    square_mm: float = 30.0,
+    distance_mm: float = 600.0,
+    seed: int = 0,
 ) -> list[tuple[np.ndarray, ProjectorMap]]:
     """``count`` poses of a chessboard in front of the rig: per pose the camera's image of the board
     (mock_devices.board_synth) and the projector map of the board's plane (for fringe rendering

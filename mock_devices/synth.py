@@ -66,7 +66,7 @@ class RigGeometry:
         """Fringe frequency on the plane (cycles/mm) of a sinusoid with ``frequency`` fringes."""
         return self.f0_per_mm * float(frequency) / self.f0_frequency
 
-    def with_camera(self, width: int, height: int) -> "RigGeometry":
+    def with_camera(self, width: int, height: int) -> RigGeometry:
         return replace(self, camera_width=width, camera_height=height)
 
 
@@ -75,21 +75,21 @@ class Appearance:
     """Photometric model of the scene and the camera (intensities in camera digital numbers)."""
 
     reflectivity: float | np.ndarray = 1.0
-    ambient: float = 0.0           # light not from the projector, in projector-intensity units
-    gamma: float = 1.0             # projector response: out = in ** gamma
-    gain: float = 200.0            # DN for projector intensity 1 on reflectivity 1
-    snr_db: float | None = None    # additive white Gaussian noise, signal power = mean(I^2)
-    bit_depth: int | None = 8      # None: keep float
-    shadow_level: float = 0.0      # intensity seen in projector shadow (besides ambient)
+    ambient: float = 0.0  # light not from the projector, in projector-intensity units
+    gamma: float = 1.0  # projector response: out = in ** gamma
+    gain: float = 200.0  # DN for projector intensity 1 on reflectivity 1
+    snr_db: float | None = None  # additive white Gaussian noise, signal power = mean(I^2)
+    bit_depth: int | None = 8  # None: keep float
+    shadow_level: float = 0.0  # intensity seen in projector shadow (besides ambient)
 
 
 @dataclass
 class ProjectorMap:
     """Where each camera pixel looks in projector coordinates."""
 
-    u: np.ndarray            # (H, W) projector column (continuous, pixel centres at k + 0.5)
-    v: np.ndarray            # (H, W) projector row
-    lit: np.ndarray          # (H, W) bool: the projector reaches the pixel
+    u: np.ndarray  # (H, W) projector column (continuous, pixel centres at k + 0.5)
+    v: np.ndarray  # (H, W) projector row
+    lit: np.ndarray  # (H, W) bool: the projector reaches the pixel
     height_mm: np.ndarray | None = field(repr=False, default=None)  # the scene
 
 
@@ -192,7 +192,9 @@ def sample_projector_image(image: np.ndarray, mapping: ProjectorMap) -> np.ndarr
     return cv2.remap(img, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
 
 
-def expose(projected: np.ndarray, mapping: ProjectorMap, appearance: Appearance, rng: np.random.Generator) -> np.ndarray:
+def expose(
+    projected: np.ndarray, mapping: ProjectorMap, appearance: Appearance, rng: np.random.Generator
+) -> np.ndarray:
     """Camera image from the projector intensity reaching each pixel (before gamma).
 
     I = gain * reflectivity * (ambient + gamma(projected) on lit pixels, shadow_level elsewhere),

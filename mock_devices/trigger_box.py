@@ -68,16 +68,17 @@ class TriggerFaults:
         for name in ("garble_reply_on", "drop_reply_on"):
             unknown = set(getattr(self, name)) - set(tp.COMMANDS)
             if unknown:
-                raise ValueError(f"TriggerFaults.{name}: unknown command(s) {sorted(unknown)}, "
-                                 f"expected some of {', '.join(tp.COMMANDS)}")
+                raise ValueError(
+                    f"TriggerFaults.{name}: unknown command(s) {sorted(unknown)}, "
+                    f"expected some of {', '.join(tp.COMMANDS)}"
+                )
         for name in ("garble_times", "drop_times"):
             if getattr(self, name) < 1:
                 raise ValueError(f"TriggerFaults.{name} must be >= 1, got {getattr(self, name)}")
         if self.stall is not True and self.stall is not False and int(self.stall) < 0:
             raise ValueError(f"TriggerFaults.stall must be a bool or a count >= 0, got {self.stall}")
         if self.disconnect_after is not None and self.disconnect_after < 0:
-            raise ValueError(f"TriggerFaults.disconnect_after must be >= 0, got "
-                             f"{self.disconnect_after}")
+            raise ValueError(f"TriggerFaults.disconnect_after must be >= 0, got {self.disconnect_after}")
 
     def stall_after(self) -> int | None:
         if self.stall is True:
@@ -105,8 +106,13 @@ class _Output:
 class _BoxFirmware:
     """The box's protocol state machine, as the firmware implements it."""
 
-    def __init__(self, protocol_version: int, watchdog_s: float | None, now: float,
-                 polarity: tp.Polarity = tp.Polarity.ACTIVE_HIGH) -> None:
+    def __init__(
+        self,
+        protocol_version: int,
+        watchdog_s: float | None,
+        now: float,
+        polarity: tp.Polarity = tp.Polarity.ACTIVE_HIGH,
+    ) -> None:
         self.protocol_version = protocol_version
         self.watchdog_s = watchdog_s
         self.hello_done = False
@@ -170,8 +176,7 @@ class _BoxFirmware:
 
     def tick(self, now: float) -> _Output:
         out = _Output()
-        if (self.state == "ARMED" and self.watchdog_s is not None
-                and now - self.last_line_at > self.watchdog_s):
+        if self.state == "ARMED" and self.watchdog_s is not None and now - self.last_line_at > self.watchdog_s:
             self.state, self.armed, self.fired, self.missed = "IDLE", 0, 0, 0
             out.before.append(tp.encode_event("WATCHDOG"))
         return out
@@ -240,9 +245,16 @@ class _BoxFirmware:
     def _cmd_status(self, rid: int, args: tuple[str, ...], out: _Output) -> bytes:
         _ints(args, 0, (0, 0))
         return tp.encode_ok(
-            rid, f"st={self.state}", f"n={self.armed}", f"fired={self.fired}", f"miss={self.missed}",
-            f"w={self.width_us}", f"d={self.delay_us}", f"pol={self.polarity.value}",
-            f"src={self.source.value}")
+            rid,
+            f"st={self.state}",
+            f"n={self.armed}",
+            f"fired={self.fired}",
+            f"miss={self.missed}",
+            f"w={self.width_us}",
+            f"d={self.delay_us}",
+            f"pol={self.polarity.value}",
+            f"src={self.source.value}",
+        )
 
     def _cmd_reset(self, rid: int, args: tuple[str, ...], out: _Output) -> bytes:
         _ints(args, 0, (0, 0))
@@ -471,8 +483,7 @@ class FakeTriggerBox:
         if cmd in self.faults.drop_reply_on and self._dropped.get(rid, 0) < self.faults.drop_times:
             self._dropped[rid] = self._dropped.get(rid, 0) + 1
             out.reply = None
-        elif (cmd in self.faults.garble_reply_on
-              and self._garbled.get(rid, 0) < self.faults.garble_times):
+        elif cmd in self.faults.garble_reply_on and self._garbled.get(rid, 0) < self.faults.garble_times:
             self._garbled[rid] = self._garbled.get(rid, 0) + 1
             out.reply = self._garble(out.reply)
 
@@ -482,7 +493,7 @@ class FakeTriggerBox:
         new = int(self._rng.integers(0x21, 0x7F))
         if new == line[pos]:
             new = 0x21 if line[pos] != 0x21 else 0x22
-        return line[:pos] + bytes([new]) + line[pos + 1:]
+        return line[:pos] + bytes([new]) + line[pos + 1 :]
 
     def _emit(self, out: _Output) -> None:
         pulses = list(out.pulses)

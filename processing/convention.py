@@ -82,7 +82,9 @@ def gray_offset(
         expected = np.pi / 2 + np.pi * (s & 1)
         return _circular_mean((phi - expected)[use])
     if count != frequency:
-        raise ValueError(f"bits: expected 2**bits == frequency or 2 * frequency, found bits = {bits}, frequency = {frequency}")
+        raise ValueError(
+            f"bits: expected 2**bits == frequency or 2 * frequency, found bits = {bits}, frequency = {frequency}"
+        )
     along = 1 if axis == "x" else 0
     a = [slice(None), slice(None)]
     b = [slice(None), slice(None)]

@@ -57,7 +57,9 @@ def _inputs(
     return phase_pair(absolute_phase, wrapped_phase, mask, ("absolute_phase", "wrapped_phase"))
 
 
-def _info(method: str, parameters: dict[str, Any], start: float, frequency: float | None, **extra: Any) -> dict[str, Any]:
+def _info(
+    method: str, parameters: dict[str, Any], start: float, frequency: float | None, **extra: Any
+) -> dict[str, Any]:
     info: dict[str, Any] = {
         "method": method,
         "parameters": parameters,
@@ -80,8 +82,12 @@ def _solver_info(
 
 
 def correct_none(
-    absolute_phase: np.ndarray, wrapped_phase: np.ndarray, orders: np.ndarray | None = None, mask: np.ndarray | None = None,
-    frequency: float | None = None, **params: Any,
+    absolute_phase: np.ndarray,
+    wrapped_phase: np.ndarray,
+    orders: np.ndarray | None = None,
+    mask: np.ndarray | None = None,
+    frequency: float | None = None,
+    **params: Any,
 ) -> Result:
     """No correction: the phase as unwrapped (NaN outside the mask)."""
     start = time.perf_counter()
@@ -90,8 +96,12 @@ def correct_none(
 
 
 def correct_vote(
-    absolute_phase: np.ndarray, wrapped_phase: np.ndarray, orders: np.ndarray | None = None, mask: np.ndarray | None = None,
-    frequency: float | None = None, min_segment: int = 4,
+    absolute_phase: np.ndarray,
+    wrapped_phase: np.ndarray,
+    orders: np.ndarray | None = None,
+    mask: np.ndarray | None = None,
+    frequency: float | None = None,
+    min_segment: int = 4,
 ) -> Result:
     """Ding's row-wise voting between wrapped-phase jumps ([119])."""
     start = time.perf_counter()
@@ -101,22 +111,37 @@ def correct_vote(
 
 
 def correct_rpca_orders(
-    absolute_phase: np.ndarray, wrapped_phase: np.ndarray, orders: np.ndarray | None = None, mask: np.ndarray | None = None,
+    absolute_phase: np.ndarray,
+    wrapped_phase: np.ndarray,
+    orders: np.ndarray | None = None,
+    mask: np.ndarray | None = None,
     frequency: float | None = None,
-    t: float = 0.034, beta: float | None = None, postprocess: bool = True, solver: str = "ialm", svd: str = "auto",
+    t: float = 0.034,
+    beta: float | None = None,
+    postprocess: bool = True,
+    solver: str = "ialm",
+    svd: str = "auto",
 ) -> Result:
     """RPCA on the fringe-order map, then the monotonicity pass (thesis ch. 3)."""
     start = time.perf_counter()
     phase, wrapped, valid = _inputs(absolute_phase, wrapped_phase, mask)
     k = np.where(valid, np.rint((phase - np.mod(wrapped, TWO_PI)) / TWO_PI), 0.0)
-    out, _, result = correct_orders_rpca(k, wrapped, valid, t=t, beta=beta, postprocess=postprocess, solver=solver, svd=svd)
+    out, _, result = correct_orders_rpca(
+        k, wrapped, valid, t=t, beta=beta, postprocess=postprocess, solver=solver, svd=svd
+    )
     parameters = {"t": t, "beta": beta, "postprocess": postprocess, "solver": solver, "svd": svd}
     return out, _solver_info("rpca-orders", parameters, start, frequency, result)
 
 
 def correct_rpca_phase(
-    absolute_phase: np.ndarray, wrapped_phase: np.ndarray, orders: np.ndarray | None = None, mask: np.ndarray | None = None,
-    frequency: float | None = None, tau: float | None = None, stable: bool = True, svd: str = "auto",
+    absolute_phase: np.ndarray,
+    wrapped_phase: np.ndarray,
+    orders: np.ndarray | None = None,
+    mask: np.ndarray | None = None,
+    frequency: float | None = None,
+    tau: float | None = None,
+    stable: bool = True,
+    svd: str = "auto",
 ) -> Result:
     """Low-rank part of the absolute phase by inexact ALM RPCA (thesis ch. 4)."""
     start = time.perf_counter()
@@ -140,8 +165,14 @@ def default_decimation(shape: tuple[int, ...]) -> int:
 
 
 def correct_auto(
-    absolute_phase: np.ndarray, wrapped_phase: np.ndarray, orders: np.ndarray | None = None, mask: np.ndarray | None = None,
-    frequency: float | None = None, tau: float | None = None, k_sigma: float = 4.0, svd: str = "auto",
+    absolute_phase: np.ndarray,
+    wrapped_phase: np.ndarray,
+    orders: np.ndarray | None = None,
+    mask: np.ndarray | None = None,
+    frequency: float | None = None,
+    tau: float | None = None,
+    k_sigma: float = 4.0,
+    svd: str = "auto",
     decimate: int | None = None,
 ) -> Result:
     """The most accurate method measured: region-pooled orders, ch. 4 RPCA, measured detail restored.
@@ -213,14 +244,24 @@ def correct_auto(
     changed = valid & (np.abs(reordered - phase) > np.pi)
     parameters = {
         "tau": tau if tau is not None else default_tau(phase.shape),
-        "stable": True, "k_sigma": k_sigma, "svd": svd,
+        "stable": True,
+        "k_sigma": k_sigma,
+        "svd": svd,
     }
     return out, _solver_info(
-        "auto", parameters, start, frequency, result,
+        "auto",
+        parameters,
+        start,
+        frequency,
+        result,
         steps=["pool-region-orders", "rpca-phase", "reorder-if-consistent"]
-        + (["settle-orders"] if len(candidates) > 2 else []) + ["restore-detail"],
-        orders_changed=int(np.count_nonzero(changed)), misfit_pixels=int(np.count_nonzero(misfit)), guard=guard_name,
-        order_breaks=breaks, rpca_input=base_name,
+        + (["settle-orders"] if len(candidates) > 2 else [])
+        + ["restore-detail"],
+        orders_changed=int(np.count_nonzero(changed)),
+        misfit_pixels=int(np.count_nonzero(misfit)),
+        guard=guard_name,
+        order_breaks=breaks,
+        rpca_input=base_name,
     )
 
 
@@ -229,9 +270,15 @@ CORRECTIONS: dict[str, CorrectionMethod] = {
     for method in (
         CorrectionMethod("none", correct_none, "no correction: the phase as unwrapped"),
         CorrectionMethod("vote", correct_vote, "Ding's row-wise voting of fringe orders between wrapped-phase jumps"),
-        CorrectionMethod("rpca-orders", correct_rpca_orders, "RPCA on the fringe-order map, then monotonic rows (thesis ch. 3)"),
-        CorrectionMethod("rpca-phase", correct_rpca_phase, "low-rank part of the absolute phase by stable RPCA (thesis ch. 4)"),
-        CorrectionMethod("auto", correct_auto, "ch. 4 RPCA with guarded re-derived fringe orders (most accurate measured)"),
+        CorrectionMethod(
+            "rpca-orders", correct_rpca_orders, "RPCA on the fringe-order map, then monotonic rows (thesis ch. 3)"
+        ),
+        CorrectionMethod(
+            "rpca-phase", correct_rpca_phase, "low-rank part of the absolute phase by stable RPCA (thesis ch. 4)"
+        ),
+        CorrectionMethod(
+            "auto", correct_auto, "ch. 4 RPCA with guarded re-derived fringe orders (most accurate measured)"
+        ),
     )
 }
 

@@ -78,5 +78,12 @@ def rpca_denoise_stack(
     for index, frame in enumerate(arr):
         out[index], result = rpca_denoise_frame(frame, tau=tau, stable=stable, svd=svd, tol=tol, dtype=dtype)
         results.append(result)
-        log.info("denoised frame %d/%d: rank %d, %d iterations, %.2f s", index + 1, len(arr), result.rank, result.iterations, result.seconds)
+        log.info(
+            "denoised frame %d/%d: rank %d, %d iterations, %.2f s",
+            index + 1,
+            len(arr),
+            result.rank,
+            result.iterations,
+            result.seconds,
+        )
     return out, results

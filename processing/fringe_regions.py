@@ -95,7 +95,9 @@ def _fringe_regions(
     return core, labels, int(count)
 
 
-def _drop_small_regions(labels: np.ndarray, core: np.ndarray, count: int, min_size: int) -> tuple[np.ndarray, np.ndarray, int]:
+def _drop_small_regions(
+    labels: np.ndarray, core: np.ndarray, count: int, min_size: int
+) -> tuple[np.ndarray, np.ndarray, int]:
     """Regions of fewer than ``min_size`` pixels removed from ``core`` (label 0), the rest relabelled 1 .. n.
 
     Such a region can hold no square with ``min_size`` votes, so it never votes; noisy maps have
@@ -113,8 +115,12 @@ def _tile_pieces(labels: np.ndarray, core: np.ndarray, count: int, tile: int) ->
     """Each region cut into ``tile`` x ``tile`` squares: compact piece labels (0 outside ``core``)."""
     rows, cols = labels.shape
     across, down = -(-cols // tile), -(-rows // tile)
-    tiles = (np.arange(rows, dtype=np.int32)[:, None] // tile) * across + (np.arange(cols, dtype=np.int32)[None, :] // tile)
-    key = labels[core].astype(np.int64 if count * down * across >= 1 << 31 else np.int32) * (down * across) + tiles[core]
+    tiles = (np.arange(rows, dtype=np.int32)[:, None] // tile) * across + (
+        np.arange(cols, dtype=np.int32)[None, :] // tile
+    )
+    key = (
+        labels[core].astype(np.int64 if count * down * across >= 1 << 31 else np.int32) * (down * across) + tiles[core]
+    )
     pieces = np.zeros(labels.shape, dtype=np.int32)
     if count * down * across <= 1 << 24:
         used = np.zeros(count * down * across, dtype=bool)

@@ -133,10 +133,10 @@ def ftp_phase(
 class FringeParts:
     """What the height and correction stages need from one FTP-phased fringe image, all (H, W)."""
 
-    phase: np.ndarray       # wrapped phase in [-pi, pi), float64
-    amplitude: np.ndarray   # fringe amplitude B, float64
+    phase: np.ndarray  # wrapped phase in [-pi, pi), float64
+    amplitude: np.ndarray  # fringe amplitude B, float64
     background: np.ndarray  # mean intensity over one fringe period along the axis, float64
-    valid: np.ndarray       # bool: amplitude above ``min_modulation`` times its median
+    valid: np.ndarray  # bool: amplitude above ``min_modulation`` times its median
 
 
 def ftp_fringe_parts(

@@ -33,8 +33,8 @@ def plane_estimate(
     """
     h, w = phase.shape
     offsets = np.arange(-radius, radius + 1)
-    dy, dx = np.meshgrid(offsets, offsets, indexing="ij")
-    dy, dx = dy.ravel().astype(np.float64), dx.ravel().astype(np.float64)
+    grid_y, grid_x = np.meshgrid(offsets, offsets, indexing="ij")
+    dy, dx = grid_y.ravel().astype(np.float64), grid_x.ravel().astype(np.float64)
     yy = rows[:, None] + dy.astype(np.int64)[None, :]
     xx = cols[:, None] + dx.astype(np.int64)[None, :]
     inside = (yy >= 0) & (yy < h) & (xx >= 0) & (xx < w)

@@ -169,7 +169,16 @@ class Sinusoid(Pattern):
     """
 
     kind: ClassVar[str] = "sinusoid"
-    KEYS: ClassVar[tuple[str, ...]] = ("axis", "frequency", "steps", "step", "offset", "amplitude", "phase_rad", "shift_rad")
+    KEYS: ClassVar[tuple[str, ...]] = (
+        "axis",
+        "frequency",
+        "steps",
+        "step",
+        "offset",
+        "amplitude",
+        "phase_rad",
+        "shift_rad",
+    )
     MAIN_KEYS: ClassVar[tuple[str, ...]] = ("axis", "frequency", "steps", "step")
 
     axis: str = "x"
@@ -323,7 +332,11 @@ def parse_pattern(entry: Any) -> Pattern:
     cls = PATTERN_TYPES.get(kind) if isinstance(kind, str) else None
     if cls is None:
         raise PatternError("kind", f"one of {', '.join(PATTERN_KINDS)}", kind)
-    required = [f.name for f in dataclasses.fields(cls) if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING]
+    required = [
+        f.name
+        for f in dataclasses.fields(cls)
+        if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
+    ]
     for key in required:
         if key not in entry:
             raise PatternError(key)

@@ -254,7 +254,8 @@ def order_breaks(phase: np.ndarray, valid: np.ndarray) -> int:
     masked = np.where(valid, phase, np.nan)
     breaks = 0
     for second in (
-        masked[:, 2:] - 2.0 * masked[:, 1:-1] + masked[:, :-2], masked[2:, :] - 2.0 * masked[1:-1, :] + masked[:-2, :]
+        masked[:, 2:] - 2.0 * masked[:, 1:-1] + masked[:, :-2],
+        masked[2:, :] - 2.0 * masked[1:-1, :] + masked[:-2, :],
     ):
         np.abs(second, out=second)
         breaks += int(np.count_nonzero(second > np.pi))  # NaN (an invalid pixel of the three) never counts
@@ -262,7 +263,10 @@ def order_breaks(phase: np.ndarray, valid: np.ndarray) -> int:
 
 
 def restore_detail(
-    low_rank_phase: np.ndarray, measured_phase: np.ndarray, mask: np.ndarray | None = None, k_sigma: float = 4.0,
+    low_rank_phase: np.ndarray,
+    measured_phase: np.ndarray,
+    mask: np.ndarray | None = None,
+    k_sigma: float = 4.0,
     noise_sigma: float | None = None,
 ) -> np.ndarray:
     """Low-rank phase, except where the measured phase departs from it coherently beyond the noise.
@@ -355,7 +359,12 @@ def upsample_blocks(blocks: np.ndarray, factor: int, shape: tuple[int, int]) -> 
 
 
 def decimated_low_rank(
-    phase: np.ndarray, valid: np.ndarray, factor: int, noise_sigma: float, tau: float | None = None, svd: str = "auto",
+    phase: np.ndarray,
+    valid: np.ndarray,
+    factor: int,
+    noise_sigma: float,
+    tau: float | None = None,
+    svd: str = "auto",
     bend: float = 1.0,
 ) -> tuple[np.ndarray, RPCAResult, np.ndarray]:
     """Low-rank part of a phase map solved on its ``factor`` x ``factor`` block means, interpolated back.

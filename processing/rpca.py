@@ -251,7 +251,7 @@ def rpca_ialm(
     iteration = 0
     target = np.empty_like(d)
     gap = np.empty_like(d)
-    for iteration in range(1, int(max_iter) + 1):
+    for iteration in range(1, int(max_iter) + 1):  # noqa: B007  (reported after the loop)
         inv_mu = 1.0 / mu
         np.multiply(y, inv_mu, out=target)
         target += d  # D + Y / mu, shared by both updates
@@ -270,7 +270,14 @@ def rpca_ialm(
     seconds = time.perf_counter() - start
     log.debug(
         "rpca_ialm %dx%d: %d iterations, rank %d, residual %.2e, %.3f s (%d partial, %d full SVDs)",
-        m, n, iteration, rank, residual, seconds, state.partial_svds, state.full_svds,
+        m,
+        n,
+        iteration,
+        rank,
+        residual,
+        seconds,
+        state.partial_svds,
+        state.full_svds,
     )
     return RPCAResult(low_rank, sparse, iteration, rank, converged, residual, seconds)
 
@@ -278,7 +285,7 @@ def rpca_ialm(
 def _spectral_norm(d: np.ndarray) -> float:
     """Largest singular value by a short power iteration on D^T D (accurate to ~1e-6)."""
     rng = np.random.default_rng(0)
-    v = rng.standard_normal(d.shape[1]).astype(d.dtype)
+    v = np.asarray(rng.standard_normal(d.shape[1]), dtype=d.dtype)
     v /= np.linalg.norm(v)
     value = 0.0
     for _ in range(100):
@@ -355,7 +362,7 @@ def rpca_adm(
     change = np.inf
     converged = False
     iteration = 0
-    for iteration in range(1, int(max_iter) + 1):
+    for iteration in range(1, int(max_iter) + 1):  # noqa: B007  (reported after the loop)
         previous_norm = np.sqrt(float(np.vdot(low_rank, low_rank)) + float(np.vdot(sparse, sparse)))
         new_sparse = shrink(inv_beta * h - low_rank + d, weight_sparse * inv_beta)
         new_low, rank = singular_value_threshold(d - new_sparse + inv_beta * h, weight_low * inv_beta, state, svd)
@@ -369,7 +376,5 @@ def rpca_adm(
             break
     residual = float(np.linalg.norm(d - low_rank - sparse) / np.linalg.norm(d))
     seconds = time.perf_counter() - start
-    log.debug(
-        "rpca_adm %dx%d: %d iterations, rank %d, change %.2e, %.3f s", m, n, iteration, rank, change, seconds
-    )
+    log.debug("rpca_adm %dx%d: %d iterations, rank %d, change %.2e, %.3f s", m, n, iteration, rank, change, seconds)
     return RPCAResult(low_rank, sparse, iteration, rank, converged, residual, seconds)

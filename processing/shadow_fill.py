@@ -29,7 +29,9 @@ def valid_mask(image: np.ndarray, mask: np.ndarray | None, name: str = "image") 
         valid = finite
     else:
         if np.any(checked & ~finite):
-            raise ValueError(f"{name}: NaN or infinity at {int(np.count_nonzero(checked & ~finite))} pixels the mask marks valid")
+            raise ValueError(
+                f"{name}: NaN or infinity at {int(np.count_nonzero(checked & ~finite))} pixels the mask marks valid"
+            )
         valid = checked
     if not valid.any():
         raise ValueError("mask: no valid pixel (the whole map is shadow)")

@@ -126,7 +126,9 @@ def _finite_image(value: object, name: str, shape: tuple[int, ...] | None = None
     return arr
 
 
-def separate_fringe_speckle(image: np.ndarray, tau: float | None = None, tol: float = DEFAULT_RPCA_TOL, svd: str = "auto"):
+def separate_fringe_speckle(
+    image: np.ndarray, tau: float | None = None, tol: float = DEFAULT_RPCA_TOL, svd: str = "auto"
+):
     """Low-rank fringe part and sparse speckle part of one image by inexact ALM RPCA.
 
     Stable principal component pursuit (thesis eq. 2.16: D = L + S + dense noise): the solver
@@ -351,8 +353,13 @@ def _consistent_unwrap(
     # Back to full size: sample the coarse grid at (y / step, x / step).
     map_x = np.broadcast_to((np.arange(cols, dtype=np.float32) / step)[None, :], (rows, cols))
     map_y = np.broadcast_to((np.arange(rows, dtype=np.float32) / step)[:, None], (rows, cols))
-    smooth = cv2.remap(coarse.astype(np.float32), np.ascontiguousarray(map_x), np.ascontiguousarray(map_y),
-                       interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).astype(np.float64)
+    smooth = cv2.remap(
+        coarse.astype(np.float32),
+        np.ascontiguousarray(map_x),
+        np.ascontiguousarray(map_y),
+        interpolation=cv2.INTER_LINEAR,
+        borderMode=cv2.BORDER_REPLICATE,
+    ).astype(np.float64)
     return wrapped_phase + TWO_PI * np.rint((smooth - wrapped_phase) / TWO_PI)
 
 
@@ -521,8 +528,10 @@ def fewer_breaks(
     b = wrapped_phase + TWO_PI * fallback
     breaks_a = np.zeros(count)
     breaks_b = np.zeros(count)
-    for first, second in (((slice(None), slice(None, -1)), (slice(None), slice(1, None))),
-                          ((slice(None, -1), slice(None)), (slice(1, None), slice(None)))):
+    for first, second in (
+        ((slice(None), slice(None, -1)), (slice(None), slice(1, None))),
+        ((slice(None, -1), slice(None)), (slice(1, None), slice(None))),
+    ):
         pair = valid[first] & valid[second]
         lp, lq = labels[first], labels[second]
         same = lp == lq
@@ -616,8 +625,16 @@ def single_shot_unwrap(
         if reference_absolute_phase is not None:
             _validate.phase_map(reference_absolute_phase, "reference_absolute_phase", img.shape)
         reference = prepare_reference(
-            reference_image, reference_absolute_phase, frequency, axis=axis, carrier=carrier,
-            bandwidth=bandwidth, tau=tau, rpca_tol=rpca_tol, separate=separate, svd=svd,
+            reference_image,
+            reference_absolute_phase,
+            frequency,
+            axis=axis,
+            carrier=carrier,
+            bandwidth=bandwidth,
+            tau=tau,
+            rpca_tol=rpca_tol,
+            separate=separate,
+            svd=svd,
         )
     user_mask = _validate.bool_mask(mask, "mask", img.shape)
     timings: dict[str, float] = {"reference": reference.seconds}

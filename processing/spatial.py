@@ -85,8 +85,10 @@ def _spanning_tree_edges(mask: np.ndarray, quality: np.ndarray) -> coo_matrix:
     height, width = mask.shape
     index = np.arange(height * width).reshape(height, width)
     heads, tails, weights = [], [], []
-    for a, b in (((slice(None), slice(None, -1)), (slice(None), slice(1, None))),
-                 ((slice(None, -1), slice(None)), (slice(1, None), slice(None)))):
+    for a, b in (
+        ((slice(None), slice(None, -1)), (slice(None), slice(1, None))),
+        ((slice(None, -1), slice(None)), (slice(1, None), slice(None))),
+    ):
         both = mask[a] & mask[b]
         heads.append(index[a][both])
         tails.append(index[b][both])
@@ -154,8 +156,10 @@ def unwrap_quality_guided(
     _, first = np.unique(labels[best_first], return_index=True)
     roots = best_first[first]
     links = coo_matrix(
-        (np.ones(tree.nnz + roots.size), (np.concatenate([tree.row, np.full(roots.size, n)]),
-                                          np.concatenate([tree.col, roots]))),
+        (
+            np.ones(tree.nnz + roots.size),
+            (np.concatenate([tree.row, np.full(roots.size, n)]), np.concatenate([tree.col, roots])),
+        ),
         shape=(n + 1, n + 1),
     ).tocsr()
     _, parent = breadth_first_order(links, n, directed=False, return_predecessors=True)

@@ -391,7 +391,9 @@ def _three_frequency_turns(frequencies: Sequence[int]) -> TurnKernel:
 
 def _check_frequencies_coprime(frequencies: Sequence[int], name: str) -> None:
     if math.gcd(*frequencies) != 1:
-        raise ValueError(f"{name}: {list(frequencies)} share the common divisor {math.gcd(*frequencies)}; expected none > 1")
+        raise ValueError(
+            f"{name}: {list(frequencies)} share the common divisor {math.gcd(*frequencies)}; expected none > 1"
+        )
 
 
 # --------------------------------------------------------------------------- hierarchical / heterodyne
@@ -624,7 +626,7 @@ def decode_gray(
         bits = planes > level
     # Gray -> binary: b_i = g_0 ^ g_1 ^ ... ^ g_i (cumulative XOR over the planes, MSB first).
     binary = np.bitwise_xor.accumulate(bits.astype(np.uint8), axis=0)
-    weights = (1 << np.arange(planes.shape[0] - 1, -1, -1, dtype=np.int64))
+    weights = 1 << np.arange(planes.shape[0] - 1, -1, -1, dtype=np.int64)
     return np.tensordot(weights, binary.astype(np.int64), axes=(0, 0))
 
 

@@ -32,8 +32,18 @@ if TYPE_CHECKING:
     from rig.store.capture import Capture
 
 __all__ = [
-    "DEFAULT_CORRECTION", "CancelToken", "Cancelled", "Event", "ProcessOptions", "Reporter",
-    "load_capture", "load_calibration", "load_config", "process", "write_outputs", "scan",
+    "DEFAULT_CORRECTION",
+    "CancelToken",
+    "Cancelled",
+    "Event",
+    "ProcessOptions",
+    "Reporter",
+    "load_capture",
+    "load_calibration",
+    "load_config",
+    "process",
+    "write_outputs",
+    "scan",
 ]
 
 PathLike = str | Path

@@ -12,7 +12,19 @@ from rig import __version__
 from rig.errors import USER_ERRORS
 
 # Subcommand modules under rig/commands, in the order `rig --help` lists them.
-COMMAND_MODULES: tuple[str, ...] = ("scan", "calibrate", "devices", "simulate", "process", "batch", "info", "import_", "demo", "study", "console")
+COMMAND_MODULES: tuple[str, ...] = (
+    "scan",
+    "calibrate",
+    "devices",
+    "simulate",
+    "process",
+    "batch",
+    "info",
+    "import_",
+    "demo",
+    "study",
+    "console",
+)
 
 EXIT_USER_ERROR = 1
 EXIT_INTERRUPTED = 130

@@ -99,10 +99,17 @@ class ScanConfig:
     def pattern_models(self) -> list[Pattern]:
         """The typed patterns of one scan (see :meth:`patterns`)."""
         if self.pattern_set == "speckle":
-            return [SpeckleSinusoid(
-                axis=self.axis, frequency=_plain_number(self.speckle_frequency), steps=1, step=0,
-                seed=self.speckle_seed, dot_px=self.speckle_dot_px, speckle_gain=self.speckle_gain,
-            )]
+            return [
+                SpeckleSinusoid(
+                    axis=self.axis,
+                    frequency=_plain_number(self.speckle_frequency),
+                    steps=1,
+                    step=0,
+                    seed=self.speckle_seed,
+                    dot_px=self.speckle_dot_px,
+                    speckle_gain=self.speckle_gain,
+                )
+            ]
         out: list[Pattern] = [
             Sinusoid(axis=self.axis, frequency=_plain_number(f), steps=self.steps, step=j)
             for f in self.frequencies
@@ -259,7 +266,7 @@ def _snr(value: Any) -> float | None:
     if value == "none":
         return None
     if not _is_number(value):
-        raise _Bad("a number in dB or \"none\"")
+        raise _Bad('a number in dB or "none"')
     return float(value)
 
 
@@ -330,9 +337,7 @@ def _section(data: Mapping[str, Any], name: str, where: str) -> dict[str, Any]:
     values: dict[str, Any] = {}
     for key, value in raw.items():
         if key not in schema:
-            raise ConfigError(
-                f"{where}: [{name}] {key}: unknown key; expected one of {', '.join(schema)}"
-            )
+            raise ConfigError(f"{where}: [{name}] {key}: unknown key; expected one of {', '.join(schema)}")
         try:
             values[key] = schema[key](value)
         except _Bad as bad:
@@ -364,7 +369,9 @@ def parse_config(data: Mapping[str, Any], source: Path | None = None, where: str
     if "backend" not in trigger and camera.get("backend", CameraConfig.backend) != "simulated":
         trigger["backend"] = "software"  # the fake trigger box can only pulse the simulated camera
     if trigger.get("backend") == "serial" and "port" not in trigger:
-        raise ConfigError(f"{where}: [trigger] port: expected a serial port or pyserial URL for backend 'serial', found nothing")
+        raise ConfigError(
+            f"{where}: [trigger] port: expected a serial port or pyserial URL for backend 'serial', found nothing"
+        )
     scan = _section(data, "scan", where)
     simulation = _section(data, "simulation", where)
     config = RigConfig(

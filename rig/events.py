@@ -49,8 +49,15 @@ class Event:
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready form (the console sends these over its websocket)."""
-        return {"task": self.task, "kind": self.kind, "done": self.done, "total": self.total,
-                "note": self.note, "time": self.time, "data": self.data}
+        return {
+            "task": self.task,
+            "kind": self.kind,
+            "done": self.done,
+            "total": self.total,
+            "note": self.note,
+            "time": self.time,
+            "data": self.data,
+        }
 
 
 EventSink = Callable[[Event], None]
@@ -101,7 +108,9 @@ class Reporter:
         Steps expected, if known up front; services call :meth:`begin` when they know it.
     """
 
-    def __init__(self, task: str, sink: EventSink | None = None, cancel: CancelToken | None = None, total: int = 0) -> None:
+    def __init__(
+        self, task: str, sink: EventSink | None = None, cancel: CancelToken | None = None, total: int = 0
+    ) -> None:
         self.task = task
         self.sink = sink
         self.cancel = cancel if cancel is not None else CancelToken()

@@ -21,7 +21,9 @@ BAR_WIDTH = 24
 class Progress:
     """Progress of ``total`` steps of one command; use as a context manager."""
 
-    def __init__(self, label: str, total: int, stream: TextIO | None = None, quiet: bool = False, tty: bool | None = None) -> None:
+    def __init__(
+        self, label: str, total: int, stream: TextIO | None = None, quiet: bool = False, tty: bool | None = None
+    ) -> None:
         self.label = label
         self.total = max(int(total), 1)
         self.stream = sys.stderr if stream is None else stream
@@ -33,7 +35,7 @@ class Progress:
         self._width = 0
         self._announced = False
 
-    def __enter__(self) -> "Progress":
+    def __enter__(self) -> Progress:
         self.started = time.perf_counter()
         self._draw("")
         return self

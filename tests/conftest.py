@@ -28,7 +28,9 @@ def small_capture(tmp_path: Path, small_scan: SimulatedScan) -> SimulatedPaths:
     return write_simulated_scan(small_scan, tmp_path / "scan")
 
 
-def _simulated_rig_toml(projector: tuple[int, int], camera: tuple[int, int], snr_db: float, gamma: float | None = None) -> str:
+def _simulated_rig_toml(
+    projector: tuple[int, int], camera: tuple[int, int], snr_db: float, gamma: float | None = None
+) -> str:
     text = (
         f"\n[projector]\nsize = [{projector[0]}, {projector[1]}]\n[camera]\nsize = [{camera[0]}, {camera[1]}]\n"
         '[scan]\nfrequencies = [1, 8, 32]\nsteps = 4\n[simulation]\nscene = "hemisphere"\n'
@@ -58,11 +60,20 @@ def exact_calibration() -> Callable[[Path, Path], Path]:
 
     def calibrate(config_path: Path, directory: Path) -> Path:
         geometry = geometry_from_config(load_config(config_path))
-        assert main(["scan", "--config", str(config_path), "--scene", "reference", "-o", str(directory / "reference")]) == 0
+        assert (
+            main(["scan", "--config", str(config_path), "--scene", "reference", "-o", str(directory / "reference")])
+            == 0
+        )
         write_calibration(
             directory,
-            Calibration(l0_mm=geometry.l0_mm, d0_mm=geometry.d0_mm, f0_per_mm=geometry.f0_per_mm,
-                        f0_frequency=geometry.f0_frequency, pixel_mm=geometry.pixel_mm, reference="reference"),
+            Calibration(
+                l0_mm=geometry.l0_mm,
+                d0_mm=geometry.d0_mm,
+                f0_per_mm=geometry.f0_per_mm,
+                f0_frequency=geometry.f0_frequency,
+                pixel_mm=geometry.pixel_mm,
+                reference="reference",
+            ),
         )
         return directory
 

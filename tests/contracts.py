@@ -26,7 +26,16 @@ SIZE = (128, 96)
 # One pattern of every kind and option of capture-format.md, and the projector-only alignment grid.
 PATTERNS = [
     {"kind": "sinusoid", "axis": "x", "frequency": 5, "steps": 6, "step": 1},
-    {"kind": "sinusoid", "axis": "y", "frequency": 3, "steps": 4, "step": 3, "offset": 0.4, "amplitude": 0.3, "phase_rad": math.pi},
+    {
+        "kind": "sinusoid",
+        "axis": "y",
+        "frequency": 3,
+        "steps": 4,
+        "step": 3,
+        "offset": 0.4,
+        "amplitude": 0.3,
+        "phase_rad": math.pi,
+    },
     {"kind": "sinusoid", "axis": "x", "frequency": 40, "steps": 3, "step": 0, "shift_rad": 1.1},
     {"kind": "gray", "axis": "x", "bit": 0, "bits": 7},
     {"kind": "gray", "axis": "x", "bit": 6, "bits": 7},
@@ -34,7 +43,16 @@ PATTERNS = [
     {"kind": "flat", "level": 0.0},
     {"kind": "flat", "level": 0.3},
     {"kind": "flat", "level": 1.0},
-    {"kind": "speckle-sinusoid", "axis": "x", "frequency": 8, "steps": 3, "step": 2, "seed": 4, "dot_px": 3, "speckle_gain": 0.3},
+    {
+        "kind": "speckle-sinusoid",
+        "axis": "x",
+        "frequency": 8,
+        "steps": 3,
+        "step": 2,
+        "seed": 4,
+        "dot_px": 3,
+        "speckle_gain": 0.3,
+    },
     {"kind": "grid", "pitch_px": 16},
     {"kind": "grid", "pitch_px": 7, "line_px": 3, "crosshair_px": 5, "level": 0.8, "background": 0.1},
 ]
@@ -112,7 +130,11 @@ class ProjectorContract:
 
     @pytest.mark.parametrize(
         "bad",
-        [{"kind": "checkerboard"}, {"kind": "sinusoid", "axis": "x", "steps": 4, "step": 0}, {"kind": "gray", "axis": "z", "bit": 0, "bits": 4}],
+        [
+            {"kind": "checkerboard"},
+            {"kind": "sinusoid", "axis": "x", "steps": 4, "step": 0},
+            {"kind": "gray", "axis": "z", "bit": 0, "bits": 4},
+        ],
         ids=["unknown-kind", "missing-frequency", "bad-axis"],
     )
     def test_bad_pattern_names_the_problem(self, projector: Projector, bad: dict) -> None:
@@ -120,8 +142,11 @@ class ProjectorContract:
             with pytest.raises(ValueError, match="pattern|axis"):
                 projector.show(bad)
 
-    @pytest.mark.parametrize("lut", [np.array([0.5]), np.array([0.0, 1.5]), np.ones((4, 4)) * 0.5, np.array([0.0, np.nan])],
-                             ids=["one-entry", "above-one", "2-d", "nan"])
+    @pytest.mark.parametrize(
+        "lut",
+        [np.array([0.5]), np.array([0.0, 1.5]), np.ones((4, 4)) * 0.5, np.array([0.0, np.nan])],
+        ids=["one-entry", "above-one", "2-d", "nan"],
+    )
     def test_bad_lut_is_refused(self, projector: Projector, lut: np.ndarray) -> None:
         with pytest.raises(ValueError, match="lut"):
             projector.set_gamma_lut(lut)

@@ -57,8 +57,7 @@ class ExchangeScript:
         with self.lock:
             problems = list(self.errors)
             if self._pending:
-                problems.append(f"{len(self._pending)} exchange(s) left over, next: "
-                                f"{_show(self._pending[0][0])}")
+                problems.append(f"{len(self._pending)} exchange(s) left over, next: {_show(self._pending[0][0])}")
         assert not problems, "; ".join(problems)
 
 
@@ -125,8 +124,7 @@ def expected_usb_protocol(exchanges: Sequence[Exchange]) -> Iterator[ScriptedHid
 
 
 @contextlib.contextmanager
-def expected_protocol(driver_class: type, exchanges: Sequence[Exchange],
-                      **kwargs: object) -> Iterator[object]:
+def expected_protocol(driver_class: type, exchanges: Sequence[Exchange], **kwargs: object) -> Iterator[object]:
     """pymeasure's form: yield an opened ``driver_class`` whose peer follows ``exchanges``.
 
     Serial drivers (constructor argument ``url``) get a scripted pty, USB drivers (``backend``)
@@ -138,8 +136,7 @@ def expected_protocol(driver_class: type, exchanges: Sequence[Exchange],
         with expected_serial_protocol(exchanges) as port, driver_class(port, **kwargs) as driver:
             yield driver
     elif "backend" in parameters:
-        with expected_usb_protocol(exchanges) as backend, \
-                driver_class(backend=backend, **kwargs) as driver:
+        with expected_usb_protocol(exchanges) as backend, driver_class(backend=backend, **kwargs) as driver:
             yield driver
     else:
         raise TypeError(f"{driver_class.__name__} takes neither url nor backend")

@@ -20,16 +20,16 @@ from drivers.camera import TriggerSource
 from drivers.dlp import LightCrafter4500
 from drivers.dlp_protocol import Command
 from drivers.errors import DeviceError, DeviceNotFoundError, DeviceTimeoutError
+from drivers.projector_dlp import DlpVideoProjector
 from mock_devices.camera import CameraFaults, SimulatedCamera
 from mock_devices.dlp_usb import Dlpc350Faults, FakeDlpc350Backend
 from mock_devices.trigger_box import TriggerFaults
 from processing.patterns import sinusoid_shift
 from rig.acquisition.loop import AcquisitionError, AcquisitionSettings, SoftwareTrigger, run_scan
-from rig.hardware.assembly import trigger_path
-from rig.store.capture import INCOMPLETE_MARK, read_capture
-from drivers.projector_dlp import DlpVideoProjector
 from rig.config import CameraConfig, ProjectorConfig, RigConfig, ScanConfig, SimulationConfig, TriggerConfig
+from rig.hardware.assembly import trigger_path
 from rig.hardware.simulated import SimulatedRig, appearance_from_config
+from rig.store.capture import INCOMPLETE_MARK, read_capture
 
 STEPS = 8
 FREQUENCY = 2
@@ -58,7 +58,13 @@ def scan(tmp_path: Path, trigger: str, retries: int = 2, camera_faults=None, tri
     with SimulatedRig(config, scene="reference", camera_faults=camera_faults, trigger_faults=trigger_faults) as rig:
         path = trigger_path(rig.camera, rig.trigger_box)
         result = run_scan(
-            tmp_path / "capture", config.scan.patterns(), rig.projector, rig.camera, path, settings(config), progress=progress
+            tmp_path / "capture",
+            config.scan.patterns(),
+            rig.projector,
+            rig.camera,
+            path,
+            settings(config),
+            progress=progress,
         )
         return result, rig
 
@@ -97,9 +103,9 @@ def test_clean_scan_stores_each_frame_under_its_pattern(tmp_path, trigger):
 @pytest.mark.parametrize(
     ("faults", "retried_pattern"),
     [
-        (CameraFaults(timeout_on={2}), 2),   # trigger missed: no frame at all
-        (CameraFaults(drop={3}), 3),         # frame lost in transport: id gap on the next one
-        (CameraFaults(stale={5}), 5),        # frame exposed before its trigger
+        (CameraFaults(timeout_on={2}), 2),  # trigger missed: no frame at all
+        (CameraFaults(drop={3}), 3),  # frame lost in transport: id gap on the next one
+        (CameraFaults(stale={5}), 5),  # frame exposed before its trigger
     ],
     ids=["timeout", "dropped", "stale"],
 )
@@ -139,7 +145,7 @@ class CameraWithoutTriggerIndex(SimulatedCamera):
     [
         # exposure indices count from start(); the loop restarts the camera after each fault
         (CameraFaults(timeout_on={2}), STEPS + 3),  # missed triggers use no frame id
-        (CameraFaults(drop={3}), STEPS + 2),         # lost frames do
+        (CameraFaults(drop={3}), STEPS + 2),  # lost frames do
         (CameraFaults(duplicate={4}), STEPS),
         (CameraFaults(stale={5}), STEPS + 1),
     ],
@@ -153,7 +159,12 @@ def test_camera_without_trigger_indices_is_matched_by_frame_id(tmp_path, faults,
         )
         with camera:
             result = run_scan(
-                tmp_path / "capture", config.scan.patterns(), rig.projector, camera, SoftwareTrigger(camera), settings(config)
+                tmp_path / "capture",
+                config.scan.patterns(),
+                rig.projector,
+                camera,
+                SoftwareTrigger(camera),
+                settings(config),
             )
         assert_every_frame_matches_its_pattern(result.path, rig)
     assert result.attempts == attempts
@@ -218,7 +229,9 @@ def test_unacknowledged_pulse_leaves_no_extra_frame_for_the_next_pattern(tmp_pat
     config = small_config("simulated-serial")
     with SimulatedRig(config, scene="reference") as rig:
         path = trigger_path(rig.camera, ReplyLostAfterPulse(rig.trigger_box, lose=4))
-        result = run_scan(tmp_path / "capture", config.scan.patterns(), rig.projector, rig.camera, path, settings(config))
+        result = run_scan(
+            tmp_path / "capture", config.scan.patterns(), rig.projector, rig.camera, path, settings(config)
+        )
         assert_every_frame_matches_its_pattern(result.path, rig)
     frames = read_capture(result.path).frames
     assert [f["trigger_index"] for f in frames] == [0, 1, 2, 3, 5, 6, 7, 8]
@@ -230,8 +243,9 @@ def test_trigger_box_is_kept_armed_while_the_loop_waits_for_a_slow_frame(tmp_pat
     # 1 s for a frame before retrying: without heartbeats the next FIRE would find it disarmed.
     config = small_config("simulated-serial")
     slow = AcquisitionSettings(fetch_timeout_s=1.0, retries=2, keepalive_s=0.1)
-    with SimulatedRig(config, scene="reference", camera_faults=CameraFaults(timeout_on={2}),
-                      fake_box_options={"watchdog_s": 0.3}) as rig:
+    with SimulatedRig(
+        config, scene="reference", camera_faults=CameraFaults(timeout_on={2}), fake_box_options={"watchdog_s": 0.3}
+    ) as rig:
         path = trigger_path(rig.camera, rig.trigger_box)
         result = run_scan(tmp_path / "capture", config.scan.patterns(), rig.projector, rig.camera, path, slow)
         assert_every_frame_matches_its_pattern(result.path, rig)
@@ -286,7 +300,15 @@ def test_devices_are_restored_after_a_failed_scan(tmp_path, trigger):
         rig.camera.exposure_us = 1234.0
         path = trigger_path(rig.camera, rig.trigger_box)
         with pytest.raises(AcquisitionError):
-            run_scan(tmp_path / "c", config.scan.patterns(), rig.projector, rig.camera, path, settings(config), exposure_us=500.0)
+            run_scan(
+                tmp_path / "c",
+                config.scan.patterns(),
+                rig.projector,
+                rig.camera,
+                path,
+                settings(config),
+                exposure_us=500.0,
+            )
         assert not rig.camera.is_started
         assert rig.camera.trigger_source is TriggerSource.SOFTWARE
         assert rig.camera.exposure_us == 1234.0

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from rig import api
-from rig.events import CancelToken, Cancelled, Event, Reporter
+from rig.events import Cancelled, CancelToken, Event, Reporter
 
 
 def test_process_in_memory_writes_nothing_then_outputs_match(small_capture, tmp_path: Path) -> None:

@@ -42,7 +42,10 @@ def _case(name: str):
 def scores(request) -> dict[str, float]:
     height, geometry, obj, ref, f = _case(request.param)
     mask = obj.lit & ref.lit
-    out = {"oracle": nmse(heights(oracle_phase(obj), oracle_phase(ref), geometry, f), height, mask), "case": request.param}
+    out = {
+        "oracle": nmse(heights(oracle_phase(obj), oracle_phase(ref), geometry, f), height, mask),
+        "case": request.param,
+    }
     for method in ("none", "vote", "rpca-phase", "auto"):
         po, pr = (correct(method, c.phase, c.wrapped, mask=c.lit)[0] for c in (obj, ref))
         out[method] = nmse(heights(po, pr, geometry, f), height, mask)

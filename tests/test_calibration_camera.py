@@ -7,7 +7,13 @@ import numpy as np
 import pytest
 
 from calibration.camera import (
-    BoardSpec, calibrate_camera, detect_board, undistort_map, undistort_pixels, undistort_points, undistort_stack,
+    BoardSpec,
+    calibrate_camera,
+    detect_board,
+    undistort_map,
+    undistort_pixels,
+    undistort_points,
+    undistort_stack,
 )
 from calibration.errors import CalibrationError
 from mock_devices.board_synth import PinholeCamera, calibration_views
@@ -71,7 +77,7 @@ def test_undistortion_straightens_the_board(chessboard_views):
     corrected = undistort_stack(view, CAMERA.camera_matrix, CAMERA.distortion)
     assert corrected.shape == view.shape and corrected.dtype == view.dtype
     before, after = homography_misfit(view), homography_misfit(corrected)
-    assert before > 0.15          # a distorted board is not a homography (0.22 px here) ...
+    assert before > 0.15  # a distorted board is not a homography (0.22 px here) ...
     assert after < 0.06 and after < before / 4  # ... a straightened one is, to the corner noise
     stack = undistort_stack(np.stack(images[:2]), CAMERA.camera_matrix, CAMERA.distortion)
     assert np.array_equal(stack[1], undistort_stack(images[1], CAMERA.camera_matrix, CAMERA.distortion))
@@ -109,4 +115,6 @@ def test_points_and_maps_undistort_like_the_frames(chessboard_views):
     from_x = undistort_map(columns, CAMERA.camera_matrix, CAMERA.distortion)
     from_y = undistort_map(rows, CAMERA.camera_matrix, CAMERA.distortion)
     source = np.array([[from_x[100, 250], from_y[100, 250]], [from_x[30, 40], from_y[30, 40]]])
-    assert np.allclose(undistort_pixels(source, CAMERA.camera_matrix, CAMERA.distortion), [[250, 100], [40, 30]], atol=0.01)
+    assert np.allclose(
+        undistort_pixels(source, CAMERA.camera_matrix, CAMERA.distortion), [[250, 100], [40, 30]], atol=0.01
+    )

@@ -37,16 +37,18 @@ def _edit(path: Path, **changes: object) -> None:
 
 def test_fringe_axis_other_than_the_calibrations_is_refused(capsys, small_capture, tmp_path) -> None:
     _edit(small_capture.calibration / "calibration.json", fringe_axis="y")
-    line = _one_line_error(capsys, "process", small_capture.capture, "--calibration", small_capture.calibration,
-                           "-o", tmp_path / "out")
+    line = _one_line_error(
+        capsys, "process", small_capture.capture, "--calibration", small_capture.calibration, "-o", tmp_path / "out"
+    )
     assert "fringe axis: x does not fit" in line and "fringe_axis y" in line and "--axis y" in line
     assert not (tmp_path / "out").exists()
 
 
 def test_distances_in_metres_are_refused(capsys, small_capture, tmp_path) -> None:
     _edit(small_capture.calibration / "calibration.json", l0_mm=1.0)
-    line = _one_line_error(capsys, "process", small_capture.capture, "--calibration", small_capture.calibration,
-                           "-o", tmp_path / "out")
+    line = _one_line_error(
+        capsys, "process", small_capture.capture, "--calibration", small_capture.calibration, "-o", tmp_path / "out"
+    )
     assert "l0_mm: 1 mm is implausibly short" in line and "metres" in line and "(1000)" in line
 
 
@@ -57,8 +59,9 @@ def test_reference_with_other_frequencies_names_the_cause(capsys, small_capture,
         if pattern.get("frequency") == 64:
             pattern["frequency"] = 32
     manifest.write_text(json.dumps(data))
-    line = _one_line_error(capsys, "process", small_capture.capture, "--calibration", small_capture.calibration,
-                           "-o", tmp_path / "out")
+    line = _one_line_error(
+        capsys, "process", small_capture.capture, "--calibration", small_capture.calibration, "-o", tmp_path / "out"
+    )
     assert "the reference capture does not fit this capture" in line and "likely cause" in line and "fix:" in line
 
 
@@ -79,11 +82,17 @@ def _stereo_calibration(tmp_path: Path, projector: tuple[int, int], translation:
     cal = tmp_path / "cal"
     cal.mkdir()
     fields = {
-        "format": "fpp-calibration", "version": 1, "model": "stereo",
-        "camera_matrix": [[100, 0, 32], [0, 100, 24], [0, 0, 1]], "distortion": [],
+        "format": "fpp-calibration",
+        "version": 1,
+        "model": "stereo",
+        "camera_matrix": [[100, 0, 32], [0, 100, 24], [0, 0, 1]],
+        "distortion": [],
         "projector_matrix": [[150, 0, projector[0] / 2], [0, 150, projector[1] / 2], [0, 0, 1]],
-        "projector_distortion": [], "rotation": [[1, 0, 0], [0, 1, 0], [0, 0, 1]],
-        "translation_mm": translation, "camera_size": [64, 48], "projector_size": list(projector),
+        "projector_distortion": [],
+        "rotation": [[1, 0, 0], [0, 1, 0], [0, 0, 1]],
+        "translation_mm": translation,
+        "camera_size": [64, 48],
+        "projector_size": list(projector),
     }
     (cal / "calibration.json").write_text(json.dumps(fields))
     return cal
@@ -109,15 +118,59 @@ def test_stereo_translation_in_metres_is_refused(capsys, tmp_path) -> None:
 @needs_real_data
 def test_real_eye_imported_without_projector_width_is_refused(capsys, tmp_path) -> None:
     eye = REAL_DATA / "slmaster-eye"
-    assert main(["calibrate", "--import-opencv", str(eye / "caliInfo.yml"), "--projector-size", "1920x1024",
-                 "--pixel-centre", "0", "-o", str(tmp_path / "cal")]) == 0
-    assert main(["import", str(eye / "L"), "--patterns", "sin:f=32,steps=12,phase=pi; gray:bits=6",
-                 "-o", str(tmp_path / "eye")]) == 0
+    assert (
+        main(
+            [
+                "calibrate",
+                "--import-opencv",
+                str(eye / "caliInfo.yml"),
+                "--projector-size",
+                "1920x1024",
+                "--pixel-centre",
+                "0",
+                "-o",
+                str(tmp_path / "cal"),
+            ]
+        )
+        == 0
+    )
+    assert (
+        main(
+            [
+                "import",
+                str(eye / "L"),
+                "--patterns",
+                "sin:f=32,steps=12,phase=pi; gray:bits=6",
+                "-o",
+                str(tmp_path / "eye"),
+            ]
+        )
+        == 0
+    )
     capsys.readouterr()
-    line = _one_line_error(capsys, "process", tmp_path / "eye", "--calibration", tmp_path / "cal", "-o", tmp_path / "out")
+    line = _one_line_error(
+        capsys, "process", tmp_path / "eye", "--calibration", tmp_path / "cal", "-o", tmp_path / "out"
+    )
     assert "projector width: 1280 px does not fit" in line and "re-import it with --projector-width 1920" in line
-    assert main(["import", str(eye / "L"), "--patterns", "sin:f=32,steps=12,phase=pi; gray:bits=6",
-                 "--projector-width", "1920", "--downsample", "2", "-o", str(tmp_path / "small")]) == 0
+    assert (
+        main(
+            [
+                "import",
+                str(eye / "L"),
+                "--patterns",
+                "sin:f=32,steps=12,phase=pi; gray:bits=6",
+                "--projector-width",
+                "1920",
+                "--downsample",
+                "2",
+                "-o",
+                str(tmp_path / "small"),
+            ]
+        )
+        == 0
+    )
     capsys.readouterr()
-    line = _one_line_error(capsys, "process", tmp_path / "small", "--calibration", tmp_path / "cal", "-o", tmp_path / "out")
+    line = _one_line_error(
+        capsys, "process", tmp_path / "small", "--calibration", tmp_path / "cal", "-o", tmp_path / "out"
+    )
     assert "camera: 640x512 does not fit" in line and "camera_size 1280x1024" in line and "--downsample" in line

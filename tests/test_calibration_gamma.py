@@ -12,8 +12,14 @@ import pytest
 
 from calibration.errors import CalibrationError
 from calibration.gamma import (
-    compensate_phase, fit_gamma, inverse_lut, mean_response, phase_error_table, ramp_patterns,
-    ripple_table_from_plane, table_from_fields,
+    compensate_phase,
+    fit_gamma,
+    inverse_lut,
+    mean_response,
+    phase_error_table,
+    ramp_patterns,
+    ripple_table_from_plane,
+    table_from_fields,
 )
 from drivers.projector import apply_gamma_lut, validate_gamma_lut
 from mock_devices import synth
@@ -76,7 +82,7 @@ def test_lut_pre_correction_removes_the_ripple(gamma_fit, method):
     assert np.max(np.abs(gamma_fit.normalized_response(lut) - x)) < 0.02
     raw, _, _ = ripple(None)
     corrected, _, _ = ripple(lut)
-    assert raw > 0.05                  # gamma 2.2 with 3 steps ripples by ~0.1 rad
+    assert raw > 0.05  # gamma 2.2 with 3 steps ripples by ~0.1 rad
     assert corrected < raw / 4
 
 
@@ -108,7 +114,7 @@ def test_bad_ramps_are_refused():
 
 def test_ripple_table_learnt_from_the_plane_itself():
     raw, measured, truth = ripple(None, seed=5)
-    absolute = truth + wrap(measured - truth)        # the plane's absolute phase, ripple included
+    absolute = truth + wrap(measured - truth)  # the plane's absolute phase, ripple included
     table, ripple_rms = ripple_table_from_plane(absolute)
     assert ripple_rms == pytest.approx(raw, rel=0.2)  # the table sees the ripple a smooth fit leaves
     _, measured2, truth2 = ripple(None, seed=6)

@@ -11,9 +11,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from calibration.camera import BoardSpec, detect_board
 from calibration.errors import CalibrationError
 from calibration.geometry import fit_f0, fit_l0_d0, pixel_mm_from_corners
-from calibration.camera import BoardSpec, detect_board
 from calibration.reference import check_same_patterns, phase_frequency
 from mock_devices import synth
 from mock_devices.board_synth import PinholeCamera, board_pose, chessboard_texture, render_board_view
@@ -23,14 +23,21 @@ from processing.phase_shift import phase_shift
 FREQUENCY = 16.0
 STEPS = 6
 GEOMETRY = synth.RigGeometry(
-    l0_mm=1000.0, d0_mm=250.0, f0_per_mm=0.03125, f0_frequency=FREQUENCY, pixel_mm=3.2,
-    camera_width=128, camera_height=96,
+    l0_mm=1000.0,
+    d0_mm=250.0,
+    f0_per_mm=0.03125,
+    f0_frequency=FREQUENCY,
+    pixel_mm=3.2,
+    camera_width=128,
+    camera_height=96,
 )
 APPEARANCE = synth.Appearance(gain=200.0, ambient=0.05, snr_db=30.0, bit_depth=8)
 HEIGHTS = (25.0, 50.0, 100.0, 150.0)  # a translation stage's travel; l0 shows in the curvature
 
 
-def measured_phase(height_mm: np.ndarray, rng: np.random.Generator, appearance=APPEARANCE) -> tuple[np.ndarray, np.ndarray]:
+def measured_phase(
+    height_mm: np.ndarray, rng: np.random.Generator, appearance=APPEARANCE
+) -> tuple[np.ndarray, np.ndarray]:
     """Absolute phase (at FREQUENCY) of a scene from rendered fringes, and the lit mask."""
     mapping = synth.projector_coordinates(height_mm, GEOMETRY)
     frames = synth.render_stack(synth.sinusoid_patterns([FREQUENCY], STEPS), mapping, GEOMETRY, appearance, rng)
@@ -98,7 +105,10 @@ def test_gauge_block_measured_within_a_tenth_of_a_millimetre(calibration_data):
 
 
 def test_ideal_phases_give_exact_parameters():
-    truth = [synth.true_absolute_phase(synth.projector_coordinates(plane(h), GEOMETRY), GEOMETRY, FREQUENCY) for h in (0.0, *HEIGHTS)]
+    truth = [
+        synth.true_absolute_phase(synth.projector_coordinates(plane(h), GEOMETRY), GEOMETRY, FREQUENCY)
+        for h in (0.0, *HEIGHTS)
+    ]
     fit = fit_l0_d0(HEIGHTS, [p - truth[0] for p in truth[1:]], GEOMETRY.f0_per_mm)
     assert fit.l0_mm == pytest.approx(GEOMETRY.l0_mm, rel=1e-9)
     assert fit.d0_mm == pytest.approx(GEOMETRY.d0_mm, rel=1e-9)
@@ -107,16 +117,26 @@ def test_ideal_phases_give_exact_parameters():
 
 
 def test_negative_baseline_keeps_its_sign():
-    geometry = synth.RigGeometry(l0_mm=800.0, d0_mm=-150.0, f0_per_mm=0.03125, f0_frequency=FREQUENCY,
-                                 pixel_mm=3.2, camera_width=64, camera_height=48)
-    truth = [synth.true_absolute_phase(synth.projector_coordinates(np.full((48, 64), h), geometry), geometry, FREQUENCY)
-             for h in (0.0, 15.0, 30.0, 60.0)]
+    geometry = synth.RigGeometry(
+        l0_mm=800.0,
+        d0_mm=-150.0,
+        f0_per_mm=0.03125,
+        f0_frequency=FREQUENCY,
+        pixel_mm=3.2,
+        camera_width=64,
+        camera_height=48,
+    )
+    truth = [
+        synth.true_absolute_phase(synth.projector_coordinates(np.full((48, 64), h), geometry), geometry, FREQUENCY)
+        for h in (0.0, 15.0, 30.0, 60.0)
+    ]
     fit = fit_l0_d0((15.0, 30.0, 60.0), [p - truth[0] for p in truth[1:]], geometry.f0_per_mm)
     assert fit.d0_mm == pytest.approx(-150.0, rel=1e-9)
     assert fit.l0_mm == pytest.approx(800.0, rel=1e-9)
 
 
 # --- bad input -------------------------------------------------------------------------------
+
 
 def test_too_few_heights_is_refused(calibration_data):
     with pytest.raises(CalibrationError, match="at least 3 known heights"):

@@ -7,7 +7,6 @@ the per-pixel polynomial must absorb it, and the stereo model must not care.
 
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
 
@@ -84,7 +83,9 @@ def test_stereo_model_through_the_dispatch(planes, tmp_path):
 
 
 def test_reference_plane_model_through_the_dispatch():
-    cal = Calibration(l0_mm=1000.0, d0_mm=250.0, f0_per_mm=0.0125, f0_frequency=8.0, pixel_mm=0.5, reference="reference")
+    cal = Calibration(
+        l0_mm=1000.0, d0_mm=250.0, f0_per_mm=0.0125, f0_frequency=8.0, pixel_mm=0.5, reference="reference"
+    )
     delta = np.full((4, 6), -0.5)
     points, height = points_from_phase(cal, delta, np.zeros((4, 6)), 8.0)
     expected = 1000.0 * -0.5 / (-0.5 - 2 * np.pi * 0.0125 * 250.0)
@@ -102,8 +103,12 @@ def test_bad_polynomial_input(planes, tmp_path):
         fit_polynomial(HEIGHTS[:3], [np.zeros_like(d) for d in deltas[:3]], FREQUENCY, degree=2)
     with pytest.raises(CalibrationError, match="singular"):
         fit_polynomial((20.0, 40.0, 60.0), [deltas[0]] * 3, FREQUENCY, degree=2)  # three heights, one phase
-    cal = Calibration(model="polynomial", reference="reference", pixel_mm=0.5,
-                      extra={"polynomial": {"file": "missing.npy", "degree": 3, "phase_frequency": 64}})
+    cal = Calibration(
+        model="polynomial",
+        reference="reference",
+        pixel_mm=0.5,
+        extra={"polynomial": {"file": "missing.npy", "degree": 3, "phase_frequency": 64}},
+    )
     write_calibration(tmp_path, cal)
     with pytest.raises(CalibrationError, match="missing.npy: missing"):
         height_from_phase(read_calibration(tmp_path), deltas[0], deltas[0], FREQUENCY)

@@ -9,9 +9,9 @@ import cv2
 import numpy as np
 import pytest
 
+from calibration.camera import BoardSpec
 from calibration.errors import CalibrationError
 from calibration.opencv_yaml import import_opencv_calibration
-from calibration.camera import BoardSpec
 from calibration.stereo import StereoModel, board_phase_view, calibrate_stereo, fit_plane, triangulate
 from mock_devices import synth
 from mock_devices.stereo_synth import board_session, calibration_fields, demo_rig, demo_scene, trace
@@ -44,12 +44,17 @@ def test_exact_phase_triangulates_to_the_scene(simulated):
 
 def test_rendered_fringes_reproduce_the_object_within_0_2_mm_rms(simulated):
     rig, truth, mapping, model = simulated
-    geometry = synth.RigGeometry(camera_width=rig.camera.width, camera_height=rig.camera.height,
-                                 projector_width=rig.projector.width, projector_height=rig.projector.height)
+    geometry = synth.RigGeometry(
+        camera_width=rig.camera.width,
+        camera_height=rig.camera.height,
+        projector_width=rig.projector.width,
+        projector_height=rig.projector.height,
+    )
     appearance = synth.Appearance(gain=200.0, ambient=0.05, snr_db=30.0, bit_depth=8)
-    frames = synth.render_stack(synth.sinusoid_patterns(FREQUENCIES, STEPS), mapping, geometry, appearance,
-                                np.random.default_rng(0))
-    results = [phase_shift(frames[i * STEPS:(i + 1) * STEPS]) for i in range(len(FREQUENCIES))]
+    frames = synth.render_stack(
+        synth.sinusoid_patterns(FREQUENCIES, STEPS), mapping, geometry, appearance, np.random.default_rng(0)
+    )
+    results = [phase_shift(frames[i * STEPS : (i + 1) * STEPS]) for i in range(len(FREQUENCIES))]
     unwrapped = unwrap_hierarchical([r.phase for r in results], list(FREQUENCIES))
     mask = unwrapped.valid & mapping.lit
     points = triangulate(model, np.where(mask, unwrapped.phase, np.nan), FREQUENCIES[-1])
@@ -74,14 +79,17 @@ def rigid_rms(found: np.ndarray, truth: np.ndarray) -> float:
 
 def test_stereo_calibrated_from_board_views_reproduces_the_object():
     rig = demo_rig(320, 256)
-    geometry = synth.RigGeometry(camera_width=320, camera_height=256, projector_width=rig.projector.width,
-                                 projector_height=rig.projector.height)
+    geometry = synth.RigGeometry(
+        camera_width=320, camera_height=256, projector_width=rig.projector.width, projector_height=rig.projector.height
+    )
     rng = np.random.default_rng(1)
     views = []
     for image, mapping in board_session(rig, count=8, seed=3):
         appearance = synth.Appearance(reflectivity=image / 220.0, gain=200.0, ambient=0.05, snr_db=30.0, bit_depth=8)
-        stacks = [synth.render_stack(synth.sinusoid_patterns(FREQUENCIES, 4, axis=axis), mapping, geometry, appearance, rng)
-                  for axis in ("x", "y")]
+        stacks = [
+            synth.render_stack(synth.sinusoid_patterns(FREQUENCIES, 4, axis=axis), mapping, geometry, appearance, rng)
+            for axis in ("x", "y")
+        ]
         view = board_phase_view(image, BoardSpec("chessboard", (9, 7), 30.0), stacks[0], stacks[1], FREQUENCIES, 4)
         assert view is not None
         views.append(view)
@@ -97,7 +105,7 @@ def test_stereo_calibrated_from_board_views_reproduces_the_object():
     valid = np.isfinite(points[..., 2])
     assert valid.mean() > 0.95
     heights_true = 600.0 - truth[..., 2]
-    on = valid & (heights_true > 0.5)   # the spheres: shape after rigid alignment
+    on = valid & (heights_true > 0.5)  # the spheres: shape after rigid alignment
     assert rigid_rms(points[on], truth[on]) < 0.2
     assert rigid_rms(points[valid], truth[valid]) < 0.3  # the whole view, corners beyond the boards included
     # heights above the background plane, as measured by the calibrated model, match the sphere
@@ -138,7 +146,9 @@ def test_real_eye_capture_becomes_a_point_cloud():
     fields = import_opencv_calibration(EYE / "caliInfo.yml", (1920, 1024), pixel_centre=0.0)
     model = StereoModel.from_fields(fields)
     assert model.camera_size == (1280, 1024) and model.baseline_mm == pytest.approx(109.4, abs=0.1)
-    frames = np.stack([cv2.imread(str(EYE / "L" / f"{i}.png"), cv2.IMREAD_GRAYSCALE) for i in range(18)]).astype(np.float32)
+    frames = np.stack([cv2.imread(str(EYE / "L" / f"{i}.png"), cv2.IMREAD_GRAYSCALE) for i in range(18)]).astype(
+        np.float32
+    )
     shifted = phase_shift(frames[:12])
     # the rig's periods start at -pi (phase_rad = pi); 6 complementary Gray planes for 32 periods
     wrapped = np.mod(shifted.phase + np.pi, 2 * np.pi)
@@ -150,12 +160,17 @@ def test_real_eye_capture_becomes_a_point_cloud():
     valid = np.isfinite(z)
     assert valid.sum() > 150_000
     low, high = np.percentile(z[valid], [5, 95])
-    assert 650 < low < high < 800 and high - low < 100   # a ~10 cm plaque about 0.7 m away
+    assert 650 < low < high < 800 and high - low < 100  # a ~10 cm plaque about 0.7 m away
     # the points are consistent with the projector: reprojected, they land on the measured column
     rvec, _ = cv2.Rodrigues(model.rotation)
     sample = np.argwhere(valid)[::97]
-    projected, _ = cv2.projectPoints(points[sample[:, 0], sample[:, 1]].reshape(-1, 1, 3), rvec, model.translation_mm,
-                                     model.projector_matrix, model.projector_distortion)
+    projected, _ = cv2.projectPoints(
+        points[sample[:, 0], sample[:, 1]].reshape(-1, 1, 3),
+        rvec,
+        model.translation_mm,
+        model.projector_matrix,
+        model.projector_distortion,
+    )
     column = unwrapped.phase[sample[:, 0], sample[:, 1]] * 1920 / (2 * np.pi * 32)
     assert np.max(np.abs(projected.reshape(-1, 2)[:, 0] - column)) < 0.01
     # a surface, not scatter: depth differs from its 5x5 median by little on most pixels
@@ -171,11 +186,53 @@ def test_eye_capture_through_the_command_line(tmp_path, capsys):
 
     from rig.cli import main
 
-    assert main(["import", str(EYE / "L"), "--patterns", "sin:f=32,steps=12,phase=pi; gray:bits=6",
-                 "--projector-width", "1920", "--projector-height", "1024", "-o", str(tmp_path / "eye")]) == 0
-    assert main(["calibrate", "--import-opencv", str(EYE / "caliInfo.yml"), "--projector-size", "1920x1024",
-                 "--pixel-centre", "0", "-o", str(tmp_path / "cal")]) == 0
-    assert main(["process", str(tmp_path / "eye"), "--calibration", str(tmp_path / "cal"), "-o", str(tmp_path / "out"), "-q"]) == 0
+    assert (
+        main(
+            [
+                "import",
+                str(EYE / "L"),
+                "--patterns",
+                "sin:f=32,steps=12,phase=pi; gray:bits=6",
+                "--projector-width",
+                "1920",
+                "--projector-height",
+                "1024",
+                "-o",
+                str(tmp_path / "eye"),
+            ]
+        )
+        == 0
+    )
+    assert (
+        main(
+            [
+                "calibrate",
+                "--import-opencv",
+                str(EYE / "caliInfo.yml"),
+                "--projector-size",
+                "1920x1024",
+                "--pixel-centre",
+                "0",
+                "-o",
+                str(tmp_path / "cal"),
+            ]
+        )
+        == 0
+    )
+    assert (
+        main(
+            [
+                "process",
+                str(tmp_path / "eye"),
+                "--calibration",
+                str(tmp_path / "cal"),
+                "-o",
+                str(tmp_path / "out"),
+                "-q",
+            ]
+        )
+        == 0
+    )
     report = json.loads((tmp_path / "out" / "report.json").read_text())
     assert report["calibration_model"] == "stereo" and report["points"] > 150_000
     assert 690 < report["height_mm"]["median"] < 760  # depth of the plaque, mm from the camera

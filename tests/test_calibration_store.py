@@ -57,7 +57,13 @@ def test_write_fills_created_time_and_creates_the_directory(tmp_path: Path) -> N
 
 
 def test_other_models_are_carried_with_their_keys(tmp_path: Path) -> None:
-    data = {"format": "fpp-calibration", "version": 1, "model": "polynomial", "coefficients": [[1, 2], [3, 4]], "order": 3}
+    data = {
+        "format": "fpp-calibration",
+        "version": 1,
+        "model": "polynomial",
+        "coefficients": [[1, 2], [3, 4]],
+        "order": 3,
+    }
     cal = read_calibration(_write(tmp_path, data))
     assert cal.model == "polynomial" and cal.extra == {"coefficients": [[1, 2], [3, 4]], "order": 3}
     write_calibration(tmp_path / "copy", cal)

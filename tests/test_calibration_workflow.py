@@ -17,11 +17,12 @@ from calibration.models import height_from_phase
 from calibration.store import read_calibration
 from rig.calibrate.operator import ConsoleOperator, StageCommand
 from rig.calibrate.session import CalibrationPlan, acquire, compute
-from rig.store.capture import read_capture, write_capture
 from rig.cli import main
 from rig.config import load_config
 from rig.errors import CaptureError, ConfigError
 from rig.hardware.simulated import geometry_from_config, scene_height
+from rig.store.capture import read_capture, write_capture
+
 
 @pytest.fixture(scope="module")
 def rig_text(simulated_rig_toml):
@@ -37,8 +38,22 @@ def session(tmp_path_factory, rig_text):
     root = tmp_path_factory.mktemp("calibrate")
     config = root / "rig.toml"
     config.write_text(rig_text, encoding="utf-8")
-    code = main(["calibrate", "--config", str(config), "-o", str(root / "cal"), "--board", BOARD,
-                 "--board-views", "4", "--gamma", "9", "-q"])
+    code = main(
+        [
+            "calibrate",
+            "--config",
+            str(config),
+            "-o",
+            str(root / "cal"),
+            "--board",
+            BOARD,
+            "--board-views",
+            "4",
+            "--gamma",
+            "9",
+            "-q",
+        ]
+    )
     assert code == 0
     return root, config
 
@@ -84,9 +99,26 @@ def test_scan_then_process_matches_the_virtual_scene(session, rig_text):
     root, config = session
     # scans go through the measured LUT, as the calibration captures did
     scan_config = root / "rig-lut.toml"
-    scan_config.write_text(rig_text.replace("[camera]", f'gamma_lut = "{root / "cal" / "gamma-lut.npy"}"\n[camera]'), encoding="utf-8")
-    assert main(["scan", "--config", str(scan_config), "-o", str(root / "obj"), "--calibration", str(root / "cal"),
-                 "--process", "--process-output", str(root / "out")]) == 0
+    scan_config.write_text(
+        rig_text.replace("[camera]", f'gamma_lut = "{root / "cal" / "gamma-lut.npy"}"\n[camera]'), encoding="utf-8"
+    )
+    assert (
+        main(
+            [
+                "scan",
+                "--config",
+                str(scan_config),
+                "-o",
+                str(root / "obj"),
+                "--calibration",
+                str(root / "cal"),
+                "--process",
+                "--process-output",
+                str(root / "out"),
+            ]
+        )
+        == 0
+    )
     height = np.load(root / "out" / "height.npy")
     rig_config = load_config(config)
     truth = scene_height(rig_config, "object", geometry_from_config(rig_config))
@@ -100,8 +132,24 @@ def test_scan_then_process_matches_the_virtual_scene(session, rig_text):
 
 def test_recompute_from_stored_captures_with_another_model(session, capsys):
     root, _ = session
-    assert main(["calibrate", "--from", str(root / "cal"), "--model", "polynomial", "--degree", "3",
-                 "-o", str(root / "poly"), "--json", "-q"]) == 0
+    assert (
+        main(
+            [
+                "calibrate",
+                "--from",
+                str(root / "cal"),
+                "--model",
+                "polynomial",
+                "--degree",
+                "3",
+                "-o",
+                str(root / "poly"),
+                "--json",
+                "-q",
+            ]
+        )
+        == 0
+    )
     printed = json.loads(capsys.readouterr().out)
     assert printed["model"] == "polynomial"
     poly = read_calibration(root / "poly")
@@ -183,8 +231,20 @@ def test_bad_sessions_give_one_line_errors(session, tmp_path, capsys):
     write_capture(plane, frames, capture.patterns, {"width": 456, "height": 570}, scene="some-plane")
     with pytest.raises(CalibrationError, match="scene 'some-plane': expected 'plane-at-<height>mm'"):
         compute(broken)
-    assert main(["calibrate", "--import-opencv", str(tmp_path / "none.yml"), "--projector-size", "1920x1080",
-                 "-o", str(tmp_path / "st")]) == 1
+    assert (
+        main(
+            [
+                "calibrate",
+                "--import-opencv",
+                str(tmp_path / "none.yml"),
+                "--projector-size",
+                "1920x1080",
+                "-o",
+                str(tmp_path / "st"),
+            ]
+        )
+        == 1
+    )
     assert "none.yml: missing" in capsys.readouterr().err
 
 
@@ -197,8 +257,9 @@ def test_stereo_session_recomputed_from_stored_poses(tmp_path):
 
     rig = demo_rig(320, 256)
     projector = {"width": rig.projector.width, "height": rig.projector.height}
-    geometry = synth.RigGeometry(camera_width=320, camera_height=256, projector_width=rig.projector.width,
-                                 projector_height=rig.projector.height)
+    geometry = synth.RigGeometry(
+        camera_width=320, camera_height=256, projector_width=rig.projector.width, projector_height=rig.projector.height
+    )
     config = load_config(None)
     patterns = stereo_patterns(config)
     rng = np.random.default_rng(5)
@@ -210,7 +271,13 @@ def test_stereo_session_recomputed_from_stored_poses(tmp_path):
     appearance = synth.Appearance(gain=200.0, ambient=0.05, snr_db=30.0, bit_depth=8)
     scan = config.scan.patterns()
     _, plane_map = trace(rig, Scene(plane_distance=600.0))
-    write_capture(cal / "reference", synth.render_stack(scan, plane_map, geometry, appearance, rng), scan, projector, scene="reference")
+    write_capture(
+        cal / "reference",
+        synth.render_stack(scan, plane_map, geometry, appearance, rng),
+        scan,
+        projector,
+        scene="reference",
+    )
     (cal / "session.json").write_text(json.dumps(CalibrationPlan(model="stereo", board=None, board_views=6).to_json()))
     assert main(["calibrate", "--from", str(cal), "--board", "chessboard:9x7:30", "-q"]) == 0
     stereo = read_calibration(cal)
@@ -230,13 +297,33 @@ def test_stereo_session_recomputed_from_stored_poses(tmp_path):
 def test_gamma_ripple_removed_in_processing(tmp_path, rig_text):
     """A gamma-2.2 projector under 3-step phase shifting, not pre-corrected: the ripple table the
     calibration learnt on the reference plane takes the waves out of the object's heights."""
-    from rig.pipeline import gamma_correction, run as pipeline
+    from rig.pipeline import gamma_correction
+    from rig.pipeline import run as pipeline
     from rig.pipeline.plan import ProcessOptions
 
     config = tmp_path / "rig.toml"
-    config.write_text(rig_text.replace("steps = 4", "steps = 3").replace("gamma = 1.8", "gamma = 2.2").replace("snr_db = 30", "snr_db = 40"))
-    assert main(["calibrate", "--config", str(config), "-o", str(tmp_path / "cal"), "--board", "none",
-                 "--pixel-mm", "1.6", "-q"]) == 0
+    config.write_text(
+        rig_text.replace("steps = 4", "steps = 3")
+        .replace("gamma = 1.8", "gamma = 2.2")
+        .replace("snr_db = 30", "snr_db = 40")
+    )
+    assert (
+        main(
+            [
+                "calibrate",
+                "--config",
+                str(config),
+                "-o",
+                str(tmp_path / "cal"),
+                "--board",
+                "none",
+                "--pixel-mm",
+                "1.6",
+                "-q",
+            ]
+        )
+        == 0
+    )
     assert read_calibration(tmp_path / "cal").extra["phase_error"]["ripple_rms_rad"] > 0.05
     assert main(["scan", "--config", str(config), "-o", str(tmp_path / "obj")]) == 0
     rig_config = load_config(config)
@@ -248,21 +335,55 @@ def test_gamma_ripple_removed_in_processing(tmp_path, rig_text):
         errors[correction] = float(np.sqrt(np.mean((result.height[valid] - truth[valid]) ** 2)))
     assert errors[gamma_correction.NAME] < errors["none"] / 2
     # and from the command line
-    assert main(["process", str(tmp_path / "obj"), "--calibration", str(tmp_path / "cal"), "--correction", "gamma-table",
-                 "-o", str(tmp_path / "out"), "-q"]) == 0
+    assert (
+        main(
+            [
+                "process",
+                str(tmp_path / "obj"),
+                "--calibration",
+                str(tmp_path / "cal"),
+                "--correction",
+                "gamma-table",
+                "-o",
+                str(tmp_path / "out"),
+                "-q",
+            ]
+        )
+        == 0
+    )
     height = np.load(tmp_path / "out" / "height.npy")
     valid = np.isfinite(height)
-    assert float(np.sqrt(np.mean((height[valid] - truth[valid]) ** 2))) == pytest.approx(errors[gamma_correction.NAME], rel=1e-6)
+    assert float(np.sqrt(np.mean((height[valid] - truth[valid]) ** 2))) == pytest.approx(
+        errors[gamma_correction.NAME], rel=1e-6
+    )
 
 
 def test_gauge_block_measured_through_the_whole_product(session, tmp_path, rig_text):
     """rig calibrate (the session above) then rig scan --process of a 25.000 mm gauge block at 30 dB."""
     root, _ = session
     config = tmp_path / "rig.toml"
-    config.write_text(rig_text.replace('scene = "hemisphere"', 'scene = "gauge-block"')
-                      .replace("[camera]", f'gamma_lut = "{root / "cal" / "gamma-lut.npy"}"\n[camera]'))
-    assert main(["scan", "--config", str(config), "-o", str(tmp_path / "block"), "--calibration", str(root / "cal"),
-                 "--process", "--process-output", str(tmp_path / "out")]) == 0
+    config.write_text(
+        rig_text.replace('scene = "hemisphere"', 'scene = "gauge-block"').replace(
+            "[camera]", f'gamma_lut = "{root / "cal" / "gamma-lut.npy"}"\n[camera]'
+        )
+    )
+    assert (
+        main(
+            [
+                "scan",
+                "--config",
+                str(config),
+                "-o",
+                str(tmp_path / "block"),
+                "--calibration",
+                str(root / "cal"),
+                "--process",
+                "--process-output",
+                str(tmp_path / "out"),
+            ]
+        )
+        == 0
+    )
     height = np.load(tmp_path / "out" / "height.npy")
     rig_config = load_config(config)
     truth = scene_height(rig_config, "object", geometry_from_config(rig_config))

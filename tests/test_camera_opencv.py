@@ -7,8 +7,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from contracts import CameraContract, device_option
+
 from drivers.camera import TriggerMode, TriggerSource
 from drivers.errors import DeviceNotFoundError, DeviceTimeoutError, UnsupportedFeatureError
 

@@ -12,8 +12,8 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
-
 from contracts import CameraContract, device_option  # noqa: E402
+
 from drivers.camera import PixelFormat, TriggerMode, TriggerSource  # noqa: E402
 from drivers.errors import DeviceNotFoundError, DeviceTimeoutError, IncompatibleStateError, UnsupportedFeatureError  # noqa: E402
 
@@ -40,8 +40,15 @@ def image_folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def emulated(folder: Path, **kwargs) -> PylonCamera:
-    features = {"ImageFilename": str(folder), "ImageFileMode": "On", "TestImageSelector": "Off",
-                "OffsetX": 0, "OffsetY": 0, "Width": WIDTH, "Height": HEIGHT}
+    features = {
+        "ImageFilename": str(folder),
+        "ImageFileMode": "On",
+        "TestImageSelector": "Off",
+        "OffsetX": 0,
+        "OffsetY": 0,
+        "Width": WIDTH,
+        "Height": HEIGHT,
+    }
     return PylonCamera(device_class="BaslerCamEmu", features=features, **kwargs)
 
 
@@ -150,6 +157,7 @@ def test_unknown_serial_is_device_not_found() -> None:
 # -- what a real Basler USB3 camera does that the emulator does not (issue 15) -----------------
 # mock_devices.pylon_camera.UsbCameraQuirks overrides only those nodes of the emulator.
 
+
 def quirky(folder: Path, **quirks) -> PylonCamera:
     from pypylon import pylon
 
@@ -158,8 +166,15 @@ def quirky(folder: Path, **quirks) -> PylonCamera:
     info = pylon.DeviceInfo()
     info.SetDeviceClass("BaslerCamEmu")
     inner = pylon.InstantCamera(pylon.TlFactory.GetInstance().CreateFirstDevice(info))
-    features = {"ImageFilename": str(folder), "ImageFileMode": "On", "TestImageSelector": "Off",
-                "OffsetX": 0, "OffsetY": 0, "Width": WIDTH, "Height": HEIGHT}
+    features = {
+        "ImageFilename": str(folder),
+        "ImageFileMode": "On",
+        "TestImageSelector": "Off",
+        "OffsetX": 0,
+        "OffsetY": 0,
+        "Width": WIDTH,
+        "Height": HEIGHT,
+    }
     return PylonCamera(camera=UsbCameraQuirks(inner, **quirks), features=features)
 
 

@@ -6,8 +6,8 @@ import threading
 
 import numpy as np
 import pytest
-
 from contracts import CameraContract
+
 from drivers.camera import (
     DroppedFrameError,
     DuplicateFrameError,
@@ -22,7 +22,9 @@ from mock_devices.camera import CameraFaults, SimulatedCamera
 from mock_devices.synth import Appearance, RigGeometry, true_absolute_phase
 
 # An 80 x 60 camera under a 128 x 96 projector, with the synthesiser's default field of view.
-GEOMETRY = RigGeometry(pixel_mm=0.4 * 1024 / 80, camera_width=80, camera_height=60, projector_width=128, projector_height=96)
+GEOMETRY = RigGeometry(
+    pixel_mm=0.4 * 1024 / 80, camera_width=80, camera_height=60, projector_width=128, projector_height=96
+)
 CLEAN = Appearance(gain=200.0, bit_depth=8)  # no noise, no ambient, linear projector
 
 
@@ -33,6 +35,7 @@ class FlatProjector(Projector):
     def _show(self, pattern) -> None: ...
     def _wait(self, timeout_s: float) -> bool:
         return True
+
     def _close(self) -> None: ...
 
 
@@ -112,13 +115,20 @@ def test_camera_sees_the_rendered_fringes_through_the_scene(axis: str) -> None:
     scene = np.tile(np.linspace(0.0, 40.0, cols), (rows, 1))
     frequency = 4
     projector = gl_projector(bits=8)
-    with projector, SimulatedCamera(projector, GEOMETRY, scene, appearance=Appearance(gain=250.0, bit_depth=12)) as camera:
+    with (
+        projector,
+        SimulatedCamera(projector, GEOMETRY, scene, appearance=Appearance(gain=250.0, bit_depth=12)) as camera,
+    ):
         camera.pixel_format = PixelFormat.MONO12
         camera.start()
-        stack = np.stack([
-            snap(camera, projector, {"kind": "sinusoid", "axis": axis, "frequency": frequency, "steps": 4, "step": j}).image
-            for j in range(4)
-        ]).astype(float)
+        stack = np.stack(
+            [
+                snap(
+                    camera, projector, {"kind": "sinusoid", "axis": axis, "frequency": frequency, "steps": 4, "step": j}
+                ).image
+                for j in range(4)
+            ]
+        ).astype(float)
         mapping = camera.mapping
     shifts = 2 * np.pi * np.arange(4) / 4
     wrapped = np.arctan2(-np.tensordot(np.sin(shifts), stack, 1), np.tensordot(np.cos(shifts), stack, 1))
@@ -144,7 +154,10 @@ def test_noise_is_seeded() -> None:
     images = []
     for seed in (1, 1, 2):
         projector = FlatProjector(GEOMETRY.projector_size)
-        with projector, SimulatedCamera(projector, GEOMETRY, appearance=appearance, rng=np.random.default_rng(seed)) as cam:
+        with (
+            projector,
+            SimulatedCamera(projector, GEOMETRY, appearance=appearance, rng=np.random.default_rng(seed)) as cam,
+        ):
             cam.pixel_format = PixelFormat.MONO16
             cam.start()
             images.append(snap(cam, projector, {"kind": "flat", "level": 0.5}).image.astype(float))

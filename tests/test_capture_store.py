@@ -9,8 +9,8 @@ import cv2
 import numpy as np
 import pytest
 
-from rig.store.capture import CaptureWriter, check_same_patterns, read_capture, write_capture
 from rig.errors import CaptureError
+from rig.store.capture import CaptureWriter, check_same_patterns, read_capture, write_capture
 
 PROJECTOR = {"width": 64, "height": 32}
 
@@ -120,14 +120,23 @@ def _edit(field_path: tuple, value):
         for key in field_path[:-1]:
             target = target[key]
         target[field_path[-1]] = value
+
     return edit
 
 
 BAD_MANIFESTS = [
-    ("unknown format", _edit(("format",), "fringe-archive"), r"capture.json: format: expected 'fpp-capture', found 'fringe-archive'"),
+    (
+        "unknown format",
+        _edit(("format",), "fringe-archive"),
+        r"capture.json: format: expected 'fpp-capture', found 'fringe-archive'",
+    ),
     ("unknown version", _edit(("version",), 2), r"version: expected 1 .*found 2"),
     ("missing frame", lambda m: m["frames"].pop(), r"no frame for pattern\(s\) 2"),
-    ("extra frame", lambda m: m["frames"].append(dict(m["frames"][0], file="frames/x.png")), r"extra frame for pattern 0"),
+    (
+        "extra frame",
+        lambda m: m["frames"].append(dict(m["frames"][0], file="frames/x.png")),
+        r"extra frame for pattern 0",
+    ),
     ("frame of no pattern", _edit(("frames", 1, "pattern"), 7), r"frames\[1\].pattern: expected an index 0 .. 2"),
     ("absolute path", _edit(("frames", 0, "file"), "/etc/passwd"), r"frames\[0\].file: expected a path relative"),
     ("escaping path", _edit(("frames", 0, "file"), "../elsewhere/000.png"), r"frames\[0\].file: .*no '\.\.'"),
@@ -163,7 +172,9 @@ def test_invalid_json_names_line_and_column(capture_dir: Path) -> None:
 def test_checksum_mismatch_names_the_file(capture_dir: Path) -> None:
     frame = capture_dir / _manifest(capture_dir)["frames"][1]["file"]
     cv2.imwrite(str(frame), np.zeros((24, 32), np.uint8))
-    with pytest.raises(CaptureError, match=rf"{frame.name}: checksum mismatch: expected sha256 [0-9a-f]{{64}}, found [0-9a-f]{{64}}"):
+    with pytest.raises(
+        CaptureError, match=rf"{frame.name}: checksum mismatch: expected sha256 [0-9a-f]{{64}}, found [0-9a-f]{{64}}"
+    ):
         read_capture(capture_dir)
 
 

@@ -10,16 +10,21 @@ import pytest
 from calibration.store import read_calibration
 from mock_devices.dlp_usb import FakeDlpc350Backend
 from mock_devices.scenes import make_scene
-from rig.store.capture import read_capture
 from rig.cli import main
 from rig.hardware.probes import format_probe, probe_dlp
+from rig.store.capture import read_capture
 
 
 def test_devices_lists_every_family_and_the_simulated_rig(capsys):
     assert main(["devices", "--no-opencv"]) == 0
     out = capsys.readouterr().out
-    for title in ("Basler (pylon) cameras", "Serial ports (trigger box)", "DLP projectors (USB)",
-                  "Off-screen rendering", "Simulated rig"):
+    for title in (
+        "Basler (pylon) cameras",
+        "Serial ports (trigger box)",
+        "DLP projectors (USB)",
+        "Off-screen rendering",
+        "Simulated rig",
+    ):
         assert title in out
     assert "simulated-serial" in out and "gl-offscreen" in out
 
@@ -32,8 +37,22 @@ def test_devices_finds_a_lightcrafter_on_usb():
 
 def test_simulate_writes_capture_calibration_and_truth(tmp_path):
     out = tmp_path / "sim"
-    args = ["simulate", "-o", str(out), "--size", "96x72", "--scene", "steps",
-            "--frequencies", "1", "8", "--steps", "4", "--snr-db", "none"]
+    args = [
+        "simulate",
+        "-o",
+        str(out),
+        "--size",
+        "96x72",
+        "--scene",
+        "steps",
+        "--frequencies",
+        "1",
+        "8",
+        "--steps",
+        "4",
+        "--snr-db",
+        "none",
+    ]
     assert main(args) == 0
     capture = read_capture(out / "object")
     reference = read_capture(out / "calibration" / "reference")

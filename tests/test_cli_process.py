@@ -19,12 +19,12 @@ import pytest
 
 from calibration.store import read_calibration
 from mock_devices import synth
-from rig.store.capture import write_capture
 from rig.cli import main
+from rig.hardware.synthesis import demo_geometry, simulate_scan, write_simulated_scan
 from rig.pipeline.outputs import read_ply_points
 from rig.pipeline.plan import ProcessOptions, choose_unwrap, group_patterns
 from rig.pipeline.run import process
-from rig.hardware.synthesis import demo_geometry, simulate_scan, write_simulated_scan
+from rig.store.capture import write_capture
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -49,8 +49,9 @@ def _assert_one_line_error(code: int, err: str, *fragments: str) -> None:
 
 def test_process_recovers_the_scene_heights(capsys, small_capture, small_scan, tmp_path) -> None:
     out = tmp_path / "out"
-    code, stdout, _ = _run(capsys, "process", small_capture.capture, "--calibration", small_capture.calibration,
-                           "-o", out, "--json", "-q")
+    code, stdout, _ = _run(
+        capsys, "process", small_capture.capture, "--calibration", small_capture.calibration, "-o", out, "--json", "-q"
+    )
     assert code == 0
     summary = json.loads(stdout)
     assert summary["unwrap"] == "hierarchical"
@@ -67,7 +68,10 @@ def test_process_recovers_the_scene_heights(capsys, small_capture, small_scan, t
 
 def test_outputs_follow_the_format(capsys, small_capture, small_scan, tmp_path) -> None:
     out = tmp_path / "out"
-    assert _run(capsys, "process", small_capture.capture, "--calibration", small_capture.calibration, "-o", out, "-q")[0] == 0
+    assert (
+        _run(capsys, "process", small_capture.capture, "--calibration", small_capture.calibration, "-o", out, "-q")[0]
+        == 0
+    )
     mask = np.load(out / "mask.npy")
     phase = np.load(out / "phase.npy")
     truth = synth.true_absolute_phase(small_scan.object_map, small_scan.geometry, 64)
@@ -100,8 +104,13 @@ def test_without_calibration_writes_phase_and_skips_height(capsys, small_capture
 
 @pytest.mark.parametrize(
     "frequencies,expected",
-    [((16,), "spatial"), ((1, 8, 64), "hierarchical"), ((5, 8), "two-frequency"),
-     ((64, 58, 53), "heterodyne"), ((6, 10, 15), "three-frequency")],
+    [
+        ((16,), "spatial"),
+        ((1, 8, 64), "hierarchical"),
+        ((5, 8), "two-frequency"),
+        ((64, 58, 53), "heterodyne"),
+        ((6, 10, 15), "three-frequency"),
+    ],
 )
 def test_automatic_unwrap_choice(frequencies, expected) -> None:
     groups = group_patterns(synth.sinusoid_patterns(frequencies, 4))
@@ -111,7 +120,9 @@ def test_automatic_unwrap_choice(frequencies, expected) -> None:
 def test_automatic_choice_refuses_what_nothing_fits() -> None:
     from rig.errors import ProcessingError
 
-    with pytest.raises(ProcessingError, match=r"frequencies \[4, 8\]: no automatic unwrapping method fits; choose one with --unwrap"):
+    with pytest.raises(
+        ProcessingError, match=r"frequencies \[4, 8\]: no automatic unwrapping method fits; choose one with --unwrap"
+    ):
         choose_unwrap(group_patterns(synth.sinusoid_patterns((4, 8), 4)), "x")
 
 
@@ -151,8 +162,17 @@ def test_two_frequency_with_phase_offset_and_custom_shifts(tmp_path) -> None:
     patterns = []
     for f in (5, 8):
         for j, shift in enumerate((0.0, 1.9, 4.0, 5.1)):
-            patterns.append({"kind": "sinusoid", "axis": "x", "frequency": f, "steps": 4, "step": j,
-                             "phase_rad": np.pi, "shift_rad": shift})
+            patterns.append(
+                {
+                    "kind": "sinusoid",
+                    "axis": "x",
+                    "frequency": f,
+                    "steps": 4,
+                    "step": j,
+                    "phase_rad": np.pi,
+                    "shift_rad": shift,
+                }
+            )
     scan, paths = _scan_with(tmp_path, patterns)
     result = process(paths.capture, paths.calibration)
     assert result.object.unwrapped.method == "two-frequency"
@@ -239,7 +259,9 @@ def test_calibration_for_another_camera_size(capsys, small_capture, tmp_path) ->
     bigger = simulate_scan("flat", geometry=demo_geometry(200, 120))
     paths = write_simulated_scan(bigger, tmp_path / "other")
     code, _, err = _run(capsys, "process", small_capture.capture, "--calibration", paths.calibration, "-q")
-    _assert_one_line_error(code, err, "reference capture does not fit", "camera size: expected 160x120", "found 200x120")
+    _assert_one_line_error(
+        code, err, "reference capture does not fit", "camera size: expected 160x120", "found 200x120"
+    )
 
 
 def test_calibration_with_unknown_version_or_model(capsys, small_capture) -> None:
@@ -255,16 +277,31 @@ def test_calibration_with_unknown_version_or_model(capsys, small_capture) -> Non
 
 def test_speckle_capture_without_calibration_is_one_line(capsys, tmp_path) -> None:
     frames = np.zeros((1, 32, 48), np.uint8)
-    pattern = {"kind": "speckle-sinusoid", "axis": "x", "frequency": 8, "steps": 1, "step": 0,
-               "seed": 1, "dot_px": 3, "speckle_gain": 0.3}
+    pattern = {
+        "kind": "speckle-sinusoid",
+        "axis": "x",
+        "frequency": 8,
+        "steps": 1,
+        "step": 0,
+        "seed": 1,
+        "dot_px": 3,
+        "speckle_gain": 0.3,
+    }
     write_capture(tmp_path / "c", frames, [pattern], {"width": 96, "height": 64})
     code, _, err = _run(capsys, "process", tmp_path / "c", "-q")
-    _assert_one_line_error(code, err, "speckle-sinusoid (single-shot) capture takes its fringe orders from a reference-plane capture")
+    _assert_one_line_error(
+        code, err, "speckle-sinusoid (single-shot) capture takes its fringe orders from a reference-plane capture"
+    )
 
 
 def test_subprocess_error_has_no_traceback(tmp_path) -> None:
-    done = subprocess.run([sys.executable, "-m", "rig.cli", "process", str(tmp_path / "nothing")],
-                          cwd=REPO, capture_output=True, text=True, timeout=60)
+    done = subprocess.run(
+        [sys.executable, "-m", "rig.cli", "process", str(tmp_path / "nothing")],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert done.returncode == 1
     assert done.stderr.strip().splitlines()[-1].startswith("rig process: error:") and "Traceback" not in done.stderr
     assert "capture directory not found" in done.stderr
@@ -311,7 +348,10 @@ def test_demo_reports_a_small_height_error(capsys, tmp_path) -> None:
 
 def test_rerun_without_calibration_leaves_no_stale_height(capsys, small_capture, tmp_path) -> None:
     out = tmp_path / "out"
-    assert _run(capsys, "process", small_capture.capture, "--calibration", small_capture.calibration, "-o", out, "-q")[0] == 0
+    assert (
+        _run(capsys, "process", small_capture.capture, "--calibration", small_capture.calibration, "-o", out, "-q")[0]
+        == 0
+    )
     assert (out / "height.npy").exists()
     assert _run(capsys, "process", small_capture.capture, "-o", out, "-q")[0] == 0
     assert not (out / "height.npy").exists() and not (out / "points.ply").exists() and (out / "wrapped.npy").exists()

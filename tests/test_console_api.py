@@ -77,8 +77,17 @@ def test_status_devices_and_openapi(console: TestClient) -> None:
     assert devices["camera"]["backend"] == "simulated" and devices["camera"]["state"] == "open"
     assert devices["projector"]["backend"] == "gl-offscreen" and devices["trigger"]["backend"] == "simulated-serial"
     paths = console.get("/api/openapi.json").json()["paths"]
-    for path in ("/api/status", "/api/devices", "/api/exposure", "/api/projector", "/api/scan", "/api/process",
-                 "/api/captures", "/api/results", "/api/calibrations"):
+    for path in (
+        "/api/status",
+        "/api/devices",
+        "/api/exposure",
+        "/api/projector",
+        "/api/scan",
+        "/api/process",
+        "/api/captures",
+        "/api/results",
+        "/api/calibrations",
+    ):
         assert path in paths
 
 
@@ -244,7 +253,9 @@ def test_reprocess_and_compare(console: TestClient) -> None:
     job = console.post("/api/scan", json={"name": "base", "options": {"correction": "none"}}).json()["job"]
     wait_job(console, job["id"])
     wait_saved(console, "base")
-    again = console.post("/api/process", json={"capture": "base", "name": "base-vote", "options": {"correction": "vote"}})
+    again = console.post(
+        "/api/process", json={"capture": "base", "name": "base-vote", "options": {"correction": "vote"}}
+    )
     assert again.status_code == 202
     assert wait_job(console, again.json()["job"]["id"])["state"] == "done"
     assert console.get("/api/results/base-vote").json()["methods"]["correction"] == "vote"
@@ -312,7 +323,9 @@ def test_the_alignment_grid_shows_in_the_live_frame(console: TestClient) -> None
     shown = frame[mapping.lit].astype(np.float64)
     match = np.corrcoef(shown, seen(32))[0, 1]
     half_pitch_off = np.corrcoef(shown, seen(32, roll=16))[0, 1]
-    print(f"grid in the live frame: correlation {match:.2f} with the grid's image, {half_pitch_off:.2f} half a pitch off")
+    print(
+        f"grid in the live frame: correlation {match:.2f} with the grid's image, {half_pitch_off:.2f} half a pitch off"
+    )
     assert match > 0.8 and half_pitch_off < 0.3, (match, half_pitch_off)
     assert console.put("/api/projector", json={"pattern": "grid", "pitch_px": 2}).status_code == 400
 
@@ -343,15 +356,25 @@ def test_a_trigger_timeout_is_reported_and_the_next_scan_works(console: TestClie
 
 def test_calibration_wizard_options_model_and_gamma(console: TestClient) -> None:
     stereo = console.post("/api/calibrate", json={"name": "st", "model": "stereo", "board_views": 3})
-    assert stereo.status_code == 400 and "simulated rig" in stereo.json()["error"] and "real rig" in stereo.json()["error"]
+    assert (
+        stereo.status_code == 400 and "simulated rig" in stereo.json()["error"] and "real rig" in stereo.json()["error"]
+    )
     bad = console.post("/api/calibrate", json={"name": "g", "gamma_levels": 3})
     assert bad.status_code == 400 and bad.json()["error"].startswith("gamma_levels: expected")
     assert console.post("/api/calibrate", json={"model": "affine"}).status_code == 400
     assert not (console.app.state.session.data.root / "calibrations" / "st").exists()
     with console.websocket_connect("/api/events") as socket:
         socket.receive_text()
-        reply = console.post("/api/calibrate", json={"name": "poly", "heights_mm": [25, 50, 100], "board_views": 0,
-                                                     "model": "polynomial", "gamma_levels": 5})
+        reply = console.post(
+            "/api/calibrate",
+            json={
+                "name": "poly",
+                "heights_mm": [25, 50, 100],
+                "board_views": 0,
+                "model": "polynomial",
+                "gamma_levels": 5,
+            },
+        )
         assert reply.status_code == 202
         steps, result = [], None
         while result is None:
@@ -368,7 +391,9 @@ def test_calibration_wizard_options_model_and_gamma(console: TestClient) -> None
     assert any(line.startswith("projector gamma") for line in result["lines"])
     assert any(line.startswith("polynomial degree") for line in result["lines"])
     assert wait_job(console, reply.json()["job"]["id"])["state"] == "done"
-    stored = json.loads((console.app.state.session.data.root / "calibrations" / "poly" / "calibration.json").read_text())
+    stored = json.loads(
+        (console.app.state.session.data.root / "calibrations" / "poly" / "calibration.json").read_text()
+    )
     assert stored["model"] == "polynomial" and "gamma" in stored
 
 

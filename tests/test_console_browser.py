@@ -31,13 +31,18 @@ import pytest
 from rig.config import load_config
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
-playwright_api = pytest.importorskip("playwright.sync_api", reason="playwright not installed (pip install -e '.[test]')")
+playwright_api = pytest.importorskip(
+    "playwright.sync_api", reason="playwright not installed (pip install -e '.[test]')"
+)
 if CHROMIUM is None:
     pytest.skip("no chromium browser (apt-get install chromium)", allow_module_level=True)
 
 SCREENSHOTS = os.environ.get("RIG_SCREENSHOTS") == "1"
-SHOTS = (Path(__file__).resolve().parent.parent / "docs" / "console" if SCREENSHOTS
-         else Path(tempfile.gettempdir()) / "rig-console-screenshots")
+SHOTS = (
+    Path(__file__).resolve().parent.parent / "docs" / "console"
+    if SCREENSHOTS
+    else Path(tempfile.gettempdir()) / "rig-console-screenshots"
+)
 WIDTH, HEIGHT = (640, 480) if SCREENSHOTS else (320, 240)
 RIG_TOML = f"""
 [camera]
@@ -72,8 +77,17 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]]
     cal = root / "data" / "calibrations" / "cal"
     scan(config, cal / "reference", scene="reference")
     g = geometry_from_config(config)
-    write_calibration(cal, Calibration(l0_mm=g.l0_mm, d0_mm=g.d0_mm, f0_per_mm=g.f0_per_mm, f0_frequency=g.f0_frequency,
-                                       pixel_mm=g.pixel_mm, reference="reference"))
+    write_calibration(
+        cal,
+        Calibration(
+            l0_mm=g.l0_mm,
+            d0_mm=g.d0_mm,
+            f0_per_mm=g.f0_per_mm,
+            f0_frequency=g.f0_frequency,
+            pixel_mm=g.pixel_mm,
+            reference="reference",
+        ),
+    )
     app = create_app(config, root / "data", fault_injection=True)
     port = _free_port()
     uv = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning", ws="websockets-sansio"))
@@ -91,8 +105,11 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]]
 @pytest.fixture(scope="module")
 def browser(server: dict[str, Any]) -> Iterator[Any]:
     with playwright_api.sync_playwright() as p:
-        chromium = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=["--use-gl=swiftshader", "--enable-webgl",
-                                                                                     "--ignore-gpu-blocklist"])
+        chromium = p.chromium.launch(
+            executable_path=CHROMIUM,
+            headless=True,
+            args=["--use-gl=swiftshader", "--enable-webgl", "--ignore-gpu-blocklist"],
+        )
         yield chromium
         chromium.close()
 
@@ -129,11 +146,13 @@ def shot(page: Any, name: str) -> None:
 
 def displayed_mean(page: Any) -> float:
     """Mean grey level (0..255) of what the live-view canvas shows."""
-    return float(page.evaluate("""() => {
+    return float(
+        page.evaluate("""() => {
         const c = document.querySelector('[data-testid=live-view]');
         const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
         let s = 0; for (let i = 0; i < d.length; i += 4) s += (d[i] + d[i + 1] + d[i + 2]) / 3;
-        return s / (d.length / 4); }"""))
+        return s / (d.length / 4); }""")
+    )
 
 
 def wait_frames(page: Any, count: int) -> None:
@@ -204,7 +223,7 @@ def test_scan_shows_3d_and_a_height_readout_matching_the_object(page: Any, serve
     truth = scene_height(config, "object", geometry_from_config(config))
     box = page.get_by_test_id("height-map").bounding_box()
     top_y, top_x = np.unravel_index(int(np.argmax(truth)), truth.shape)
-    for (py, px) in ((top_y, top_x), (top_y + HEIGHT // 12, top_x - WIDTH // 21)):
+    for py, px in ((top_y, top_x), (top_y + HEIGHT // 12, top_x - WIDTH // 21)):
         page.mouse.move(box["x"] + (px + 0.5) * box["width"] / WIDTH, box["y"] + (py + 0.5) * box["height"] / HEIGHT)
         readout = page.get_by_test_id("height-readout")
         x, y, value = (readout.get_attribute(k) for k in ("data-x", "data-y", "data-value"))
@@ -213,8 +232,10 @@ def test_scan_shows_3d_and_a_height_readout_matching_the_object(page: Any, serve
         assert "mm" in readout.inner_text()
     timings = page.evaluate("window.consoleState.timings")
     first = [t for t in timings if t["name"] == name][0]
-    print(f"scan to result on screen ({WIDTH}x{HEIGHT}): height map {first['map_since_last_frame_ms']:.0f} ms, "
-          f"with the 3-D view {first['since_last_frame_ms']:.0f} ms after the last frame")
+    print(
+        f"scan to result on screen ({WIDTH}x{HEIGHT}): height map {first['map_since_last_frame_ms']:.0f} ms, "
+        f"with the 3-D view {first['since_last_frame_ms']:.0f} ms after the last frame"
+    )
     page.get_by_test_id("downloads").locator("a").first.wait_for(timeout=30_000)
     assert page.get_by_test_id("downloads").locator("a", has_text="points.ply").count() == 1
     shot(page, "result")
@@ -271,7 +292,9 @@ def test_captures_reprocess_and_compare(page: Any) -> None:
     items.first.click()
     page.locator("#opt-correction").select_option("vote")
     page.get_by_test_id("reprocess").click()
-    page.wait_for_function("(document.querySelector('#view-result').dataset.result || '').includes('-vote')", timeout=60_000)
+    page.wait_for_function(
+        "(document.querySelector('#view-result').dataset.result || '').includes('-vote')", timeout=60_000
+    )
     page.locator("nav button[data-view=captures]").click()
     page.wait_for_function("document.querySelectorAll('#compare-a option').length >= 2")
     options = page.locator("#compare-a option").all_inner_texts()
@@ -291,11 +314,15 @@ def test_calibration_wizard(page: Any) -> None:
     page.locator("#cal-views").fill("0")
     assert page.get_by_test_id("calibration-model").input_value() == "reference-plane"
     page.get_by_test_id("calibration-start").click()
-    page.wait_for_function("document.querySelector('[data-testid=calibration-result]').dataset.done === 'true'", timeout=90_000)
+    page.wait_for_function(
+        "document.querySelector('[data-testid=calibration-result]').dataset.done === 'true'", timeout=90_000
+    )
     text = page.get_by_test_id("calibration-result").inner_text()
     assert "l0 = " in text and "d0 = " in text and "residuals" in text
     steps = page.get_by_test_id("calibration-steps").locator("li")
     assert steps.count() >= 4
-    assert steps.evaluate_all("items => items.map((li) => li.className)") == ["done"] * steps.count()  # the last one too
+    assert (
+        steps.evaluate_all("items => items.map((li) => li.className)") == ["done"] * steps.count()
+    )  # the last one too
     page.wait_for_function("document.querySelector('[data-testid=calibration]').value === 'wizard-cal'")
     shot(page, "calibration")

@@ -27,9 +27,24 @@ def test_ctrl_c_closes_the_devices_and_exits_cleanly(tmp_path: Path) -> None:
     (tmp_path / "rig.toml").write_text("[camera]\nsize = [160, 120]\n[projector]\nsize = [228, 285]\n")
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
     process = subprocess.Popen(
-        [sys.executable, "-m", "rig.cli", "-v", "console", "--config", str(tmp_path / "rig.toml"),
-         "--data", str(tmp_path / "data"), "--port", "0"],
-        cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        [
+            sys.executable,
+            "-m",
+            "rig.cli",
+            "-v",
+            "console",
+            "--config",
+            str(tmp_path / "rig.toml"),
+            "--data",
+            str(tmp_path / "data"),
+            "--port",
+            "0",
+        ],
+        cwd=tmp_path,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
     )
     try:
         lines: list[str] = []

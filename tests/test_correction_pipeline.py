@@ -44,8 +44,17 @@ def test_each_method_runs_through_the_pipeline(small_capture, tmp_path, method: 
 
 
 def test_rpca_denoising_stage_is_recorded_and_parameters_reach_it(small_capture, small_scan, tmp_path) -> None:
-    report = run_process(small_capture.capture, small_capture.calibration, tmp_path / "den",
-                         "--denoise", "rpca", "--correction", "none", "--param", "stable=true")
+    report = run_process(
+        small_capture.capture,
+        small_capture.calibration,
+        tmp_path / "den",
+        "--denoise",
+        "rpca",
+        "--correction",
+        "none",
+        "--param",
+        "stable=true",
+    )
     info = report["stage_info"]["object"]["denoise"]
     assert info["method"] == "rpca" and info["parameters"] == {"stable": True}
     assert len(info["iterations"]) == len(info["rank"]) == 12  # 3 frequencies x 4 steps

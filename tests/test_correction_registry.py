@@ -28,7 +28,11 @@ def test_a_needed_input_missing_from_the_calibration_is_named() -> None:
 
 def test_gamma_table_subtracts_the_tabulated_ripple() -> None:
     centers = np.linspace(0, 2 * np.pi, 32, endpoint=False) + np.pi / 32
-    fields = {"phase_error_centers": centers.tolist(), "phase_error_rad": (0.05 * np.sin(3 * centers)).tolist(), "frequency": 8}
+    fields = {
+        "phase_error_centers": centers.tolist(),
+        "phase_error_rad": (0.05 * np.sin(3 * centers)).tolist(),
+        "frequency": 8,
+    }
     truth = np.linspace(0.1, 40.0, 600).reshape(20, 30)
     measured = truth + 0.05 * np.sin(3 * np.mod(truth, 2 * np.pi))
     phase, info = REGISTRY["gamma-table"](measured, np.mod(measured, 2 * np.pi), frequency=8, phase_error=fields)

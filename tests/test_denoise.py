@@ -46,7 +46,9 @@ def test_stable_denoising_beats_exact_decomposition(scan) -> None:
 
 
 def test_impulsive_noise_goes_to_the_sparse_part(scan) -> None:
-    clean = simulate_scan("hemisphere", scan.geometry, scan.patterns[:1], synth.Appearance(bit_depth=None), seed=4).object_frames[0]
+    clean = simulate_scan(
+        "hemisphere", scan.geometry, scan.patterns[:1], synth.Appearance(bit_depth=None), seed=4
+    ).object_frames[0]
     rng = np.random.default_rng(8)
     hit = rng.random(clean.shape) < 0.05
     spoiled = np.where(hit, 255.0, clean)

@@ -34,7 +34,7 @@ from drivers.errors import (
 )
 from mock_devices.dlp_usb import Dlpc350Faults, FakeDlpc350Backend
 from tests.contracts import device_option
-from tests.protocol import expected_protocol, expected_usb_protocol
+from tests.protocol import expected_protocol
 
 
 def report(hex_bytes: str) -> bytes:
@@ -59,24 +59,25 @@ def read_exchange(seq: int, cmd3_cmd2: str, data: str) -> tuple[bytes, bytes]:
 
 
 # open() reads power (awake), display mode (video) and main status (sequencer stopped)
-OPEN = [read_exchange(1, "00 02", "00"), read_exchange(2, "1b 1a", "00"),
-        read_exchange(3, "0c 1a", "00")]
+OPEN = [read_exchange(1, "00 02", "00"), read_exchange(2, "1b 1a", "00"), read_exchange(3, "0c 1a", "00")]
 
 
 def one_entry_sequence(**overrides) -> PatternSequence:
-    entry = PatternEntry(pattern_number=5, bit_depth=1, leds=Led.GREEN,
-                         trigger=TriggerType.EXTERNAL_POSITIVE, buffer_swap=True)
-    kwargs = dict(entries=[entry], exposure_us=10000, frame_period_us=16667,
-                  source=PatternSource.VIDEO_PORT)
+    entry = PatternEntry(
+        pattern_number=5, bit_depth=1, leds=Led.GREEN, trigger=TriggerType.EXTERNAL_POSITIVE, buffer_swap=True
+    )
+    kwargs = dict(entries=[entry], exposure_us=10000, frame_period_us=16667, source=PatternSource.VIDEO_PORT)
     kwargs.update(overrides)
     return PatternSequence(**kwargs)
 
 
 def valid_sequence(n: int = 3, depth: int = 8) -> PatternSequence:
-    entries = [PatternEntry(k, bit_depth=depth, trigger=TriggerType.EXTERNAL_POSITIVE,
-                            buffer_swap=(k == 0)) for k in range(n)]
-    return PatternSequence(entries=entries, exposure_us=dp.MIN_EXPOSURE_US[depth],
-                           frame_period_us=dp.MIN_EXPOSURE_US[depth])
+    entries = [
+        PatternEntry(k, bit_depth=depth, trigger=TriggerType.EXTERNAL_POSITIVE, buffer_swap=(k == 0)) for k in range(n)
+    ]
+    return PatternSequence(
+        entries=entries, exposure_us=dp.MIN_EXPOSURE_US[depth], frame_period_us=dp.MIN_EXPOSURE_US[depth]
+    )
 
 
 def ready(backend) -> LightCrafter4500:
@@ -89,6 +90,7 @@ def ready(backend) -> LightCrafter4500:
 
 # -- packet format ----------------------------------------------------------------------------
 
+
 def test_request_layout_matches_the_guide():
     # write display mode (USB 0x1A1B) = pattern: flags 0x40 (write, reply), seq, length 3
     # (CMD3, CMD2, 1 data byte), CMD3 = 0x1B then CMD2 = 0x1A, data 0x01
@@ -97,8 +99,9 @@ def test_request_layout_matches_the_guide():
 
 
 def test_pattern_entry_bits():
-    entry = PatternEntry(pattern_number=5, bit_depth=1, leds=Led.GREEN,
-                         trigger=TriggerType.EXTERNAL_POSITIVE, buffer_swap=True)
+    entry = PatternEntry(
+        pattern_number=5, bit_depth=1, leds=Led.GREEN, trigger=TriggerType.EXTERNAL_POSITIVE, buffer_swap=True
+    )
     # byte 0: pattern << 2 | trigger; byte 1: LEDs << 4 | depth; byte 2: swap is bit 2
     assert entry.pack() == bytes([0x15, 0x21, 0x04])
     assert PatternEntry.unpack(entry.pack()) == entry
@@ -127,8 +130,7 @@ CONFIGURE_ONE_ENTRY = [  # configure_sequence(one_entry_sequence()), from sequen
 
 
 def test_open_reads_power_mode_and_sequencer_state():
-    exchanges = [read_exchange(1, "00 02", "01"), read_exchange(2, "1b 1a", "01"),
-                 read_exchange(3, "0c 1a", "03")]
+    exchanges = [read_exchange(1, "00 02", "01"), read_exchange(2, "1b 1a", "01"), read_exchange(3, "0c 1a", "03")]
     with expected_protocol(LightCrafter4500, exchanges) as dlp:
         assert dlp.state is SequenceState.RUNNING
         with pytest.raises(IncompatibleStateError, match="standby"):
@@ -136,9 +138,14 @@ def test_open_reads_power_mode_and_sequencer_state():
 
 
 def test_wake_standby_and_display_mode_reports():
-    exchanges = [*OPEN, write_exchange(4, "00 02 00"), write_exchange(5, "1b 1a 01"),
-                 read_exchange(6, "1b 1a", "00"),  # still switching: read again
-                 read_exchange(7, "1b 1a", "01"), write_exchange(8, "00 02 01")]
+    exchanges = [
+        *OPEN,
+        write_exchange(4, "00 02 00"),
+        write_exchange(5, "1b 1a 01"),
+        read_exchange(6, "1b 1a", "00"),  # still switching: read again
+        read_exchange(7, "1b 1a", "01"),
+        write_exchange(8, "00 02 01"),
+    ]
     with expected_protocol(LightCrafter4500, exchanges, settle_s=0) as dlp:
         dlp.wake()
         dlp.set_display_mode(DisplayMode.PATTERN)
@@ -154,7 +161,9 @@ def test_configure_sequence_reports():
 
 def test_validate_polls_until_not_busy_then_start():
     exchanges = [
-        *OPEN, *TO_PATTERN, *CONFIGURE_ONE_ENTRY,
+        *OPEN,
+        *TO_PATTERN,
+        *CONFIGURE_ONE_ENTRY,
         write_exchange(14, "1a 1a 00"),  # start validation
         read_exchange(15, "1a 1a", "80"),  # busy
         read_exchange(16, "1a 1a", "10"),  # done, with a warning bit
@@ -162,16 +171,17 @@ def test_validate_polls_until_not_busy_then_start():
         read_exchange(18, "24 1a", "00"),  # ignored (first start after video mode)
         write_exchange(19, "24 1a 02"),  # start again
         read_exchange(20, "24 1a", "02"),  # running
-        write_exchange(21, "24 1a 01"), read_exchange(22, "24 1a", "01"),  # pause
-        write_exchange(23, "24 1a 00"), read_exchange(24, "24 1a", "00"),  # stop
+        write_exchange(21, "24 1a 01"),
+        read_exchange(22, "24 1a", "01"),  # pause
+        write_exchange(23, "24 1a 00"),
+        read_exchange(24, "24 1a", "00"),  # stop
     ]
     with expected_protocol(LightCrafter4500, exchanges, settle_s=0) as dlp:
         dlp.set_display_mode(DisplayMode.PATTERN)
         dlp.configure_sequence(one_entry_sequence())
         result = dlp.validate()
         assert result.ok
-        assert result.messages == ["warning: frame period and exposure differ by less than "
-                                   "230 us"]
+        assert result.messages == ["warning: frame period and exposure differ by less than 230 us"]
         dlp.start()
         dlp.pause()
         dlp.stop()
@@ -179,8 +189,12 @@ def test_validate_polls_until_not_busy_then_start():
 
 
 def test_status_reads_three_registers():
-    exchanges = [*OPEN, read_exchange(4, "0a 1a", "41"), read_exchange(5, "0b 1a", "01"),
-                 read_exchange(6, "0c 1a", "02")]
+    exchanges = [
+        *OPEN,
+        read_exchange(4, "0a 1a", "41"),
+        read_exchange(5, "0b 1a", "01"),
+        read_exchange(6, "0c 1a", "02"),
+    ]
     with expected_protocol(LightCrafter4500, exchanges) as dlp:
         status = dlp.status()
     assert status.sequencer_running and not status.parked
@@ -189,9 +203,12 @@ def test_status_reads_three_registers():
 
 def test_stale_reply_is_skipped_by_sequence_number():
     # the device answers with an old reply (sequence 3) before the one to this request (4)
-    exchanges = [*OPEN, (report("c0 04 02 00 0a 1a"),
-                         report("80 03 01 00 00") + report("80 04 01 00 01")),
-                 read_exchange(5, "0b 1a", "01"), read_exchange(6, "0c 1a", "00")]
+    exchanges = [
+        *OPEN,
+        (report("c0 04 02 00 0a 1a"), report("80 03 01 00 00") + report("80 04 01 00 01")),
+        read_exchange(5, "0b 1a", "01"),
+        read_exchange(6, "0c 1a", "00"),
+    ]
     with expected_protocol(LightCrafter4500, exchanges) as dlp:
         assert dlp.status().hardware == 0x01
 
@@ -204,8 +221,13 @@ def test_error_flag_in_reply_raises_naming_the_command():
 
 
 def test_validation_failure_is_explained():
-    exchanges = [*OPEN, *TO_PATTERN, *CONFIGURE_ONE_ENTRY,
-                 write_exchange(14, "1a 1a 00"), read_exchange(15, "1a 1a", "03")]
+    exchanges = [
+        *OPEN,
+        *TO_PATTERN,
+        *CONFIGURE_ONE_ENTRY,
+        write_exchange(14, "1a 1a 00"),
+        read_exchange(15, "1a 1a", "03"),
+    ]
     with expected_protocol(LightCrafter4500, exchanges, settle_s=0) as dlp:
         dlp.set_display_mode(DisplayMode.PATTERN)
         dlp.configure_sequence(one_entry_sequence())
@@ -216,6 +238,7 @@ def test_validation_failure_is_explained():
 
 
 # -- controller state through the fake backend ------------------------------------------------
+
 
 def test_open_detaches_kernel_driver_claims_and_releases():
     backend = FakeDlpc350Backend()
@@ -229,9 +252,14 @@ def test_open_detaches_kernel_driver_claims_and_releases():
 def test_full_flow_programs_the_controller():
     backend = FakeDlpc350Backend()
     sequence = PatternSequence(
-        entries=[PatternEntry(k % 3, bit_depth=8, trigger=TriggerType.EXTERNAL_POSITIVE,
-                              buffer_swap=(k % 3 == 0)) for k in range(6)],
-        exposure_us=9000, frame_period_us=9500, image_indexes=(4, 5))
+        entries=[
+            PatternEntry(k % 3, bit_depth=8, trigger=TriggerType.EXTERNAL_POSITIVE, buffer_swap=(k % 3 == 0))
+            for k in range(6)
+        ],
+        exposure_us=9000,
+        frame_period_us=9500,
+        image_indexes=(4, 5),
+    )
     with ready(backend) as dlp:
         dlp.configure_sequence(sequence)
         dlp.validate()
@@ -292,18 +320,22 @@ def test_state_rules_refuse_without_traffic():
 
 # -- limits -----------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("sequence, message", [
-    (PatternSequence([PatternEntry(0)] * 129, 235, 235), "1..128 entries"),
-    (PatternSequence([PatternEntry(25, bit_depth=1)], 235, 235),
-     r"holds 24: 0\.\.23; 24 is the black fill"),
-    (PatternSequence([PatternEntry(3, bit_depth=8)], 8333, 8333), r"holds 3: 0\.\.2"),
-    (PatternSequence([PatternEntry(k % 24) for k in range(25)], 235, 235),
-     "more than 24 patterns from one 24-bit image"),
-    (PatternSequence([PatternEntry(0)], 235, 235, patterns_to_display=257), "1..256"),
-    (PatternSequence([PatternEntry(0, insert_black=True, trigger_out_prev=True)], 235, 235),
-     "insert_black"),
-    (PatternSequence([PatternEntry(0)], 235, 235, image_indexes=()), "1..64 flash images"),
-])
+
+@pytest.mark.parametrize(
+    "sequence, message",
+    [
+        (PatternSequence([PatternEntry(0)] * 129, 235, 235), "1..128 entries"),
+        (PatternSequence([PatternEntry(25, bit_depth=1)], 235, 235), r"holds 24: 0\.\.23; 24 is the black fill"),
+        (PatternSequence([PatternEntry(3, bit_depth=8)], 8333, 8333), r"holds 3: 0\.\.2"),
+        (
+            PatternSequence([PatternEntry(k % 24) for k in range(25)], 235, 235),
+            "more than 24 patterns from one 24-bit image",
+        ),
+        (PatternSequence([PatternEntry(0)], 235, 235, patterns_to_display=257), "1..256"),
+        (PatternSequence([PatternEntry(0, insert_black=True, trigger_out_prev=True)], 235, 235), "insert_black"),
+        (PatternSequence([PatternEntry(0)], 235, 235, image_indexes=()), "1..64 flash images"),
+    ],
+)
 def test_sequencer_limits(sequence, message):
     backend = FakeDlpc350Backend()
     with ready(backend) as dlp:
@@ -314,20 +346,22 @@ def test_sequencer_limits(sequence, message):
     assert isinstance(info.value, ValueError) and isinstance(info.value, UnsupportedFeatureError)
 
 
-@pytest.mark.parametrize("depth, exposure, period, message", [
-    (8, 8332, 8332, "below the 8333 us minimum for 8-bit"),
-    (1, 234, 1000, "below the 235 us minimum for 1-bit"),
-    (1, 2000, 1000, "exceeds the frame period"),
-    (1, 1000, 1100, "at least 230 us shorter"),
-])
+@pytest.mark.parametrize(
+    "depth, exposure, period, message",
+    [
+        (8, 8332, 8332, "below the 8333 us minimum for 8-bit"),
+        (1, 234, 1000, "below the 235 us minimum for 1-bit"),
+        (1, 2000, 1000, "exceeds the frame period"),
+        (1, 1000, 1100, "at least 230 us shorter"),
+    ],
+)
 def test_exposure_rules(depth, exposure, period, message):
     sequence = PatternSequence([PatternEntry(0, bit_depth=depth)], exposure, period)
     with ready(FakeDlpc350Backend()) as dlp, pytest.raises(ExposureError, match=message):
         dlp.configure_sequence(sequence)
 
 
-@pytest.mark.parametrize("depth, exposure, period", [(1, 235, 235), (1, 1000, 1230),
-                                                     (8, 8333, 20000)])
+@pytest.mark.parametrize("depth, exposure, period", [(1, 235, 235), (1, 1000, 1230), (8, 8333, 20000)])
 def test_exposure_rules_accept_boundaries(depth, exposure, period):
     sequence = PatternSequence([PatternEntry(0, bit_depth=depth)], exposure, period)
     with ready(FakeDlpc350Backend()) as dlp:
@@ -336,6 +370,7 @@ def test_exposure_rules_accept_boundaries(depth, exposure, period):
 
 
 # -- faults and missing devices ---------------------------------------------------------------
+
 
 def test_usb_error_is_wrapped_naming_the_command():
     faults = Dlpc350Faults(usb_error_on={Command.PATTERN_START_STOP: errno.EPIPE})
@@ -411,6 +446,7 @@ def test_default_backend_without_a_projector_raises_device_not_found():
 
 
 # -- contract: every DlpController backend, simulated or real ---------------------------------
+
 
 class DlpContract:
     """Mix into a class whose ``make_dlp()`` returns an unopened DlpController."""
@@ -489,12 +525,16 @@ def test_running_rolls_back_when_start_is_refused():
 
 # -- what a real DLPC350 does that an instant, echoing controller would not (issue 15) ---------
 
+
 def test_two_image_indexes_play_in_the_order_given():
     # TI's SendImageLut swaps a two-entry image LUT because the firmware plays it swapped
     backend = FakeDlpc350Backend()
     sequence = PatternSequence(
         entries=[PatternEntry(k % 3, bit_depth=8, buffer_swap=(k % 3 == 0)) for k in range(6)],
-        exposure_us=9000, frame_period_us=9000, image_indexes=(4, 5))
+        exposure_us=9000,
+        frame_period_us=9000,
+        image_indexes=(4, 5),
+    )
     with ready(backend) as dlp:
         dlp.configure_sequence(sequence)
         assert backend.state.image_lut == {0: 4, 1: 5}
@@ -550,10 +590,12 @@ def test_replies_with_or_without_the_sequence_echoed(echo):
 
 def test_controller_that_does_not_echo_is_read_without_matching():
     # reply sequence 0 to every request (as TI's host expects: it sends reads with sequence 0)
-    exchanges = [(report("c0 01 02 00 00 02"), report("80 00 01 00 00")),
-                 (report("c0 02 02 00 1b 1a"), report("80 00 01 00 01")),
-                 (report("c0 03 02 00 0c 1a"), report("80 00 01 00 00")),
-                 (report("c0 04 02 00 0a 1a"), report("80 00 01 00 41"))]
+    exchanges = [
+        (report("c0 01 02 00 00 02"), report("80 00 01 00 00")),
+        (report("c0 02 02 00 1b 1a"), report("80 00 01 00 01")),
+        (report("c0 03 02 00 0c 1a"), report("80 00 01 00 00")),
+        (report("c0 04 02 00 0a 1a"), report("80 00 01 00 41")),
+    ]
     with expected_protocol(LightCrafter4500, exchanges) as dlp:
         assert dlp._read_byte(Command.HARDWARE_STATUS) == 0x41
 
@@ -562,8 +604,7 @@ def test_long_message_continues_in_headerless_reports():
     data = bytes(range(100))
     reports = dp.encode_message(Command.MAILBOX_DATA, 9, data)
     # first: header (length 102 = 0x66), CMD3 CMD2, 58 data bytes; then 42 bytes, zero padded
-    assert reports == [bytes.fromhex("40 09 66 00 34 1a") + data[:58],
-                       data[58:].ljust(64, b"\x00")]
+    assert reports == [bytes.fromhex("40 09 66 00 34 1a") + data[:58], data[58:].ljust(64, b"\x00")]
     with pytest.raises(dp.PacketError, match="use encode_message"):
         dp.encode_request(Command.MAILBOX_DATA, 9, data)
 
@@ -571,8 +612,9 @@ def test_long_message_continues_in_headerless_reports():
 def test_full_lut_and_64_image_indexes_reach_the_controller():
     backend = FakeDlpc350Backend()
     entries = [PatternEntry(k % 3, bit_depth=8, buffer_swap=(k % 2 == 0)) for k in range(128)]
-    sequence = PatternSequence(entries=entries, exposure_us=9000, frame_period_us=209_000,
-                               image_indexes=tuple(range(64)))
+    sequence = PatternSequence(
+        entries=entries, exposure_us=9000, frame_period_us=209_000, image_indexes=tuple(range(64))
+    )
     with ready(backend) as dlp:
         dlp.configure_sequence(sequence)
         assert [backend.state.pattern_lut[k] for k in range(128)] == entries
@@ -582,23 +624,20 @@ def test_full_lut_and_64_image_indexes_reach_the_controller():
 
 def test_flash_sequence_beyond_two_images_needs_time_to_load_each():
     entries = [PatternEntry(k % 3, bit_depth=8, buffer_swap=(k % 3 == 0)) for k in range(9)]
-    short = PatternSequence(entries=entries, exposure_us=9000, frame_period_us=9000,
-                            image_indexes=(0, 1, 2))
+    short = PatternSequence(entries=entries, exposure_us=9000, frame_period_us=9000, image_indexes=(0, 1, 2))
     backend = FakeDlpc350Backend()
     with ready(backend) as dlp:
         sent = len(backend.requests)
         with pytest.raises(ExposureError, match=r"load an image from flash.*200000 us"):
             dlp.configure_sequence(short)
         assert len(backend.requests) == sent
-        loaded = PatternSequence(entries=entries, exposure_us=9000, frame_period_us=209_000,
-                                 image_indexes=(0, 1, 2))
+        loaded = PatternSequence(entries=entries, exposure_us=9000, frame_period_us=209_000, image_indexes=(0, 1, 2))
         dlp.configure_sequence(loaded)
         dlp.validate()
         dlp.start()
         assert dlp.status().healthy
     # two images fit the frame buffers: no load time needed
-    two = PatternSequence(entries=entries[:6], exposure_us=9000, frame_period_us=9000,
-                          image_indexes=(0, 1))
+    two = PatternSequence(entries=entries[:6], exposure_us=9000, frame_period_us=9000, image_indexes=(0, 1))
     with ready(FakeDlpc350Backend()) as dlp, dlp.running(two):
         assert dlp.status().healthy
 
@@ -608,8 +647,9 @@ def test_fake_flags_a_forced_swap_when_images_load_too_slowly():
     backend = FakeDlpc350Backend(busy_s=0)
     entries = [PatternEntry(k % 3, bit_depth=8, buffer_swap=(k % 3 == 0)) for k in range(9)]
     with ready(backend) as dlp:
-        dlp.configure_sequence(PatternSequence(entries=entries, exposure_us=9000,
-                                               frame_period_us=209_000, image_indexes=(0, 1, 2)))
+        dlp.configure_sequence(
+            PatternSequence(entries=entries, exposure_us=9000, frame_period_us=209_000, image_indexes=(0, 1, 2))
+        )
         backend.state.frame_period_us = 9000
         dlp.validate()
         dlp.start()
@@ -625,8 +665,12 @@ def test_one_bit_black_fill_pattern_24_is_accepted():
 
 def test_main_status_bit_3_is_gamma_correction_on_the_dlpc350():
     assert dp.MainStatus.GAMMA_CORRECTION == 0x08
-    exchanges = [*OPEN, read_exchange(4, "0a 1a", "01"), read_exchange(5, "0b 1a", "01"),
-                 read_exchange(6, "0c 1a", "08")]
+    exchanges = [
+        *OPEN,
+        read_exchange(4, "0a 1a", "01"),
+        read_exchange(5, "0b 1a", "01"),
+        read_exchange(6, "0c 1a", "08"),
+    ]
     with expected_protocol(LightCrafter4500, exchanges) as dlp:
         status = dlp.status()
     assert status.gamma_correction and status.healthy

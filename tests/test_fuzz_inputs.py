@@ -20,23 +20,38 @@ from hypothesis import strategies as st
 from rig.cli import main
 from rig.store.capture import CaptureWriter
 
-FUZZ = settings(max_examples=25, derandomize=True, deadline=None, database=None,
-                suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+FUZZ = settings(
+    max_examples=25,
+    derandomize=True,
+    deadline=None,
+    database=None,
+    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
+)
 
 PATTERNS = [{"kind": "sinusoid", "axis": "x", "frequency": f, "steps": 3, "step": j} for f in (1, 4) for j in range(3)]
 
 json_scalars = st.one_of(
-    st.none(), st.booleans(), st.integers(-(2**70), 2**70), st.floats(allow_nan=True, allow_infinity=True),
-    st.text(max_size=12), st.sampled_from(["../../etc/passwd", "/etc/passwd", "frames/000.png", "", "\u0000x", "a" * 300]),
+    st.none(),
+    st.booleans(),
+    st.integers(-(2**70), 2**70),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.text(max_size=12),
+    st.sampled_from(["../../etc/passwd", "/etc/passwd", "frames/000.png", "", "\u0000x", "a" * 300]),
 )
-json_values = st.recursive(json_scalars, lambda inner: st.lists(inner, max_size=3) | st.dictionaries(st.text(max_size=6), inner, max_size=3), max_leaves=8)
+json_values = st.recursive(
+    json_scalars,
+    lambda inner: st.lists(inner, max_size=3) | st.dictionaries(st.text(max_size=6), inner, max_size=3),
+    max_leaves=8,
+)
 
 
 @pytest.fixture(scope="module")
 def pristine(tmp_path_factory) -> Path:
     root = tmp_path_factory.mktemp("fuzz")
     rng = np.random.default_rng(0)
-    with CaptureWriter(root / "cap", {"width": 24, "height": 16, "bit_depth": 8}, {"width": 64, "height": 48}, PATTERNS) as writer:
+    with CaptureWriter(
+        root / "cap", {"width": 24, "height": 16, "bit_depth": 8}, {"width": 64, "height": 48}, PATTERNS
+    ) as writer:
         for i in range(len(PATTERNS)):
             writer.add_frame(i, rng.integers(0, 255, (16, 24), dtype=np.uint8))
     return root / "cap"
@@ -73,8 +88,18 @@ def assert_clean_outcome(code: int, err: str, root: Path, before: set[str], outp
     if code != 0:
         lines = [line for line in err.splitlines() if line.strip() and " error: " in line]
         assert code == 1 and len(lines) == 1, err
-        assert len([line for line in err.splitlines() if line.strip() and ": error:" not in line and
-                    not line.startswith(("process ", "scan ", "simulate "))]) == 0, err
+        assert (
+            len(
+                [
+                    line
+                    for line in err.splitlines()
+                    if line.strip()
+                    and ": error:" not in line
+                    and not line.startswith(("process ", "scan ", "simulate "))
+                ]
+            )
+            == 0
+        ), err
         if output is not None:
             assert not output.exists() or output.name in before, f"failed run left {output}"
     created = _listing(root) - before
@@ -132,8 +157,10 @@ def test_mutated_frame_files(capsys, tmp_path_factory, pristine, data) -> None:
 
 
 @FUZZ
-@given(key=st.sampled_from(["l0_mm", "d0_mm", "f0_per_mm", "f0_frequency", "pixel_mm", "reference", "model", "format"]),
-       value=json_values)
+@given(
+    key=st.sampled_from(["l0_mm", "d0_mm", "f0_per_mm", "f0_frequency", "pixel_mm", "reference", "model", "format"]),
+    value=json_values,
+)
 def test_mutated_calibration(capsys, tmp_path_factory, small_scan, key, value) -> None:
     from rig.hardware.synthesis import write_simulated_scan
 
@@ -149,16 +176,31 @@ def test_mutated_calibration(capsys, tmp_path_factory, small_scan, key, value) -
     assert_clean_outcome(code, capsys.readouterr().err, root, before, out)
     if code == 0:
         report = json.loads((out / "report.json").read_text())
-        assert "Infinity" not in json.dumps(report) and np.isfinite(np.load(out / "height.npy")[np.load(out / "mask.npy")]).all()
+        assert (
+            "Infinity" not in json.dumps(report)
+            and np.isfinite(np.load(out / "height.npy")[np.load(out / "mask.npy")]).all()
+        )
 
 
 toml_values = st.one_of(
-    st.integers(-(2**63), 2**63 - 1).map(str), st.floats(allow_nan=False).map(lambda v: repr(v).replace("inf", "1e999")),
-    st.text(alphabet="abc[]{}=\"'\\\n 0123456789.,-", max_size=20), st.sampled_from(['"none"', "[1, 1e308]", "[100000, 100000]", "true"]),
+    st.integers(-(2**63), 2**63 - 1).map(str),
+    st.floats(allow_nan=False).map(lambda v: repr(v).replace("inf", "1e999")),
+    st.text(alphabet="abc[]{}=\"'\\\n 0123456789.,-", max_size=20),
+    st.sampled_from(['"none"', "[1, 1e308]", "[100000, 100000]", "true"]),
 )
-CONFIG_KEYS = [("camera", "size"), ("camera", "exposure_us"), ("scan", "frequencies"), ("scan", "steps"),
-               ("scan", "retries"), ("trigger", "baudrate"), ("trigger", "timeout_s"), ("simulation", "snr_db"),
-               ("projector", "size"), ("scan", "speckle_frequency"), ("simulation", "scene")]
+CONFIG_KEYS = [
+    ("camera", "size"),
+    ("camera", "exposure_us"),
+    ("scan", "frequencies"),
+    ("scan", "steps"),
+    ("scan", "retries"),
+    ("trigger", "baudrate"),
+    ("trigger", "timeout_s"),
+    ("simulation", "snr_db"),
+    ("projector", "size"),
+    ("scan", "speckle_frequency"),
+    ("simulation", "scene"),
+]
 
 
 @FUZZ
@@ -177,9 +219,17 @@ def test_mutated_config(capsys, tmp_path_factory, section_key, value) -> None:
 
 
 @FUZZ
-@given(argv=st.lists(st.one_of(st.sampled_from(["--size", "--steps", "--frequencies", "--snr-db", "--seed", "--scene",
-                                                "--overwrite", "--pattern-set"]),
-                               st.text(alphabet="0123456789x.-e+abc/", max_size=10)), max_size=6))
+@given(
+    argv=st.lists(
+        st.one_of(
+            st.sampled_from(
+                ["--size", "--steps", "--frequencies", "--snr-db", "--seed", "--scene", "--overwrite", "--pattern-set"]
+            ),
+            st.text(alphabet="0123456789x.-e+abc/", max_size=10),
+        ),
+        max_size=6,
+    )
+)
 def test_fuzzed_simulate_arguments(capsys, tmp_path_factory, monkeypatch, argv) -> None:
     monkeypatch.setenv("RIG_MAX_IMAGE_SIDE", "64")  # any size the fuzzer finds stays small
     root = tmp_path_factory.mktemp("a")

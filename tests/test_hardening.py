@@ -45,13 +45,16 @@ def write_small(path: Path, overwrite: bool = False) -> None:
 # 1. --overwrite replaces only what this program wrote -------------------------------------------
 
 
-@pytest.mark.parametrize("argv", [
-    ("scan", "-o", "{d}", "--overwrite"),
-    ("simulate", "-o", "{d}", "--size", "32x24", "--overwrite"),
-    ("calibrate", "-o", "{d}", "--overwrite"),
-    ("demo", "-o", "{d}", "--size", "32x24", "-q"),
-    ("process", "{cap}", "-o", "{d}", "-q"),
-])
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ("scan", "-o", "{d}", "--overwrite"),
+        ("simulate", "-o", "{d}", "--size", "32x24", "--overwrite"),
+        ("calibrate", "-o", "{d}", "--overwrite"),
+        ("demo", "-o", "{d}", "--size", "32x24", "-q"),
+        ("process", "{cap}", "-o", "{d}", "-q"),
+    ],
+)
 def test_overwrite_never_replaces_a_foreign_directory(capsys, tmp_path, small_capture, argv) -> None:
     precious = tmp_path / "d"
     precious.mkdir()
@@ -179,8 +182,11 @@ def test_unwritable_outputs_fail_before_computing(capsys, tmp_path, small_captur
     file = tmp_path / "afile"
     file.write_text("x")
     out = where.format(file=file)
-    for argv in (("process", small_capture.capture, "-o", out, "-q"), ("simulate", "-o", out, "--size", "32x24"),
-                 ("calibrate", "-o", out, "-q")):
+    for argv in (
+        ("process", small_capture.capture, "-o", out, "-q"),
+        ("simulate", "-o", out, "--size", "32x24"),
+        ("calibrate", "-o", out, "-q"),
+    ):
         assert_one_line(*run(capsys, *argv))
     assert file.read_text() == "x"
 
@@ -194,20 +200,27 @@ def test_singular_phase_shifts_name_the_patterns(capsys, small_capture) -> None:
     assert_one_line(*run(capsys, "process", small_capture.capture, "-q"), "patterns[0]", "cannot compute a phase")
 
 
-@pytest.mark.parametrize("text", ["[" * 100000 + "]" * 100000, '{"format": ' + "7" * 5000 + "}", "{\"a\": NaN}"],
-                         ids=["nesting", "digits", "nan"])
+@pytest.mark.parametrize(
+    "text",
+    ["[" * 100000 + "]" * 100000, '{"format": ' + "7" * 5000 + "}", '{"a": NaN}'],
+    ids=["nesting", "digits", "nan"],
+)
 def test_hostile_json_is_one_line(capsys, small_capture, text) -> None:
     (small_capture.capture / "capture.json").write_text(text)
     assert_one_line(*run(capsys, "info", small_capture.capture), "capture.json")
 
 
-@pytest.mark.parametrize("toml,fragment", [
-    ("[scan]\nfrequencies = [1, 1e308]\n", "frequencies"),
-    ("[trigger]\nbaudrate = 9223372036854775807\n", "baudrate"),
-    ("[camera]\nsize = [100000, 100000]\n", "size"),
-    ("[scan]\nsteps = " + "9" * 5000 + "\n", "not valid TOML"),
-    ("a = " + "[" * 5000 + "]" * 5000 + "\n", "not valid TOML"),
-], ids=["frequency", "baudrate", "size", "digits", "nesting"])
+@pytest.mark.parametrize(
+    "toml,fragment",
+    [
+        ("[scan]\nfrequencies = [1, 1e308]\n", "frequencies"),
+        ("[trigger]\nbaudrate = 9223372036854775807\n", "baudrate"),
+        ("[camera]\nsize = [100000, 100000]\n", "size"),
+        ("[scan]\nsteps = " + "9" * 5000 + "\n", "not valid TOML"),
+        ("a = " + "[" * 5000 + "]" * 5000 + "\n", "not valid TOML"),
+    ],
+    ids=["frequency", "baudrate", "size", "digits", "nesting"],
+)
 def test_absurd_config_values_are_one_line(capsys, tmp_path, toml, fragment) -> None:
     config = tmp_path / "rig.toml"
     config.write_text(toml)
@@ -222,7 +235,9 @@ def test_impossible_file_names_are_one_line(capsys, small_capture, name) -> None
 
 
 def test_bad_parameter_value_is_one_line(capsys, small_capture) -> None:
-    code, err = run(capsys, "process", small_capture.capture, "--correction", "auto", "--param", "max_residual=abc", "-q")
+    code, err = run(
+        capsys, "process", small_capture.capture, "--correction", "auto", "--param", "max_residual=abc", "-q"
+    )
     assert_one_line(code, err, "max_residual" if "max_residual" in err else "abc")
 
 
@@ -230,7 +245,9 @@ def test_import_opencv_on_a_file_that_is_not_opencv(capsys, tmp_path) -> None:
     for content in (b"hello\n", b"%YAML:1.0\n[[[[", b"\x89PNG\r\n"):
         source = tmp_path / "cal.yml"
         source.write_bytes(content)
-        code, err = run(capsys, "calibrate", "--import-opencv", source, "--projector-size", "10x10", "-o", tmp_path / "c")
+        code, err = run(
+            capsys, "calibrate", "--import-opencv", source, "--projector-size", "10x10", "-o", tmp_path / "c"
+        )
         assert_one_line(code, err, "cal.yml")
     assert not (tmp_path / "c").exists()
 
@@ -292,7 +309,9 @@ def test_absurd_l0_gives_no_infinity(capsys, tmp_path, small_capture) -> None:
     data["l0_mm"] = 1e308
     path.write_text(json.dumps(data))
     out = tmp_path / "o"
-    code, err = run(capsys, "process", small_capture.capture, "--calibration", small_capture.calibration, "-o", out, "-q")
+    code, err = run(
+        capsys, "process", small_capture.capture, "--calibration", small_capture.calibration, "-o", out, "-q"
+    )
     if code == 0:
         assert np.isfinite(np.load(out / "height.npy")[np.load(out / "mask.npy")]).all()
         assert "Infinity" not in (out / "report.json").read_text()

@@ -98,27 +98,39 @@ def test_a_failing_preview_keeps_the_old_output(tmp_path, small_capture, monkeyp
 GOOD_CAMERA = [[200.0, 0.0, 80.0], [0.0, 200.0, 60.0], [0.0, 0.0, 1.0]]
 
 
-@pytest.mark.parametrize(("field", "value", "expected"), [
-    ("camera_matrix", [[float("nan"), 0, 80], [0, 200, 60], [0, 0, 1]], "finite"),
-    ("camera_matrix", [[0, 0, 80], [0, 0, 60], [0, 0, 1]], "fx, fy > 0"),
-    ("camera_matrix", [[200, 0, 80], [0, -200, 60], [0, 0, 1]], "fx, fy > 0"),
-    ("camera_matrix", [[1e-300, 0, 80], [0, 1e-300, 60], [0, 0, 1]], "invertible"),
-    ("camera_matrix", [[200, 0, 80], [0, 200, 60], [0, 0, 0]], "[0, 0, 1]"),
-    ("camera_matrix", [[200, 0, 80], [0, 200, 60]], "3x3"),
-    ("camera_matrix", "identity", "3x3"),
-    ("distortion", [0.1, float("inf"), 0, 0, 0], "finite"),
-    ("distortion", [0.1, 0.2, 0.3], "0, 4, 5, 8, 12 or 14"),
-])
-def test_unusable_camera_matrix_is_named_when_the_calibration_is_read(capsys, tmp_path, small_capture, field,
-                                                                       value, expected) -> None:
+@pytest.mark.parametrize(
+    ("field", "value", "expected"),
+    [
+        ("camera_matrix", [[float("nan"), 0, 80], [0, 200, 60], [0, 0, 1]], "finite"),
+        ("camera_matrix", [[0, 0, 80], [0, 0, 60], [0, 0, 1]], "fx, fy > 0"),
+        ("camera_matrix", [[200, 0, 80], [0, -200, 60], [0, 0, 1]], "fx, fy > 0"),
+        ("camera_matrix", [[1e-300, 0, 80], [0, 1e-300, 60], [0, 0, 1]], "invertible"),
+        ("camera_matrix", [[200, 0, 80], [0, 200, 60], [0, 0, 0]], "[0, 0, 1]"),
+        ("camera_matrix", [[200, 0, 80], [0, 200, 60]], "3x3"),
+        ("camera_matrix", "identity", "3x3"),
+        ("distortion", [0.1, float("inf"), 0, 0, 0], "finite"),
+        ("distortion", [0.1, 0.2, 0.3], "0, 4, 5, 8, 12 or 14"),
+    ],
+)
+def test_unusable_camera_matrix_is_named_when_the_calibration_is_read(
+    capsys, tmp_path, small_capture, field, value, expected
+) -> None:
     path = small_capture.calibration / "calibration.json"
     data = json.loads(path.read_text())
     data.update({"camera_matrix": GOOD_CAMERA, "distortion": [0.0] * 5, field: value})
     path.write_text(json.dumps(data, allow_nan=True).replace("NaN", "1e999").replace("Infinity", "1e999"))
     if "nan" in json.dumps(value, allow_nan=True).lower():  # JSON has no NaN: 1e999 - 1e999 is what a tool would write
         path.write_text(path.read_text().replace("1e999", "NaN"))
-    code, err = run(capsys, "process", small_capture.capture, "--calibration", small_capture.calibration,
-                    "-o", tmp_path / "out", "-q")
+    code, err = run(
+        capsys,
+        "process",
+        small_capture.capture,
+        "--calibration",
+        small_capture.calibration,
+        "-o",
+        tmp_path / "out",
+        "-q",
+    )
     assert_one_line(code, err, str(path), field, expected)
     assert not (tmp_path / "out").exists()
 
@@ -226,8 +238,23 @@ def read_only(tmp_path_factory):
         scan = write_simulated_scan(simulate_scan("hemisphere", geometry=demo_geometry(48, 32), seed=1), mount / "scan")
         assert main(["process", str(scan.capture), "-o", str(mount / "out"), "-q"]) == 0
         (root / "rig.toml").write_text(SMALL_RIG)
-        assert main(["calibrate", "--config", str(root / "rig.toml"), "-o", str(mount / "cal"), "--board", "none",
-                     "--pixel-mm", "1.6", "-q"]) == 0
+        assert (
+            main(
+                [
+                    "calibrate",
+                    "--config",
+                    str(root / "rig.toml"),
+                    "-o",
+                    str(mount / "cal"),
+                    "--board",
+                    "none",
+                    "--pixel-mm",
+                    "1.6",
+                    "-q",
+                ]
+            )
+            == 0
+        )
         (mount / "foreign.yml").write_text("%YAML:1.0\n---\nM1: 1\n")
         done = _mount(["-o", "remount,ro", str(mount)])
         if done.returncode != 0:
@@ -246,12 +273,30 @@ READ_ONLY_COMMANDS = {
     "simulate": ("simulate", "-o", "{fs}/sim", "--size", "32x24"),
     "demo": ("demo", "-o", "{fs}/demo", "--size", "32x24", "-q"),
     "calibrate": ("calibrate", "--config", "{rig}", "-o", "{fs}/cal2", "--board", "none", "--pixel-mm", "1.6", "-q"),
-    "calibrate-overwrite": ("calibrate", "--config", "{rig}", "-o", "{fs}/cal", "--overwrite", "--board", "none",
-                            "--pixel-mm", "1.6", "-q"),
+    "calibrate-overwrite": (
+        "calibrate",
+        "--config",
+        "{rig}",
+        "-o",
+        "{fs}/cal",
+        "--overwrite",
+        "--board",
+        "none",
+        "--pixel-mm",
+        "1.6",
+        "-q",
+    ),
     "calibrate-from-in-place": ("calibrate", "--from", "{fs}/cal", "-q"),
     "calibrate-from-elsewhere": ("calibrate", "--from", "{fs}/cal", "-o", "{fs}/cal3", "-q"),
-    "import-opencv": ("calibrate", "--import-opencv", "{fs}/foreign.yml", "--projector-size", "96x120", "-o",
-                      "{fs}/imported"),
+    "import-opencv": (
+        "calibrate",
+        "--import-opencv",
+        "{fs}/foreign.yml",
+        "--projector-size",
+        "96x120",
+        "-o",
+        "{fs}/imported",
+    ),
 }
 
 
@@ -291,8 +336,21 @@ def _check_broken_filestorage(directory: Path, opencv_site: str = "") -> dict[st
         path.parent.mkdir(parents=True)
         path.write_text(text)
         done = subprocess.run(
-            [sys.executable, "-m", "rig.cli", "calibrate", "--import-opencv", str(path), "--projector-size", "96x120",
-             "-o", str(directory / name / "cal")], capture_output=True, text=True, env=_env(opencv_site),
+            [
+                sys.executable,
+                "-m",
+                "rig.cli",
+                "calibrate",
+                "--import-opencv",
+                str(path),
+                "--projector-size",
+                "96x120",
+                "-o",
+                str(directory / name / "cal"),
+            ],
+            capture_output=True,
+            text=True,
+            env=_env(opencv_site),
         )
         lines = done.stderr.strip().splitlines()
         ok = done.returncode == 1 and len(lines) == 1 and str(path) in lines[0] and "Traceback" not in done.stderr
@@ -315,12 +373,16 @@ def test_import_opencv_errors_are_one_line(tmp_path) -> None:
 OTHER_OPENCVS = [p for p in os.environ.get("RIG_TEST_OPENCV_PATHS", "").split(os.pathsep) if p]
 
 
-@pytest.mark.skipif(not OTHER_OPENCVS, reason="set RIG_TEST_OPENCV_PATHS to directories holding other OpenCV "
-                    "installs (pip install --target DIR 'opencv-python-headless<5') to run under them too")
+@pytest.mark.skipif(
+    not OTHER_OPENCVS,
+    reason="set RIG_TEST_OPENCV_PATHS to directories holding other OpenCV "
+    "installs (pip install --target DIR 'opencv-python-headless<5') to run under them too",
+)
 @pytest.mark.parametrize("site", OTHER_OPENCVS or ["none"])
 def test_import_opencv_errors_are_one_line_under_other_opencv(tmp_path, site) -> None:
-    version = subprocess.run([sys.executable, "-c", "import cv2; print(cv2.__version__)"], capture_output=True,
-                             text=True, env=_env(site)).stdout.strip()
+    version = subprocess.run(
+        [sys.executable, "-c", "import cv2; print(cv2.__version__)"], capture_output=True, text=True, env=_env(site)
+    ).stdout.strip()
     assert version, f"no OpenCV importable from {site}"
     problems = _check_broken_filestorage(tmp_path, site)
     assert not any(problems.values()), (version, problems)

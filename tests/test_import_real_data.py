@@ -17,8 +17,8 @@ import pytest
 
 from rig.cli import main
 from rig.errors import CaptureError, ConfigError
-from rig.store.importer import ImportOptions, import_folder, natural_key, parse_angle, parse_spec
 from rig.pipeline.run import process
+from rig.store.importer import ImportOptions, import_folder, natural_key, parse_angle, parse_spec
 
 REAL_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "real-data"
 needs_real_data = pytest.mark.skipif(not REAL_DATA.is_dir(), reason=f"real data not present at {REAL_DATA}")
@@ -30,7 +30,14 @@ needs_real_data = pytest.mark.skipif(not REAL_DATA.is_dir(), reason=f"real data 
 def test_spec_expands_to_capture_patterns() -> None:
     patterns = parse_spec("sin:f=32,steps=12,phase=pi; gray:bits=6")
     assert len(patterns) == 18
-    assert patterns[0] == {"kind": "sinusoid", "axis": "x", "frequency": 32, "steps": 12, "step": 0, "phase_rad": math.pi}
+    assert patterns[0] == {
+        "kind": "sinusoid",
+        "axis": "x",
+        "frequency": 32,
+        "steps": 12,
+        "step": 0,
+        "phase_rad": math.pi,
+    }
     assert patterns[11]["step"] == 11
     assert patterns[12] == {"kind": "gray", "axis": "x", "bit": 0, "bits": 6, "inverted": False}
     multi = parse_spec("sin:f=64/58/53,steps=4")
@@ -39,11 +46,26 @@ def test_spec_expands_to_capture_patterns() -> None:
     assert [p["shift_rad"] for p in shifted] == pytest.approx([0, math.pi / 2, math.pi, 3 * math.pi / 2])
     mixed = parse_spec("skip:2; white; black; gray:bits=2,inverted=interleaved,axis=y")
     assert mixed[:2] == [None, None] and mixed[2]["level"] == 1.0 and mixed[3]["level"] == 0.0
-    assert [(p["bit"], p["inverted"], p["axis"]) for p in mixed[4:]] == [(0, False, "y"), (0, True, "y"), (1, False, "y"), (1, True, "y")]
+    assert [(p["bit"], p["inverted"], p["axis"]) for p in mixed[4:]] == [
+        (0, False, "y"),
+        (0, True, "y"),
+        (1, False, "y"),
+        (1, True, "y"),
+    ]
 
 
-@pytest.mark.parametrize("text,value", [("pi", math.pi), ("-pi", -math.pi), ("pi/2", math.pi / 2), ("2pi/3", 2 * math.pi / 3),
-                                        ("90deg", math.pi / 2), ("-1.5", -1.5), (".5", 0.5)])
+@pytest.mark.parametrize(
+    "text,value",
+    [
+        ("pi", math.pi),
+        ("-pi", -math.pi),
+        ("pi/2", math.pi / 2),
+        ("2pi/3", 2 * math.pi / 3),
+        ("90deg", math.pi / 2),
+        ("-1.5", -1.5),
+        (".5", 0.5),
+    ],
+)
 def test_angles(text, value) -> None:
     assert parse_angle(text, "x") == pytest.approx(value)
 
@@ -106,7 +128,9 @@ def test_import_converts_colour_and_records_provenance(tmp_path) -> None:
 def test_shift_sign_negates_the_phase(tmp_path) -> None:
     folder = _fringe_folder(tmp_path)
     plus = process(import_folder(folder, "sin:f=4,steps=4", tmp_path / "a").path).object.wrapped.phase[0]
-    minus = process(import_folder(folder, "sin:f=4,steps=4", tmp_path / "b", ImportOptions(shift_sign=-1)).path).object.wrapped.phase[0]
+    minus = process(
+        import_folder(folder, "sin:f=4,steps=4", tmp_path / "b", ImportOptions(shift_sign=-1)).path
+    ).object.wrapped.phase[0]
     np.testing.assert_allclose(np.angle(np.exp(1j * (plus + minus))), 0.0, atol=1e-6)
 
 
@@ -150,8 +174,16 @@ def test_a_parent_folder_points_at_the_subfolders_with_images(tmp_path, capsys) 
 
 @needs_real_data
 def test_the_eyes_parent_folder_points_at_l(tmp_path, capsys) -> None:
-    code = main(["import", str(REAL_DATA / "slmaster-eye"), "--patterns", "sin:f=32,steps=12,phase=pi; gray:bits=6",
-                 "-o", str(tmp_path / "eye")])
+    code = main(
+        [
+            "import",
+            str(REAL_DATA / "slmaster-eye"),
+            "--patterns",
+            "sin:f=32,steps=12,phase=pi; gray:bits=6",
+            "-o",
+            str(tmp_path / "eye"),
+        ]
+    )
     err = capsys.readouterr().err
     assert code == 1 and "subfolders hold images: L/ (18 images)" in err
 
@@ -187,8 +219,16 @@ def _row_steps(phase: np.ndarray) -> np.ndarray:
 
 @needs_real_data
 def test_slmaster_eye_gray_code_gives_monotonic_absolute_phase(tmp_path, capsys) -> None:
-    capture = _import(tmp_path, capsys, REAL_DATA / "slmaster-eye" / "L", "sin:f=32,steps=12,phase=pi; gray:bits=6",
-                      "--projector-width", "1920", "--projector-height", "1024")
+    capture = _import(
+        tmp_path,
+        capsys,
+        REAL_DATA / "slmaster-eye" / "L",
+        "sin:f=32,steps=12,phase=pi; gray:bits=6",
+        "--projector-width",
+        "1920",
+        "--projector-height",
+        "1024",
+    )
     result = process(capture)
     assert result.object.unwrapped.method == "gray"  # 6 planes for 32 periods: complementary Gray code
     assert result.mask.sum() > 10000  # the plaque
@@ -205,8 +245,14 @@ def test_slmaster_eye_gray_code_gives_monotonic_absolute_phase(tmp_path, capsys)
 
 @needs_real_data
 def test_slmaster_david_heterodyne_is_smooth_and_monotonic(tmp_path, capsys) -> None:
-    capture = _import(tmp_path, capsys, REAL_DATA / "slmaster-david-heterodyne", "sin:f=64/58/53,steps=4,phase=pi",
-                      "--projector-width", "1920")
+    capture = _import(
+        tmp_path,
+        capsys,
+        REAL_DATA / "slmaster-david-heterodyne",
+        "sin:f=64/58/53,steps=4,phase=pi",
+        "--projector-width",
+        "1920",
+    )
     result = process(capture)
     assert result.object.unwrapped.method == "heterodyne"
     lit = result.object.wrapped.valid
@@ -234,5 +280,7 @@ def test_fpp_tools_lens_fringe_count_and_smooth_spatial_unwrap(tmp_path, capsys)
     steps = _row_steps(result.phase)
     assert np.mean(np.abs(steps) > np.pi) < 1e-3  # quality-guided unwrap is smooth
     assert np.mean(steps < 0) > 0.99  # with the shifts as named, phase decreases along x ...
-    flipped = process(_import(tmp_path / "flip", capsys, folder, spec, "--glob", "lens_crop_*.jpg", "--shift-sign", "-1"))
+    flipped = process(
+        _import(tmp_path / "flip", capsys, folder, spec, "--glob", "lens_crop_*.jpg", "--shift-sign", "-1")
+    )
     assert np.mean(_row_steps(flipped.phase) > 0) > 0.99  # ... and --shift-sign -1 turns it round

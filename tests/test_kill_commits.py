@@ -35,8 +35,9 @@ steps = 4
 
 def _start(*argv: str, cwd: Path) -> subprocess.Popen:
     env = {**os.environ, "PYTHONPATH": str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", "")}
-    return subprocess.Popen([sys.executable, "-m", "rig.cli", *argv], cwd=cwd, env=env,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    return subprocess.Popen(
+        [sys.executable, "-m", "rig.cli", *argv], cwd=cwd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE
+    )
 
 
 def _kill_after(process: subprocess.Popen, delay_s: float) -> None:
@@ -88,8 +89,19 @@ def test_killed_processing_leaves_the_old_or_the_new_result(tmp_path, small_capt
     assert _start("process", str(small_capture.capture), "-o", str(out), "-q", cwd=tmp_path).wait() == 0
     seen = {_assert_complete_output(out)}
     for delay in _delays(12, 0.3, 2.0):
-        _kill_after(_start("process", str(small_capture.capture), "--calibration", str(small_capture.calibration),
-                           "-o", str(out), "-q", cwd=tmp_path), delay)
+        _kill_after(
+            _start(
+                "process",
+                str(small_capture.capture),
+                "--calibration",
+                str(small_capture.calibration),
+                "-o",
+                str(out),
+                "-q",
+                cwd=tmp_path,
+            ),
+            delay,
+        )
         seen.add(_assert_complete_output(out))
     assert "none" in seen
 

@@ -39,8 +39,23 @@ def test_partly_lit_view_calibrates_within_half_a_percent(tmp_path, capsys) -> N
     config = tmp_path / "rig.toml"
     config.write_text(PARTLY_LIT)
     # the pixel size is given: this test is about the phase fits (f0, l0, d0) on a partly lit view
-    assert main(["calibrate", "--config", str(config), "-o", str(tmp_path / "cal"), "--board", "none",
-                 "--pixel-mm", "1.28", "-q"]) == 0, capsys.readouterr().err
+    assert (
+        main(
+            [
+                "calibrate",
+                "--config",
+                str(config),
+                "-o",
+                str(tmp_path / "cal"),
+                "--board",
+                "none",
+                "--pixel-mm",
+                "1.28",
+                "-q",
+            ]
+        )
+        == 0
+    ), capsys.readouterr().err
     cal = json.loads((tmp_path / "cal" / "calibration.json").read_text())
     f0_at_32 = 0.0266667 * 32 / 8
     assert cal["f0_per_mm"] * 8 / cal["f0_frequency"] == pytest.approx(0.0266667, rel=0.005)
@@ -49,7 +64,9 @@ def test_partly_lit_view_calibrates_within_half_a_percent(tmp_path, capsys) -> N
     assert cal["d0_mm"] == pytest.approx(250.0, rel=0.005)
 
 
-@pytest.mark.parametrize("f0_per_mm, tolerance", [(0.0266667, 0.005), (0.015625, 0.0015)], ids=["partly-lit", "fully-lit"])
+@pytest.mark.parametrize(
+    "f0_per_mm, tolerance", [(0.0266667, 0.005), (0.015625, 0.0015)], ids=["partly-lit", "fully-lit"]
+)
 def test_default_calibration_with_board_views(tmp_path, capsys, f0_per_mm, tolerance) -> None:
     """The default session (board on the plane and six tilted views) on a partly lit view: corners
     beyond or at the footprint's edge are left out, so no spurious lens distortion is fitted and the
@@ -69,13 +86,53 @@ def test_default_calibration_with_board_views(tmp_path, capsys, f0_per_mm, toler
 @needs_real_data
 def test_stereo_summary_says_depth_and_preview_has_an_invalid_legend(tmp_path, capsys) -> None:
     eye = REAL_DATA / "slmaster-eye"
-    assert main(["calibrate", "--import-opencv", str(eye / "caliInfo.yml"), "--projector-size", "1920x1024",
-                 "--pixel-centre", "0", "-o", str(tmp_path / "cal")]) == 0
-    assert main(["import", str(eye / "L"), "--patterns", "sin:f=32,steps=12,phase=pi; gray:bits=6",
-                 "--projector-width", "1920", "-o", str(tmp_path / "eye")]) == 0
+    assert (
+        main(
+            [
+                "calibrate",
+                "--import-opencv",
+                str(eye / "caliInfo.yml"),
+                "--projector-size",
+                "1920x1024",
+                "--pixel-centre",
+                "0",
+                "-o",
+                str(tmp_path / "cal"),
+            ]
+        )
+        == 0
+    )
+    assert (
+        main(
+            [
+                "import",
+                str(eye / "L"),
+                "--patterns",
+                "sin:f=32,steps=12,phase=pi; gray:bits=6",
+                "--projector-width",
+                "1920",
+                "-o",
+                str(tmp_path / "eye"),
+            ]
+        )
+        == 0
+    )
     capsys.readouterr()
-    assert main(["process", str(tmp_path / "eye"), "--calibration", str(tmp_path / "cal"), "-o", str(tmp_path / "out"),
-                 "--correction", "none"]) == 0
+    assert (
+        main(
+            [
+                "process",
+                str(tmp_path / "eye"),
+                "--calibration",
+                str(tmp_path / "cal"),
+                "-o",
+                str(tmp_path / "out"),
+                "--correction",
+                "none",
+            ]
+        )
+        == 0
+    )
     err = capsys.readouterr().err
     assert ", depth " in err and ", height " not in err
     report = json.loads((tmp_path / "out" / "report.json").read_text())
@@ -89,10 +146,38 @@ def test_stereo_summary_says_depth_and_preview_has_an_invalid_legend(tmp_path, c
 def test_scan_process_prints_the_process_summary(tmp_path, capsys, simulated_rig_toml) -> None:
     config = tmp_path / "rig.toml"
     config.write_text(simulated_rig_toml((320, 400), (160, 120), 35.0))
-    assert main(["calibrate", "--config", str(config), "-o", str(tmp_path / "cal"), "--board", "none",
-                 "--pixel-mm", "2.56", "-q"]) == 0
+    assert (
+        main(
+            [
+                "calibrate",
+                "--config",
+                str(config),
+                "-o",
+                str(tmp_path / "cal"),
+                "--board",
+                "none",
+                "--pixel-mm",
+                "2.56",
+                "-q",
+            ]
+        )
+        == 0
+    )
     capsys.readouterr()
-    assert main(["scan", "--config", str(config), "-o", str(tmp_path / "part"), "--calibration", str(tmp_path / "cal"),
-                 "--process"]) == 0
+    assert (
+        main(
+            [
+                "scan",
+                "--config",
+                str(config),
+                "-o",
+                str(tmp_path / "part"),
+                "--calibration",
+                str(tmp_path / "cal"),
+                "--process",
+            ]
+        )
+        == 0
+    )
     err = capsys.readouterr().err
     assert "part-processed: valid " in err and ", height " in err and " points" in err

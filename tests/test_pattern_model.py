@@ -61,23 +61,35 @@ def test_written_capture_round_trips_byte_identical(tmp_path: Path, scan: ScanCo
 @pytest.mark.parametrize(
     ("folder", "spec", "options"),
     [
-        ("slmaster-eye/L", "sin:f=32,steps=12,phase=pi; gray:bits=6", ["--projector-width", "1920", "--projector-height", "1024"]),
+        (
+            "slmaster-eye/L",
+            "sin:f=32,steps=12,phase=pi; gray:bits=6",
+            ["--projector-width", "1920", "--projector-height", "1024"],
+        ),
         ("slmaster-david-heterodyne", "sin:f=64/58/53,steps=4", ["--projector-width", "1920"]),
         ("fpp-tools-lens", "sin:f=36,shifts=0/90/180/270deg", ["--glob", "lens_crop_*.jpg", "--shift-sign", "-1"]),
     ],
 )
-def test_real_data_imports_round_trip_byte_identical(tmp_path: Path, folder: str, spec: str, options: list[str]) -> None:
+def test_real_data_imports_round_trip_byte_identical(
+    tmp_path: Path, folder: str, spec: str, options: list[str]
+) -> None:
     from rig.cli import main
 
     out = tmp_path / "capture"
-    assert main(["import", str(REAL_DATA / folder), "--patterns", spec, "-o", str(out), "--downsample", "4", *options]) == 0
+    assert (
+        main(["import", str(REAL_DATA / folder), "--patterns", spec, "-o", str(out), "--downsample", "4", *options])
+        == 0
+    )
     original, rewritten = _rewritten_bytes(out / "capture.json", tmp_path)
     assert rewritten == original
 
 
 _numbers = st.floats(min_value=-10, max_value=10, allow_nan=False) | st.integers(-10, 10)
-_extra = st.dictionaries(st.text("abcdefghij_", min_size=3, max_size=8).map(lambda k: f"x_{k}"),
-                         st.integers() | st.text(max_size=5) | st.booleans(), max_size=3)
+_extra = st.dictionaries(
+    st.text("abcdefghij_", min_size=3, max_size=8).map(lambda k: f"x_{k}"),
+    st.integers() | st.text(max_size=5) | st.booleans(),
+    max_size=3,
+)
 
 
 @st.composite
@@ -86,12 +98,18 @@ def _entries(draw: st.DrawFn) -> dict:
     entry: dict = {"kind": kind}
     if kind in ("sinusoid", "speckle-sinusoid"):
         steps = draw(st.integers(1, 12))
-        entry.update(frequency=draw(st.integers(1, 64) | st.floats(0.5, 64)), steps=steps, step=draw(st.integers(0, steps - 1)))
+        entry.update(
+            frequency=draw(st.integers(1, 64) | st.floats(0.5, 64)), steps=steps, step=draw(st.integers(0, steps - 1))
+        )
         for key in ("axis", "offset", "amplitude", "phase_rad", "shift_rad"):
             if draw(st.booleans()):
                 entry[key] = draw(st.sampled_from(["x", "y"])) if key == "axis" else draw(_numbers)
         if kind == "speckle-sinusoid":
-            for key, values in (("seed", st.integers(0, 2**31)), ("dot_px", st.integers(1, 8)), ("speckle_gain", st.floats(0, 1))):
+            for key, values in (
+                ("seed", st.integers(0, 2**31)),
+                ("dot_px", st.integers(1, 8)),
+                ("speckle_gain", st.floats(0, 1)),
+            ):
                 if draw(st.booleans()):
                     entry[key] = draw(values)
     elif kind == "gray":
@@ -118,7 +136,13 @@ def test_any_valid_entry_round_trips_exactly(entry: dict) -> None:
 
 
 def test_patterns_built_in_code_write_the_main_keys_and_changed_options() -> None:
-    assert Sinusoid(frequency=8, steps=4, step=1).to_dict() == {"kind": "sinusoid", "axis": "x", "frequency": 8, "steps": 4, "step": 1}
+    assert Sinusoid(frequency=8, steps=4, step=1).to_dict() == {
+        "kind": "sinusoid",
+        "axis": "x",
+        "frequency": 8,
+        "steps": 4,
+        "step": 1,
+    }
     assert list(Sinusoid(frequency=8, steps=4, step=1, phase_rad=math.pi).to_dict())[-1] == "phase_rad"
     assert Gray(bit=0, bits=3).to_dict() == {"kind": "gray", "axis": "x", "bit": 0, "bits": 3, "inverted": False}
     assert Flat(level=1).to_dict() == {"kind": "flat", "level": 1}
@@ -132,13 +156,33 @@ def test_patterns_built_in_code_write_the_main_keys_and_changed_options() -> Non
     [
         ({"kind": "flat"}, "level", "level: missing"),
         ({"kind": "cross"}, "kind", "kind: expected one of sinusoid, speckle-sinusoid, gray, flat"),
-        ({"kind": "sinusoid", "frequency": 0, "steps": 4, "step": 0}, "frequency", "expected a positive number, found 0"),
+        (
+            {"kind": "sinusoid", "frequency": 0, "steps": 4, "step": 0},
+            "frequency",
+            "expected a positive number, found 0",
+        ),
         ({"kind": "sinusoid", "frequency": 4, "steps": 4, "step": 4}, "step", "expected 0 .. 3 (steps = 4), found 4"),
-        ({"kind": "sinusoid", "frequency": 4, "steps": 4, "step": 0, "axis": "z"}, "axis", "expected 'x' or 'y', found 'z'"),
+        (
+            {"kind": "sinusoid", "frequency": 4, "steps": 4, "step": 0, "axis": "z"},
+            "axis",
+            "expected 'x' or 'y', found 'z'",
+        ),
         ({"kind": "gray", "bit": 0, "bits": 2, "inverted": "yes"}, "inverted", "expected true or false, found 'yes'"),
-        ({"kind": "speckle-sinusoid", "frequency": 4, "steps": 1, "step": 0, "seed": -1}, "seed", "expected an integer >= 0, found -1"),
-        ({"kind": "speckle-sinusoid", "frequency": 4, "steps": 1, "step": 0, "dot_px": 0}, "dot_px", "expected an integer >= 1, found 0"),
-        ({"kind": "speckle-sinusoid", "frequency": 4, "steps": 1, "step": 0, "speckle_gain": 1.5}, "speckle_gain", "expected a value in [0, 1], found 1.5"),
+        (
+            {"kind": "speckle-sinusoid", "frequency": 4, "steps": 1, "step": 0, "seed": -1},
+            "seed",
+            "expected an integer >= 0, found -1",
+        ),
+        (
+            {"kind": "speckle-sinusoid", "frequency": 4, "steps": 1, "step": 0, "dot_px": 0},
+            "dot_px",
+            "expected an integer >= 1, found 0",
+        ),
+        (
+            {"kind": "speckle-sinusoid", "frequency": 4, "steps": 1, "step": 0, "speckle_gain": 1.5},
+            "speckle_gain",
+            "expected a value in [0, 1], found 1.5",
+        ),
     ],
 )
 def test_one_validation_every_layer_names_the_key(entry: dict, key: str, message: str) -> None:

@@ -56,7 +56,17 @@ def test_wrong_phase_convention_is_refused_with_the_fix(capsys, tmp_path, render
     assert "phase=pi" in lines[0].split("--patterns (")[1]  # the corrected spec, ready to paste
     code, err = _process(capsys, folder, rendered, tmp_path / "right")
     assert code == 0, err  # the right convention passes (no false alarm)
-    main(["process", str(tmp_path / "wrong"), "-o", str(tmp_path / "forced"), "-q", "--param", "phase_convention_check=false"])
+    main(
+        [
+            "process",
+            str(tmp_path / "wrong"),
+            "-o",
+            str(tmp_path / "forced"),
+            "-q",
+            "--param",
+            "phase_convention_check=false",
+        ]
+    )
     assert "phase convention" not in capsys.readouterr().err  # the off switch processes (heterodyne: nothing valid)
 
 
@@ -83,8 +93,23 @@ def test_offset_estimates_on_ideal_phases() -> None:
 )
 def test_real_data_without_phase_pi_is_refused(capsys, tmp_path, folder, spec) -> None:
     out = tmp_path / "capture"
-    assert main(["import", str(REAL_DATA / folder), "--patterns", spec, "--projector-width", "1920",
-                 "--downsample", "2", "-o", str(out)]) == 0
+    assert (
+        main(
+            [
+                "import",
+                str(REAL_DATA / folder),
+                "--patterns",
+                spec,
+                "--projector-width",
+                "1920",
+                "--downsample",
+                "2",
+                "-o",
+                str(out),
+            ]
+        )
+        == 0
+    )
     capsys.readouterr()
     assert main(["process", str(out), "-o", str(tmp_path / "out"), "-q"]) == 1
     err = capsys.readouterr().err.strip()

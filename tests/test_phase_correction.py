@@ -23,8 +23,10 @@ def results(case: ProtocolCase) -> dict[str, float]:
     """NMSE_h of every registered correction (object and reference corrected alike), and the oracle."""
     out = {"oracle": case.nmse_h(case.object.oracle(), case.reference.oracle())}
     for name in CORRECTIONS:
-        phases = [correct(name, m.absolute, m.wrapped, orders=m.orders, mask=m.mask, frequency=8)[0]
-                  for m in (case.object, case.reference)]
+        phases = [
+            correct(name, m.absolute, m.wrapped, orders=m.orders, mask=m.mask, frequency=8)[0]
+            for m in (case.object, case.reference)
+        ]
         out[name] = case.nmse_h(*phases)
     return out
 

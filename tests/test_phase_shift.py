@@ -88,7 +88,10 @@ def test_integer_and_float32_stacks(phi: np.ndarray, dtype: type) -> None:
 def test_phase_range_half_open() -> None:
     """phi = pi exactly must come back as -pi (range [-pi, pi))."""
     phi = np.full((2, 3), np.pi)
-    for stack in (_frames(phi, 2 * np.pi * np.arange(4) / 4), np.rint(_frames(phi, 2 * np.pi * np.arange(4) / 4)).astype(np.uint8)):
+    for stack in (
+        _frames(phi, 2 * np.pi * np.arange(4) / 4),
+        np.rint(_frames(phi, 2 * np.pi * np.arange(4) / 4)).astype(np.uint8),
+    ):
         phase = phase_shift(stack).phase
         assert np.all(phase >= -np.pi) and np.all(phase < np.pi)
         np.testing.assert_allclose(np.abs(phase), np.pi, atol=1e-6)

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from contracts import PATTERNS, SIZE, ProjectorContract, expected_drive, pattern_id
+
 from drivers.errors import DeviceNotFoundError
 
 moderngl = pytest.importorskip("moderngl", reason="moderngl is not installed")

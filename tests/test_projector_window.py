@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from contracts import PATTERNS, SIZE, ProjectorContract, expected_drive, pattern_id
+
 from drivers.errors import DeviceNotFoundError, UnsupportedFeatureError
 
 glfw = pytest.importorskip("glfw", reason="glfw is not installed (optional extra 'display')")
@@ -32,10 +32,17 @@ def read_xwd(path: Path) -> np.ndarray:
     data = path.read_bytes()
     header = np.frombuffer(data[:100], dtype=">u4")
     header_size, width, height = int(header[0]), int(header[4]), int(header[5])
-    byte_order, bits_per_pixel, bytes_per_line, ncolors = int(header[7]), int(header[11]), int(header[12]), int(header[19])
+    byte_order, bits_per_pixel, bytes_per_line, ncolors = (
+        int(header[7]),
+        int(header[11]),
+        int(header[12]),
+        int(header[19]),
+    )
     assert bits_per_pixel == 32, f"expected a 32-bit screen, found {bits_per_pixel}"
     start = header_size + 12 * ncolors
-    pixels = np.frombuffer(data[start : start + bytes_per_line * height], dtype=np.uint8).reshape(height, bytes_per_line)
+    pixels = np.frombuffer(data[start : start + bytes_per_line * height], dtype=np.uint8).reshape(
+        height, bytes_per_line
+    )
     pixels = pixels[:, : 4 * width].reshape(height, width, 4)
     return pixels[..., [2, 1, 0]] if byte_order == 0 else pixels[..., [1, 2, 3]]  # LSBFirst: B G R x
 
@@ -56,8 +63,23 @@ def xvfb(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
     # -displayfd: a free display number, written once the server accepts clients;
     # -noreset: otherwise the server resets when a projector closes and refuses the next one.
     server = subprocess.Popen(
-        ["Xvfb", "-displayfd", str(write_fd), "-screen", "0", f"{SIZE[0]}x{SIZE[1]}x24", "-fbdir", str(fbdir), "-nolisten", "tcp", "-noreset"],
-        pass_fds=(write_fd,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, preexec_fn=_die_with_parent,
+        [
+            "Xvfb",
+            "-displayfd",
+            str(write_fd),
+            "-screen",
+            "0",
+            f"{SIZE[0]}x{SIZE[1]}x24",
+            "-fbdir",
+            str(fbdir),
+            "-nolisten",
+            "tcp",
+            "-noreset",
+        ],
+        pass_fds=(write_fd,),
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        preexec_fn=_die_with_parent,
     )
     os.close(write_fd)
     try:

@@ -107,8 +107,21 @@ def _peer_valid(folder: Path) -> np.ndarray:
 def test_heterodyne_coverage_matches_the_peers_threshold(tmp_path, capsys) -> None:
     folder = REAL_DATA / "slmaster-david-heterodyne"
     out = tmp_path / "david"
-    assert main(["import", str(folder), "--patterns", "sin:f=64/58/53,steps=4,phase=pi", "--projector-width", "1920",
-                 "-o", str(out)]) == 0
+    assert (
+        main(
+            [
+                "import",
+                str(folder),
+                "--patterns",
+                "sin:f=64/58/53,steps=4,phase=pi",
+                "--projector-width",
+                "1920",
+                "-o",
+                str(out),
+            ]
+        )
+        == 0
+    )
     peer = _peer_valid(folder)
     result = process(out)
     ours = result.mask
@@ -128,10 +141,37 @@ def test_heterodyne_coverage_matches_the_peers_threshold(tmp_path, capsys) -> No
 @needs_real_data
 def test_no_floating_specks_on_the_eye(tmp_path, capsys) -> None:
     eye = REAL_DATA / "slmaster-eye"
-    assert main(["calibrate", "--import-opencv", str(eye / "caliInfo.yml"), "--projector-size", "1920x1024",
-                 "--pixel-centre", "0", "-o", str(tmp_path / "cal")]) == 0
-    assert main(["import", str(eye / "L"), "--patterns", "sin:f=32,steps=12,phase=pi; gray:bits=6",
-                 "--projector-width", "1920", "-o", str(tmp_path / "eye")]) == 0
+    assert (
+        main(
+            [
+                "calibrate",
+                "--import-opencv",
+                str(eye / "caliInfo.yml"),
+                "--projector-size",
+                "1920x1024",
+                "--pixel-centre",
+                "0",
+                "-o",
+                str(tmp_path / "cal"),
+            ]
+        )
+        == 0
+    )
+    assert (
+        main(
+            [
+                "import",
+                str(eye / "L"),
+                "--patterns",
+                "sin:f=32,steps=12,phase=pi; gray:bits=6",
+                "--projector-width",
+                "1920",
+                "-o",
+                str(tmp_path / "eye"),
+            ]
+        )
+        == 0
+    )
     result = process(tmp_path / "eye", tmp_path / "cal")
     assert result.height is not None and result.points is not None
     depth = result.height[result.mask]
@@ -143,7 +183,21 @@ def test_no_floating_specks_on_the_eye(tmp_path, capsys) -> None:
     kept = process(tmp_path / "eye", tmp_path / "cal", ProcessOptions(min_island_fraction=0.0))
     assert np.nanmax(kept.height) > 1200  # the off switch keeps them
     capsys.readouterr()
-    assert main(["process", str(tmp_path / "eye"), "--calibration", str(tmp_path / "cal"), "-o", str(tmp_path / "out"),
-                 "--correction", "none", "-q"]) == 0
+    assert (
+        main(
+            [
+                "process",
+                str(tmp_path / "eye"),
+                "--calibration",
+                str(tmp_path / "cal"),
+                "-o",
+                str(tmp_path / "out"),
+                "--correction",
+                "none",
+                "-q",
+            ]
+        )
+        == 0
+    )
     err = capsys.readouterr().err
     assert "692" in err or "693" in err, err  # summary range starts at the plaque, not at 636 mm

@@ -76,7 +76,9 @@ def test_any_change_misses_and_replaces_the_stale_entry(small_capture, tmp_path:
     if change == "options":  # both option sets stay usable side by side
         assert len(after) == 2 and set(before) < set(after)
         reference_cache.forget()
-        process_capture(small_capture.capture, small_capture.calibration, tmp_path / "c", ProcessOptions(correction="none"))
+        process_capture(
+            small_capture.capture, small_capture.calibration, tmp_path / "c", ProcessOptions(correction="none")
+        )
         assert _reference_cached(tmp_path / "c")
     else:  # another reference capture or calibration: the old entry is stale and removed
         assert len(after) == 1 and after != before

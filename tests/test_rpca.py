@@ -9,7 +9,9 @@ from processing.rpca import robust_noise_sigma, rpca_adm, rpca_ialm
 from processing.svd import SubspaceState, singular_value_threshold
 
 
-def planted(n: int = 200, rank: int = 5, density: float = 0.05, seed: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def planted(
+    n: int = 200, rank: int = 5, density: float = 0.05, seed: int = 1
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """D = L + S with L of ``rank`` (Gaussian factors) and ``density`` of S uniform in [-50, 50]."""
     rng = np.random.default_rng(seed)
     low = rng.standard_normal((n, rank)) @ rng.standard_normal((rank, n))

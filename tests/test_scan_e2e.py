@@ -13,19 +13,19 @@ import os
 import numpy as np
 import pytest
 
-from rig.store.capture import read_capture
 from rig.cli import COMMAND_MODULES, main
 from rig.config import load_config
 from rig.hardware.simulated import geometry_from_config, scene_height
+from rig.store.capture import read_capture
 
 # pylon reads PYLON_CAMEMU when pypylon first loads (see tests/test_camera_pylon.py).
 os.environ.setdefault("PYLON_CAMEMU", "1")
+
 
 @pytest.fixture
 def small_rig(simulated_rig_toml):
     """A 160x120 camera at 35 dB and a 228x285 projector: quick, and enough for three frequencies."""
     return simulated_rig_toml((228, 285), (160, 120), snr_db=35)
-
 
 
 # Expected error from the camera noise alone: at 35 dB the noise is ~2.3 DN against a fringe
@@ -61,10 +61,23 @@ def test_scan_reference_then_object_processes_to_the_scene_heights(tmp_path, sma
     calibration = exact_calibration(config_path, tmp_path / "calibration")
     capture = tmp_path / "object"
     out = tmp_path / "processed"
-    assert main([
-        "scan", "--config", str(config_path), "-o", str(capture),
-        "--calibration", str(calibration), "--process", "--process-output", str(out),
-    ]) == 0
+    assert (
+        main(
+            [
+                "scan",
+                "--config",
+                str(config_path),
+                "-o",
+                str(capture),
+                "--calibration",
+                str(calibration),
+                "--process",
+                "--process-output",
+                str(out),
+            ]
+        )
+        == 0
+    )
 
     assert read_capture(capture).complete
     height = np.load(out / "height.npy")
@@ -91,7 +104,9 @@ def test_rig_process_reads_what_rig_scan_wrote(tmp_path, small_rig, exact_calibr
     geometry = geometry_from_config(config)
     calibration = exact_calibration(config_path, tmp_path / "calibration")
     assert main(["scan", "--config", str(config_path), "-o", str(tmp_path / "object")]) == 0
-    assert main(["process", str(tmp_path / "object"), "--calibration", str(calibration), "-o", str(tmp_path / "out")]) == 0
+    assert (
+        main(["process", str(tmp_path / "object"), "--calibration", str(calibration), "-o", str(tmp_path / "out")]) == 0
+    )
     height = np.load(tmp_path / "out" / "height.npy")
     truth = scene_height(config, "object", geometry)
     valid = np.isfinite(height)
@@ -157,16 +172,24 @@ def test_scan_with_a_real_backend_pylon_emulator(tmp_path):
 def test_gamma_lut_from_the_config_linearises_the_projector(tmp_path, small_rig):
     """A projector with gamma 2.2, pre-corrected by the LUT the config names, behaves like a linear one."""
     np.save(tmp_path / "lut.npy", np.linspace(0.0, 1.0, 256) ** (1 / 2.2))
-    linear = small_rig.replace("snr_db = 35", 'snr_db = "none"').replace("frequencies = [1, 8, 32]", "frequencies = [8]")
+    linear = small_rig.replace("snr_db = 35", 'snr_db = "none"').replace(
+        "frequencies = [1, 8, 32]", "frequencies = [8]"
+    )
     rigs = {  # [simulation] is the last table: appended keys land there
         "linear": linear,
         "gamma": linear + "gamma = 2.2\n",
-        "corrected": linear.replace("size = [228, 285]\n", 'size = [228, 285]\ngamma_lut = "lut.npy"\n', 1) + "gamma = 2.2\n",
+        "corrected": linear.replace("size = [228, 285]\n", 'size = [228, 285]\ngamma_lut = "lut.npy"\n', 1)
+        + "gamma = 2.2\n",
     }
     frames = {}
     for name, text in rigs.items():
         (tmp_path / f"{name}.toml").write_text(text)
-        assert main(["scan", "--config", str(tmp_path / f"{name}.toml"), "--scene", "reference", "-o", str(tmp_path / name)]) == 0
+        assert (
+            main(
+                ["scan", "--config", str(tmp_path / f"{name}.toml"), "--scene", "reference", "-o", str(tmp_path / name)]
+            )
+            == 0
+        )
         frames[name] = read_capture(tmp_path / name).load_frames().astype(float)
     assert np.abs(frames["corrected"] - frames["linear"]).mean() < 1.5  # DN: 8-bit framebuffer and camera
     assert np.abs(frames["gamma"] - frames["linear"]).mean() > 10

@@ -8,14 +8,29 @@ from processing.single_shot import prepare_reference, single_shot_unwrap
 
 SIZE = 160
 FREQUENCY = 16
-PATTERN = {"kind": "speckle-sinusoid", "axis": "x", "frequency": FREQUENCY, "steps": 1, "step": 0,
-           "seed": 4, "dot_px": 3, "speckle_gain": 0.3}
+PATTERN = {
+    "kind": "speckle-sinusoid",
+    "axis": "x",
+    "frequency": FREQUENCY,
+    "steps": 1,
+    "step": 0,
+    "seed": 4,
+    "dot_px": 3,
+    "speckle_gain": 0.3,
+}
 
 
 def _geometry(size: int) -> synth.RigGeometry:
     # The study's rig (rig/study.py) scaled to a small camera: 500 mm view, l0 1000 mm, d0 1250 mm.
-    return synth.RigGeometry(l0_mm=1000.0, d0_mm=1250.0, f0_per_mm=8 / 625.0, f0_frequency=8,
-                             pixel_mm=500.0 / size, camera_width=size, camera_height=size)
+    return synth.RigGeometry(
+        l0_mm=1000.0,
+        d0_mm=1250.0,
+        f0_per_mm=8 / 625.0,
+        f0_frequency=8,
+        pixel_mm=500.0 / size,
+        camera_width=size,
+        camera_height=size,
+    )
 
 
 def _scene(height_mm, snr_db=25.0, seed=0):
@@ -126,7 +141,11 @@ def test_fringes_along_y_are_handled_by_transposing(hemisphere):
 )
 def test_bad_input_names_the_argument(hemisphere, change, name):
     image, reference, _, ref_truth = hemisphere
-    kwargs = {"image": image, "reference_image": reference, "reference_absolute_phase": ref_truth,
-              "frequency": FREQUENCY} | change
+    kwargs = {
+        "image": image,
+        "reference_image": reference,
+        "reference_absolute_phase": ref_truth,
+        "frequency": FREQUENCY,
+    } | change
     with pytest.raises(ValueError, match=f"^{name}"):
         single_shot_unwrap(**kwargs)

@@ -18,16 +18,16 @@ import numpy as np
 import pytest
 
 from mock_devices import synth
-from rig.store.capture import read_capture, validate_pattern
 from rig.cli import main
 from rig.config import load_config, parse_config
 from rig.errors import ConfigError
 from rig.hardware.simulated import appearance_from_config, geometry_from_config, scene_height
+from rig.store.capture import read_capture, validate_pattern
 
 MEDIAN_ERROR_MM = 0.25
-WITHIN_1MM = 0.75        # share of valid pixels within 1 mm of the truth
-ORDER_SLIPS = 0.07       # share of valid pixels off by more than 5 mm
-MIN_VALID = 0.9          # share of the pixels the projector reaches in both scenes
+WITHIN_1MM = 0.75  # share of valid pixels within 1 mm of the truth
+ORDER_SLIPS = 0.07  # share of valid pixels off by more than 5 mm
+MIN_VALID = 0.9  # share of the pixels the projector reaches in both scenes
 
 SPECKLE_RIG = """
 [camera]
@@ -67,7 +67,10 @@ def _assert_single_shot_info(info: dict, role: str) -> None:
 @pytest.fixture(scope="module")
 def simulated(tmp_path_factory):
     root = tmp_path_factory.mktemp("speckle") / "sim"
-    assert main(["simulate", "-o", str(root), "--pattern-set", "speckle", "--size", "256x192", "--scene", "hemisphere"]) == 0
+    assert (
+        main(["simulate", "-o", str(root), "--pattern-set", "speckle", "--size", "256x192", "--scene", "hemisphere"])
+        == 0
+    )
     return root
 
 
@@ -76,7 +79,10 @@ def test_simulated_speckle_capture_is_processed_single_shot(simulated, tmp_path)
     assert [p["kind"] for p in capture.patterns] == ["speckle-sinusoid"]
     assert read_capture(simulated / "calibration" / "reference").patterns == capture.patterns
     out = tmp_path / "out"
-    assert main(["process", str(simulated / "object"), "--calibration", str(simulated / "calibration"), "-o", str(out)]) == 0
+    assert (
+        main(["process", str(simulated / "object"), "--calibration", str(simulated / "calibration"), "-o", str(out)])
+        == 0
+    )
 
     truth = np.load(simulated / "truth-height.npy")
     config = parse_config({"camera": {"size": [256, 192]}})
@@ -96,8 +102,25 @@ def test_simulated_speckle_capture_is_processed_single_shot(simulated, tmp_path)
 
 def test_single_shot_parameters_come_from_param(simulated, tmp_path):
     out = tmp_path / "out"
-    assert main(["process", str(simulated / "object"), "--calibration", str(simulated / "calibration"), "-o", str(out),
-                 "--param", "patch=21", "--param", "vote=false", "--correction", "none"]) == 0
+    assert (
+        main(
+            [
+                "process",
+                str(simulated / "object"),
+                "--calibration",
+                str(simulated / "calibration"),
+                "-o",
+                str(out),
+                "--param",
+                "patch=21",
+                "--param",
+                "vote=false",
+                "--correction",
+                "none",
+            ]
+        )
+        == 0
+    )
     info = json.loads((out / "report.json").read_text())["stage_info"]
     for role in ("object", "reference"):
         assert info[role]["single_shot"]["parameters"]["patch"] == 21
@@ -114,20 +137,48 @@ def test_single_shot_without_calibration_is_one_line(simulated, tmp_path, capsys
 
 
 def test_denoising_a_single_shot_is_refused(simulated, tmp_path, capsys):
-    code = main(["process", str(simulated / "object"), "--calibration", str(simulated / "calibration"),
-                 "-o", str(tmp_path / "out"), "--denoise", "rpca"])
+    code = main(
+        [
+            "process",
+            str(simulated / "object"),
+            "--calibration",
+            str(simulated / "calibration"),
+            "-o",
+            str(tmp_path / "out"),
+            "--denoise",
+            "rpca",
+        ]
+    )
     err = capsys.readouterr().err
     assert code == 1 and "Traceback" not in err
     assert "--denoise rpca: not for a speckle-sinusoid (single-shot) capture" in err
 
 
 def test_config_speckle_pattern_set():
-    config = parse_config({"scan": {"pattern_set": "speckle", "speckle_frequency": 12, "speckle_seed": 3,
-                                    "speckle_dot_px": 2, "speckle_gain": 0.25, "axis": "y"}})
+    config = parse_config(
+        {
+            "scan": {
+                "pattern_set": "speckle",
+                "speckle_frequency": 12,
+                "speckle_seed": 3,
+                "speckle_dot_px": 2,
+                "speckle_gain": 0.25,
+                "axis": "y",
+            }
+        }
+    )
     (pattern,) = config.scan.patterns()
     validate_pattern("config", 0, pattern)
-    assert pattern == {"kind": "speckle-sinusoid", "axis": "y", "frequency": 12, "steps": 1, "step": 0,
-                       "seed": 3, "dot_px": 2, "speckle_gain": 0.25}
+    assert pattern == {
+        "kind": "speckle-sinusoid",
+        "axis": "y",
+        "frequency": 12,
+        "steps": 1,
+        "step": 0,
+        "seed": 3,
+        "dot_px": 2,
+        "speckle_gain": 0.25,
+    }
     assert parse_config({}).scan.patterns()[0]["kind"] == "sinusoid"
     with pytest.raises(ConfigError, match=r"\[scan\] pattern_set: expected one of"):
         parse_config({"scan": {"pattern_set": "single"}})
@@ -144,8 +195,16 @@ def test_rig_scan_projects_the_speckle_pattern(tmp_path):
     capture = read_capture(tmp_path / "ref")
     assert capture.complete and len(capture.frames) == 1
     (pattern,) = capture.patterns
-    assert pattern == {"kind": "speckle-sinusoid", "axis": "x", "frequency": 16, "steps": 1, "step": 0,
-                       "seed": 7, "dot_px": 3, "speckle_gain": 0.3}
+    assert pattern == {
+        "kind": "speckle-sinusoid",
+        "axis": "x",
+        "frequency": 16,
+        "steps": 1,
+        "step": 0,
+        "seed": 7,
+        "dot_px": 3,
+        "speckle_gain": 0.3,
+    }
     geometry = geometry_from_config(config)
     mapping = synth.projector_coordinates(np.zeros((geometry.camera_height, geometry.camera_width)), geometry)
     expected = synth.render_frame(pattern, mapping, geometry, appearance_from_config(config), np.random.default_rng(0))
@@ -169,10 +228,28 @@ def test_rig_scan_speckle_then_process(tmp_path, exact_calibration):
     geometry = geometry_from_config(config)
     calibration = exact_calibration(config_path, tmp_path / "calibration")
     out = tmp_path / "processed"
-    assert main(["scan", "--config", str(config_path), "-o", str(tmp_path / "object"),
-                 "--calibration", str(calibration), "--process", "--process-output", str(out)]) == 0
+    assert (
+        main(
+            [
+                "scan",
+                "--config",
+                str(config_path),
+                "-o",
+                str(tmp_path / "object"),
+                "--calibration",
+                str(calibration),
+                "--process",
+                "--process-output",
+                str(out),
+            ]
+        )
+        == 0
+    )
     truth = scene_height(config, "object", geometry)
-    lit = synth.projector_coordinates(truth, geometry).lit & synth.projector_coordinates(np.zeros_like(truth), geometry).lit
+    lit = (
+        synth.projector_coordinates(truth, geometry).lit
+        & synth.projector_coordinates(np.zeros_like(truth), geometry).lit
+    )
     _assert_heights(np.load(out / "height.npy"), truth, lit)
     report = json.loads((out / "report.json").read_text())
     _assert_single_shot_info(report["stage_info"]["object"], "object")
@@ -188,12 +265,44 @@ def test_calibrate_then_scan_the_speckle_reference_then_single_shots(tmp_path):
     shifting.write_text(SPECKLE_RIG.replace('pattern_set = "speckle"', "frequencies = [1, 8, 32]"))
     calibration = tmp_path / "calibration"
     assert main(["calibrate", "--config", str(shifting), "-o", str(calibration), "-q"]) == 0
-    assert main(["scan", "--config", str(speckle), "--scene", "reference", "-o", str(calibration / "reference"), "--overwrite"]) == 0
+    assert (
+        main(
+            [
+                "scan",
+                "--config",
+                str(speckle),
+                "--scene",
+                "reference",
+                "-o",
+                str(calibration / "reference"),
+                "--overwrite",
+            ]
+        )
+        == 0
+    )
     out = tmp_path / "processed"
-    assert main(["scan", "--config", str(speckle), "-o", str(tmp_path / "object"),
-                 "--calibration", str(calibration), "--process", "--process-output", str(out)]) == 0
+    assert (
+        main(
+            [
+                "scan",
+                "--config",
+                str(speckle),
+                "-o",
+                str(tmp_path / "object"),
+                "--calibration",
+                str(calibration),
+                "--process",
+                "--process-output",
+                str(out),
+            ]
+        )
+        == 0
+    )
     config = load_config(speckle)
     geometry = geometry_from_config(config)
     truth = scene_height(config, "object", geometry)
-    lit = synth.projector_coordinates(truth, geometry).lit & synth.projector_coordinates(np.zeros_like(truth), geometry).lit
+    lit = (
+        synth.projector_coordinates(truth, geometry).lit
+        & synth.projector_coordinates(np.zeros_like(truth), geometry).lit
+    )
     _assert_heights(np.load(out / "height.npy"), truth, lit)

@@ -93,12 +93,17 @@ def test_simulated_scan_single_frequency() -> None:
     heights = scenes.sphere_cap(96, 128, geometry.pixel_mm)
     mapping = synth.projector_coordinates(heights, geometry)
     stack = synth.render_stack(
-        synth.sinusoid_patterns([16], 4), mapping, geometry, synth.Appearance(ambient=0.05, snr_db=35.0),
+        synth.sinusoid_patterns([16], 4),
+        mapping,
+        geometry,
+        synth.Appearance(ambient=0.05, snr_db=35.0),
         np.random.default_rng(2),
     )
     result = phase_shift(stack)
     valid = shadow_mask(result.modulation, result.background)
-    unwrapped = unwrap_quality_guided(result.phase, quality=quality_map(result.modulation, result.background), mask=valid)
+    unwrapped = unwrap_quality_guided(
+        result.phase, quality=quality_map(result.modulation, result.background), mask=valid
+    )
     truth = synth.true_absolute_phase(mapping, geometry, 16)
     _assert_equal_up_to_2pi(unwrapped, truth, valid & mapping.lit, 0.3)
 

@@ -71,8 +71,16 @@ def test_bad_arguments_name_the_argument(bad):
 
 def test_pattern_is_scaled_sinusoid_plus_speckle_inside_unit_range():
     size = (96, 72)
-    pattern = {"kind": "speckle-sinusoid", "axis": "x", "frequency": 4, "steps": 1, "step": 0,
-               "seed": 5, "dot_px": 2, "speckle_gain": 0.25}
+    pattern = {
+        "kind": "speckle-sinusoid",
+        "axis": "x",
+        "frequency": 4,
+        "steps": 1,
+        "step": 0,
+        "seed": 5,
+        "dot_px": 2,
+        "speckle_gain": 0.25,
+    }
     image = pattern_image(pattern, size)
     assert image.min() >= 0.0 and image.max() <= 1.0
     u = np.arange(size[0]) + 0.5
@@ -83,7 +91,9 @@ def test_pattern_is_scaled_sinusoid_plus_speckle_inside_unit_range():
     np.testing.assert_allclose(image, 0.75 * fringe + 0.25 * z, atol=1e-6)
     # Sampled at the projector pixel containing (u, v): a shift inside a pixel changes nothing
     # of the speckle term.
-    shifted = pattern_intensity(pattern, uu + 0.3, vv + 0.4, size) - 0.75 * sinusoid_intensity(pattern, uu + 0.3, size[0])
+    shifted = pattern_intensity(pattern, uu + 0.3, vv + 0.4, size) - 0.75 * sinusoid_intensity(
+        pattern, uu + 0.3, size[0]
+    )
     np.testing.assert_allclose(shifted, 0.25 * z, atol=1e-9)
 
 

@@ -11,9 +11,17 @@ from rig.cli import main
 from rig.errors import ConfigError
 from rig.study.experiments import METHODS, StudyConfig
 
-FIGURES = ["table41_phase_maps.png", "table41_cross_section.png", "t_sweep_mse.png", "t_sweep_errors.png",
-           "nmse_vs_snr.png", "denoise_cross_section.png", "denoise_heights.png", "isolated_phase_maps.png",
-           "single_shot.png"]
+FIGURES = [
+    "table41_phase_maps.png",
+    "table41_cross_section.png",
+    "t_sweep_mse.png",
+    "t_sweep_errors.png",
+    "nmse_vs_snr.png",
+    "denoise_cross_section.png",
+    "denoise_heights.png",
+    "isolated_phase_maps.png",
+    "single_shot.png",
+]
 
 
 @pytest.fixture(scope="module")
@@ -26,8 +34,11 @@ def study(tmp_path_factory):
 
 
 def _values(rows, experiment, metric, **keys):
-    return [float(r["value"]) for r in rows
-            if r["experiment"] == experiment and r["metric"] == metric and all(r[k] == str(v) for k, v in keys.items())]
+    return [
+        float(r["value"])
+        for r in rows
+        if r["experiment"] == experiment and r["metric"] == metric and all(r[k] == str(v) for k, v in keys.items())
+    ]
 
 
 def test_writes_report_csv_and_figures(study):
@@ -41,7 +52,14 @@ def test_writes_report_csv_and_figures(study):
     # The thesis' figures stand beside ours.
     for thesis_value in ("0.3893", "0.2959", "0.0057", "0.0081", "0.0199", "0.6786"):
         assert thesis_value in report
-    assert {r["experiment"] for r in rows} == {"table-4.1", "denoise", "t-sweep", "snr-sweep", "isolated", "single-shot"}
+    assert {r["experiment"] for r in rows} == {
+        "table-4.1",
+        "denoise",
+        "t-sweep",
+        "snr-sweep",
+        "isolated",
+        "single-shot",
+    }
 
 
 def test_table_4_1_is_internally_consistent(study):
@@ -61,15 +79,17 @@ def test_table_4_1_is_internally_consistent(study):
     # The report's median equals the CSV's.
     report = (out / "README.md").read_text()
     median_none = np.median(_values(rows, "table-4.1", "nmse_h", method="none"))
-    line = next(l for l in report.splitlines() if l.startswith("| no correction | 0.3893"))
+    line = next(row for row in report.splitlines() if row.startswith("| no correction | 0.3893"))
     assert re.search(rf"\| {median_none:.4f} \(", line)
 
 
 def test_sweeps_and_single_shot_are_consistent(study):
     _, rows = study
     # More noise, more wrong orders before correction.
-    assert _values(rows, "t-sweep", "order_errors", scene="hemisphere", snr_db=10.0, t="none")[0] > \
-        _values(rows, "t-sweep", "order_errors", scene="hemisphere", snr_db=15.0, t="none")[0]
+    assert (
+        _values(rows, "t-sweep", "order_errors", scene="hemisphere", snr_db=10.0, t="none")[0]
+        > _values(rows, "t-sweep", "order_errors", scene="hemisphere", snr_db=15.0, t="none")[0]
+    )
     none_by_snr = [_values(rows, "snr-sweep", "nmse_h", method="none", snr_db=s)[0] for s in (10.0, 15.0, 25.0)]
     assert none_by_snr[0] > none_by_snr[1] > none_by_snr[2]
     for scene in ("hemisphere", "two-hemispheres"):

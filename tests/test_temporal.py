@@ -81,7 +81,10 @@ def _stacks(frequencies, steps, seed=0):
     heights = scenes.make_scene("hemisphere", geometry.camera_height, geometry.camera_width, geometry.pixel_mm)
     mapping = synth.projector_coordinates(heights, geometry)
     stack = synth.render_stack(
-        synth.sinusoid_patterns(frequencies, steps), mapping, geometry, synth.Appearance(ambient=0.05, snr_db=40.0),
+        synth.sinusoid_patterns(frequencies, steps),
+        mapping,
+        geometry,
+        synth.Appearance(ambient=0.05, snr_db=40.0),
         np.random.default_rng(seed),
     )
     return [stack[i * steps : (i + 1) * steps] for i in range(len(frequencies))], mapping, geometry
@@ -284,8 +287,11 @@ def test_decode_gray_every_code_word() -> None:
     bits = 4
     u = (np.arange(64) + 0.5)[None, :]
     planes = np.stack(
-        [200.0 * ((gray_stripe_index(u, 64, bits) ^ (gray_stripe_index(u, 64, bits) >> 1)) >> (bits - 1 - b) & 1) + 10
-         for b in range(bits)]
+        [
+            200.0 * ((gray_stripe_index(u, 64, bits) ^ (gray_stripe_index(u, 64, bits) >> 1)) >> (bits - 1 - b) & 1)
+            + 10
+            for b in range(bits)
+        ]
     )
     expected = gray_stripe_index(u, 64, bits)
     np.testing.assert_array_equal(decode_gray(planes, 210.0 - planes + 10.0), expected)

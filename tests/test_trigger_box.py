@@ -27,7 +27,7 @@ from mock_devices.trigger_box import FakeTriggerBox, TriggerFaults
 from tests.contracts import device_option
 from tests.protocol import expected_protocol, expected_serial_protocol
 
-HELLO = (b'1 HELLO 2*41\n', b'1 OK 2 box-fw/2.1*6C\n')
+HELLO = (b"1 HELLO 2*41\n", b"1 OK 2 box-fw/2.1*6C\n")
 
 
 def opened(port: str, **kwargs) -> SerialTriggerBox:
@@ -39,20 +39,24 @@ def opened(port: str, **kwargs) -> SerialTriggerBox:
 
 # -- line format ------------------------------------------------------------------------------
 
+
 def test_checksum_is_xor_of_body_bytes():
     # '1'^' '^'H'^'E'^'L'^'L'^'O'^' '^'1' = 0x42, worked by hand
     assert tp.frame("1 HELLO 1") == b"1 HELLO 1*42\n"
 
 
-@pytest.mark.parametrize("line", [
-    b"1 OK*17\n",            # wrong checksum
-    b"1 OK*16",              # no terminator
-    b"1 OK\n",               # no checksum
-    b"1 \xffK*16\n",          # not ASCII
-    b"x OK*" + b"%02X" % tp.checksum(b"x OK") + b"\n",  # id not a number
-    b"1 MAYBE*" + b"%02X" % tp.checksum(b"1 MAYBE") + b"\n",  # neither OK nor ERR
-    b"1 ERR 3 STATE*" + b"%02X" % tp.checksum(b"1 ERR 3 STATE") + b"\n",  # code/name disagree
-])
+@pytest.mark.parametrize(
+    "line",
+    [
+        b"1 OK*17\n",  # wrong checksum
+        b"1 OK*16",  # no terminator
+        b"1 OK\n",  # no checksum
+        b"1 \xffK*16\n",  # not ASCII
+        b"x OK*" + b"%02X" % tp.checksum(b"x OK") + b"\n",  # id not a number
+        b"1 MAYBE*" + b"%02X" % tp.checksum(b"1 MAYBE") + b"\n",  # neither OK nor ERR
+        b"1 ERR 3 STATE*" + b"%02X" % tp.checksum(b"1 ERR 3 STATE") + b"\n",  # code/name disagree
+    ],
+)
 def test_malformed_lines_are_rejected(line):
     with pytest.raises(tp.LineError):
         tp.parse_incoming(line)
@@ -61,11 +65,11 @@ def test_malformed_lines_are_rejected(line):
 def test_event_and_error_lines_parse():
     assert tp.parse_incoming(b"! PULSE 1*4F\n") == tp.Event("PULSE", ("1",))
     reply = tp.parse_incoming(b"2 ERR 3 NOT_ARMED ARM first*15\n")
-    assert (reply.id, reply.ok, reply.code, reply.text) == (2, False, tp.ErrorCode.NOT_ARMED,
-                                                            "ARM first")
+    assert (reply.id, reply.ok, reply.code, reply.text) == (2, False, tp.ErrorCode.NOT_ARMED, "ARM first")
 
 
 # -- exact exchanges --------------------------------------------------------------------------
+
 
 def test_open_sends_hello_and_keeps_firmware_id():
     with expected_serial_protocol([HELLO]) as port:
@@ -82,8 +86,7 @@ def test_full_exposure_sequence_lines():
         (b"4 ARM 2 SW*7C\n", b"4 OK 2 SW*26\n"),
         (b"5 FIRE*0D\n", b"! PULSE 0*4E\n5 OK 0*01\n"),
         (b"6 FIRE*0E\n", b"! PULSE 1*4F\n6 OK 1*03\n! DONE 2*13\n"),
-        (b"7 STATUS*03\n",
-         b'7 OK st=DONE n=2 fired=2 miss=0 w=250 d=40 pol=NEG src=SW*4B\n'),
+        (b"7 STATUS*03\n", b"7 OK st=DONE n=2 fired=2 miss=0 w=250 d=40 pol=NEG src=SW*4B\n"),
     ]
     with expected_protocol(SerialTriggerBox, exchanges, boot_timeout_s=0) as box:
         box.ping()
@@ -92,8 +95,7 @@ def test_full_exposure_sequence_lines():
         assert [box.fire(), box.fire()] == [0, 1]
         status = box.status()
         assert (status.state, status.armed, status.fired) == ("DONE", 2, 2)
-        assert (status.pulse_width_us, status.delay_us, status.polarity) == (250, 40,
-                                                                            Polarity.ACTIVE_LOW)
+        assert (status.pulse_width_us, status.delay_us, status.polarity) == (250, 40, Polarity.ACTIVE_LOW)
         assert box.pulses_seen() == [0, 1]
         assert [e.name for e in box.events][-1] == "DONE"
 
@@ -105,15 +107,17 @@ def test_stale_reply_with_old_id_is_skipped():
 
 
 def test_garbled_reply_is_retried_with_the_same_id():
-    exchanges = [HELLO, (b"2 ARM 1 SW*79\n", b"2 OK 1 SW*24\n"),  # bad checksum
-                 (b"2 ARM 1 SW*79\n", b"2 OK 1 SW*23\n")]
+    exchanges = [
+        HELLO,
+        (b"2 ARM 1 SW*79\n", b"2 OK 1 SW*24\n"),  # bad checksum
+        (b"2 ARM 1 SW*79\n", b"2 OK 1 SW*23\n"),
+    ]
     with expected_serial_protocol(exchanges) as port, opened(port) as box:
         box.arm(1)
 
 
 def test_request_garbled_on_the_way_is_resent():
-    exchanges = [HELLO, (b"2 PING*02\n", b"0 ERR 6 BAD_CHECKSUM request rejected*09\n"),
-                 (b"2 PING*02\n", b"2 OK*16\n")]
+    exchanges = [HELLO, (b"2 PING*02\n", b"0 ERR 6 BAD_CHECKSUM request rejected*09\n"), (b"2 PING*02\n", b"2 OK*16\n")]
     with expected_serial_protocol(exchanges) as port, opened(port) as box:
         box.ping()
 
@@ -134,18 +138,20 @@ def test_retries_are_bounded_and_error_names_port_and_command():
 
 def test_missing_reply_times_out_after_retries():
     exchanges = [HELLO] + [(b"2 PING*02\n", None)] * 2
-    with expected_serial_protocol(exchanges) as port, opened(port, timeout_s=0.05,
-                                                              retries=1) as box:
+    with expected_serial_protocol(exchanges) as port, opened(port, timeout_s=0.05, retries=1) as box:
         start = time.monotonic()
         with pytest.raises(DeviceTimeoutError, match=rf"{port}.*no reply to PING"):
             box.ping()
         assert time.monotonic() - start < 0.5
 
 
-@pytest.mark.parametrize("reply, error", [
-    (b"2 ERR 4 STATE already armed RESET first*02\n", IncompatibleStateError),
-    (b"2 ERR 2 BAD_ARGUMENT 0 outside 1..65535*0A\n", TriggerBoxRefusedError),
-])
+@pytest.mark.parametrize(
+    "reply, error",
+    [
+        (b"2 ERR 4 STATE already armed RESET first*02\n", IncompatibleStateError),
+        (b"2 ERR 2 BAD_ARGUMENT 0 outside 1..65535*0A\n", TriggerBoxRefusedError),
+    ],
+)
 def test_error_replies_map_to_device_errors(reply, error):
     with expected_serial_protocol([HELLO, (b"2 ARM 1 SW*79\n", reply)]) as port:
         with opened(port) as box, pytest.raises(error, match="ARM refused"):
@@ -153,7 +159,7 @@ def test_error_replies_map_to_device_errors(reply, error):
 
 
 def test_hello_has_its_own_longer_deadline_for_booting_boards():
-    exchanges = [(b'1 HELLO 2*41\n', None), HELLO]  # the first HELLO is lost while booting
+    exchanges = [(b"1 HELLO 2*41\n", None), HELLO]  # the first HELLO is lost while booting
     with expected_serial_protocol(exchanges) as port:
         box = SerialTriggerBox(port, timeout_s=0.02, command_timeouts={"HELLO": 0.1}, boot_timeout_s=0)
         start = time.monotonic()
@@ -165,7 +171,7 @@ def test_hello_has_its_own_longer_deadline_for_booting_boards():
 
 
 def test_box_version_other_than_ours_is_refused_and_port_closed():
-    with expected_serial_protocol([(b'1 HELLO 2*41\n', b'1 OK 1 box-fw/2.1*6F\n')]) as port:
+    with expected_serial_protocol([(b"1 HELLO 2*41\n", b"1 OK 1 box-fw/2.1*6F\n")]) as port:
         box = SerialTriggerBox(port, boot_timeout_s=0)
         with pytest.raises(UnsupportedFeatureError, match="protocol 1.*speaks 2"):
             box.open()
@@ -191,6 +197,7 @@ def test_missing_port_names_port_and_remedy():
 
 # -- against the fake box (same protocol, firmware behaviour) ---------------------------------
 
+
 def test_fake_box_pulses_reach_on_pulse_in_order():
     seen = []
     with FakeTriggerBox(on_pulse=seen.append) as fake, SerialTriggerBox(fake.port) as box:
@@ -206,8 +213,10 @@ def test_fake_box_pulses_reach_on_pulse_in_order():
 def test_dropped_fire_reply_is_retried_without_a_second_pulse():
     seen = []
     faults = TriggerFaults(drop_reply_on={"FIRE"})
-    with FakeTriggerBox(on_pulse=seen.append, faults=faults) as fake, \
-            SerialTriggerBox(fake.port, timeout_s=0.05) as box:
+    with (
+        FakeTriggerBox(on_pulse=seen.append, faults=faults) as fake,
+        SerialTriggerBox(fake.port, timeout_s=0.05) as box,
+    ):
         box.arm(2)
         assert box.fire() == 0
         assert box.fire() == 1
@@ -219,8 +228,7 @@ def test_dropped_fire_reply_is_retried_without_a_second_pulse():
 def test_garbled_replies_from_fake_box_are_recovered():
     seen = []
     faults = TriggerFaults(garble_reply_on={"FIRE", "ARM"})
-    with FakeTriggerBox(on_pulse=seen.append, faults=faults) as fake, \
-            SerialTriggerBox(fake.port) as box:
+    with FakeTriggerBox(on_pulse=seen.append, faults=faults) as fake, SerialTriggerBox(fake.port) as box:
         box.arm(3)
         assert [box.fire() for _ in range(3)] == [0, 1, 2]
     assert seen == [0, 1, 2]
@@ -318,9 +326,11 @@ def test_unreadable_requests_are_answered_with_id_zero():
         port.write(b"x" * 120 + b"\n")  # too long
         port.write(b"0 PING*" + b"%02X" % tp.checksum(b"0 PING") + b"\n")  # id 0 is reserved
         time.sleep(0.05)
-    assert fake.sent[-3:] == [b"0 ERR 6 BAD_CHECKSUM request rejected*09\n",
-                              b"0 ERR 7 SYNTAX request rejected*14\n",
-                              b"0 ERR 7 SYNTAX request rejected*14\n"]
+    assert fake.sent[-3:] == [
+        b"0 ERR 6 BAD_CHECKSUM request rejected*09\n",
+        b"0 ERR 7 SYNTAX request rejected*14\n",
+        b"0 ERR 7 SYNTAX request rejected*14\n",
+    ]
 
 
 def test_fake_box_answers_the_wire_format_exactly():
@@ -328,14 +338,20 @@ def test_fake_box_answers_the_wire_format_exactly():
         box.arm(1)
         box.fire()
         box.reset()
-    assert fake.received == [b'1 HELLO 2*41\n', b"2 ARM 1 SW*79\n", b"3 FIRE*0B\n",
-                             b"4 RESET*41\n"]
-    assert fake.sent == [b'! READY 2*58\n', b'1 OK 2 fpp-trigger-box/2.0.0*51\n',
-                         b"2 OK 1 SW*23\n", b"! PULSE 0*4E\n", b"3 OK 0*07\n", b"! DONE 1*10\n",
-                         b"4 OK*10\n"]
+    assert fake.received == [b"1 HELLO 2*41\n", b"2 ARM 1 SW*79\n", b"3 FIRE*0B\n", b"4 RESET*41\n"]
+    assert fake.sent == [
+        b"! READY 2*58\n",
+        b"1 OK 2 fpp-trigger-box/2.0.0*51\n",
+        b"2 OK 1 SW*23\n",
+        b"! PULSE 0*4E\n",
+        b"3 OK 0*07\n",
+        b"! DONE 1*10\n",
+        b"4 OK*10\n",
+    ]
 
 
 # -- contract: every TriggerBox backend, simulated or real ------------------------------------
+
 
 class TriggerBoxContract:
     """Mix into a class whose ``make_box()`` returns an unopened TriggerBox."""
@@ -357,8 +373,7 @@ class TriggerBoxContract:
             assert box.status().state == "ARMED"
             assert [box.fire(), box.fire()] == [0, 1]
             status = box.status()
-            assert (status.state, status.fired, status.pulse_width_us, status.delay_us) == (
-                "DONE", 2, 150, 20)
+            assert (status.state, status.fired, status.pulse_width_us, status.delay_us) == ("DONE", 2, 150, 20)
             with pytest.raises(IncompatibleStateError):
                 box.fire()
             box.reset()
@@ -419,6 +434,7 @@ class TestTriggerBoxOnDevice(TriggerBoxContract):
 
 
 # -- what an Arduino Uno does that a box always listening would not (issue 15) ----------------
+
 
 def test_open_waits_for_the_banner_of_a_board_that_resets_on_open():
     # the Uno reboots when the port opens (DTR); its bootloader drops what arrives meanwhile

@@ -28,10 +28,27 @@ def firmware_binary(tmp_path_factory) -> Path:
         pytest.skip("no C++ compiler (g++ or clang++) to build the firmware for the host")
     binary = tmp_path_factory.mktemp("firmware") / "trigger_box"
     subprocess.run(
-        [compiler, "-std=c++17", "-Wall", "-Wextra", "-Werror", "-O1", f"-I{FIRMWARE / 'host'}",
-         "-x", "c++", str(FIRMWARE / "trigger_box.ino"), "-x", "none",
-         str(FIRMWARE / "host" / "host_main.cpp"), "-o", str(binary)],
-        check=True, capture_output=True, timeout=120)
+        [
+            compiler,
+            "-std=c++17",
+            "-Wall",
+            "-Wextra",
+            "-Werror",
+            "-O1",
+            f"-I{FIRMWARE / 'host'}",
+            "-x",
+            "c++",
+            str(FIRMWARE / "trigger_box.ino"),
+            "-x",
+            "none",
+            str(FIRMWARE / "host" / "host_main.cpp"),
+            "-o",
+            str(binary),
+        ],
+        check=True,
+        capture_output=True,
+        timeout=120,
+    )
     return binary
 
 
@@ -69,27 +86,84 @@ def run_fake(steps) -> list[bytes]:
 
 
 SCENARIOS = {
-    "scan": [req(1, "HELLO", 2), req(2, "CONFIG", 250, 40, "NEG"), req(3, "ARM", 3),
-             req(4, "FIRE"), req(4, "FIRE"), req(4, "STATUS"), req(5, "FIRE"), req(6, "STATUS"),
-             req(7, "FIRE"),
-             req(8, "FIRE"), req(9, "RESET"), req(10, "STATUS")],
-    "refusals": [req(1, "FIRE"), req(2, "HELLO", 1), req(3, "HELLO", "x"), req(4, "HELLO", 2),
-                 req(5, "JUMP"), req(6, "CONFIG", 0, 0, "POS"), req(7, "CONFIG", 5, 5, "UP"),
-                 req(8, "ARM", 0), req(9, "ARM", 2, "BOTH"), req(10, "ARM", 2),
-                 req(11, "CONFIG", 10, 0, "POS"), req(12, "ARM", 1), req(13, "fire", 1),
-                 req(14, "fire"), req(15, "PING", 3), req(16, "PING")],
-    "sync": [req(1, "HELLO", 2), ("S", b""), req(2, "ARM", 2, "EXT"), req(3, "FIRE"), ("S", b""),
-             req(4, "STATUS"), ("S", b""), ("S", b""), req(5, "STATUS")],
-    "watchdog": [req(1, "HELLO", 2), req(2, "ARM", 4, "EXT"), ("S", b""), ("T", b"9000"),
-                 req(3, "PING"),
-                 ("T", b"9000"), req(4, "STATUS"), ("T", b"10100"), req(5, "STATUS")],
-    "missed": [req(1, "HELLO", 2), req(2, "CONFIG", 300, 0, "POS"), req(3, "ARM", 3, "EXT"),
-               ("E", b"100"), req(4, "STATUS"), ("E", b"5"), ("S", b""), req(5, "STATUS"),
-               req(6, "ARM", 1, "EXT"), req(7, "RESET"), req(8, "STATUS")],
-    "garbage": [raw(b"1 HELLO 1*43"), raw(b"1 HELLO 1"), raw(b"x" * 120),
-                raw(tp.frame("0 PING").rstrip(b"\n")), raw(tp.frame("3  PING").rstrip(b"\n")),
-                raw(tp.frame("3 PI#NG").rstrip(b"\n")), raw(tp.frame("70000 PING").rstrip(b"\n")),
-                raw(tp.frame("5").rstrip(b"\n")), raw(tp.frame("6 PING").rstrip(b"\n") + b"\r")],
+    "scan": [
+        req(1, "HELLO", 2),
+        req(2, "CONFIG", 250, 40, "NEG"),
+        req(3, "ARM", 3),
+        req(4, "FIRE"),
+        req(4, "FIRE"),
+        req(4, "STATUS"),
+        req(5, "FIRE"),
+        req(6, "STATUS"),
+        req(7, "FIRE"),
+        req(8, "FIRE"),
+        req(9, "RESET"),
+        req(10, "STATUS"),
+    ],
+    "refusals": [
+        req(1, "FIRE"),
+        req(2, "HELLO", 1),
+        req(3, "HELLO", "x"),
+        req(4, "HELLO", 2),
+        req(5, "JUMP"),
+        req(6, "CONFIG", 0, 0, "POS"),
+        req(7, "CONFIG", 5, 5, "UP"),
+        req(8, "ARM", 0),
+        req(9, "ARM", 2, "BOTH"),
+        req(10, "ARM", 2),
+        req(11, "CONFIG", 10, 0, "POS"),
+        req(12, "ARM", 1),
+        req(13, "fire", 1),
+        req(14, "fire"),
+        req(15, "PING", 3),
+        req(16, "PING"),
+    ],
+    "sync": [
+        req(1, "HELLO", 2),
+        ("S", b""),
+        req(2, "ARM", 2, "EXT"),
+        req(3, "FIRE"),
+        ("S", b""),
+        req(4, "STATUS"),
+        ("S", b""),
+        ("S", b""),
+        req(5, "STATUS"),
+    ],
+    "watchdog": [
+        req(1, "HELLO", 2),
+        req(2, "ARM", 4, "EXT"),
+        ("S", b""),
+        ("T", b"9000"),
+        req(3, "PING"),
+        ("T", b"9000"),
+        req(4, "STATUS"),
+        ("T", b"10100"),
+        req(5, "STATUS"),
+    ],
+    "missed": [
+        req(1, "HELLO", 2),
+        req(2, "CONFIG", 300, 0, "POS"),
+        req(3, "ARM", 3, "EXT"),
+        ("E", b"100"),
+        req(4, "STATUS"),
+        ("E", b"5"),
+        ("S", b""),
+        req(5, "STATUS"),
+        req(6, "ARM", 1, "EXT"),
+        req(7, "RESET"),
+        req(8, "STATUS"),
+    ],
+    "garbage": [
+        raw(b"1 HELLO 1*43"),
+        raw(b"1 HELLO 1"),
+        raw(b"x" * 120),
+        raw(tp.frame("0 PING").rstrip(b"\n")),
+        raw(tp.frame("3  PING").rstrip(b"\n")),
+        raw(tp.frame("3 PI#NG").rstrip(b"\n")),
+        raw(tp.frame("70000 PING").rstrip(b"\n")),
+        raw(tp.frame("5").rstrip(b"\n")),
+        raw(tp.frame("6 PING").rstrip(b"\n") + b"\r"),
+    ],
 }
 
 
@@ -124,9 +198,18 @@ def test_firmware_builds_for_the_atmega328p(tmp_path, request):
     if not (core / "Arduino.h").exists():
         pytest.skip(f"no Arduino AVR core at {core} (Debian: apt install arduino-core-avr)")
     gcc, gxx, ar, size = tools
-    flags = ["-mmcu=atmega328p", "-DF_CPU=16000000L", "-DARDUINO=10819", "-DARDUINO_AVR_UNO",
-             "-DARDUINO_ARCH_AVR", "-Os", "-ffunction-sections", "-fdata-sections",
-             f"-I{core}", f"-I{variant}"]
+    flags = [
+        "-mmcu=atmega328p",
+        "-DF_CPU=16000000L",
+        "-DARDUINO=10819",
+        "-DARDUINO_AVR_UNO",
+        "-DARDUINO_ARCH_AVR",
+        "-Os",
+        "-ffunction-sections",
+        "-fdata-sections",
+        f"-I{core}",
+        f"-I{variant}",
+    ]
     cxx = [gxx, "-std=gnu++17", "-fno-exceptions", "-fno-threadsafe-statics", *flags]
     jobs = []
     for source in sorted(core.iterdir()):
@@ -144,15 +227,32 @@ def test_firmware_builds_for_the_atmega328p(tmp_path, request):
     archive = tmp_path / "core.a"
     _avr_compile([ar, "rcs", str(archive), *(job[-1] for job in jobs)])
     sketch = tmp_path / "trigger_box.o"
-    _avr_compile([*cxx, "-Wall", "-Wextra", "-Werror", "-x", "c++", "-include", "Arduino.h", "-c",
-                  str(FIRMWARE / "trigger_box.ino"), "-o", str(sketch)])
+    _avr_compile(
+        [
+            *cxx,
+            "-Wall",
+            "-Wextra",
+            "-Werror",
+            "-x",
+            "c++",
+            "-include",
+            "Arduino.h",
+            "-c",
+            str(FIRMWARE / "trigger_box.ino"),
+            "-o",
+            str(sketch),
+        ]
+    )
     elf = tmp_path / "trigger_box.elf"
-    _avr_compile([gcc, "-mmcu=atmega328p", "-Os", "-Wl,--gc-sections", str(sketch), str(archive),
-                  "-lm", "-o", str(elf)])
+    _avr_compile(
+        [gcc, "-mmcu=atmega328p", "-Os", "-Wl,--gc-sections", str(sketch), str(archive), "-lm", "-o", str(elf)]
+    )
     report = subprocess.run([size, str(elf)], capture_output=True, text=True, check=True).stdout
     text, data, bss = (int(v) for v in report.splitlines()[1].split()[:3])
-    summary = (f"trigger box firmware for ATmega328P: flash {text + data} of 32256 bytes, "
-               f"static RAM {data + bss} of 2048 bytes (data {data}, bss {bss})")
+    summary = (
+        f"trigger box firmware for ATmega328P: flash {text + data} of 32256 bytes, "
+        f"static RAM {data + bss} of 2048 bytes (data {data}, bss {bss})"
+    )
     capture = request.config.pluginmanager.get_plugin("capturemanager")
     reporter = request.config.pluginmanager.get_plugin("terminalreporter")
     if capture is not None and reporter is not None:  # shown in every run, e.g. CI logs

@@ -226,7 +226,7 @@ class BackgroundWriter:
         self.busy_s = 0.0
         self._thread = threading.Thread(target=self._run, name="capture-writer", daemon=True)
 
-    def __enter__(self) -> "BackgroundWriter":
+    def __enter__(self) -> BackgroundWriter:
         self._thread.start()
         return self
 
@@ -271,7 +271,7 @@ class InlineWriter:
         self.writer = writer
         self.busy_s = 0.0
 
-    def __enter__(self) -> "InlineWriter":
+    def __enter__(self) -> InlineWriter:
         return self
 
     def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
@@ -290,11 +290,11 @@ class InlineWriter:
 class StepTimes:
     """Seconds spent in each step of the loop, summed over the scan."""
 
-    show_s: float = 0.0      # projector: render / upload and wait until shown
-    trigger_s: float = 0.0   # firing the trigger
-    fetch_s: float = 0.0     # camera: waiting for the exposure and read-out
-    store_s: float = 0.0     # handing the frame over to the writer (queueing)
-    finish_s: float = 0.0    # waiting for the writer and committing the capture
+    show_s: float = 0.0  # projector: render / upload and wait until shown
+    trigger_s: float = 0.0  # firing the trigger
+    fetch_s: float = 0.0  # camera: waiting for the exposure and read-out
+    store_s: float = 0.0  # handing the frame over to the writer (queueing)
+    finish_s: float = 0.0  # waiting for the writer and committing the capture
 
 
 @dataclass
@@ -319,7 +319,7 @@ class _TriggerLog:
     """Triggers fired since the camera started: their count, and the index the next one will carry."""
 
     def __init__(self) -> None:
-        self.fired = 0       # rank of the next trigger since the camera started
+        self.fired = 0  # rank of the next trigger since the camera started
         self.next_index = 0  # trigger index after the last one the trigger path reported
         self.indexed: bool | None = None  # whether the camera's frames carry trigger indices (None: no frame yet)
 
@@ -529,9 +529,13 @@ def run_scan(
     with staged_camera(camera, trigger.source, TriggerMode.ONCE, exposure_us, gain):
         camera_info = {"width": camera.width, "height": camera.height, "bit_depth": camera.pixel_format.bit_depth}
         projector_info = {"width": projector.width, "height": projector.height}
-        capture_extra = {"devices": {"projector": projector.name, "camera": camera.name, "trigger": type(trigger).__name__}}
+        capture_extra = {
+            "devices": {"projector": projector.name, "camera": camera.name, "trigger": type(trigger).__name__}
+        }
         capture_extra.update(extra or {})
-        writer = CaptureWriter(path, camera_info, projector_info, patterns, scene=scene, extra=capture_extra, overwrite=overwrite)
+        writer = CaptureWriter(
+            path, camera_info, projector_info, patterns, scene=scene, extra=capture_extra, overwrite=overwrite
+        )
         with writer:
             sink = BackgroundWriter(writer) if background_writer else InlineWriter(writer)
             with sink as background:

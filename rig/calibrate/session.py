@@ -26,9 +26,9 @@ import contextlib
 import json
 import logging
 import re
-import sys
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field, replace
+from operator import methodcaller
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -108,9 +108,9 @@ class CalibrationPlan:
     model: str = REFERENCE_PLANE
     degree: int = 3
     board: BoardSpec | None = field(default_factory=BoardSpec)
-    board_views: int = 6          # tilted views for intrinsics (0: pixel size only)
+    board_views: int = 6  # tilted views for intrinsics (0: pixel size only)
     pixel_mm: float | None = None  # given instead of measured with the board
-    gamma_levels: int = 0          # flat levels of the gamma ramp (0: skip)
+    gamma_levels: int = 0  # flat levels of the gamma ramp (0: skip)
     flatness_tolerance_mm: float = 1.0
 
     def check(self) -> None:
@@ -121,7 +121,9 @@ class CalibrationPlan:
             if self.board is None or self.board.kind != "chessboard":
                 raise ConfigError("--model stereo: needs a chessboard (--board chessboard:COLSxROWS:SQUARE_MM)")
             if self.board_views < 3:
-                raise ConfigError(f"--model stereo: needs at least 3 board poses (--board-views), found {self.board_views}")
+                raise ConfigError(
+                    f"--model stereo: needs at least 3 board poses (--board-views), found {self.board_views}"
+                )
             return
         heights = [float(h) for h in self.heights_mm]
         if len(heights) < MIN_HEIGHTS:
@@ -140,7 +142,7 @@ class CalibrationPlan:
         return data
 
     @classmethod
-    def from_json(cls, data: dict[str, Any], where: str) -> "CalibrationPlan":
+    def from_json(cls, data: dict[str, Any], where: str) -> CalibrationPlan:
         try:
             board = data.get("board")
             plan = cls(
@@ -158,7 +160,7 @@ class CalibrationPlan:
         return plan
 
     @classmethod
-    def load(cls, session: Path) -> "CalibrationPlan":
+    def load(cls, session: Path) -> CalibrationPlan:
         """The plan stored in a session directory's ``session.json``."""
         data = read_json(session, CalibrationError, "missing (not a calibration session directory?)")
         return cls.from_json(data, str(session))
@@ -286,7 +288,7 @@ def _acquire_into(
 def _acquire_planes(session: _Acquisition, plan: CalibrationPlan) -> None:
     directory, patterns = session.directory, session.devices.config.scan.patterns()
     if plan.gamma_levels:
-        session.setup("gamma ramp on the bare reference plane", lambda hand: hand.clear())
+        session.setup("gamma ramp on the bare reference plane", methodcaller("clear"))
         session.capture(directory / GAMMA_DIR, ramp_patterns(plan.gamma_levels), "gamma-ramp")
         lut = _gamma_from(directory / GAMMA_DIR)[1]
         np.save(directory / GAMMA_LUT_FILE, lut)
@@ -296,15 +298,15 @@ def _acquire_planes(session: _Acquisition, plan: CalibrationPlan) -> None:
         for index in range(plan.board_views + 1):
             on_plane = index == 0
             step = "board flat on the reference plane" if on_plane else f"board view {index} of {plan.board_views}"
-            session.setup(step, lambda hand: hand.board(index, on_plane))
+            session.setup(step, methodcaller("board", index, on_plane))
             name, scene = ("plane", "board-on-reference") if on_plane else (f"view-{index:02d}", f"board-view-{index}")
             session.capture(directory / BOARD_DIR / name, BOARD_PATTERNS, scene)
-    session.setup("reference plane", lambda hand: hand.plane(0.0))
+    session.setup("reference plane", methodcaller("plane", 0.0))
     session.capture(directory / REFERENCE_DIR, patterns, "reference")
     (directory / PLANES_DIR).mkdir(exist_ok=True)
     for height in plan.heights_mm:
         label = plane_label(float(height))
-        session.setup(f"plane at {float(height):g} mm", lambda hand: hand.plane(float(height)))
+        session.setup(f"plane at {float(height):g} mm", methodcaller("plane", float(height)))
         session.capture(directory / PLANES_DIR / label, patterns, label)
 
 
@@ -320,9 +322,9 @@ def _acquire_stereo(session: _Acquisition, plan: CalibrationPlan) -> None:
         raise ConfigError("--model stereo: the scan frequencies must start at 1 (hierarchical unwrapping on the board)")
     (directory / STEREO_DIR).mkdir(exist_ok=True)
     for index in range(1, plan.board_views + 1):
-        session.setup(f"board pose {index} of {plan.board_views}", lambda hand: hand.pose(index))
+        session.setup(f"board pose {index} of {plan.board_views}", methodcaller("pose", index))
         session.capture(directory / STEREO_DIR / f"pose-{index:02d}", stereo_patterns(config), f"board-pose-{index}")
-    session.setup("reference plane", lambda hand: hand.plane(0.0))
+    session.setup("reference plane", methodcaller("plane", 0.0))
     session.capture(directory / REFERENCE_DIR, config.scan.patterns(), "reference")
 
 
@@ -401,7 +403,7 @@ def _board_note(note: str, first: int) -> str:
         return note
     index = int(match.group(1)) + first
     name = "board on the plane" if index == 0 else f"board view {index}"
-    return name + note[match.end() - 2:]
+    return name + note[match.end() - 2 :]
 
 
 def _planes(directory: Path) -> list[tuple[float, Path]]:
@@ -440,9 +442,11 @@ def compute(
     ``plan`` overrides the stored session (e.g. another model); ``output`` writes the calibration
     elsewhere (the reference capture is then copied into it: references are relative and inside).
     """
+
     def note(message: str) -> None:
         if progress is not None:
             progress.message(message)
+
     session = directory / SESSION_FILE
     if plan is None:
         plan = CalibrationPlan.load(session)
@@ -470,8 +474,9 @@ def compute(
         all_views = ([on_plane] if on_plane is not None else []) + views
         if len(views) >= 2:
             # k3 stays 0: a few views of a narrow-angle lens cannot tell it from k1, k2
-            camera = calibrate_camera([v.white for v in all_views], plan.board, flags=cv2.CALIB_FIX_K3,
-                                      darks=[v.dark for v in all_views])
+            camera = calibrate_camera(
+                [v.white for v in all_views], plan.board, flags=cv2.CALIB_FIX_K3, darks=[v.dark for v in all_views]
+            )
             extra.update(camera.as_fields())
             lines.append(
                 f"camera: {len(camera.views_used)} views, reprojection RMS {camera.rms_px:.3f} px"
@@ -481,7 +486,9 @@ def compute(
             lines.extend("  " + _board_note(note, first) for note in camera.notes)
         if pixel_mm is None:
             if on_plane is None:
-                raise CalibrationError(f"{directory / BOARD_DIR / 'plane'}: missing (the board lying on the reference plane)")
+                raise CalibrationError(
+                    f"{directory / BOARD_DIR / 'plane'}: missing (the board lying on the reference plane)"
+                )
             if plan.board.kind != "chessboard":
                 raise CalibrationError("pixel size: measure it with a chessboard (or give --pixel-mm)")
             found = detect_board(on_plane.white, plan.board, name="board on the reference plane")
@@ -517,7 +524,9 @@ def compute(
     reference, frequency, axis, patterns = phase_of(directory / REFERENCE_DIR)
     planes = _planes(directory)
     if len(planes) < MIN_HEIGHTS:
-        raise CalibrationError(f"{directory / PLANES_DIR}: {len(planes)} plane captures, need at least {MIN_HEIGHTS} heights")
+        raise CalibrationError(
+            f"{directory / PLANES_DIR}: {len(planes)} plane captures, need at least {MIN_HEIGHTS} heights"
+        )
     f0 = fit_f0(reference, pixel_mm)
     # the reference plane's phase ripple (projector gamma), for `rig process --correction gamma-table`;
     # a strong one is taken out of the calibration planes too, or it would read as planes not flat
@@ -528,7 +537,9 @@ def compute(
     if compensate:
         reference = compensate_phase(reference, table)
         extra["planes_ripple_compensated"] = True
-        lines.append("  strong ripple: the planes were fitted with it compensated; pre-correct the projector (--gamma) or process with --correction gamma-table")
+        lines.append(
+            "  strong ripple: the planes were fitted with it compensated; pre-correct the projector (--gamma) or process with --correction gamma-table"
+        )
     heights, deltas = [], []
     for height, path in planes:
         note(f"calibrate: plane at {height:g} mm")
@@ -536,8 +547,13 @@ def compute(
         check_same_patterns(patterns, plane_patterns, f"{directory / REFERENCE_DIR}", f"{path}")
         heights.append(height)
         deltas.append((compensate_phase(phase, table) if compensate else phase) - reference)
-    fit = fit_l0_d0(heights, deltas, f0.f0_per_mm, f0_std_per_mm=f0.f0_std_per_mm,
-                    flatness_tolerance_mm=plan.flatness_tolerance_mm if plan.model == REFERENCE_PLANE else None)
+    fit = fit_l0_d0(
+        heights,
+        deltas,
+        f0.f0_per_mm,
+        f0_std_per_mm=f0.f0_std_per_mm,
+        flatness_tolerance_mm=plan.flatness_tolerance_mm if plan.model == REFERENCE_PLANE else None,
+    )
     lines.append(f"l0 = {fit.l0_mm:.3f} +- {fit.l0_std_mm:.3f} mm, d0 = {fit.d0_mm:.3f} +- {fit.d0_std_mm:.3f} mm")
     lines.append("residuals " + ", ".join(f"{h:g}: {r:+.4f}" for h, r in zip(fit.heights_mm, fit.residuals_mm)) + " mm")
     extra.update({k: v for k, v in fit.as_fields().items() if k not in ("l0_mm", "d0_mm", "f0_per_mm")})
@@ -571,10 +587,14 @@ def _pose_view(path: Path, board: BoardSpec) -> Any:
     capture = read_capture(path)
     patterns = capture.patterns
     white = [i for i, p in enumerate(patterns) if p.get("kind") == "flat" and float(p.get("level", 0)) == 1.0]
-    groups = {axis: [i for i, p in enumerate(patterns) if p.get("kind") == "sinusoid" and p.get("axis", "x") == axis]
-              for axis in ("x", "y")}
+    groups = {
+        axis: [i for i, p in enumerate(patterns) if p.get("kind") == "sinusoid" and p.get("axis", "x") == axis]
+        for axis in ("x", "y")
+    }
     if not white or not groups["x"] or not groups["y"]:
-        raise CalibrationError(f"{capture.manifest_path}: a stereo pose needs a white frame and sinusoids along x and y")
+        raise CalibrationError(
+            f"{capture.manifest_path}: a stereo pose needs a white frame and sinusoids along x and y"
+        )
     frames = capture.load_frames()
     frequencies = sorted({int(patterns[i]["frequency"]) for i in groups["x"]})
     steps = int(patterns[groups["x"][0]]["steps"])
@@ -589,7 +609,12 @@ def _pose_view(path: Path, board: BoardSpec) -> Any:
 
 
 def _compute_stereo(
-    directory: Path, plan: CalibrationPlan, output: Path, lines: list[str], extra: dict[str, Any], note: Callable[[str], None]
+    directory: Path,
+    plan: CalibrationPlan,
+    output: Path,
+    lines: list[str],
+    extra: dict[str, Any],
+    note: Callable[[str], None],
 ) -> CalibrationReport:
     poses = sorted(p for p in (directory / STEREO_DIR).glob("pose-*") if (p / "capture.json").is_file())
     if len(poses) < 3:
@@ -617,7 +642,9 @@ def _compute_stereo(
         plane = fit_plane(points)
         extra["plane"] = plane.tolist()
         heights = points @ plane[:3] + plane[3]
-        lines.append(f"reference plane {plane[3]:.2f} mm from the camera, flat to {np.nanstd(heights):.3f} mm RMS: heights are above it")
+        lines.append(
+            f"reference plane {plane[3]:.2f} mm from the camera, flat to {np.nanstd(heights):.3f} mm RMS: heights are above it"
+        )
     calibration = Calibration(model=STEREO, extra=extra)
     write_calibration(output, calibration)
     return CalibrationReport(calibration, lines)

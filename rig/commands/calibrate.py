@@ -61,38 +61,89 @@ def _board(text: str) -> BoardSpec | str:
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = add_command(
-        subparsers, "calibrate", run,
+        subparsers,
+        "calibrate",
+        run,
         help="calibrate the rig: reference plane, planes at known heights, board, gamma -> calibration.json",
         description="Walk through a calibration session (the simulated rig runs it unattended) and fit "
         "l0, d0, f0 (reference-plane model) or a per-pixel polynomial; or recompute from a stored "
         "session (--from), or import an OpenCV projector-camera calibration (--import-opencv).",
     )
-    parser.add_argument("-o", "--output", type=Path, metavar="CAL", help="calibration directory to create (default: calibration)")
-    parser.add_argument("--config", type=Path, metavar="RIG.toml", help="rig config file (default: the built-in simulated rig)")
-    parser.add_argument("--from", dest="from_dir", type=Path, metavar="DIR", help="recompute from the captures of a stored session")
-    parser.add_argument("--heights", type=_heights, default=None, metavar="MM,MM,...",
-                        help="plane heights above the reference plane (default 25,50,100,150)")
-    parser.add_argument("--model", choices=("reference-plane", "polynomial", "stereo"), default=None,
-                        help="height model to fit (default reference-plane, eq. 1.15; stereo: projector-camera "
-                        "calibration from board poses with fringes along x and y)")
+    parser.add_argument(
+        "-o", "--output", type=Path, metavar="CAL", help="calibration directory to create (default: calibration)"
+    )
+    parser.add_argument(
+        "--config", type=Path, metavar="RIG.toml", help="rig config file (default: the built-in simulated rig)"
+    )
+    parser.add_argument(
+        "--from", dest="from_dir", type=Path, metavar="DIR", help="recompute from the captures of a stored session"
+    )
+    parser.add_argument(
+        "--heights",
+        type=_heights,
+        default=None,
+        metavar="MM,MM,...",
+        help="plane heights above the reference plane (default 25,50,100,150)",
+    )
+    parser.add_argument(
+        "--model",
+        choices=("reference-plane", "polynomial", "stereo"),
+        default=None,
+        help="height model to fit (default reference-plane, eq. 1.15; stereo: projector-camera "
+        "calibration from board poses with fringes along x and y)",
+    )
     parser.add_argument("--degree", type=int, default=None, help="polynomial degree (default 3)")
-    parser.add_argument("--board", type=_board, default=None, metavar="KIND:COLSxROWS:SQUARE_MM[:MARKER_MM]",
-                        help="calibration target (default chessboard:9x7:20; 'none' with --pixel-mm)")
-    parser.add_argument("--board-views", type=int, default=None, metavar="N",
-                        help="tilted board views for camera intrinsics (default 6; 0: pixel size only)")
+    parser.add_argument(
+        "--board",
+        type=_board,
+        default=None,
+        metavar="KIND:COLSxROWS:SQUARE_MM[:MARKER_MM]",
+        help="calibration target (default chessboard:9x7:20; 'none' with --pixel-mm)",
+    )
+    parser.add_argument(
+        "--board-views",
+        type=int,
+        default=None,
+        metavar="N",
+        help="tilted board views for camera intrinsics (default 6; 0: pixel size only)",
+    )
     parser.add_argument("--pixel-mm", type=float, default=None, help="pixel size on the plane, instead of measuring it")
-    parser.add_argument("--gamma", type=int, nargs="?", const=17, default=0, metavar="LEVELS",
-                        help="measure the projector gamma with a ramp of LEVELS flat levels (default 17) and write gamma-lut.npy")
-    parser.add_argument("--flatness-tolerance", type=float, default=None, metavar="MM",
-                        help="largest RMS height spread of a calibration plane (default 1 mm)")
-    parser.add_argument("--stage-command", metavar="CMD",
-                        help="move a motorised stage instead of prompting, e.g. 'stage-move --mm {height_mm}'")
-    parser.add_argument("--import-opencv", type=Path, metavar="FILE.yml",
-                        help="write a 'stereo' calibration from an OpenCV FileStorage file (M1 D1 M4 D4 Rlp Tlp S)")
+    parser.add_argument(
+        "--gamma",
+        type=int,
+        nargs="?",
+        const=17,
+        default=0,
+        metavar="LEVELS",
+        help="measure the projector gamma with a ramp of LEVELS flat levels (default 17) and write gamma-lut.npy",
+    )
+    parser.add_argument(
+        "--flatness-tolerance",
+        type=float,
+        default=None,
+        metavar="MM",
+        help="largest RMS height spread of a calibration plane (default 1 mm)",
+    )
+    parser.add_argument(
+        "--stage-command",
+        metavar="CMD",
+        help="move a motorised stage instead of prompting, e.g. 'stage-move --mm {height_mm}'",
+    )
+    parser.add_argument(
+        "--import-opencv",
+        type=Path,
+        metavar="FILE.yml",
+        help="write a 'stereo' calibration from an OpenCV FileStorage file (M1 D1 M4 D4 Rlp Tlp S)",
+    )
     parser.add_argument("--projector-size", type=_size, metavar="WxH", help="projector resolution for --import-opencv")
-    parser.add_argument("--pixel-centre", type=float, default=0.5, metavar="P",
-                        help="for --import-opencv: where projector pixel k sits in the phase convention "
-                        "(0.5: this product's patterns; 0: phase 2 pi f k / W at column k, as SLMaster)")
+    parser.add_argument(
+        "--pixel-centre",
+        type=float,
+        default=0.5,
+        metavar="P",
+        help="for --import-opencv: where projector pixel k sits in the phase convention "
+        "(0.5: this product's patterns; 0: phase 2 pi f k / W at column k, as SLMaster)",
+    )
     parser.add_argument("--overwrite", action="store_true", help="replace an existing calibration directory")
     add_report_options(parser, json_help="print calibration.json on stdout")
 
@@ -121,8 +172,12 @@ def _plan(args: argparse.Namespace, base=None):
 
     plan = base or CalibrationPlan()
     updates = {
-        "heights_mm": args.heights, "model": args.model, "degree": args.degree, "board_views": args.board_views,
-        "pixel_mm": args.pixel_mm, "flatness_tolerance_mm": args.flatness_tolerance,
+        "heights_mm": args.heights,
+        "model": args.model,
+        "degree": args.degree,
+        "board_views": args.board_views,
+        "pixel_mm": args.pixel_mm,
+        "flatness_tolerance_mm": args.flatness_tolerance,
     }
     for key, value in updates.items():
         if value is not None:

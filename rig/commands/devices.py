@@ -13,7 +13,9 @@ from rig.hardware.probes import PROBES, format_probe, probe_opencv, simulated
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = add_command(
-        subparsers, "devices", run,
+        subparsers,
+        "devices",
+        run,
         help="list connected cameras, serial ports, DLP projectors and the simulated rig",
         description="List what is connected: OpenCV and Basler cameras, serial ports (trigger box), "
         "TI DLP projectors on USB, whether off-screen rendering works, and the simulated devices. "

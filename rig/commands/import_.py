@@ -19,7 +19,9 @@ SPEC_HELP = (
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = add_command(
-        subparsers, "import", run,
+        subparsers,
+        "import",
+        run,
         help="turn a folder of fringe images from another rig into a capture",
         description="Match the folder's images (natural order: 2.png before 10.png) with the patterns "
         "of SPEC, convert them to single-channel, and write a verified capture that records where "
@@ -27,13 +29,26 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("folder", type=Path, metavar="FOLDER", help="folder holding the images")
     parser.add_argument("--patterns", required=True, metavar="SPEC", help=SPEC_HELP)
-    parser.add_argument("-o", "--output", type=Path, required=True, metavar="CAPTURE", help="capture directory to create")
-    parser.add_argument("--projector-width", type=int, metavar="PX", help="projector width in pixels (default: the image width)")
-    parser.add_argument("--projector-height", type=int, metavar="PX", help="projector height in pixels (default: the image height)")
-    parser.add_argument("--shift-sign", type=int, choices=(1, -1), default=1,
-                        help="-1 if the rig's frames are I = A + B cos(phi - delta) (default +1: cos(phi + delta))")
+    parser.add_argument(
+        "-o", "--output", type=Path, required=True, metavar="CAPTURE", help="capture directory to create"
+    )
+    parser.add_argument(
+        "--projector-width", type=int, metavar="PX", help="projector width in pixels (default: the image width)"
+    )
+    parser.add_argument(
+        "--projector-height", type=int, metavar="PX", help="projector height in pixels (default: the image height)"
+    )
+    parser.add_argument(
+        "--shift-sign",
+        type=int,
+        choices=(1, -1),
+        default=1,
+        help="-1 if the rig's frames are I = A + B cos(phi - delta) (default +1: cos(phi + delta))",
+    )
     parser.add_argument("--glob", metavar="PATTERN", help="only files matching PATTERN, e.g. 'lens_crop_*.jpg'")
-    parser.add_argument("--order", choices=("natural", "name", "mtime"), default="natural", help="file order (default natural)")
+    parser.add_argument(
+        "--order", choices=("natural", "name", "mtime"), default="natural", help="file order (default natural)"
+    )
     parser.add_argument("--crop", metavar="X,Y,W,H", help="keep only this rectangle of every image")
     parser.add_argument("--downsample", type=int, default=1, metavar="N", help="average N x N pixel blocks (default 1)")
     parser.add_argument("--scene", default="object", help="scene label of the capture (default object)")

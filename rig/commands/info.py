@@ -36,7 +36,9 @@ def describe_patterns(patterns: list[dict[str, Any]]) -> list[str]:
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = add_command(
-        subparsers, "info", run,
+        subparsers,
+        "info",
+        run,
         help="show what a capture holds and verify its frames",
         description="Print a capture's scene, image sizes, patterns and frames, and verify every frame "
         "(sha256, image size, bit depth). Exits non-zero on any problem.",
@@ -60,7 +62,22 @@ def facts(capture: Capture) -> dict[str, Any]:
         "pattern_groups": describe_patterns(capture.patterns),
         "frames": len(capture.frames),
         "verified": True,
-        "extra_keys": sorted(k for k in m if k not in {"format", "version", "scene", "created_utc", "complete", "camera", "projector", "patterns", "frames"}),
+        "extra_keys": sorted(
+            k
+            for k in m
+            if k
+            not in {
+                "format",
+                "version",
+                "scene",
+                "created_utc",
+                "complete",
+                "camera",
+                "projector",
+                "patterns",
+                "frames",
+            }
+        ),
     }
 
 
@@ -75,7 +92,9 @@ def run(args: argparse.Namespace) -> int:
         print_json(info)
         return 0
     cam, proj = info["camera"], info["projector"]
-    print(f"{info['path']}: {info['scene']} capture, {'complete' if info['complete'] else 'INCOMPLETE'}, created {info['created_utc']}")
+    print(
+        f"{info['path']}: {info['scene']} capture, {'complete' if info['complete'] else 'INCOMPLETE'}, created {info['created_utc']}"
+    )
     print(f"camera {cam['width']}x{cam['height']} {cam['bit_depth']}-bit, projector {proj['width']}x{proj['height']}")
     print(f"{info['patterns']} patterns, {info['frames']} frames, all verified (sha256, size, bit depth)")
     for line in info["pattern_groups"]:

@@ -43,7 +43,9 @@ def _correction_help() -> str:
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = add_command(
-        subparsers, "process", run,
+        subparsers,
+        "process",
+        run,
         help="turn a capture into absolute phase, a height map and a point cloud",
         description="Process a capture (and the reference-plane capture of its calibration) into "
         "height.npy, phase.npy, mask.npy, points.ply, report.json and preview.png. Without "
@@ -51,7 +53,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     add_capture_argument(parser)
     parser.add_argument("--calibration", type=Path, metavar="CAL", help="calibration directory (calibration.json)")
-    parser.add_argument("-o", "--output", type=Path, metavar="OUT", help="output directory (default: CAPTURE-processed)")
+    parser.add_argument(
+        "-o", "--output", type=Path, metavar="OUT", help="output directory (default: CAPTURE-processed)"
+    )
     add_processing_options(parser)
     parser.add_argument("--salvage", action="store_true", help="accept an incomplete capture (interrupted scan)")
     add_report_options(parser)
@@ -60,46 +64,87 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def add_processing_options(parser: argparse.ArgumentParser) -> None:
     """The pipeline's options (--unwrap, --denoise, --correction, ...), shared by `rig process` and `rig batch`."""
     parser.add_argument(
-        "--unwrap", default="auto", choices=UNWRAP_METHODS,
+        "--unwrap",
+        default="auto",
+        choices=UNWRAP_METHODS,
         help="phase unwrapping method (default auto: gray or spatial for one frequency, hierarchical when "
         "frequency 1 is present, two-frequency for 2 coprime, heterodyne or three-frequency for 3)",
     )
-    parser.add_argument("--denoise", default="none", choices=LazyChoices(_denoisers), metavar="METHOD",
-                        help="fringe denoising before phase: %(choices)s (default none)")
-    parser.add_argument("--correction", default=DEFAULT_CORRECTION, choices=LazyChoices(_corrections), metavar="METHOD",
-                        help=LazyHelp(_correction_help))
     parser.add_argument(
-        "--min-modulation", type=float, default=0.2, metavar="RATIO",
+        "--denoise",
+        default="none",
+        choices=LazyChoices(_denoisers),
+        metavar="METHOD",
+        help="fringe denoising before phase: %(choices)s (default none)",
+    )
+    parser.add_argument(
+        "--correction",
+        default=DEFAULT_CORRECTION,
+        choices=LazyChoices(_corrections),
+        metavar="METHOD",
+        help=LazyHelp(_correction_help),  # type: ignore[arg-type]  # argparse calls str() on it
+    )
+    parser.add_argument(
+        "--min-modulation",
+        type=float,
+        default=0.2,
+        metavar="RATIO",
         help="valid pixels need fringe modulation B >= RATIO x background and x the image's 99th percentile of B (default 0.2)",
     )
     parser.add_argument(
-        "--min-island", type=float, default=0.005, metavar="FRACTION", dest="min_island",
+        "--min-island",
+        type=float,
+        default=0.005,
+        metavar="FRACTION",
+        dest="min_island",
         help="drop isolated valid regions smaller than FRACTION of the largest (background specks; default 0.005)",
     )
-    parser.add_argument("--keep-islands", action="store_true", help="keep isolated valid regions (same as --min-island 0)")
     parser.add_argument(
-        "--param", action="append", default=[], metavar="KEY=VALUE",
+        "--keep-islands", action="store_true", help="keep isolated valid regions (same as --min-island 0)"
+    )
+    parser.add_argument(
+        "--param",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
         help="a parameter of the chosen denoising / correction method (repeatable; VALUE read as JSON if it parses)",
     )
-    parser.add_argument("--axis", choices=("x", "y"), help="fringe axis to use when a capture has both (default: the first)")
-    parser.add_argument("--no-undistort", dest="undistort", action="store_false", default=None,
-                        help="keep lens distortion (default: removed when the calibration has camera_matrix and distortion)")
+    parser.add_argument(
+        "--axis", choices=("x", "y"), help="fringe axis to use when a capture has both (default: the first)"
+    )
+    parser.add_argument(
+        "--no-undistort",
+        dest="undistort",
+        action="store_false",
+        default=None,
+        help="keep lens distortion (default: removed when the calibration has camera_matrix and distortion)",
+    )
 
 
 def processing_options(args: argparse.Namespace) -> ProcessOptions:
     """The :class:`ProcessOptions` of the options :func:`add_processing_options` added."""
     return ProcessOptions(
-        unwrap=args.unwrap, denoise=args.denoise, correction=args.correction,
-        min_modulation_ratio=args.min_modulation, axis=args.axis, params=parse_params(args.param),
-        undistort=args.undistort, min_island_fraction=0.0 if args.keep_islands else args.min_island,
+        unwrap=args.unwrap,
+        denoise=args.denoise,
+        correction=args.correction,
+        min_modulation_ratio=args.min_modulation,
+        axis=args.axis,
+        params=parse_params(args.param),
+        undistort=args.undistort,
+        min_island_fraction=0.0 if args.keep_islands else args.min_island,
     )
 
 
 def summary(report: dict, out: Path) -> dict:
     """The short form of a report printed by --json."""
     keys = ("valid_fraction", "height_mm", "points", "notes")
-    return {"output": str(out), "unwrap": report["methods"]["unwrap"], **{k: report[k] for k in keys if k in report},
-            "files": report["files"], "timings_s": report["timings_s"]}
+    return {
+        "output": str(out),
+        "unwrap": report["methods"]["unwrap"],
+        **{k: report[k] for k in keys if k in report},
+        "files": report["files"],
+        "timings_s": report["timings_s"],
+    }
 
 
 def parse_params(items: list[str]) -> dict[str, object]:
@@ -125,8 +170,14 @@ def run(args: argparse.Namespace) -> int:
     check_output_directory(out)  # an unwritable output fails now, not after the computation
     steps = total_steps(args.calibration is not None) + 1
     with Progress(f"process {args.capture}", total=steps, quiet=args.quiet) as progress:
-        result = process(args.capture, args.calibration, options, progress=progress, salvage=args.salvage,
-                         reference_cache_to_disk=True)
+        result = process(
+            args.capture,
+            args.calibration,
+            options,
+            progress=progress,
+            salvage=args.salvage,
+            reference_cache_to_disk=True,
+        )
         report = write_outputs(result, out)
         progress.step("outputs")
     if args.json:

@@ -27,8 +27,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Project each pattern, trigger the camera, fetch its frame and write a capture "
         "directory atomically (complete only if every pattern has its frame).",
     )
-    parser.add_argument("--config", type=Path, metavar="RIG.toml", help="rig config file (default: the built-in simulated rig)")
-    parser.add_argument("-o", "--output", type=Path, metavar="CAPTURE", help="capture directory to create (default: capture-<UTC time>)")
+    parser.add_argument(
+        "--config", type=Path, metavar="RIG.toml", help="rig config file (default: the built-in simulated rig)"
+    )
+    parser.add_argument(
+        "-o", "--output", type=Path, metavar="CAPTURE", help="capture directory to create (default: capture-<UTC time>)"
+    )
     parser.add_argument(
         "--scene",
         default="object",
@@ -37,7 +41,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--calibration", type=Path, metavar="CAL", help="calibration directory, for --process")
     parser.add_argument("--process", action="store_true", help="process the capture into a height map after the scan")
-    parser.add_argument("--process-output", type=Path, metavar="OUT", help="where --process writes (default: CAPTURE-processed)")
+    parser.add_argument(
+        "--process-output", type=Path, metavar="OUT", help="where --process writes (default: CAPTURE-processed)"
+    )
     parser.add_argument("--overwrite", action="store_true", help="replace an existing capture directory")
     parser.set_defaults(func=run)
 
@@ -68,7 +74,11 @@ def run(args: argparse.Namespace) -> int:
         result = scan(config, output, scene=args.scene, overwrite=args.overwrite, progress=progress)
     print(
         f"{result.path}: {len(result.frames)} frames in {result.wall_s:.2f} s"
-        + (f" ({result.attempts - len(result.frames)} retried, {result.discarded} discarded)" if result.attempts > len(result.frames) or result.discarded else ""),
+        + (
+            f" ({result.attempts - len(result.frames)} retried, {result.discarded} discarded)"
+            if result.attempts > len(result.frames) or result.discarded
+            else ""
+        ),
         file=sys.stderr,
     )
     print(result.path)  # stdout: the capture directory, for scripts (the default name has the time in it)
@@ -79,7 +89,9 @@ def run(args: argparse.Namespace) -> int:
 
         destination = args.process_output or output.with_name(output.name + "-processed")
         with Progress(f"process {output}", total=total_steps(with_reference=True)) as progress:
-            report = process_capture(output, args.calibration, destination, ProcessOptions(correction=DEFAULT_CORRECTION), progress=progress)
+            report = process_capture(
+                output, args.calibration, destination, ProcessOptions(correction=DEFAULT_CORRECTION), progress=progress
+            )
         print_summary(report, destination)
         print(destination)
     return 0

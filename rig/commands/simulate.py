@@ -52,18 +52,34 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "capture) and the true height map. Defaults come from the built-in simulated rig or --config.",
     )
     parser.add_argument("-o", "--output", type=Path, required=True, metavar="OUT", help="directory to create")
-    parser.add_argument("--config", type=Path, metavar="RIG.toml", help="take patterns, sizes and geometry from a rig config")
+    parser.add_argument(
+        "--config", type=Path, metavar="RIG.toml", help="take patterns, sizes and geometry from a rig config"
+    )
     parser.add_argument("--scene", help="scene name (flat, sphere-cap, hemisphere, two-hemispheres, steps, isolated)")
     parser.add_argument("--snr-db", help="camera noise as signal-to-noise ratio in dB, or 'none'")
-    parser.add_argument("--frequencies", type=float, nargs="+", metavar="F", help="sinusoid frequencies (fringes across the projector)")
+    parser.add_argument(
+        "--frequencies", type=float, nargs="+", metavar="F", help="sinusoid frequencies (fringes across the projector)"
+    )
     parser.add_argument("--steps", type=int, metavar="J", help="phase shifts per frequency")
     parser.add_argument(
-        "--pattern-set", choices=LazyChoices(_pattern_sets), metavar="SET",
+        "--pattern-set",
+        choices=LazyChoices(_pattern_sets),
+        metavar="SET",
         help="'phase-shifting' (sinusoids, the default) or 'speckle': one speckle-embedded fringe frame "
         "(single shot, [scan] speckle_* settings)",
     )
-    parser.add_argument("--patterns", type=Path, metavar="PATTERNS.json", help="a JSON list of capture-format pattern entries (overrides --frequencies/--steps)")
-    parser.add_argument("--size", type=_size, metavar="WxH", help="camera size in pixels, field of view kept (default from the config: 1024x768)")
+    parser.add_argument(
+        "--patterns",
+        type=Path,
+        metavar="PATTERNS.json",
+        help="a JSON list of capture-format pattern entries (overrides --frequencies/--steps)",
+    )
+    parser.add_argument(
+        "--size",
+        type=_size,
+        metavar="WxH",
+        help="camera size in pixels, field of view kept (default from the config: 1024x768)",
+    )
     parser.add_argument("--seed", type=int, help="noise seed")
     parser.add_argument("--overwrite", action="store_true", help="replace existing captures in OUT")
     parser.set_defaults(func=run)

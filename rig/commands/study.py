@@ -25,11 +25,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "README.md, study.csv and PNG figures with the thesis' numbers beside ours. The full study takes "
         "several minutes on two cores; --quick runs every experiment on small images in seconds.",
     )
-    parser.add_argument("-o", "--output", type=Path, default=Path("docs/study"), metavar="DIR",
-                        help="output directory (default docs/study)")
+    parser.add_argument(
+        "-o",
+        "--output",
+        type=Path,
+        default=Path("docs/study"),
+        metavar="DIR",
+        help="output directory (default docs/study)",
+    )
     parser.add_argument("--quick", action="store_true", help="small images and short sweeps (a smoke test)")
-    parser.add_argument("--seeds", type=_positive, default=None, metavar="N",
-                        help="noise seeds for the repeated experiments (default 3, quick 2)")
+    parser.add_argument(
+        "--seeds",
+        type=_positive,
+        default=None,
+        metavar="N",
+        help="noise seeds for the repeated experiments (default 3, quick 2)",
+    )
     parser.set_defaults(func=run)
 
 

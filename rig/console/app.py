@@ -18,7 +18,7 @@ import hmac
 import json
 import logging
 import uuid
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, MutableMapping
 from pathlib import Path
 from typing import Any
 from urllib.parse import parse_qs, urlsplit
@@ -180,7 +180,7 @@ class AccessMiddleware:
     def _with_cookie(self, send: Send) -> Send:
         cookie = f"{TOKEN_COOKIE}={self.token}; Path=/; HttpOnly; SameSite=Strict".encode("latin-1")
 
-        async def wrapped(message: dict[str, Any]) -> None:
+        async def wrapped(message: MutableMapping[str, Any]) -> None:
             if message["type"] == "http.response.start":
                 message = {**message, "headers": [*message.get("headers", []), (b"set-cookie", cookie)]}
             await send(message)
@@ -409,11 +409,21 @@ def create_app(
     async def set_calibration(body: CalibrationBody) -> dict[str, Any]:
         return {"active": session.set_calibration(body.name)}
 
-    @app.post("/api/calibrate", tags=["calibration"], status_code=202,
-              summary="run the calibration session (prompts and steps on the websocket); 409 while acquiring")
+    @app.post(
+        "/api/calibrate",
+        tags=["calibration"],
+        status_code=202,
+        summary="run the calibration session (prompts and steps on the websocket); 409 while acquiring",
+    )
     async def calibrate(body: CalibrateBody, request: Request) -> dict[str, Any]:
-        job = session.calibrate(body.name, tuple(body.heights_mm), body.board_views, client_of(request),
-                                model=body.model, gamma_levels=body.gamma_levels)
+        job = session.calibrate(
+            body.name,
+            tuple(body.heights_mm),
+            body.board_views,
+            client_of(request),
+            model=body.model,
+            gamma_levels=body.gamma_levels,
+        )
         return {"job": job.as_dict()}
 
     @app.post("/api/calibrate/answer", tags=["calibration"], summary="the operator did what the prompt asked")

@@ -117,7 +117,9 @@ class ProjectorSetting:
         if not math.isfinite(self.phase_deg):
             raise RigError(f"phase_deg: expected a finite angle, found {self.phase_deg}")
         if isinstance(self.pitch_px, bool) or not isinstance(self.pitch_px, int) or not 4 <= self.pitch_px <= 4096:
-            raise RigError(f"pitch_px: expected grid line spacing in projector pixels, 4 .. 4096, found {self.pitch_px}")
+            raise RigError(
+                f"pitch_px: expected grid line spacing in projector pixels, 4 .. 4096, found {self.pitch_px}"
+            )
 
     def capture_pattern(self) -> dict[str, Any]:
         """The capture-format pattern entry the projector shows."""
@@ -429,7 +431,10 @@ class ConsoleSession:
     def set_live(self, overlay: bool | None = None, view: str | None = None) -> dict[str, Any]:
         if view is not None and view not in ("camera", "modulation"):
             raise RigError(f"view: expected camera or modulation, found {view!r}")
-        self.live = replace(self.live, **{k: v for k, v in (("overlay", overlay), ("view", view)) if v is not None})
+        if overlay is not None:
+            self.live = replace(self.live, overlay=overlay)
+        if view is not None:
+            self.live = replace(self.live, view=view)
         return self.live.__dict__
 
     def set_calibration(self, name: str | None) -> str | None:
@@ -583,8 +588,12 @@ class ConsoleSession:
             raise RigError(STEREO_REFUSAL)
         if gamma_levels != 0 and gamma_levels < 5:
             raise RigError(f"gamma_levels: expected 0 (no gamma ramp) or at least 5 levels, found {gamma_levels}")
-        plan = CalibrationPlan(heights_mm=tuple(float(h) for h in heights_mm), board_views=int(board_views),
-                               model=model, gamma_levels=int(gamma_levels))
+        plan = CalibrationPlan(
+            heights_mm=tuple(float(h) for h in heights_mm),
+            board_views=int(board_views),
+            model=model,
+            gamma_levels=int(gamma_levels),
+        )
         plan.check()
         if not self._acquiring.acquire(blocking=False):
             raise Busy("busy: an acquisition is running; one acquisition at a time")
@@ -613,8 +622,19 @@ class ConsoleSession:
             operator = None if self.config.simulated else self.operator(job)
             report = calibrate(self.config, plan, path, operator, progress=reporter)  # committed only when computed
             cal = report.calibration
-            self.publish({"type": "calibration", "name": job.name, "job": job.id, "lines": list(report.lines),
-                          "l0_mm": cal.l0_mm, "d0_mm": cal.d0_mm, "f0_per_mm": cal.f0_per_mm, "model": cal.model}, None)
+            self.publish(
+                {
+                    "type": "calibration",
+                    "name": job.name,
+                    "job": job.id,
+                    "lines": list(report.lines),
+                    "l0_mm": cal.l0_mm,
+                    "d0_mm": cal.d0_mm,
+                    "f0_per_mm": cal.f0_per_mm,
+                    "model": cal.model,
+                },
+                None,
+            )
             self.calibration = job.name
             job.result = job.name
         except (DeviceError, RigError, OSError, ValueError) as exc:

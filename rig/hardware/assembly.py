@@ -149,12 +149,19 @@ def open_rig(config: RigConfig, scene: str = "object", fault: str | None = None)
                 from drivers.trigger_box import SerialTriggerBox
 
                 assert config.trigger.port is not None  # rig.config requires it for backend "serial"
-                box = SerialTriggerBox(config.trigger.port, baudrate=config.trigger.baudrate, timeout_s=config.trigger.timeout_s)
+                box = SerialTriggerBox(
+                    config.trigger.port, baudrate=config.trigger.baudrate, timeout_s=config.trigger.timeout_s
+                )
                 stack.enter_context(box)
         lut = load_gamma_lut(config)
         if lut is not None:
             projector.set_gamma_lut(lut)
         trigger = trigger_path(camera, box)
-        log.info("rig open: projector %s %s, camera %s, trigger %s", projector.name, projector.size, camera.name,
-                 "software" if box is None else box)
+        log.info(
+            "rig open: projector %s %s, camera %s, trigger %s",
+            projector.name,
+            projector.size,
+            camera.name,
+            "software" if box is None else box,
+        )
         yield RigDevices(projector, camera, trigger, config, simulation)

@@ -40,8 +40,8 @@ def probe_opencv(timeout_ms: int = 1500) -> Probe:
     import cv2
 
     if sys.platform.startswith("linux"):
-        nodes = sorted(glob.glob("/dev/video*"), key=lambda p: int(p[len("/dev/video"):] or 0))
-        indices = [int(node[len("/dev/video"):]) for node in nodes if node[len("/dev/video"):].isdigit()]
+        nodes = sorted(glob.glob("/dev/video*"), key=lambda p: int(p[len("/dev/video") :] or 0))
+        indices = [int(node[len("/dev/video") :]) for node in nodes if node[len("/dev/video") :].isdigit()]
         if not indices:
             return Probe("OpenCV cameras", [], "no /dev/video* device")
     else:
@@ -105,7 +105,11 @@ def probe_dlp(backend: object | None = None) -> Probe:
     except usb.core.USBError as exc:
         return Probe("DLP projectors (USB)", [], f"USB enumeration failed: {exc}")
     found = [
-        Found("dlp4500", f"bus {d.bus} address {d.address}", f"DLP LightCrafter 4500 ({USB_VENDOR_ID:04x}:{USB_PRODUCT_ID:04x})")
+        Found(
+            "dlp4500",
+            f"bus {d.bus} address {d.address}",
+            f"DLP LightCrafter 4500 ({USB_VENDOR_ID:04x}:{USB_PRODUCT_ID:04x})",
+        )
         for d in devices
     ]
     return Probe("DLP projectors (USB)", found, "" if found else "none")
@@ -121,7 +125,9 @@ def probe_offscreen_gl() -> Probe:
         return Probe("Off-screen rendering", [], f"EGL unavailable: {exc}")
     try:
         info = context.info
-        renderer = f"OpenGL {context.version_code // 100}.{context.version_code % 100 // 10} ({info.get('GL_RENDERER', '?')})"
+        renderer = (
+            f"OpenGL {context.version_code // 100}.{context.version_code % 100 // 10} ({info.get('GL_RENDERER', '?')})"
+        )
     finally:
         context.release()
     return Probe("Off-screen rendering", [Found("gl-offscreen", "EGL", renderer)])

@@ -148,7 +148,7 @@ class SimulatedRig:
             "max_height_mm": float(np.max(self.height_mm)),
         }
 
-    def __enter__(self) -> "SimulatedRig":
+    def __enter__(self) -> SimulatedRig:
         from drivers.camera import PixelFormat
         from drivers.projector_gl import GLProjector
         from mock_devices.camera import SimulatedCamera
@@ -199,9 +199,13 @@ class SimulatedRig:
         from drivers.trigger_box import SerialTriggerBox
         from mock_devices.trigger_box import FakeTriggerBox
 
-        self.fake_box = self._stack.enter_context(FakeTriggerBox(on_pulse=self.camera.pulse, faults=self.trigger_faults, **self.fake_box_options))
+        self.fake_box = self._stack.enter_context(
+            FakeTriggerBox(on_pulse=self.camera.pulse, faults=self.trigger_faults, **self.fake_box_options)
+        )
         self.trigger_box = self._stack.enter_context(
-            SerialTriggerBox(self.fake_box.port, baudrate=self.config.trigger.baudrate, timeout_s=self.config.trigger.timeout_s)
+            SerialTriggerBox(
+                self.fake_box.port, baudrate=self.config.trigger.baudrate, timeout_s=self.config.trigger.timeout_s
+            )
         )
 
     def __exit__(self, *exc: object) -> None:
@@ -231,10 +235,17 @@ def board_albedo(config: RigConfig, board: BoardSpec, index: int) -> np.ndarray:
     if board.kind == "chessboard":
         texture = board_synth.chessboard_texture(board.squares, board.square_mm, px_per_mm, board.square_mm)
     else:
-        texture = board_synth.charuco_texture(board.squares, board.square_mm, board.marker_mm or 0.7 * board.square_mm,
-                                              px_per_mm, board.square_mm, board.dictionary)
-    image = board_synth.render_board_view(texture, px_per_mm, board.square_mm, camera, rvec, tvec,
-                                          gain=255.0, offset=0.0, noise_dn=0.0)
+        texture = board_synth.charuco_texture(
+            board.squares,
+            board.square_mm,
+            board.marker_mm or 0.7 * board.square_mm,
+            px_per_mm,
+            board.square_mm,
+            board.dictionary,
+        )
+    image = board_synth.render_board_view(
+        texture, px_per_mm, board.square_mm, camera, rvec, tvec, gain=255.0, offset=0.0, noise_dn=0.0
+    )
     return image.astype(np.float64) / 255.0
 
 

@@ -90,9 +90,9 @@ class SimulatedScan:
 
     geometry: synth.RigGeometry
     patterns: list[dict[str, Any]]
-    height_mm: np.ndarray                 # (H, W) true scene heights
-    object_frames: np.ndarray             # (N, H, W)
-    reference_frames: np.ndarray          # (N, H, W)
+    height_mm: np.ndarray  # (H, W) true scene heights
+    object_frames: np.ndarray  # (N, H, W)
+    reference_frames: np.ndarray  # (N, H, W)
     object_map: synth.ProjectorMap
     reference_map: synth.ProjectorMap
     description: dict[str, Any] = field(default_factory=dict)
@@ -142,11 +142,15 @@ def simulate_scan(
         Extra parameters of the named scene.
     """
     geometry = demo_geometry() if geometry is None else geometry
-    pattern_list: list[dict[str, Any]] = [dict(p) for p in (patterns or synth.sinusoid_patterns(DEFAULT_FREQUENCIES, DEFAULT_STEPS))]
+    pattern_list: list[dict[str, Any]] = [
+        dict(p) for p in (patterns or synth.sinusoid_patterns(DEFAULT_FREQUENCIES, DEFAULT_STEPS))
+    ]
     appearance = demo_appearance() if appearance is None else appearance
     if isinstance(scene, str):
         name = scene
-        height = scenes.make_scene(scene, geometry.camera_height, geometry.camera_width, geometry.pixel_mm, **(scene_params or {}))
+        height = scenes.make_scene(
+            scene, geometry.camera_height, geometry.camera_width, geometry.pixel_mm, **(scene_params or {})
+        )
     else:
         name = "custom"
         height = np.asarray(scene, dtype=np.float64)
@@ -202,20 +206,33 @@ def write_simulated_scan(scan: SimulatedScan, out: str | os.PathLike[str], overw
     g = scan.geometry
     projector = {"width": g.projector_width, "height": g.projector_height}
     extra = {"simulation": dict(scan.description)}
-    write_capture(paths.capture, scan.object_frames, scan.patterns, projector, scene="object", extra=extra, overwrite=overwrite)
-    write_capture(paths.reference, scan.reference_frames, scan.patterns, projector, scene="reference", extra=extra, overwrite=overwrite)
+    write_capture(
+        paths.capture, scan.object_frames, scan.patterns, projector, scene="object", extra=extra, overwrite=overwrite
+    )
+    write_capture(
+        paths.reference,
+        scan.reference_frames,
+        scan.patterns,
+        projector,
+        scene="reference",
+        extra=extra,
+        overwrite=overwrite,
+    )
     write_calibration(paths.calibration, scan.calibration(reference="reference"))
     root.mkdir(parents=True, exist_ok=True)
     np.save(paths.truth, scan.height_mm.astype(np.float32))
     return paths
 
 
-
 ARCHIVE_SCENES = ("hemisphere", "sphere-cap", "two-hemispheres", "steps")
 
 
 def write_simulated_archive(
-    out: str | os.PathLike[str], count: int, width: int = 64, height: int = 48, seed: int = 0,
+    out: str | os.PathLike[str],
+    count: int,
+    width: int = 64,
+    height: int = 48,
+    seed: int = 0,
     scene_names: Sequence[str] = ARCHIVE_SCENES,
 ) -> tuple[Path, Path]:
     """An archive of ``count`` simulated scans sharing one calibration (for batch tests and benchmarks).

@@ -57,7 +57,9 @@ def check(estimate: OffsetEstimate, evidence: str, capture: Any, patterns: list[
         example = f" ({_spec_with_phase(spec, wanted)!r})" if isinstance(spec, str) and not spec.startswith("@") else ""
         fix = f"re-import with phase={wanted} in the sin group of --patterns{example}"
     else:
-        fix = f"the projector's patterns differ from capture.json's phase_rad; set each sinusoid's phase_rad to {wanted}"
+        fix = (
+            f"the projector's patterns differ from capture.json's phase_rad; set each sinusoid's phase_rad to {wanted}"
+        )
     raise ProcessingError(
         f"{where}: phase convention: {evidence}: every phase is offset by {estimate.offset:+.2f} rad from what "
         f"the patterns say; likely cause: the images follow another phase convention (pattern phase "

@@ -22,8 +22,13 @@ NAME = "gamma-table"
 
 
 def correct_gamma_ripple(
-    absolute_phase: np.ndarray, wrapped_phase: np.ndarray, orders: np.ndarray | None = None,
-    mask: np.ndarray | None = None, frequency: float | None = None, *, phase_error: Mapping[str, Any],
+    absolute_phase: np.ndarray,
+    wrapped_phase: np.ndarray,
+    orders: np.ndarray | None = None,
+    mask: np.ndarray | None = None,
+    frequency: float | None = None,
+    *,
+    phase_error: Mapping[str, Any],
 ) -> Result:
     """``absolute_phase`` minus the ripple tabulated in a calibration's ``phase_error`` fields.
 
@@ -39,8 +44,12 @@ def correct_gamma_ripple(
     if mask is not None:
         out = np.where(np.asarray(mask, dtype=bool), out, np.nan)
     info: dict[str, Any] = {
-        "method": NAME, "parameters": {"bins": int(table.error.size)}, "iterations": 0, "rank": None,
-        "seconds": round(time.perf_counter() - start, 4), "table_rms_rad": float(np.sqrt(np.mean(table.error**2))),
+        "method": NAME,
+        "parameters": {"bins": int(table.error.size)},
+        "iterations": 0,
+        "rank": None,
+        "seconds": round(time.perf_counter() - start, 4),
+        "table_rms_rad": float(np.sqrt(np.mean(table.error**2))),
     }
     if frequency is not None:
         info["frequency"] = float(frequency)
@@ -48,6 +57,8 @@ def correct_gamma_ripple(
 
 
 GAMMA_TABLE = CorrectionMethod(
-    NAME, correct_gamma_ripple, "subtract the projector-gamma phase ripple the calibration tabulated (needs --calibration)",
+    NAME,
+    correct_gamma_ripple,
+    "subtract the projector-gamma phase ripple the calibration tabulated (needs --calibration)",
     needs=("phase_error",),
 )

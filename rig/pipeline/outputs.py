@@ -25,8 +25,6 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 
-
-
 PREVIEW_BAR_PX = 90  # width of the scale bar panel at the right of the preview
 
 
@@ -40,8 +38,15 @@ def write_ply(path: Path, points: np.ndarray, colors: np.ndarray | None = None) 
     """Binary little-endian PLY of (N, 3) points in mm (float32), optional (N, 3) uint8 colours (or (N,) grey)."""
     pts = np.asarray(points).reshape(-1, 3)
     fields: list[tuple[str, str, tuple[int, ...]]] = [("xyz", "<f4", (3,))]
-    header = ["ply", "format binary_little_endian 1.0", "comment fpp-rig point cloud, units mm", f"element vertex {len(pts)}",
-              "property float x", "property float y", "property float z"]
+    header = [
+        "ply",
+        "format binary_little_endian 1.0",
+        "comment fpp-rig point cloud, units mm",
+        f"element vertex {len(pts)}",
+        "property float x",
+        "property float y",
+        "property float z",
+    ]
     if colors is not None:
         fields.append(("rgb", "u1", (3,)))
         header += ["property uchar red", "property uchar green", "property uchar blue"]
@@ -53,7 +58,7 @@ def write_ply(path: Path, points: np.ndarray, colors: np.ndarray | None = None) 
         record["rgb"] = rgb[:, None] if rgb.ndim == 1 else rgb.reshape(-1, 3)
     with open(path, "wb") as handle:
         handle.write(("\n".join(header) + "\n").encode("ascii"))
-        handle.write(memoryview(record).cast("B"))
+        handle.write(record.tobytes())
     return path
 
 
@@ -80,7 +85,9 @@ def _nice_step(span: float, ticks: int = 5) -> float:
     return 10.0 * magnitude
 
 
-def colour_map(values: np.ndarray, low: float, high: float, invalid_bgr: tuple[int, int, int] = (40, 40, 40)) -> np.ndarray:
+def colour_map(
+    values: np.ndarray, low: float, high: float, invalid_bgr: tuple[int, int, int] = (40, 40, 40)
+) -> np.ndarray:
     """BGR uint8 image of ``values`` mapped through the turbo colour map over [low, high]; NaN grey."""
     values = np.asarray(values)
     scale = 255.0 / (high - low) if high > low else 0.0
@@ -265,9 +272,15 @@ def build_report(result: ProcessResult, staged_inputs: tuple[Path, Path] | None 
         assert result.calibration is not None
         valid_h = result.height[result.mask]
         valid_h = valid_h[np.isfinite(valid_h)]  # report.json is strict JSON: no NaN or Infinity
-        report["height_mm"] = {
-            "min": float(np.min(valid_h)), "max": float(np.max(valid_h)), "median": float(np.median(valid_h)),
-        } if valid_h.size else None
+        report["height_mm"] = (
+            {
+                "min": float(np.min(valid_h)),
+                "max": float(np.max(valid_h)),
+                "median": float(np.median(valid_h)),
+            }
+            if valid_h.size
+            else None
+        )
         report["points"] = int(np.count_nonzero(result.mask))
         report["calibration_model"] = result.calibration.model
         # stereo without a plane gives distance from the camera, not height above a plane
@@ -321,7 +334,11 @@ def _write_files(
     with ThreadPoolExecutor(1) as pool:
         if result.height is None:
             preview = pool.submit(
-                write_preview, out / "preview.png", phase, "rad", "absolute phase" if obj.unwrapped.absolute else "phase"
+                write_preview,
+                out / "preview.png",
+                phase,
+                "rad",
+                "absolute phase" if obj.unwrapped.absolute else "phase",
             )
             shows, unit = "phase", "rad"
         else:
@@ -351,7 +368,10 @@ def _versions() -> dict[str, str]:
     import cv2
     import scipy
 
-    return {"fpp-rig": __version__, "python": platform.python_version(), "numpy": np.__version__,
-            "scipy": scipy.__version__, "opencv": cv2.__version__}
-
-
+    return {
+        "fpp-rig": __version__,
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "scipy": scipy.__version__,
+        "opencv": cv2.__version__,
+    }

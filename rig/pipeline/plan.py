@@ -148,12 +148,16 @@ def group_patterns(patterns: Sequence[Pattern | Mapping[str, Any]], where: str =
             (group_g.inverted if pattern.inverted else group_g.planes)[pattern.bit] = index
         elif isinstance(pattern, Flat):
             flats.append((index, float(pattern.level)))
-    for group in gray.values():
-        missing = [b for b in range(group.bits) if b not in group.planes]
+    for planes in gray.values():
+        missing = [b for b in range(planes.bits) if b not in planes.planes]
         if missing:
-            raise CaptureError(f"{where}: Gray code along {group.axis}: expected bits 0..{group.bits - 1}, missing {missing}")
-        if group.inverted and sorted(group.inverted) != sorted(group.planes):
-            raise CaptureError(f"{where}: Gray code along {group.axis}: inverted planes must cover the same bits as the normal ones")
+            raise CaptureError(
+                f"{where}: Gray code along {planes.axis}: expected bits 0..{planes.bits - 1}, missing {missing}"
+            )
+        if planes.inverted and sorted(planes.inverted) != sorted(planes.planes):
+            raise CaptureError(
+                f"{where}: Gray code along {planes.axis}: inverted planes must cover the same bits as the normal ones"
+            )
     for group in sinusoids.values():
         _check_separable(group, where)
     return PatternGroups(list(sinusoids.values()), gray, flats, list(single.values()))
@@ -161,12 +165,14 @@ def group_patterns(patterns: Sequence[Pattern | Mapping[str, Any]], where: str =
 
 def _check_separable(group: SinusoidGroup, where: str) -> None:
     """A phase-shifting group whose shifts cannot separate A, B and phi (too few, or all equal) is refused here."""
+    import numpy as np
+
     from processing.phase_shift import shift_weights
 
     if group.steps < 3:  # one frame goes to FTP; two are refused by the wrapped-phase stage
         return
     try:
-        shift_weights(group.steps, group.shifts)
+        shift_weights(group.steps, np.asarray(group.shifts, dtype=np.float64))
     except ValueError as exc:
         names = ", ".join(f"patterns[{i}]" for i in group.indices[:8]) + (" ..." if len(group.indices) > 8 else "")
         raise CaptureError(
@@ -197,7 +203,9 @@ def choose_unwrap(groups: PatternGroups, axis: str) -> str:
             return "ftp"
         return "gray" if axis in groups.gray else "spatial"
     if not _all_integers(freqs):
-        raise ProcessingError(f"frequencies {freqs}: temporal unwrapping needs whole fringe counts; choose --unwrap spatial")
+        raise ProcessingError(
+            f"frequencies {freqs}: temporal unwrapping needs whole fringe counts; choose --unwrap spatial"
+        )
     ints = [int(f) for f in freqs]
     if ints[0] == 1:
         return "hierarchical"
@@ -212,5 +220,3 @@ def choose_unwrap(groups: PatternGroups, axis: str) -> str:
         f"frequencies {ints}: no automatic unwrapping method fits; choose one with --unwrap "
         f"({', '.join(UNWRAP_METHODS[1:])})"
     )
-
-

@@ -113,8 +113,12 @@ def load(state: SceneState, key: str, from_disk: bool = True) -> bool:
         _MEMORY.move_to_end(key)
     meta = entry["meta"]
     state.unwrapped = UnwrappedPhase(
-        phase=entry["phase"], valid=entry["valid"], frequency=meta["frequency"], method=meta["method"],
-        absolute=meta["absolute"], orders=None,
+        phase=entry["phase"],
+        valid=entry["valid"],
+        frequency=meta["frequency"],
+        method=meta["method"],
+        absolute=meta["absolute"],
+        orders=None,
     )
     state.info = dict(meta["info"])  # the same report as when processed; timings say "cached"
     state.notes = list(meta["notes"])
@@ -144,8 +148,12 @@ def store(state: SceneState, key: str, to_disk: bool = True) -> None:
     unwrapped = state.unwrapped
     assert unwrapped is not None
     meta = {
-        "key": key, "frequency": unwrapped.frequency, "method": unwrapped.method, "absolute": unwrapped.absolute,
-        "info": state.info, "notes": state.notes,
+        "key": key,
+        "frequency": unwrapped.frequency,
+        "method": unwrapped.method,
+        "absolute": unwrapped.absolute,
+        "info": state.info,
+        "notes": state.notes,
     }
     try:
         meta_text = json.dumps(meta, default=_json_default)

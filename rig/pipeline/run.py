@@ -17,8 +17,8 @@ from calibration.store import Calibration, read_calibration
 from rig.blas import rpca_blas
 from rig.errors import ProcessingError
 from rig.pipeline import reference_cache
-from rig.pipeline.fit import check_fit
 from rig.pipeline.corrections import REGISTRY as CORRECTIONS
+from rig.pipeline.fit import check_fit
 from rig.pipeline.outputs import write_outputs
 from rig.pipeline.plan import (
     UNWRAP_METHODS,
@@ -49,6 +49,7 @@ def _solves_rpca(stage: str, state: SceneState, options: ProcessOptions) -> bool
     if stage == "correction":
         return options.correction != "none"
     return stage in RPCA_STAGES and bool(state.groups.single_shot)  # unwrap: the single shot's separation
+
 
 # --------------------------------------------------------------------------- the whole run
 
@@ -108,7 +109,9 @@ def _fringe_axis(groups: PatternGroups, options: ProcessOptions, where: str) -> 
 
 def _scene(name: str, capture: Capture, options: ProcessOptions) -> SceneState:
     groups = group_patterns(capture.pattern_models, str(capture.manifest_path))
-    return SceneState(name=name, capture=capture, groups=groups, axis=_fringe_axis(groups, options, str(capture.manifest_path)))
+    return SceneState(
+        name=name, capture=capture, groups=groups, axis=_fringe_axis(groups, options, str(capture.manifest_path))
+    )
 
 
 def total_steps(with_reference: bool) -> int:
@@ -138,7 +141,9 @@ def load_calibration_for(
     if calibration.reference is None or calibration.path is None:
         raise CalibrationError(f"{calibration.where}: reference: missing (the reference-plane capture)")
     # relative, and inside the calibration directory once every link is resolved
-    ref_path = files.contained(calibration.path, calibration.reference, calibration.where, "reference", CalibrationError)
+    ref_path = files.contained(
+        calibration.path, calibration.reference, calibration.where, "reference", CalibrationError
+    )
     if not (ref_path / "capture.json").is_file():
         raise CalibrationError(f"{calibration.where}: reference: no capture at {ref_path}")
     reference = read_capture(ref_path, verify=False)  # verified when loaded
@@ -251,7 +256,9 @@ def process(
                 f"{calibration.where}: no pixel has a finite height with this calibration although "
                 f"{int(obj.unwrapped.valid.sum())} pixels have a phase (check its numbers and matrices)"
             )
-        raise ProcessingError(f"{capture.manifest_path}: no valid pixel (all in shadow or too little fringe modulation)")
+        raise ProcessingError(
+            f"{capture.manifest_path}: no valid pixel (all in shadow or too little fringe modulation)"
+        )
     timings: dict[str, Any] = {"object": dict(obj.timings)}
     if ref is not None:
         timings["reference"] = dict(ref.timings)
@@ -275,8 +282,6 @@ def _check_options(options: ProcessOptions) -> None:
         raise ProcessingError(f"--min-modulation: expected a fraction in (0, 1], found {options.min_modulation_ratio}")
 
 
-
-
 def process_capture(
     capture_path: str | Path,
     calibration_path: str | Path | None,
@@ -286,6 +291,7 @@ def process_capture(
     salvage: bool = False,
 ) -> dict[str, Any]:
     """:func:`process` (caching the processed reference in the calibration directory) then :func:`write_outputs`."""
-    result = process(capture_path, calibration_path, options, progress=progress, salvage=salvage,
-                     reference_cache_to_disk=True)
+    result = process(
+        capture_path, calibration_path, options, progress=progress, salvage=salvage, reference_cache_to_disk=True
+    )
     return write_outputs(result, out_dir)

@@ -70,7 +70,7 @@ class SceneState:
     frames: np.ndarray | None = None
     wrapped: WrappedPhase | None = None
     unwrapped: UnwrappedPhase | None = None
-    reference: "SceneState | None" = None
+    reference: SceneState | None = None
     timings: dict[str, float] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
     info: dict[str, Any] = field(default_factory=dict)
@@ -90,10 +90,14 @@ def stage_load(state: SceneState, options: ProcessOptions) -> None:
     capture, frames = state.capture, state.frames
     expected = (len(capture.patterns), *capture.shape)
     if frames.shape != expected:
-        raise ProcessingError(f"frames: expected shape {expected} (one frame per pattern of {capture.manifest_path}), found {frames.shape}")
+        raise ProcessingError(
+            f"frames: expected shape {expected} (one frame per pattern of {capture.manifest_path}), found {frames.shape}"
+        )
     dtype = dtype_for_bit_depth(capture.bit_depth)
     if frames.dtype != dtype:
-        raise ProcessingError(f"frames: expected dtype {dtype} for camera.bit_depth {capture.bit_depth}, found {frames.dtype}")
+        raise ProcessingError(
+            f"frames: expected dtype {dtype} for camera.bit_depth {capture.bit_depth}, found {frames.dtype}"
+        )
 
 
 def stage_undistort(state: SceneState, options: ProcessOptions) -> None:
@@ -116,7 +120,9 @@ def stage_undistort(state: SceneState, options: ProcessOptions) -> None:
         matrix_arr = np.asarray(matrix, dtype=np.float64).reshape(3, 3)
         dist_arr = np.asarray(distortion, dtype=np.float64).ravel()
     except (TypeError, ValueError):
-        raise CalibrationError(f"{cal.where}: camera_matrix / distortion: expected a 3x3 matrix and a list of numbers") from None
+        raise CalibrationError(
+            f"{cal.where}: camera_matrix / distortion: expected a 3x3 matrix and a list of numbers"
+        ) from None
     assert state.frames is not None
     state.frames = undistort_stack(state.frames, matrix_arr, dist_arr)
     state.info["undistorted"] = True
@@ -134,7 +140,9 @@ def _method_params(method: Callable[..., Any], params: Mapping[str, Any]) -> dic
     return {key: value for key, value in params.items() if key in accepted}
 
 
-def _denoise_rpca(frames: np.ndarray, groups: PatternGroups, options: ProcessOptions) -> tuple[np.ndarray, dict[str, Any]]:
+def _denoise_rpca(
+    frames: np.ndarray, groups: PatternGroups, options: ProcessOptions
+) -> tuple[np.ndarray, dict[str, Any]]:
     """Thesis ch. 2.4: each frame's low-rank part (stable inexact ALM RPCA); returns frames and stage info."""
     from processing.denoise import rpca_denoise_stack
 
@@ -223,7 +231,6 @@ def _fused_pass(state: SceneState, options: ProcessOptions) -> bool:
     if method not in TEMPORAL_METHODS or not _all_integers(freqs) or len(freqs) < _FREQUENCIES_NEEDED[method]:
         return False
     from processing.fringe_pass import fringe_pass
-
     from rig.pipeline import convention_check
 
     max_residual = float(options.params.get("max_residual", np.pi / 2))  # e.g. 3.14 for drifting beats
@@ -231,9 +238,14 @@ def _fused_pass(state: SceneState, options: ProcessOptions) -> bool:
     assert state.frames is not None
     try:
         scan = fringe_pass(
-            state.frames, [group.indices for group in along], freqs, method,
-            shifts=[np.asarray(group.shifts) for group in along], min_ratio=options.min_modulation_ratio,
-            max_residual=max_residual, keep_all=state.calibration is None or check,
+            state.frames,
+            [group.indices for group in along],
+            freqs,
+            method,
+            shifts=[np.asarray(group.shifts) for group in along],
+            min_ratio=options.min_modulation_ratio,
+            max_residual=max_residual,
+            keep_all=state.calibration is None or check,
         )
     except ValueError:
         return False  # e.g. frequencies the method refuses: the stage-by-stage path reports it as before
@@ -242,7 +254,9 @@ def _fused_pass(state: SceneState, options: ProcessOptions) -> bool:
     def kept(values: list[np.ndarray]) -> list[np.ndarray | None]:
         return [values[maps[i]] if i in maps else None for i in range(len(freqs))]
 
-    state.wrapped = WrappedPhase(freqs, kept(scan.wrapped), kept(scan.modulation), kept(scan.background), scan.modulated)
+    state.wrapped = WrappedPhase(
+        freqs, kept(scan.wrapped), kept(scan.modulation), kept(scan.background), scan.modulated
+    )
     state.info["valid_after_modulation"] = float(scan.modulated.mean())
     if check:
         _check_convention(state, options, "heterodyne", scan.wrapped, [int(f) for f in freqs])
@@ -297,7 +311,8 @@ def _single_shot_parameters(options: ProcessOptions) -> tuple[dict[str, Any], di
 
     given = {k: v for k, v in _method_params(single_shot_unwrap, options.params).items() if k not in _SINGLE_SHOT_OWN}
     defaults = {
-        name: p.default for name, p in inspect.signature(single_shot_unwrap).parameters.items()
+        name: p.default
+        for name, p in inspect.signature(single_shot_unwrap).parameters.items()
         if p.kind is inspect.Parameter.KEYWORD_ONLY and name not in _SINGLE_SHOT_OWN
     }
     return given, {**defaults, **given}
@@ -328,19 +343,27 @@ def _speckle_single_shot(state: SceneState, options: ProcessOptions) -> None:
     assert state.frames is not None
     image = state.frames[group.indices[0]].astype(np.float32)
     if group.steps > 1 or len(group.indices) > 1:
-        state.notes.append(f"single-shot: {len(group.indices)} speckle-sinusoid frames; used the first (pattern {group.indices[0]})")
+        state.notes.append(
+            f"single-shot: {len(group.indices)} speckle-sinusoid frames; used the first (pattern {group.indices[0]})"
+        )
     if options.denoise != "none":
         raise ProcessingError(
             f"--denoise {options.denoise}: not for a speckle-sinusoid (single-shot) capture, whose speckle it would "
             "remove; the single shot separates fringes and speckle by RPCA itself (leave --denoise none)"
         )
     if options.unwrap != "auto":
-        state.notes.append(f"single-shot capture: --unwrap {options.unwrap} does not apply; fringe orders from the speckle")
+        state.notes.append(
+            f"single-shot capture: --unwrap {options.unwrap} does not apply; fringe orders from the speckle"
+        )
     axis = 1 if state.axis == "x" else 0
     given, settings = _single_shot_parameters(options)
-    pattern = dict(state.capture.patterns[group.indices[0]])
-    parameters = {"frequency": group.frequency, "fringe_axis": state.axis, **settings,
-                  **{k: pattern[k] for k in ("seed", "dot_px", "speckle_gain") if k in pattern}}
+    pattern = state.capture.patterns[group.indices[0]]  # read only
+    parameters: dict[str, Any] = {
+        "frequency": group.frequency,
+        "fringe_axis": state.axis,
+        **settings,
+        **{k: pattern[k] for k in ("seed", "dot_px", "speckle_gain") if k in pattern},
+    }
     start = time.perf_counter()
     try:
         if state.reference is None:
@@ -354,16 +377,32 @@ def _speckle_single_shot(state: SceneState, options: ProcessOptions) -> None:
             rpca = None
             if settings["separate"]:
                 # Separate here (not inside prepare_reference) to keep RPCA's iterations and rank for the report.
-                fringe, speckle, rpca = separate_fringe_speckle(image, tau=settings["tau"], tol=settings["rpca_tol"], svd=settings["svd"])
-                prepared = prepare_reference(fringe, None, group.frequency, axis=axis, separate=False,
-                                             **{k: v for k, v in prep.items() if k in ("carrier", "bandwidth")})
+                fringe, speckle, rpca = separate_fringe_speckle(
+                    image, tau=settings["tau"], tol=settings["rpca_tol"], svd=settings["svd"]
+                )
+                prepared = prepare_reference(
+                    fringe,
+                    None,
+                    group.frequency,
+                    axis=axis,
+                    separate=False,
+                    **{k: v for k, v in prep.items() if k in ("carrier", "bandwidth")},
+                )
                 prepared = dataclasses.replace(prepared, speckle=speckle)
             else:
-                prepared = prepare_reference(image, None, group.frequency, axis=axis, separate=False,
-                                             **{k: v for k, v in prep.items() if k in ("carrier", "bandwidth")})
+                prepared = prepare_reference(
+                    image,
+                    None,
+                    group.frequency,
+                    axis=axis,
+                    separate=False,
+                    **{k: v for k, v in prep.items() if k in ("carrier", "bandwidth")},
+                )
             prepared.seconds = time.perf_counter() - start
             state.single_shot_reference = prepared
-            parts = ftp_fringe_parts(prepared.fringe, prepared.carrier, axis, settings["bandwidth"], settings["min_modulation"])
+            parts = ftp_fringe_parts(
+                prepared.fringe, prepared.carrier, axis, settings["bandwidth"], settings["min_modulation"]
+            )
             wrapped, amplitude, background, valid = parts.phase, parts.amplitude, parts.background, parts.valid
             absolute = prepared.absolute_phase
             orders = np.where(valid, np.rint((absolute - prepared.wrapped_phase) / TWO_PI), -1).astype(np.int64)
@@ -371,21 +410,31 @@ def _speckle_single_shot(state: SceneState, options: ProcessOptions) -> None:
         else:
             prepared = state.reference.single_shot_reference
             if prepared is None:
-                raise ProcessingError(f"{where}: the reference capture is not a speckle-sinusoid single shot like this capture")
+                raise ProcessingError(
+                    f"{where}: the reference capture is not a speckle-sinusoid single shot like this capture"
+                )
             result = single_shot_unwrap(image, prepared, None, group.frequency, axis=axis, **given)
             rpca = result.rpca
-            parts = ftp_fringe_parts(result.fringe, prepared.carrier, axis, settings["bandwidth"], settings["min_modulation"])
+            parts = ftp_fringe_parts(
+                result.fringe, prepared.carrier, axis, settings["bandwidth"], settings["min_modulation"]
+            )
             wrapped, amplitude, background = parts.phase, parts.amplitude, parts.background
             valid = result.mask & np.isfinite(result.absolute_phase)
             absolute, orders, timings = result.absolute_phase, result.orders, dict(result.timings)
             timings.pop("reference", None)  # prepared with the reference capture, reported there
-            state.info["single_shot_correlation_median"] = float(np.median(result.correlation[valid])) if valid.any() else None
+            state.info["single_shot_correlation_median"] = (
+                float(np.median(result.correlation[valid])) if valid.any() else None
+            )
     except ValueError as exc:
         raise ProcessingError(f"{where}: single-shot: {exc}") from None
     state.wrapped = WrappedPhase([group.frequency], [wrapped], [amplitude], [background], valid)
     state.unwrapped = UnwrappedPhase(
-        phase=np.where(valid, absolute, np.nan), valid=valid, frequency=group.frequency, method="single-shot",
-        absolute=True, orders=orders,
+        phase=np.where(valid, absolute, np.nan),
+        valid=valid,
+        frequency=group.frequency,
+        method="single-shot",
+        absolute=True,
+        orders=orders,
     )
     state.info["valid_after_modulation"] = float(valid.mean())
     state.info["single_shot"] = {
@@ -431,13 +480,21 @@ def _rescue_rejected(state: SceneState, phase: np.ndarray, mask: np.ndarray, mod
         state.info["neighbour_rescue"] = {"readmitted": 0, "off": "--param neighbour_rescue=false"}
         return mask
     rescued = rescue(phase, mask, modulated & np.isfinite(phase))
-    state.info["neighbour_rescue"] = {"readmitted": int(np.count_nonzero(rescued & ~mask)), "off": "--param neighbour_rescue=false"}
+    state.info["neighbour_rescue"] = {
+        "readmitted": int(np.count_nonzero(rescued & ~mask)),
+        "off": "--param neighbour_rescue=false",
+    }
     return rescued
 
 
 def _check_convention(
-    state: SceneState, options: ProcessOptions, evidence: str, maps: Sequence[np.ndarray], freqs: Sequence[int],
-    stripes: np.ndarray | None = None, bits: int = 0,
+    state: SceneState,
+    options: ProcessOptions,
+    evidence: str,
+    maps: Sequence[np.ndarray],
+    freqs: Sequence[int],
+    stripes: np.ndarray | None = None,
+    bits: int = 0,
 ) -> None:
     """Refuse images whose phase convention differs from the capture's (:mod:`rig.pipeline.convention_check`)."""
     from processing.convention import gray_offset, heterodyne_offset
@@ -474,6 +531,7 @@ def stage_unwrap(state: SceneState, options: ProcessOptions) -> None:
     if len(freqs) < need:
         raise ProcessingError(f"--unwrap {method}: needs at least {need} sinusoid frequencies, the capture has {freqs}")
     absolute = True
+    result: Any  # an UnwrapResult, or a bare phase array from spatial unwrapping
     if method in ("two-frequency", "three-frequency", "hierarchical", "heterodyne", "gray"):
         from processing import temporal
     if method in ("two-frequency", "three-frequency", "hierarchical", "heterodyne"):
@@ -525,8 +583,12 @@ def stage_unwrap(state: SceneState, options: ProcessOptions) -> None:
         if method != "gray" and options.params.get("neighbour_rescue", True) is not False:
             mask = _rescue_rejected(state, phase, mask, wrapped.valid)
     state.unwrapped = UnwrappedPhase(
-        phase=np.where(mask, phase, np.nan), valid=mask, frequency=freqs[-1], method=method,
-        absolute=absolute, orders=orders,
+        phase=np.where(mask, phase, np.nan),
+        valid=mask,
+        frequency=freqs[-1],
+        method=method,
+        absolute=absolute,
+        orders=orders,
     )
 
 
@@ -560,7 +622,8 @@ def stage_height(
         if ref.unwrapped.frequency != obj.unwrapped.frequency:
             raise ProcessingError("object and reference phases are at different frequencies")
         ref_phase = ref.unwrapped.phase
-    if not (obj.unwrapped.absolute and (ref is None or ref.unwrapped.absolute)):
+    ref_absolute = ref is None or (ref.unwrapped is not None and ref.unwrapped.absolute)
+    if not (obj.unwrapped.absolute and ref_absolute):
         if ref_phase is None:
             raise ProcessingError(
                 f"{obj.capture.manifest_path}: spatial unwrapping gives phase only up to 2 pi k, and the "

@@ -35,7 +35,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path, PurePosixPath
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -171,7 +171,8 @@ def validate_manifest(manifest: Any, where: str) -> None:
     files.check_image_size(
         _int(where, camera, "width", "camera.width", minimum=1),
         _int(where, camera, "height", "camera.height", minimum=1),
-        f"{where}: camera", CaptureError,
+        f"{where}: camera",
+        CaptureError,
     )
     depth = _int(where, camera, "bit_depth", "camera.bit_depth", minimum=1)
     if not (depth <= 16 or depth == 32):
@@ -180,7 +181,8 @@ def validate_manifest(manifest: Any, where: str) -> None:
     files.check_image_size(
         _int(where, projector, "width", "projector.width", minimum=1),
         _int(where, projector, "height", "projector.height", minimum=1),
-        f"{where}: projector", CaptureError,
+        f"{where}: projector",
+        CaptureError,
     )
     patterns = manifest.get("patterns")
     if not isinstance(patterns, list) or not patterns:
@@ -304,9 +306,7 @@ class Capture:
         data = files.read_regular(path, where, CaptureError, missing=f"frame file missing (pattern {frame['pattern']})")
         digest = hashlib.sha256(data).hexdigest()
         if digest != str(frame["sha256"]).lower():
-            raise CaptureError(
-                f"{where}: checksum mismatch: expected sha256 {frame['sha256']}, found {digest}"
-            )
+            raise CaptureError(f"{where}: checksum mismatch: expected sha256 {frame['sha256']}, found {digest}")
         return data
 
     def verify_checksums(self) -> None:
@@ -422,7 +422,10 @@ def check_same_patterns(reference: Capture, capture: Capture) -> None:
             f"{reference.manifest_path}: camera size: expected {capture.width}x{capture.height} "
             f"like {capture.manifest_path}, found {reference.width}x{reference.height}"
         )
-    if reference.projector_size[0] != capture.projector_size[0] or reference.projector_size[1] != capture.projector_size[1]:
+    if (
+        reference.projector_size[0] != capture.projector_size[0]
+        or reference.projector_size[1] != capture.projector_size[1]
+    ):
         raise CaptureError(
             f"{reference.manifest_path}: projector: expected {capture.projector_size} like "
             f"{capture.manifest_path}, found {reference.projector_size}"
@@ -514,8 +517,10 @@ class CaptureWriter:
         self._done: set[int] = set()
         self._manifest_synced_at = 0.0  # time.monotonic() of the last fsynced manifest
 
-    def __enter__(self) -> "CaptureWriter":
-        files.check_target(self.path, ("capture",), self.overwrite, CaptureError, hint=" (choose another path or remove it)")
+    def __enter__(self) -> CaptureWriter:
+        files.check_target(
+            self.path, ("capture",), self.overwrite, CaptureError, hint=" (choose another path or remove it)"
+        )
         self.temp_path = files.make_staging(self.path, CaptureError)
         (self.temp_path / "frames").mkdir()
         self._manifest_synced_at = time.monotonic()
@@ -552,7 +557,7 @@ class CaptureWriter:
         self._write_manifest(durable=False)
         return self.temp_path / relative
 
-    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> bool:
+    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> Literal[False]:
         if self.temp_path is None:
             return False
         if exc_type is not None:

@@ -169,7 +169,9 @@ def open_regular(path: Path, where: str, error: ErrorType, missing: str = "missi
     return fd
 
 
-def read_regular(path: Path, where: str, error: ErrorType, max_bytes: int | None = None, missing: str = "missing") -> bytes:
+def read_regular(
+    path: Path, where: str, error: ErrorType, max_bytes: int | None = None, missing: str = "missing"
+) -> bytes:
     """Whole content of a regular file of at most ``max_bytes`` (default the file limit)."""
     max_bytes = limits().max_file_bytes if max_bytes is None else max_bytes
     fd = open_regular(path, where, error, missing)
@@ -324,7 +326,9 @@ def decode_image(data: bytes, where: str, error: ErrorType) -> np.ndarray:
     try:
         image = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED) if data else None
     except Exception as exc:  # OpenCV 4 raises cv2.error, OpenCV 5 other types for the same corrupt input
-        raise error(f"{where}: corrupt or unreadable image ({len(data)} bytes): {str(exc).strip().splitlines()[-1:]}") from None
+        raise error(
+            f"{where}: corrupt or unreadable image ({len(data)} bytes): {str(exc).strip().splitlines()[-1:]}"
+        ) from None
     if image is None:
         raise error(f"{where}: corrupt or unreadable image ({len(data)} bytes)")
     if header is None:
@@ -403,8 +407,7 @@ def check_target(target: Path, kinds: tuple[str, ...], replace: bool, error: Err
     if found not in kinds:
         what = f"{_either((found,))} directory" if found else "not written by this program"
         raise error(
-            f"{target}: exists and is {what}; only {_either(kinds)} directory is ever replaced "
-            "(choose another output)"
+            f"{target}: exists and is {what}; only {_either(kinds)} directory is ever replaced (choose another output)"
         )
 
 
@@ -502,8 +505,11 @@ def committed_path(path: Path, staging: Path, target: Path) -> Path:
     A path outside ``staging`` is returned as it is; relative and absolute spellings both work.
     """
     path, staging, target = Path(path), Path(staging), Path(target)
-    for base, final in ((staging, target), (staging.absolute(), target.absolute()),
-                        (staging.resolve(), staging.resolve().parent / target.name)):
+    for base, final in (
+        (staging, target),
+        (staging.absolute(), target.absolute()),
+        (staging.resolve(), staging.resolve().parent / target.name),
+    ):
         if path.is_relative_to(base):
             return final / path.relative_to(base)
     return path

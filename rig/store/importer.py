@@ -156,10 +156,16 @@ def parse_spec(spec: str) -> list[Pattern | None]:
             axis = _axis(p, where)
             for frequency in frequencies:
                 for j in range(steps):
-                    out.append(Sinusoid(
-                        axis=axis, frequency=frequency, steps=steps, step=j,
-                        phase_rad=0.0 if phase is None else phase, shift_rad=None if shifts is None else shifts[j],
-                    ))
+                    out.append(
+                        Sinusoid(
+                            axis=axis,
+                            frequency=frequency,
+                            steps=steps,
+                            step=j,
+                            phase_rad=0.0 if phase is None else phase,
+                            shift_rad=None if shifts is None else shifts[j],
+                        )
+                    )
         elif kind == "gray":
             p = _params(body, where, ("bits", "inverted", "axis"))
             if "bits" not in p:
@@ -169,13 +175,11 @@ def parse_spec(spec: str) -> list[Pattern | None]:
             if inverted not in ("none", "after", "interleaved"):
                 raise ConfigError(f"{where}: inverted: expected none, after or interleaved, found {inverted!r}")
             axis = _axis(p, where)
-            plane = lambda b, inv: Gray(axis=axis, bit=b, bits=bits, inverted=inv)  # noqa: E731
-            if inverted == "interleaved":
-                out.extend(plane(b, inv) for b in range(bits) for inv in (False, True))
-            else:
-                out.extend(plane(b, False) for b in range(bits))
-                if inverted == "after":
-                    out.extend(plane(b, True) for b in range(bits))
+            if inverted == "interleaved":  # each bit, then its inverse
+                order = [(b, inv) for b in range(bits) for inv in (False, True)]
+            else:  # every bit, then (after) every inverse
+                order = [(b, inv) for inv in ((False, True) if inverted == "after" else (False,)) for b in range(bits)]
+            out.extend(Gray(axis=axis, bit=b, bits=bits, inverted=inv) for b, inv in order)
         elif kind in ("flat", "white", "black"):
             p = _params(body, where, ("level",))
             level = {"white": "1", "black": "0"}.get(kind, p.get("level"))
@@ -208,8 +212,10 @@ def load_spec(text: str) -> tuple[list[Pattern | Mapping[str, Any] | None], list
         files = data.get("files")
         if files is not None and (not isinstance(files, list) or not all(isinstance(f, str) for f in files)):
             raise ConfigError(f"{path}: files: expected a list of file names")
-        return [dict(p) for p in patterns], files
-    return parse_spec(text), None
+        entries: list[Pattern | Mapping[str, Any] | None] = [dict(p) for p in patterns]
+        return entries, files
+    parsed: list[Pattern | Mapping[str, Any] | None] = list(parse_spec(text))
+    return parsed, None
 
 
 # --------------------------------------------------------------------------- files and images
@@ -313,7 +319,9 @@ def read_source_image(path: Path, options: ImportOptions) -> tuple[np.ndarray, l
     return np.ascontiguousarray(image), notes
 
 
-def import_folder(folder: str | os.PathLike[str], spec: str, output: str | os.PathLike[str], options: ImportOptions | None = None):
+def import_folder(
+    folder: str | os.PathLike[str], spec: str, output: str | os.PathLike[str], options: ImportOptions | None = None
+):
     """Write a capture at ``output`` from the images of ``folder`` described by ``spec``; returns it, verified."""
     options = ImportOptions() if options is None else options
     folder = Path(folder)
@@ -325,7 +333,8 @@ def import_folder(folder: str | os.PathLike[str], spec: str, output: str | os.Pa
     if listed is not None:
         # names relative to the folder, inside it once links are resolved (never /abs or ../..)
         files = [
-            folder / files_layer.relative_path(name, f"{spec}", f"files[{i}]", ConfigError) for i, name in enumerate(listed)
+            folder / files_layer.relative_path(name, f"{spec}", f"files[{i}]", ConfigError)
+            for i, name in enumerate(listed)
         ]
         for i, name in enumerate(listed):
             files_layer.contained(folder, name, spec, f"files[{i}]", ConfigError)
@@ -355,7 +364,8 @@ def import_folder(folder: str | os.PathLike[str], spec: str, output: str | os.Pa
         if isinstance(pattern, Sinusoid) and options.shift_sign == -1:
             pattern = pattern.replace(shift_rad=-pattern.shift)  # the rig shifted the other way
         patterns.append(pattern)
-    images, notes = [], set()
+    images: list[np.ndarray] = []
+    notes: set[str] = set()
     for _, path in pairs:
         image, image_notes = read_source_image(path, options)
         notes.update(image_notes)
@@ -383,7 +393,17 @@ def import_folder(folder: str | os.PathLike[str], spec: str, output: str | os.Pa
         "projector_given": options.projector_width is not None,
     }
     camera = {"width": int(width), "height": int(height), "bit_depth": bit_depth_of(images[0].dtype)}
-    with CaptureWriter(output, camera, projector, patterns, scene=options.scene, extra={"import": provenance}, overwrite=options.overwrite) as writer:
+    with CaptureWriter(
+        output,
+        camera,
+        projector,
+        patterns,
+        scene=options.scene,
+        extra={"import": provenance},
+        overwrite=options.overwrite,
+    ) as writer:
         for i, ((_, path), image) in enumerate(zip(pairs, images)):
-            writer.add_frame(i, image, source_file=path.name, source_sha256=hashlib.sha256(path.read_bytes()).hexdigest())
+            writer.add_frame(
+                i, image, source_file=path.name, source_sha256=hashlib.sha256(path.read_bytes()).hexdigest()
+            )
     return read_capture(output)

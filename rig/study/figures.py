@@ -18,13 +18,25 @@ BLACK = (0, 0, 0)
 GREY = (200, 200, 200)
 # Distinguishable BGR colours for plot series.
 PALETTE = [
-    (40, 40, 40), (31, 119, 180)[::-1], (255, 127, 14)[::-1], (44, 160, 44)[::-1], (214, 39, 40)[::-1],
-    (148, 103, 189)[::-1], (140, 86, 75)[::-1], (227, 119, 194)[::-1], (23, 190, 207)[::-1],
+    (40, 40, 40),
+    (31, 119, 180)[::-1],
+    (255, 127, 14)[::-1],
+    (44, 160, 44)[::-1],
+    (214, 39, 40)[::-1],
+    (148, 103, 189)[::-1],
+    (140, 86, 75)[::-1],
+    (227, 119, 194)[::-1],
+    (23, 190, 207)[::-1],
 ]
 
 
-def colorize(values: np.ndarray, lo: float | None = None, hi: float | None = None,
-             colormap: int = cv2.COLORMAP_JET, size: int | None = 240) -> np.ndarray:
+def colorize(
+    values: np.ndarray,
+    lo: float | None = None,
+    hi: float | None = None,
+    colormap: int = cv2.COLORMAP_JET,
+    size: int | None = 240,
+) -> np.ndarray:
     """BGR image of a 2-D map scaled from ``lo`` to ``hi`` (default the finite range); NaN black."""
     arr = np.asarray(values, dtype=np.float64)
     finite = np.isfinite(arr)
