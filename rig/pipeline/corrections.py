@@ -61,7 +61,12 @@ def stage_correction(state: SceneState, options: ProcessOptions) -> None:
     unwrapped = state.unwrapped
     assert unwrapped is not None
     if method.name == "auto" and not unwrapped.absolute:
-        state.info["correction"] = {"method": "auto", "skipped": "relative phase (spatial unwrapping): nothing to correct"}
+        state.info["correction"] = {
+            "method": "auto",
+            "skipped": "relative phase (spatial unwrapping): nothing to correct",
+        }
+        return
+    if _too_dense_for_spatial_methods(state, method.name):
         return
     inputs = needed_inputs(method, state.calibration)
     wrapped = None
@@ -70,8 +75,15 @@ def stage_correction(state: SceneState, options: ProcessOptions) -> None:
     if wrapped is None or not np.isfinite(wrapped[unwrapped.valid]).all():
         wrapped = np.angle(np.exp(1j * np.nan_to_num(unwrapped.phase)))  # Phi = phi + 2 pi k wraps back to phi
     try:
-        phase, info = method(unwrapped.phase, wrapped, orders=unwrapped.orders, mask=unwrapped.valid,
-                             frequency=unwrapped.frequency, **method_params(method, options.params), **inputs)
+        phase, info = method(
+            unwrapped.phase,
+            wrapped,
+            orders=unwrapped.orders,
+            mask=unwrapped.valid,
+            frequency=unwrapped.frequency,
+            **method_params(method, options.params),
+            **inputs,
+        )
     except CalibrationError as exc:
         where = state.calibration.where if state.calibration is not None else "--calibration"
         raise CalibrationError(f"{where}: {exc}") from None
@@ -82,3 +94,27 @@ def stage_correction(state: SceneState, options: ProcessOptions) -> None:
         orders = np.rint((np.nan_to_num(phase) - np.mod(wrapped, 2.0 * np.pi)) / (2.0 * np.pi))
         unwrapped.orders = np.where(unwrapped.valid, orders, unwrapped.orders).astype(unwrapped.orders.dtype)
     state.info["correction"] = info
+
+
+def _too_dense_for_spatial_methods(state: SceneState, name: str) -> bool:
+    """Fringes below 2.5 px per period: ``auto`` is skipped (it would make the result worse); an
+    explicitly requested method runs with a note saying why its result cannot be trusted."""
+    from processing.sampling import fringe_step_rad, undersampled_for_spatial_methods
+
+    unwrapped = state.unwrapped
+    assert unwrapped is not None
+    if not unwrapped.absolute:
+        return False
+    step = fringe_step_rad(unwrapped.phase, unwrapped.valid, axis=1 if state.axis == "x" else 0)
+    if not undersampled_for_spatial_methods(step):
+        return False
+    why = (
+        f"fringes {2 * np.pi / step:.1f} px apart at frequency {unwrapped.frequency:g}: too dense for corrections "
+        "that compare neighbouring pixels (they need more than 2.5 px per fringe)"
+    )
+    if name == "auto":
+        state.info["correction"] = {"method": "auto", "skipped": why}
+        state.notes.append(f"--correction auto skipped: {why}; the temporally unwrapped phase is kept")
+        return True
+    state.notes.append(f"--correction {name}: {why}; its result is unreliable")
+    return False
