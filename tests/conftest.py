@@ -16,6 +16,14 @@ pytest_plugins = ["conftest_devices"]  # the --device option for hardware contra
 SMALL_WIDTH, SMALL_HEIGHT = 160, 120
 
 
+@pytest.fixture(autouse=True, scope="session")
+def _private_processing_cache(tmp_path_factory: pytest.TempPathFactory) -> None:
+    """The processing cache of this test session lives in its own folder, not the user's."""
+    import os
+
+    os.environ["RIG_CACHE_DIR"] = str(tmp_path_factory.mktemp("rig-cache"))
+
+
 @pytest.fixture(scope="session")
 def small_scan() -> SimulatedScan:
     """A hemisphere scanned with 4-step sinusoids at frequencies 1, 8 and 64 (seeded, 35 dB SNR)."""

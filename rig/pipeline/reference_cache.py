@@ -6,18 +6,19 @@ phase, unwrap and correct it again (1.5 s of 3.5 s with the ``auto`` correction)
 phase and mask are kept:
 
 - in memory, for a long-running process (the console, a batch worker): the last few entries;
-- on disk, inside the calibration directory (``CAL/cache/reference-<source>-<options>.npz``), written
-  atomically (temporary file, fsync, rename) by ``rig process`` and ``rig scan --process``
-  (:func:`rig.pipeline.run.process_capture`), read by every run; a calibration directory that
-  cannot be written to just goes without (a log line says so). In-memory processing
+- on disk, in the user's cache directory (``$RIG_CACHE_DIR``, else ``$XDG_CACHE_HOME/fpp-rig``,
+  else ``~/.cache/fpp-rig``; ``RIG_CACHE_DIR=off`` disables it), as
+  ``reference/reference-<source>-<options>.npz``, written atomically (temporary file, fsync,
+  rename) by ``rig process`` and ``rig scan --process`` (:func:`rig.pipeline.run.process_capture`)
+  and read by every run. Nothing is written into the user's calibration or capture directories; a
+  cache that cannot be written just goes without (a log line says so). In-memory processing
   (:func:`rig.api.process`) writes no file.
 
 The key is a SHA-256 of everything the result depends on: this cache's format, the program
 version, the reference capture's manifest (its frames' checksums, patterns and camera) and the
 size and modification time of each frame file, the calibration directory's files (calibration.json
 and any table beside it) and the processing options. Recapturing the reference, recalibrating or
-choosing another option misses the cache. Writing an entry removes those of another reference
-capture or calibration, and keeps the four latest option sets of the current one.
+choosing another option misses the cache. The newest entries are kept, the oldest removed.
 Single-shot references (which keep more than a phase) are not cached.
 """
 
@@ -42,11 +43,12 @@ from rig.pipeline.stages import SceneState, UnwrappedPhase
 log = logging.getLogger(__name__)
 
 FORMAT = 1
-DIRECTORY = "cache"
+DIRECTORY = "reference"  # below the cache root
 PREFIX = "reference-"
+CACHE_ENV = "RIG_CACHE_DIR"
 _MEMORY: OrderedDict[str, dict[str, Any]] = OrderedDict()
 _MEMORY_ENTRIES = 4
-_DISK_ENTRIES = 4  # entries of one reference and calibration (different options) kept on disk
+_DISK_ENTRIES = 16  # entries kept on disk (references, calibrations and option sets together)
 
 
 def cacheable(state: SceneState) -> bool:
@@ -94,9 +96,18 @@ def _digest(content: dict[str, Any]) -> str:
     return hashlib.sha256(json.dumps(content, sort_keys=True, default=str).encode("utf-8")).hexdigest()[:32]
 
 
-def _cache_dir(state: SceneState) -> Path:
-    assert state.calibration is not None and state.calibration.path is not None
-    return state.calibration.path / DIRECTORY
+def cache_root() -> Path | None:
+    """The user's cache directory for fpp-rig, or None when ``RIG_CACHE_DIR=off`` disables it."""
+    chosen = os.environ.get(CACHE_ENV)
+    if chosen is not None:
+        return None if chosen.strip().lower() in ("", "off", "none", "0") else Path(chosen)
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "fpp-rig"
+
+
+def _cache_dir(state: SceneState) -> Path | None:
+    root = cache_root()
+    return None if root is None else root / DIRECTORY
 
 
 def load(state: SceneState, key: str, from_disk: bool = True) -> bool:
@@ -105,7 +116,8 @@ def load(state: SceneState, key: str, from_disk: bool = True) -> bool:
     if entry is None:
         if not from_disk:
             return False
-        entry = _read(_cache_dir(state) / f"{PREFIX}{key}.npz", key)
+        directory = _cache_dir(state)
+        entry = None if directory is None else _read(directory / f"{PREFIX}{key}.npz", key)
         if entry is None:
             return False
         _remember(key, entry)
@@ -166,6 +178,8 @@ def store(state: SceneState, key: str, to_disk: bool = True) -> None:
     if not to_disk:
         return
     directory = _cache_dir(state)
+    if directory is None:
+        return
     try:
         _write_atomic(directory, key, phase, valid, meta_text)
     except OSError as exc:
@@ -176,7 +190,7 @@ def _write_atomic(directory: Path, key: str, phase: np.ndarray, valid: np.ndarra
     """Write the entry of ``key`` (temporary file, fsync, rename); drop stale entries and the oldest beyond a few."""
     if directory.is_symlink():
         raise OSError(f"{directory} is a link; not writing through it")
-    directory.mkdir(exist_ok=True)
+    directory.mkdir(parents=True, exist_ok=True)
     name = f"{PREFIX}{key}.npz"
     handle, temp = tempfile.mkstemp(prefix=".tmp-", suffix=".npz", dir=directory)
     try:
@@ -188,17 +202,9 @@ def _write_atomic(directory: Path, key: str, phase: np.ndarray, valid: np.ndarra
     except BaseException:
         Path(temp).unlink(missing_ok=True)
         raise
-    source = key.split("-")[0]
-    current = []
-    for entry in directory.glob(f"{PREFIX}*.npz"):
-        if entry.is_symlink() or entry.name == name:
-            continue
-        if not entry.name.startswith(f"{PREFIX}{source}-"):
-            entry.unlink(missing_ok=True)  # another reference capture or calibration: stale
-        else:
-            current.append(entry)
-    current.sort(key=lambda p: p.stat().st_mtime_ns, reverse=True)
-    for entry in current[_DISK_ENTRIES - 1 :]:
+    others = [entry for entry in directory.glob(f"{PREFIX}*.npz") if not entry.is_symlink() and entry.name != name]
+    others.sort(key=lambda p: p.stat().st_mtime_ns, reverse=True)
+    for entry in others[_DISK_ENTRIES - 1 :]:
         entry.unlink(missing_ok=True)
 
 
@@ -210,7 +216,7 @@ def _remember(key: str, entry: dict[str, Any]) -> None:
 
 
 def forget() -> None:
-    """Empty the in-memory cache (the files in calibration directories stay)."""
+    """Empty the in-memory cache (the files in the cache directory stay)."""
     _MEMORY.clear()
 
 
