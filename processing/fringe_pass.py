@@ -332,13 +332,12 @@ def fringe_pass(
 def _sampled_high(flat: np.ndarray, spec: _Group, shape: tuple[int, int], cv2: Any | None) -> float:
     """99th percentile of a group's modulation over :func:`sample_stride`'s subsample (no full pass)."""
     stride = sample_stride(shape)
-    rows = flat[spec.rows]
-    sample = np.ascontiguousarray(rows[:, ::stride], dtype=np.float32)
+    sample = np.ascontiguousarray(flat[spec.rows, ::stride], dtype=np.float32)  # only the sampled columns copied
     coeffs = spec.weights @ sample
     modulation = _magnitude_into(coeffs[1], coeffs[2], np.empty(coeffs.shape[1], dtype=np.float32), cv2)
     if np.isfinite(modulation).any():
         return robust_high(modulation)
-    everything = np.ascontiguousarray(rows, dtype=np.float32)  # rare: NaN throughout the subsample
+    everything = np.ascontiguousarray(flat[spec.rows], dtype=np.float32)  # rare: NaN throughout the subsample
     coeffs = spec.weights @ everything
     return robust_high(_magnitude_into(coeffs[1], coeffs[2], np.empty(coeffs.shape[1], dtype=np.float32), cv2))
 

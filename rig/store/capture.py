@@ -26,6 +26,7 @@ manifest that lists only the frames of up to its last second, or, within the fir
 from __future__ import annotations
 
 import copy
+import functools
 import hashlib
 import logging
 import math
@@ -281,9 +282,9 @@ class Capture:
         """The manifest's pattern entries as written (extra keys included)."""
         return self.manifest["patterns"]
 
-    @property
+    @functools.cached_property
     def pattern_models(self) -> list[Pattern]:
-        """The patterns, typed (the manifest was validated when read, so they parse)."""
+        """The patterns, typed (the manifest was validated when read, so they parse); parsed once."""
         return [parse_pattern(p) for p in self.patterns]
 
     @property

@@ -28,6 +28,7 @@ import ctypes
 import ctypes.util
 import errno
 import fcntl
+import functools
 import json
 import os
 import shutil
@@ -89,7 +90,17 @@ class Limits:
 
 def limits() -> Limits:
     """The limits in force (defaults, or the ``RIG_MAX_*`` environment)."""
-    return Limits.from_environment()
+    overrides = tuple((key, os.environ.get(key)) for key in _LIMIT_VARIABLES)
+    return _limits_for(overrides)
+
+
+_LIMIT_VARIABLES = tuple("RIG_" + name.upper() for name in Limits.__dataclass_fields__)
+
+
+@functools.lru_cache(maxsize=8)
+def _limits_for(overrides: tuple[tuple[str, str | None], ...]) -> Limits:
+    """Limits for one set of ``RIG_MAX_*`` values (read on every file access: parsed once)."""
+    return Limits.from_environment({key: value for key, value in overrides if value is not None})
 
 
 def check_image_size(width: int, height: int, where: str, error: ErrorType) -> None:
