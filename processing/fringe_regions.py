@@ -165,6 +165,7 @@ def _window_majority(
     stride = lab.shape[1]
     offsets = (np.arange(-radius, radius + 1)[:, None] * stride + np.arange(-radius, radius + 1)[None, :]).ravel()
     flat_k, flat_lab = k.reshape(-1), lab.reshape(-1)
+    small = np.int16 if side * side < 1 << 15 else np.int32  # run lengths: the narrowest type that holds them
     for start in range(0, rows.size, _CHUNK):
         r = rows[start : start + _CHUNK] + radius
         c = cols[start : start + _CHUNK] + radius
@@ -173,10 +174,10 @@ def _window_majority(
         window = np.where(flat_lab[near] == flat_lab[at][:, None], flat_k[near], _NO_VOTE).astype(np.int32)
         window.sort(axis=1)
         # Length of the run each sorted entry ends; the longest run is the majority.
-        index = np.broadcast_to(np.arange(side * side), window.shape)
+        index = np.broadcast_to(np.arange(side * side, dtype=small), window.shape)
         new = np.ones(window.shape, dtype=bool)
         new[:, 1:] = window[:, 1:] != window[:, :-1]
-        run = index - np.maximum.accumulate(np.where(new, index, 0), axis=1) + 1
+        run = index - np.maximum.accumulate(np.where(new, index, small(0)), axis=1) + small(1)
         run[window == _NO_VOTE] = 0
         best = np.argmax(run, axis=1)
         picked = np.arange(r.size)
