@@ -79,7 +79,8 @@ def cache_key(state: SceneState, options: ProcessOptions) -> str:
     assert calibration is not None and calibration.path is not None
     capture = state.capture
     cal_files = sorted(p for p in calibration.path.iterdir() if p.is_file())
-    frames = [capture.frame_path(frame) for frame in capture.frames]
+    # only stat'ed for the key (reading them goes through the capture's contained paths)
+    frames = [capture.path / str(frame.get("file", "")) for frame in capture.frames]
     source = {
         "format": FORMAT,
         "program": __version__,

@@ -436,7 +436,7 @@ def check_same_patterns(reference: Capture, capture: Capture) -> None:
             f"{reference.manifest_path}: patterns: expected the {len(capture.patterns)} patterns of "
             f"{capture.manifest_path}, found {len(reference.patterns)}"
         )
-    for i, (ref, obj) in enumerate(zip(reference.patterns, capture.patterns)):
+    for i, (ref, obj) in enumerate(zip(reference.pattern_models, capture.pattern_models)):
         if not same_projection(ref, obj):
             raise CaptureError(
                 f"{reference.manifest_path}: patterns[{i}]: expected {pattern_signature(obj)} like "
