@@ -353,7 +353,7 @@ def as_pattern(pattern: Pattern | Mapping[str, Any]) -> Pattern:
 def same_projection(a: Pattern | Mapping[str, Any], b: Pattern | Mapping[str, Any]) -> bool:
     """True when two patterns project the same image (extra keys and key order aside)."""
     pa, pb = as_pattern(a), as_pattern(b)
-    return dataclasses.replace(pa, extra={}) == dataclasses.replace(pb, extra={})
+    return pa == pb or dataclasses.replace(pa, extra={}) == dataclasses.replace(pb, extra={})
 
 
 # --------------------------------------------------------------------------- intensities

@@ -153,10 +153,11 @@ def check_relative_path(where: str, field: str, file: Any) -> PurePosixPath:
     return files.relative_path(file, where, field, CaptureError)
 
 
-def validate_manifest(manifest: Any, where: str) -> None:
+def validate_manifest(manifest: Any, where: str) -> list[Pattern]:
     """Check a parsed capture.json against capture-format.md v1; raise CaptureError on the first problem.
 
     Every pattern must have exactly one frame and every frame must name an existing pattern.
+    Returns the patterns typed (parsed once here, kept by :func:`read_capture`).
     """
     if not isinstance(manifest, Mapping):
         raise _fail(where, "top level", "a JSON object", type(manifest).__name__)
@@ -191,8 +192,7 @@ def validate_manifest(manifest: Any, where: str) -> None:
     max_frames = files.limits().max_frames
     if len(patterns) > max_frames:
         raise _fail(where, "patterns", f"at most {max_frames} entries (RIG_MAX_FRAMES)", len(patterns))
-    for i, pattern in enumerate(patterns):
-        validate_pattern(where, i, pattern)
+    models = [validate_pattern(where, i, pattern) for i, pattern in enumerate(patterns)]
     frames = manifest.get("frames")
     if not isinstance(frames, list):
         raise _fail(where, "frames", "a list", frames)
@@ -226,6 +226,7 @@ def validate_manifest(manifest: Any, where: str) -> None:
                 f"{where}: frames: expected one frame for each of {len(patterns)} patterns, "
                 f"found {len(frames)}; no frame for pattern(s) {listed}"
             )
+    return models
 
 
 # --------------------------------------------------------------------------- reading
@@ -394,8 +395,9 @@ def read_capture(path: str | os.PathLike[str], salvage: bool = False, verify: bo
     if not path.is_dir():
         raise CaptureError(f"{path}: expected a capture directory, found a file")
     manifest = files.read_json(manifest_path, CaptureError, "missing (not a capture directory?)")
-    validate_manifest(manifest, str(manifest_path))
+    models = validate_manifest(manifest, str(manifest_path))
     capture = Capture(path=path, manifest=manifest)
+    capture.__dict__["pattern_models"] = models  # the cached property, already parsed
     if not salvage and not capture.complete:
         raise CaptureError(
             f"{manifest_path}: complete: expected true, found false (interrupted or still being written; "
