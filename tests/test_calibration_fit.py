@@ -12,12 +12,9 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-import pytest
+from realdata import import_eye, import_eye_calibration, needs_real_data
 
 from rig.cli import main
-
-REAL_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "real-data"
-needs_real_data = pytest.mark.skipif(not REAL_DATA.is_dir(), reason=f"real data not present at {REAL_DATA}")
 
 
 def _one_line_error(capsys, *argv: object) -> str:
@@ -117,58 +114,14 @@ def test_stereo_translation_in_metres_is_refused(capsys, tmp_path) -> None:
 
 @needs_real_data
 def test_real_eye_imported_without_projector_width_is_refused(capsys, tmp_path) -> None:
-    eye = REAL_DATA / "slmaster-eye"
-    assert (
-        main(
-            [
-                "calibrate",
-                "--import-opencv",
-                str(eye / "caliInfo.yml"),
-                "--projector-size",
-                "1920x1024",
-                "--pixel-centre",
-                "0",
-                "-o",
-                str(tmp_path / "cal"),
-            ]
-        )
-        == 0
-    )
-    assert (
-        main(
-            [
-                "import",
-                str(eye / "L"),
-                "--patterns",
-                "sin:f=32,steps=12,phase=pi; gray:bits=6",
-                "-o",
-                str(tmp_path / "eye"),
-            ]
-        )
-        == 0
-    )
+    import_eye_calibration(tmp_path / "cal")
+    import_eye(tmp_path / "eye")
     capsys.readouterr()
     line = _one_line_error(
         capsys, "process", tmp_path / "eye", "--calibration", tmp_path / "cal", "-o", tmp_path / "out"
     )
     assert "projector width: 1280 px does not fit" in line and "re-import it with --projector-width 1920" in line
-    assert (
-        main(
-            [
-                "import",
-                str(eye / "L"),
-                "--patterns",
-                "sin:f=32,steps=12,phase=pi; gray:bits=6",
-                "--projector-width",
-                "1920",
-                "--downsample",
-                "2",
-                "-o",
-                str(tmp_path / "small"),
-            ]
-        )
-        == 0
-    )
+    import_eye(tmp_path / "small", "--projector-width", "1920", "--downsample", "2")
     capsys.readouterr()
     line = _one_line_error(
         capsys, "process", tmp_path / "small", "--calibration", tmp_path / "cal", "-o", tmp_path / "out"

@@ -3,11 +3,10 @@ import, and the real SLMaster eye capture."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import cv2
 import numpy as np
 import pytest
+from realdata import EYE, import_eye, import_eye_calibration, process_eye
 
 from calibration.camera import BoardSpec
 from calibration.errors import CalibrationError
@@ -18,7 +17,6 @@ from mock_devices.stereo_synth import board_session, calibration_fields, demo_ri
 from processing.phase_shift import phase_shift
 from processing.temporal import decode_gray, unwrap_gray, unwrap_hierarchical
 
-EYE = Path(__file__).resolve().parents[2] / "shared" / "real-data" / "slmaster-eye"
 FREQUENCIES = (1, 8, 64)
 STEPS = 6
 
@@ -184,55 +182,9 @@ def test_eye_capture_through_the_command_line(tmp_path, capsys):
     """rig import + rig calibrate --import-opencv + rig process: the real capture becomes points.ply."""
     import json
 
-    from rig.cli import main
-
-    assert (
-        main(
-            [
-                "import",
-                str(EYE / "L"),
-                "--patterns",
-                "sin:f=32,steps=12,phase=pi; gray:bits=6",
-                "--projector-width",
-                "1920",
-                "--projector-height",
-                "1024",
-                "-o",
-                str(tmp_path / "eye"),
-            ]
-        )
-        == 0
-    )
-    assert (
-        main(
-            [
-                "calibrate",
-                "--import-opencv",
-                str(EYE / "caliInfo.yml"),
-                "--projector-size",
-                "1920x1024",
-                "--pixel-centre",
-                "0",
-                "-o",
-                str(tmp_path / "cal"),
-            ]
-        )
-        == 0
-    )
-    assert (
-        main(
-            [
-                "process",
-                str(tmp_path / "eye"),
-                "--calibration",
-                str(tmp_path / "cal"),
-                "-o",
-                str(tmp_path / "out"),
-                "-q",
-            ]
-        )
-        == 0
-    )
+    import_eye(tmp_path / "eye", "--projector-width", "1920", "--projector-height", "1024")
+    import_eye_calibration(tmp_path / "cal")
+    process_eye(tmp_path, "-q")
     report = json.loads((tmp_path / "out" / "report.json").read_text())
     assert report["calibration_model"] == "stereo" and report["points"] > 150_000
     assert 690 < report["height_mm"]["median"] < 760  # depth of the plaque, mm from the camera

@@ -11,6 +11,7 @@ import sys
 
 import numpy as np
 import pytest
+from cli_steps import calibrate_on_plane, scan_and_process
 
 from calibration.errors import CalibrationError
 from calibration.models import height_from_phase
@@ -102,23 +103,7 @@ def test_scan_then_process_matches_the_virtual_scene(session, rig_text):
     scan_config.write_text(
         rig_text.replace("[camera]", f'gamma_lut = "{root / "cal" / "gamma-lut.npy"}"\n[camera]'), encoding="utf-8"
     )
-    assert (
-        main(
-            [
-                "scan",
-                "--config",
-                str(scan_config),
-                "-o",
-                str(root / "obj"),
-                "--calibration",
-                str(root / "cal"),
-                "--process",
-                "--process-output",
-                str(root / "out"),
-            ]
-        )
-        == 0
-    )
+    scan_and_process(scan_config, root / "obj", root / "cal", root / "out")
     height = np.load(root / "out" / "height.npy")
     rig_config = load_config(config)
     truth = scene_height(rig_config, "object", geometry_from_config(rig_config))
@@ -307,23 +292,7 @@ def test_gamma_ripple_removed_in_processing(tmp_path, rig_text):
         .replace("gamma = 1.8", "gamma = 2.2")
         .replace("snr_db = 30", "snr_db = 40")
     )
-    assert (
-        main(
-            [
-                "calibrate",
-                "--config",
-                str(config),
-                "-o",
-                str(tmp_path / "cal"),
-                "--board",
-                "none",
-                "--pixel-mm",
-                "1.6",
-                "-q",
-            ]
-        )
-        == 0
-    )
+    assert calibrate_on_plane(config, tmp_path / "cal", 1.6) == 0
     assert read_calibration(tmp_path / "cal").extra["phase_error"]["ripple_rms_rad"] > 0.05
     assert main(["scan", "--config", str(config), "-o", str(tmp_path / "obj")]) == 0
     rig_config = load_config(config)
@@ -367,23 +336,7 @@ def test_gauge_block_measured_through_the_whole_product(session, tmp_path, rig_t
             "[camera]", f'gamma_lut = "{root / "cal" / "gamma-lut.npy"}"\n[camera]'
         )
     )
-    assert (
-        main(
-            [
-                "scan",
-                "--config",
-                str(config),
-                "-o",
-                str(tmp_path / "block"),
-                "--calibration",
-                str(root / "cal"),
-                "--process",
-                "--process-output",
-                str(tmp_path / "out"),
-            ]
-        )
-        == 0
-    )
+    scan_and_process(config, tmp_path / "block", root / "cal", tmp_path / "out")
     height = np.load(tmp_path / "out" / "height.npy")
     rig_config = load_config(config)
     truth = scene_height(rig_config, "object", geometry_from_config(rig_config))

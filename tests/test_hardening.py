@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_steps import assert_one_line, run
 
 from mock_devices.camera import CameraFaults
 from rig.cli import main
@@ -22,18 +23,6 @@ from rig.store.capture import CaptureWriter, read_capture
 PATTERNS = [{"kind": "sinusoid", "axis": "x", "frequency": 1, "steps": 3, "step": j} for j in range(3)]
 CAMERA = {"width": 16, "height": 12, "bit_depth": 8}
 PROJECTOR = {"width": 32, "height": 24}
-
-
-def run(capsys, *argv) -> tuple[int, str]:
-    code = main([str(a) for a in argv])
-    return code, capsys.readouterr().err
-
-
-def assert_one_line(code: int, err: str, *fragments: str) -> None:
-    lines = [line for line in err.splitlines() if ": error:" in line]
-    assert code == 1 and len(lines) == 1 and "Traceback" not in err, err
-    for fragment in fragments:
-        assert fragment in lines[0], lines[0]
 
 
 def write_small(path: Path, overwrite: bool = False) -> None:

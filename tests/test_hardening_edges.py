@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_steps import assert_one_line, calibrate_on_plane, run
 
 from rig.cli import main
 from rig.errors import OutputError
@@ -22,18 +23,6 @@ from rig.pipeline.run import process
 from rig.store import files
 
 REPO = Path(__file__).resolve().parents[1]
-
-
-def run(capsys, *argv) -> tuple[int, str]:
-    code = main([str(a) for a in argv])
-    return code, capsys.readouterr().err
-
-
-def assert_one_line(code: int, err: str, *fragments: str) -> None:
-    lines = [line for line in err.splitlines() if ": error:" in line]
-    assert code == 1 and len(lines) == 1 and "Traceback" not in err, err
-    for fragment in fragments:
-        assert fragment in lines[0], lines[0]
 
 
 # 5. the preview of a degenerate map (the crash after phase.npy was written) ---------------------
@@ -238,23 +227,7 @@ def read_only(tmp_path_factory):
         scan = write_simulated_scan(simulate_scan("hemisphere", geometry=demo_geometry(48, 32), seed=1), mount / "scan")
         assert main(["process", str(scan.capture), "-o", str(mount / "out"), "-q"]) == 0
         (root / "rig.toml").write_text(SMALL_RIG)
-        assert (
-            main(
-                [
-                    "calibrate",
-                    "--config",
-                    str(root / "rig.toml"),
-                    "-o",
-                    str(mount / "cal"),
-                    "--board",
-                    "none",
-                    "--pixel-mm",
-                    "1.6",
-                    "-q",
-                ]
-            )
-            == 0
-        )
+        assert calibrate_on_plane(root / "rig.toml", mount / "cal", 1.6) == 0
         (mount / "foreign.yml").write_text("%YAML:1.0\n---\nM1: 1\n")
         done = _mount(["-o", "remount,ro", str(mount)])
         if done.returncode != 0:

@@ -8,17 +8,15 @@ covers only 73 % of the view, the camera sees the unlit plane around it.
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
+from cli_steps import calibrate_on_plane
+from realdata import import_eye, import_eye_calibration, needs_real_data, process_eye
 
 from rig.cli import main
 from rig.pipeline.outputs import colour_map
-
-REAL_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "real-data"
-needs_real_data = pytest.mark.skipif(not REAL_DATA.is_dir(), reason=f"real data not present at {REAL_DATA}")
 
 PARTLY_LIT = """
 [projector]
@@ -39,23 +37,7 @@ def test_partly_lit_view_calibrates_within_half_a_percent(tmp_path, capsys) -> N
     config = tmp_path / "rig.toml"
     config.write_text(PARTLY_LIT)
     # the pixel size is given: this test is about the phase fits (f0, l0, d0) on a partly lit view
-    assert (
-        main(
-            [
-                "calibrate",
-                "--config",
-                str(config),
-                "-o",
-                str(tmp_path / "cal"),
-                "--board",
-                "none",
-                "--pixel-mm",
-                "1.28",
-                "-q",
-            ]
-        )
-        == 0
-    ), capsys.readouterr().err
+    assert calibrate_on_plane(config, tmp_path / "cal", 1.28) == 0, capsys.readouterr().err
     cal = json.loads((tmp_path / "cal" / "calibration.json").read_text())
     f0_at_32 = 0.0266667 * 32 / 8
     assert cal["f0_per_mm"] * 8 / cal["f0_frequency"] == pytest.approx(0.0266667, rel=0.005)
@@ -85,54 +67,10 @@ def test_default_calibration_with_board_views(tmp_path, capsys, f0_per_mm, toler
 
 @needs_real_data
 def test_stereo_summary_says_depth_and_preview_has_an_invalid_legend(tmp_path, capsys) -> None:
-    eye = REAL_DATA / "slmaster-eye"
-    assert (
-        main(
-            [
-                "calibrate",
-                "--import-opencv",
-                str(eye / "caliInfo.yml"),
-                "--projector-size",
-                "1920x1024",
-                "--pixel-centre",
-                "0",
-                "-o",
-                str(tmp_path / "cal"),
-            ]
-        )
-        == 0
-    )
-    assert (
-        main(
-            [
-                "import",
-                str(eye / "L"),
-                "--patterns",
-                "sin:f=32,steps=12,phase=pi; gray:bits=6",
-                "--projector-width",
-                "1920",
-                "-o",
-                str(tmp_path / "eye"),
-            ]
-        )
-        == 0
-    )
+    import_eye_calibration(tmp_path / "cal")
+    import_eye(tmp_path / "eye", "--projector-width", "1920")
     capsys.readouterr()
-    assert (
-        main(
-            [
-                "process",
-                str(tmp_path / "eye"),
-                "--calibration",
-                str(tmp_path / "cal"),
-                "-o",
-                str(tmp_path / "out"),
-                "--correction",
-                "none",
-            ]
-        )
-        == 0
-    )
+    process_eye(tmp_path, "--correction", "none")
     err = capsys.readouterr().err
     assert ", depth " in err and ", height " not in err
     report = json.loads((tmp_path / "out" / "report.json").read_text())
@@ -146,23 +84,7 @@ def test_stereo_summary_says_depth_and_preview_has_an_invalid_legend(tmp_path, c
 def test_scan_process_prints_the_process_summary(tmp_path, capsys, simulated_rig_toml) -> None:
     config = tmp_path / "rig.toml"
     config.write_text(simulated_rig_toml((320, 400), (160, 120), 35.0))
-    assert (
-        main(
-            [
-                "calibrate",
-                "--config",
-                str(config),
-                "-o",
-                str(tmp_path / "cal"),
-                "--board",
-                "none",
-                "--pixel-mm",
-                "2.56",
-                "-q",
-            ]
-        )
-        == 0
-    )
+    assert calibrate_on_plane(config, tmp_path / "cal", 2.56) == 0
     capsys.readouterr()
     assert (
         main(

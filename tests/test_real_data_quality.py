@@ -13,6 +13,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from realdata import REAL_DATA, import_eye, import_eye_calibration, needs_real_data, process_eye
 
 from processing.islands import island_mask
 from processing.neighbour_rescue import rescue
@@ -20,8 +21,6 @@ from rig.cli import main
 from rig.pipeline.plan import ProcessOptions
 from rig.pipeline.run import process
 
-REAL_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "real-data"
-needs_real_data = pytest.mark.skipif(not REAL_DATA.is_dir(), reason=f"real data not present at {REAL_DATA}")
 PEER_THRESHOLD = 30.0  # SLMaster test/testThreeFrequencyHeterodynePattern.cpp, testUnwrap
 
 
@@ -140,38 +139,8 @@ def test_heterodyne_coverage_matches_the_peers_threshold(tmp_path, capsys) -> No
 
 @needs_real_data
 def test_no_floating_specks_on_the_eye(tmp_path, capsys) -> None:
-    eye = REAL_DATA / "slmaster-eye"
-    assert (
-        main(
-            [
-                "calibrate",
-                "--import-opencv",
-                str(eye / "caliInfo.yml"),
-                "--projector-size",
-                "1920x1024",
-                "--pixel-centre",
-                "0",
-                "-o",
-                str(tmp_path / "cal"),
-            ]
-        )
-        == 0
-    )
-    assert (
-        main(
-            [
-                "import",
-                str(eye / "L"),
-                "--patterns",
-                "sin:f=32,steps=12,phase=pi; gray:bits=6",
-                "--projector-width",
-                "1920",
-                "-o",
-                str(tmp_path / "eye"),
-            ]
-        )
-        == 0
-    )
+    import_eye_calibration(tmp_path / "cal")
+    import_eye(tmp_path / "eye", "--projector-width", "1920")
     result = process(tmp_path / "eye", tmp_path / "cal")
     assert result.height is not None and result.points is not None
     depth = result.height[result.mask]
@@ -183,21 +152,6 @@ def test_no_floating_specks_on_the_eye(tmp_path, capsys) -> None:
     kept = process(tmp_path / "eye", tmp_path / "cal", ProcessOptions(min_island_fraction=0.0))
     assert np.nanmax(kept.height) > 1200  # the off switch keeps them
     capsys.readouterr()
-    assert (
-        main(
-            [
-                "process",
-                str(tmp_path / "eye"),
-                "--calibration",
-                str(tmp_path / "cal"),
-                "-o",
-                str(tmp_path / "out"),
-                "--correction",
-                "none",
-                "-q",
-            ]
-        )
-        == 0
-    )
+    process_eye(tmp_path, "--correction", "none", "-q")
     err = capsys.readouterr().err
     assert "692" in err or "693" in err, err  # summary range starts at the plaque, not at 636 mm

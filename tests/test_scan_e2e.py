@@ -12,6 +12,7 @@ import os
 
 import numpy as np
 import pytest
+from cli_steps import scan_and_process
 
 from rig.cli import COMMAND_MODULES, main
 from rig.config import load_config
@@ -61,23 +62,7 @@ def test_scan_reference_then_object_processes_to_the_scene_heights(tmp_path, sma
     calibration = exact_calibration(config_path, tmp_path / "calibration")
     capture = tmp_path / "object"
     out = tmp_path / "processed"
-    assert (
-        main(
-            [
-                "scan",
-                "--config",
-                str(config_path),
-                "-o",
-                str(capture),
-                "--calibration",
-                str(calibration),
-                "--process",
-                "--process-output",
-                str(out),
-            ]
-        )
-        == 0
-    )
+    scan_and_process(config_path, capture, calibration, out)
 
     assert read_capture(capture).complete
     height = np.load(out / "height.npy")

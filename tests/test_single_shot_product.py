@@ -16,6 +16,7 @@ import json
 
 import numpy as np
 import pytest
+from cli_steps import scan_and_process
 
 from mock_devices import synth
 from rig.cli import main
@@ -228,23 +229,7 @@ def test_rig_scan_speckle_then_process(tmp_path, exact_calibration):
     geometry = geometry_from_config(config)
     calibration = exact_calibration(config_path, tmp_path / "calibration")
     out = tmp_path / "processed"
-    assert (
-        main(
-            [
-                "scan",
-                "--config",
-                str(config_path),
-                "-o",
-                str(tmp_path / "object"),
-                "--calibration",
-                str(calibration),
-                "--process",
-                "--process-output",
-                str(out),
-            ]
-        )
-        == 0
-    )
+    scan_and_process(config_path, tmp_path / "object", calibration, out)
     truth = scene_height(config, "object", geometry)
     lit = (
         synth.projector_coordinates(truth, geometry).lit
@@ -281,23 +266,7 @@ def test_calibrate_then_scan_the_speckle_reference_then_single_shots(tmp_path):
         == 0
     )
     out = tmp_path / "processed"
-    assert (
-        main(
-            [
-                "scan",
-                "--config",
-                str(speckle),
-                "-o",
-                str(tmp_path / "object"),
-                "--calibration",
-                str(calibration),
-                "--process",
-                "--process-output",
-                str(out),
-            ]
-        )
-        == 0
-    )
+    scan_and_process(speckle, tmp_path / "object", calibration, out)
     config = load_config(speckle)
     geometry = geometry_from_config(config)
     truth = scene_height(config, "object", geometry)
