@@ -70,6 +70,35 @@ def live_frames(socket: Any, count: int) -> list[dict[str, Any]]:
     return headers
 
 
+def scan_into_fault(client: TestClient, socket: Any, fault: str, name: str) -> tuple[dict[str, Any], str]:
+    """Inject ``fault`` into the simulated rig, start an unprocessed scan ``name``: its job and the
+    message of the first error event on ``socket``."""
+    assert client.post("/api/simulation/fault", json={"fault": fault}).status_code == 200
+    job = client.post("/api/scan", json={"name": name, "process": False}).json()["job"]
+    while True:
+        message = socket.receive()
+        if message.get("text"):
+            data = json.loads(message["text"])
+            if data["type"] == "error":
+                return job, data["message"]
+
+
+def calibration_messages(socket: Any) -> tuple[list[str], dict[str, Any]]:
+    """The step notes of a calibration job on ``socket`` up to its result message, and that result;
+    an error message fails the test."""
+    steps: list[str] = []
+    while True:
+        message = socket.receive()
+        if message.get("text"):
+            data = json.loads(message["text"])
+            if data["type"] == "progress" and data["event"]["kind"] == "message":
+                steps.append(data["event"]["note"])
+            elif data["type"] == "calibration":
+                return steps, data
+            elif data["type"] == "error":
+                raise AssertionError(data["message"])
+
+
 def test_status_devices_and_openapi(console: TestClient) -> None:
     status = console.get("/api/status").json()
     assert status["state"] == "idle" and not status["busy"] and status["simulated"]
@@ -226,16 +255,8 @@ def test_requests_from_another_origin_are_refused(console: TestClient) -> None:
 def test_a_device_fault_is_reported_and_the_next_scan_works(console: TestClient) -> None:
     with console.websocket_connect("/api/events") as socket:
         socket.receive_text()
-        assert console.post("/api/simulation/fault", json={"fault": "camera-gone"}).status_code == 200
-        job = console.post("/api/scan", json={"name": "faulty", "process": False}).json()["job"]
-        errors = []
-        while not errors:
-            message = socket.receive()
-            if message.get("text"):
-                data = json.loads(message["text"])
-                if data["type"] == "error":
-                    errors.append(data["message"])
-    assert "disappeared" in errors[0]
+        job, error = scan_into_fault(console, socket, "camera-gone", "faulty")
+    assert "disappeared" in error
     assert wait_job(console, job["id"])["state"] == "failed"
     status = console.get("/api/status").json()
     assert "disappeared" in status["device_error"]
@@ -271,17 +292,7 @@ def test_calibration_wizard_runs_unattended_on_the_simulated_rig(console: TestCl
         reply = console.post("/api/calibrate", json={"name": "cal", "heights_mm": [25, 50, 100], "board_views": 0})
         assert reply.status_code == 202
         assert console.post("/api/scan", json={}).status_code == 409  # one acquisition at a time
-        steps, result = [], None
-        while result is None:
-            message = socket.receive()
-            if message.get("text"):
-                data = json.loads(message["text"])
-                if data["type"] == "progress" and data["event"]["kind"] == "message":
-                    steps.append(data["event"]["note"])
-                elif data["type"] == "calibration":
-                    result = data
-                elif data["type"] == "error":
-                    raise AssertionError(data["message"])
+        steps, result = calibration_messages(socket)
     assert any("reference plane" in s for s in steps) and any("25 mm" in s for s in steps)
     assert result["l0_mm"] == pytest.approx(1000.0, rel=0.01) and result["d0_mm"] == pytest.approx(250.0, rel=0.01)
     assert wait_job(console, reply.json()["job"]["id"])["state"] == "done"
@@ -333,17 +344,9 @@ def test_the_alignment_grid_shows_in_the_live_frame(console: TestClient) -> None
 def test_a_trigger_timeout_is_reported_and_the_next_scan_works(console: TestClient) -> None:
     with console.websocket_connect("/api/events") as socket:
         socket.receive_text()
-        assert console.post("/api/simulation/fault", json={"fault": "trigger-timeout"}).status_code == 200
-        job = console.post("/api/scan", json={"name": "stalled", "process": False}).json()["job"]
-        errors = []
-        while not errors:
-            message = socket.receive()
-            if message.get("text"):
-                data = json.loads(message["text"])
-                if data["type"] == "error":
-                    errors.append(data["message"])
-    print(f"trigger-timeout error: {errors[0]}")
-    assert "trigger" in errors[0].lower() and "Traceback" not in errors[0] and "\n" not in errors[0], errors[0]
+        job, error = scan_into_fault(console, socket, "trigger-timeout", "stalled")
+    print(f"trigger-timeout error: {error}")
+    assert "trigger" in error.lower() and "Traceback" not in error and "\n" not in error, error
     assert wait_job(console, job["id"])["state"] == "failed"
     assert not (console.app.state.session.data.root / "captures" / "stalled").exists()
     assert console.get("/api/status").json()["device_error"]
@@ -376,17 +379,7 @@ def test_calibration_wizard_options_model_and_gamma(console: TestClient) -> None
             },
         )
         assert reply.status_code == 202
-        steps, result = [], None
-        while result is None:
-            message = socket.receive()
-            if message.get("text"):
-                data = json.loads(message["text"])
-                if data["type"] == "progress" and data["event"]["kind"] == "message":
-                    steps.append(data["event"]["note"])
-                elif data["type"] == "calibration":
-                    result = data
-                elif data["type"] == "error":
-                    raise AssertionError(data["message"])
+        steps, result = calibration_messages(socket)
     assert steps[0].startswith("gamma ramp") and result["model"] == "polynomial"
     assert any(line.startswith("projector gamma") for line in result["lines"])
     assert any(line.startswith("polynomial degree") for line in result["lines"])
