@@ -69,24 +69,14 @@ class Recorder:
 
 def calibrate(session: ConsoleSession, config: Any) -> None:
     """The simulated rig's exact geometry as calibration "cal", with a reference scan."""
-    from calibration.store import Calibration, write_calibration
+    from calibration.store import write_calibration
     from rig.acquisition.scan import scan
     from rig.hardware.simulated import geometry_from_config
+    from rig.hardware.synthesis import exact_calibration
 
     cal = session.data.root / "calibrations" / "cal"
     scan(config, cal / "reference", scene="reference")
-    g = geometry_from_config(config)
-    write_calibration(
-        cal,
-        Calibration(
-            l0_mm=g.l0_mm,
-            d0_mm=g.d0_mm,
-            f0_per_mm=g.f0_per_mm,
-            f0_frequency=g.f0_frequency,
-            pixel_mm=g.pixel_mm,
-            reference="reference",
-        ),
-    )
+    write_calibration(cal, exact_calibration(geometry_from_config(config)))
     session.set_calibration("cal")
 
 

@@ -61,10 +61,11 @@ def simulated_rig_toml() -> Callable[..., str]:
 def exact_calibration() -> Callable[[Path, Path], Path]:
     """``(config_path, directory)``: `rig scan` the reference plane into ``directory/reference`` and
     write the simulated rig's exact geometry as the calibration there (what `rig calibrate` estimates)."""
-    from calibration.store import Calibration, write_calibration
+    from calibration.store import write_calibration
     from rig.cli import main
     from rig.config import load_config
     from rig.hardware.simulated import geometry_from_config
+    from rig.hardware.synthesis import exact_calibration as exact
 
     def calibrate(config_path: Path, directory: Path) -> Path:
         geometry = geometry_from_config(load_config(config_path))
@@ -72,17 +73,7 @@ def exact_calibration() -> Callable[[Path, Path], Path]:
             main(["scan", "--config", str(config_path), "--scene", "reference", "-o", str(directory / "reference")])
             == 0
         )
-        write_calibration(
-            directory,
-            Calibration(
-                l0_mm=geometry.l0_mm,
-                d0_mm=geometry.d0_mm,
-                f0_per_mm=geometry.f0_per_mm,
-                f0_frequency=geometry.f0_frequency,
-                pixel_mm=geometry.pixel_mm,
-                reference="reference",
-            ),
-        )
+        write_calibration(directory, exact(geometry))
         return directory
 
     return calibrate

@@ -66,28 +66,18 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]]
     """The console on the simulated rig (640x480, with an exact calibration) served by uvicorn."""
     import uvicorn
 
-    from calibration.store import Calibration, write_calibration
+    from calibration.store import write_calibration
     from rig.acquisition.scan import scan
     from rig.console.app import create_app
     from rig.hardware.simulated import geometry_from_config
+    from rig.hardware.synthesis import exact_calibration
 
     root = tmp_path_factory.mktemp("console")
     (root / "rig.toml").write_text(RIG_TOML)
     config = load_config(root / "rig.toml")
     cal = root / "data" / "calibrations" / "cal"
     scan(config, cal / "reference", scene="reference")
-    g = geometry_from_config(config)
-    write_calibration(
-        cal,
-        Calibration(
-            l0_mm=g.l0_mm,
-            d0_mm=g.d0_mm,
-            f0_per_mm=g.f0_per_mm,
-            f0_frequency=g.f0_frequency,
-            pixel_mm=g.pixel_mm,
-            reference="reference",
-        ),
-    )
+    write_calibration(cal, exact_calibration(geometry_from_config(config)))
     app = create_app(config, root / "data", fault_injection=True)
     port = _free_port()
     uv = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning", ws="websockets-sansio"))

@@ -84,6 +84,21 @@ def demo_geometry(width: int = 640, height: int = 480) -> synth.RigGeometry:
     )
 
 
+def exact_calibration(
+    geometry: synth.RigGeometry, reference: str = "reference", extra: dict[str, Any] | None = None
+) -> Calibration:
+    """The reference-plane calibration that ``geometry`` is exactly (what `rig calibrate` estimates)."""
+    return Calibration(
+        l0_mm=geometry.l0_mm,
+        d0_mm=geometry.d0_mm,
+        f0_per_mm=geometry.f0_per_mm,
+        f0_frequency=float(geometry.f0_frequency),
+        pixel_mm=geometry.pixel_mm,
+        reference=reference,
+        extra=dict(extra or {}),
+    )
+
+
 @dataclass
 class SimulatedScan:
     """Frames of an object and of the reference plane under the same patterns, with the truth."""
@@ -104,16 +119,7 @@ class SimulatedScan:
 
     def calibration(self, reference: str = "reference") -> Calibration:
         """The exact calibration of the simulated rig (reference-plane model)."""
-        g = self.geometry
-        return Calibration(
-            l0_mm=g.l0_mm,
-            d0_mm=g.d0_mm,
-            f0_per_mm=g.f0_per_mm,
-            f0_frequency=float(g.f0_frequency),
-            pixel_mm=g.pixel_mm,
-            reference=reference,
-            extra={"simulation": dict(self.description)},
-        )
+        return exact_calibration(self.geometry, reference, extra={"simulation": dict(self.description)})
 
 
 def simulate_scan(
