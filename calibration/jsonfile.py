@@ -1,4 +1,4 @@
-"""JSON files: read with one-line errors, write atomically.
+"""JSON and text files: read with one-line errors, write atomically.
 
 Shared by the calibration store (calibration.json) and the capture store (capture.json, in
 ``rig``). It lives here because ``calibration`` is the lowest package that does file I/O
@@ -38,11 +38,15 @@ def write_json_atomic(path: Path, obj: Any, durable: bool = True) -> None:
     Readers see the old or the new file, never a partial one. ``durable`` fsyncs the new file
     before the rename (needed to survive a power loss, not a crash of the program).
     """
-    path = Path(path)
-    text = json.dumps(obj, indent=2, ensure_ascii=False) + "\n"
+    write_text_atomic(Path(path), json.dumps(obj, indent=2, ensure_ascii=False) + "\n", durable)
+
+
+def write_text_atomic(path: Path, text: str, durable: bool = True, newline: str | None = None) -> None:
+    """Write ``text`` (UTF-8) to a temporary sibling and rename it onto ``path``: readers see the old
+    or the new file, never a partial one; ``durable`` fsyncs it first, ``newline`` is :func:`open`'s."""
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
+        with os.fdopen(fd, "w", encoding="utf-8", newline=newline) as handle:
             handle.write(text)
             if durable:
                 handle.flush()

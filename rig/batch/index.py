@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import csv
 import io
-import os
-import tempfile
 from collections.abc import Iterable, Mapping
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Any
+
+from calibration.jsonfile import write_text_atomic
 
 STATUSES = ("ok", "error", "skipped")
 
@@ -79,16 +79,7 @@ def table_text(columns: tuple[str, ...], rows: Iterable[Mapping[str, Any]]) -> s
 def write_table_atomic(path: Path, text: str) -> Path:
     """Write ``text`` to a temporary sibling, sync it and rename it onto ``path``."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as handle:
-            handle.write(text)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_text_atomic(path, text, newline="")
     return path
 
 
