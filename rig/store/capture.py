@@ -128,6 +128,18 @@ def _mapping(where: str, obj: Mapping[str, Any], key: str) -> Mapping[str, Any]:
     return obj[key]
 
 
+def _sized(where: str, manifest: Mapping[str, Any], key: str) -> Mapping[str, Any]:
+    """``manifest[key]`` (camera or projector): an object whose width and height are within the image limits."""
+    block = _mapping(where, manifest, key)
+    files.check_image_size(
+        _int(where, block, "width", f"{key}.width", minimum=1),
+        _int(where, block, "height", f"{key}.height", minimum=1),
+        f"{where}: {key}",
+        CaptureError,
+    )
+    return block
+
+
 def validate_pattern(where: str, index: int, pattern: Any) -> Pattern:
     """Check one ``patterns[index]`` entry against the pattern model; return it typed.
 
@@ -169,23 +181,11 @@ def validate_manifest(manifest: Any, where: str) -> list[Pattern]:
         raise _fail(where, "scene", "a string such as 'object' or 'reference'", manifest.get("scene"))
     if not isinstance(manifest.get("complete"), bool):
         raise _fail(where, "complete", "true or false", manifest.get("complete"))
-    camera = _mapping(where, manifest, "camera")
-    files.check_image_size(
-        _int(where, camera, "width", "camera.width", minimum=1),
-        _int(where, camera, "height", "camera.height", minimum=1),
-        f"{where}: camera",
-        CaptureError,
-    )
+    camera = _sized(where, manifest, "camera")
     depth = _int(where, camera, "bit_depth", "camera.bit_depth", minimum=1)
     if not (depth <= 16 or depth == 32):
         raise _fail(where, "camera.bit_depth", "1..16 or 32", depth)
-    projector = _mapping(where, manifest, "projector")
-    files.check_image_size(
-        _int(where, projector, "width", "projector.width", minimum=1),
-        _int(where, projector, "height", "projector.height", minimum=1),
-        f"{where}: projector",
-        CaptureError,
-    )
+    _sized(where, manifest, "projector")
     patterns = manifest.get("patterns")
     if not isinstance(patterns, list) or not patterns:
         raise _fail(where, "patterns", "a non-empty list", patterns)
