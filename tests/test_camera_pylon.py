@@ -39,8 +39,9 @@ def image_folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return folder
 
 
-def emulated(folder: Path, **kwargs) -> PylonCamera:
-    features = {
+def emulator_features(folder: Path) -> dict[str, object]:
+    """The camera emulator showing the images of ``folder`` at WIDTH x HEIGHT."""
+    return {
         "ImageFilename": str(folder),
         "ImageFileMode": "On",
         "TestImageSelector": "Off",
@@ -49,7 +50,10 @@ def emulated(folder: Path, **kwargs) -> PylonCamera:
         "Width": WIDTH,
         "Height": HEIGHT,
     }
-    return PylonCamera(device_class="BaslerCamEmu", features=features, **kwargs)
+
+
+def emulated(folder: Path, **kwargs) -> PylonCamera:
+    return PylonCamera(device_class="BaslerCamEmu", features=emulator_features(folder), **kwargs)
 
 
 def _emulator_problem() -> str | None:
@@ -166,16 +170,7 @@ def quirky(folder: Path, **quirks) -> PylonCamera:
     info = pylon.DeviceInfo()
     info.SetDeviceClass("BaslerCamEmu")
     inner = pylon.InstantCamera(pylon.TlFactory.GetInstance().CreateFirstDevice(info))
-    features = {
-        "ImageFilename": str(folder),
-        "ImageFileMode": "On",
-        "TestImageSelector": "Off",
-        "OffsetX": 0,
-        "OffsetY": 0,
-        "Width": WIDTH,
-        "Height": HEIGHT,
-    }
-    return PylonCamera(camera=UsbCameraQuirks(inner, **quirks), features=features)
+    return PylonCamera(camera=UsbCameraQuirks(inner, **quirks), features=emulator_features(folder))
 
 
 @needs_emulator
