@@ -14,15 +14,12 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from realdata import REAL_DATA, needs_real_data
 
 from rig.cli import main
 from rig.errors import CaptureError, ConfigError
 from rig.pipeline.run import process
 from rig.store.importer import ImportOptions, import_folder, natural_key, parse_angle, parse_spec
-
-REAL_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "real-data"
-needs_real_data = pytest.mark.skipif(not REAL_DATA.is_dir(), reason=f"real data not present at {REAL_DATA}")
-
 
 # ------------------------------------------------------------------ the spec mini-language
 

@@ -12,14 +12,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from realdata import REAL_DATA, needs_real_data
 
 from processing.convention import OffsetEstimate, gray_offset, heterodyne_offset
 from processing.patterns import pattern_image
 from rig.cli import main
 from rig.store.importer import parse_spec
 
-REAL_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "real-data"
-needs_real_data = pytest.mark.skipif(not REAL_DATA.is_dir(), reason=f"real data not present at {REAL_DATA}")
 SIZE = (480, 40)  # projector = camera, (width, height)
 
 
