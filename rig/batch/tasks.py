@@ -136,11 +136,30 @@ def _compare(task: CaptureTask, main: Any, main_seconds: float) -> list[CompareR
     return rows
 
 
+def _single_threaded_worker() -> None:
+    """One thread per worker: the cluster runs a worker per core, so OpenCV's thread pool and the
+    frame-reading threads would only oversubscribe the cores (BLAS is limited around each task).
+    Only inside a Dask worker process: a task run in the caller's process changes nothing."""
+    try:
+        from distributed import get_worker
+
+        get_worker()
+    except (ImportError, ValueError):
+        return
+    import cv2
+
+    from rig.store import capture
+
+    cv2.setNumThreads(1)
+    capture.LOAD_THREADS = 1
+
+
 def run_task(task: CaptureTask) -> TaskOutcome:
     """Process one capture, commit its outputs and return its rows; never raises for a bad capture."""
     from rig.blas import blas_threads
     from rig.pipeline.outputs import check_output_directory, write_outputs
 
+    _single_threaded_worker()
     started = time.perf_counter()
     worker = worker_name()
     row = IndexRow(capture=task.name, status="error", correction=task.options.correction, worker=worker)

@@ -339,13 +339,14 @@ class Capture:
             )
         return image
 
-    def load_frames(self, patterns: Iterable[int] | None = None, threads: int = LOAD_THREADS) -> np.ndarray:
+    def load_frames(self, patterns: Iterable[int] | None = None, threads: int | None = None) -> np.ndarray:
         """Frames of the given pattern indices (default all, in pattern order) as an (N, H, W) array.
 
         Reading, checksums and decoding run on ``threads`` threads (hashlib and OpenCV release
         the GIL: about twice as fast on two cores); each frame lands in its slot of the stack.
         The first failing frame in pattern order is the one reported, as when loading in turn.
         """
+        threads = LOAD_THREADS if threads is None else threads
         indices = list(range(len(self.patterns)) if patterns is None else patterns)
         if not indices:
             raise CaptureError(f"{self.manifest_path}: frames: no pattern to load")
