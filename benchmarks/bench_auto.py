@@ -35,7 +35,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.bench_pipeline import GROUPS, STEPS, fused_pipeline  # noqa: E402
-from benchmarks.measure import cpu_description, interleaved  # noqa: E402
+from benchmarks.measure import cpu_description, interleaved, load_line  # noqa: E402
 from mock_devices import scenes, synth  # noqa: E402
 from processing.correction import correct_auto, correct_rpca_phase  # noqa: E402
 from processing.fringe_pass import fringe_pass  # noqa: E402
@@ -118,10 +118,11 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--runs: expected at least 3")
     for line in cpu_description():
         print(line)
-    print(f"load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    load_before = os.getloadavg()
     for case in args.case:
         run_case(case, args.runs)
-    print(f"\nload average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    print()
+    print(load_line(load_before, os.getloadavg()))
     return 0
 
 

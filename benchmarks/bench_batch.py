@@ -31,7 +31,6 @@ import argparse
 import contextlib
 import json
 import os
-import platform
 import random
 import resource
 import shutil
@@ -48,6 +47,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.dask_cluster import external_cluster, repo_env  # noqa: E402
+from benchmarks.measure import cpu_description, load_line  # noqa: E402
 from rig.batch import BatchPlan, run_batch  # noqa: E402
 from rig.batch.discovery import INCOMPLETE_REASON  # noqa: E402
 from rig.batch.index import read_table  # noqa: E402
@@ -60,14 +60,6 @@ from rig.store.files import INCOMPLETE_MARK, REPLACED_MARK  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 ARRAYS = ("height.npy", "phase.npy", "mask.npy")
-
-
-def cpu_model() -> str:
-    with contextlib.suppress(OSError), open("/proc/cpuinfo", encoding="ascii", errors="replace") as info:
-        for line in info:
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    return platform.processor() or "unknown"
 
 
 def cpu_seconds() -> float:
@@ -272,10 +264,9 @@ def main(argv: list[str] | None = None) -> int:
             f"archive: {len(status)} captures {args.size} ({len(good)} good, 3 corrupt, 2 incomplete), "
             f"written in {time.perf_counter() - t0:.1f} s"
         )
-        print(
-            f"machine: {cpu_model()}, {os.cpu_count()} logical CPUs, load average before "
-            f"{' '.join(f'{v:.2f}' for v in os.getloadavg())}"
-        )
+        for line in cpu_description():
+            print(line)
+        load_before = os.getloadavg()
         processable = [n for n, s in status.items() if s != "skipped"]
         sample = processable if args.loop_sample <= 0 else processable[: args.loop_sample]
         loop_wall = process_loop(archive, calibration, sample, root / "process")
@@ -319,7 +310,7 @@ def main(argv: list[str] | None = None) -> int:
             f"CPU seconds (client + workers): 1 worker {statistics.median(rows['1w cpu']):.1f}, "
             f"2 workers {statistics.median(rows['2w cpu']):.1f}"
         )
-        print(f"load average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
+        print(load_line(load_before, os.getloadavg()))
 
         refs = [("in-process loop", root / "loop"), ("`rig process` outputs", root / "process")]
         problems = check_results(last_out, status, refs)

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import statistics
 import sys
 import tempfile
@@ -28,21 +27,12 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from benchmarks.measure import cpu_description, load_line  # noqa: E402
 from rig import api  # noqa: E402
 from rig.config import parse_config  # noqa: E402
 from rig.console.datadir import DataDir  # noqa: E402
 from rig.console.session import ConsoleSession, ProjectorSetting  # noqa: E402
 from rig.pipeline.plan import ProcessOptions  # noqa: E402
-
-
-def cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
 
 
 def size(text: str) -> tuple[int, int]:
@@ -138,7 +128,9 @@ def main() -> None:
     parser.add_argument("--scan-size", type=size, default=(1024, 768))
     parser.add_argument("--live-seconds", type=float, default=5.0)
     args = parser.parse_args()
-    print(f"CPU: {cpu_model()} ({os.cpu_count()} logical); load average before: {os.getloadavg()}")
+    for line in cpu_description():
+        print(line)
+    load_before = os.getloadavg()
     fps = live_fps(*args.live_size, args.live_seconds)
     print(
         f"live view {args.live_size[0]}x{args.live_size[1]}, fringe shown (modulation map computed): {fps:.1f} fps "
@@ -150,7 +142,7 @@ def main() -> None:
     print(f"  console (last frame -> result): {spread(console_s)}")
     print(f"  peer rig.api.process from disk: {spread(peer_s)}")
     print(f"  console / peer: {statistics.median(ratios):.2f} ({min(ratios):.2f} - {max(ratios):.2f})")
-    print(f"load average after: {os.getloadavg()}")
+    print(load_line(load_before, os.getloadavg()))
 
 
 if __name__ == "__main__":
