@@ -31,6 +31,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from benchmarks.measure import cpu_description, load_line  # noqa: E402
 from mock_devices.camera import SimulatedCamera  # noqa: E402
 from rig.acquisition.loop import AcquisitionSettings, run_scan  # noqa: E402
 from rig.config import CameraConfig, RigConfig, TriggerConfig  # noqa: E402
@@ -112,7 +113,7 @@ def main() -> int:
     config = dataclasses.replace(
         RigConfig(), camera=CameraConfig(width=width, height=height), trigger=TriggerConfig(backend=args.trigger)
     )
-    load_before = os.getloadavg()[0]
+    load_before = os.getloadavg()
     work = Path(tempfile.mkdtemp(prefix="bench-scan-"))
     results: dict[str, list[dict[str, float]]] = {"writer thread": [], "inline writer (peer)": []}
     try:
@@ -130,7 +131,9 @@ def main() -> int:
             f"{config.projector.width}x{config.projector.height}, trigger {args.trigger}, {args.runs} runs (medians)"
         )
         # Everything here is CPU time on this machine's cores: compare figures taken at a similar load.
-        print(f"load average (1 min) {load_before:.1f} before, {os.getloadavg()[0]:.1f} after, {os.cpu_count()} CPUs")
+        for line in cpu_description():
+            print(line)
+        print(load_line(load_before, os.getloadavg()))
         ours = summarise("writer thread", results["writer thread"])
         peer = summarise("inline writer (peer)", results["inline writer (peer)"])
         print(f"ratio wall inline / thread: {peer['wall_s'] / ours['wall_s']:.2f}")
