@@ -55,7 +55,6 @@ from calibration.gamma import (
     ripple_table_from_plane,
 )
 from calibration.geometry import MIN_HEIGHTS, fit_f0, fit_l0_d0, lit_interior, pixel_mm_from_corners
-from calibration.jsonfile import read_json
 from calibration.polynomial import POLYNOMIAL, fit_polynomial
 from calibration.reference import REFERENCE_DIR, check_same_patterns
 from calibration.stereo import (
@@ -68,6 +67,7 @@ from calibration.stereo import (
 from calibration.store import REFERENCE_PLANE, Calibration, write_calibration
 from rig.config import RigConfig
 from rig.errors import CaptureError, ConfigError
+from rig.store import files
 from rig.store.capture import read_capture
 
 if TYPE_CHECKING:
@@ -162,7 +162,9 @@ class CalibrationPlan:
     @classmethod
     def load(cls, session: Path) -> CalibrationPlan:
         """The plan stored in a session directory's ``session.json``."""
-        data = read_json(session, CalibrationError, "missing (not a calibration session directory?)")
+        data = files.read_json(
+            session, CalibrationError, "missing (not a calibration session directory?)", strict=False
+        )
         return cls.from_json(data, str(session))
 
 
@@ -247,8 +249,6 @@ def calibrate(
 @contextlib.contextmanager
 def _staged_session(directory: Path, overwrite: bool) -> Iterator[Path]:
     """A staging directory committed as ``directory`` on success (removed on any error)."""
-    from rig.store import files
-
     if directory.is_dir() and not directory.is_symlink() and not files.is_empty_directory(directory):
         if not overwrite:
             raise CaptureError(f"{directory}: already exists and is not empty; choose another -o or pass --overwrite")
@@ -423,8 +423,6 @@ def _planes(directory: Path) -> list[tuple[float, Path]]:
 def _copy_capture(source: Path, target: Path) -> None:
     """Copy a capture directory atomically (an earlier capture at ``target`` is replaced)."""
     import shutil
-
-    from rig.store import files
 
     read_capture(source)  # only a complete, verified capture is copied
     with files.staged_directory(target, ("capture",), True, CaptureError) as staging:
