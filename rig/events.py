@@ -140,13 +140,3 @@ class Reporter:
     def check(self) -> None:
         """Raise :class:`Cancelled` if the task was asked to stop."""
         self.cancel.check(self.task)
-
-
-def sink_to_progress(progress: ProgressSink) -> EventSink:
-    """An event sink that steps a CLI-style progress object on every ``step`` event."""
-
-    def sink(event: Event) -> None:
-        if event.kind == "step":
-            progress.step(event.note)
-
-    return sink
