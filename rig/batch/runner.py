@@ -9,6 +9,7 @@ never prints.
 
 from __future__ import annotations
 
+import itertools
 import logging
 import os
 import time
@@ -286,7 +287,7 @@ def _run_on_dask(
             by_key[future.key] = (future, task)
             running.add(future)
 
-        for task in _take(pending, window):
+        for task in itertools.islice(pending, window):
             submit(task)
         last_index = time.monotonic()
         try:
@@ -297,7 +298,7 @@ def _run_on_dask(
                 except Exception as exc:  # noqa: BLE001 - KilledWorker and the like: that capture failed
                     outcome = _lost_outcome(task, exc)
                 outcomes.append(outcome)
-                for nxt in _take(pending, 1):
+                for nxt in itertools.islice(pending, 1):
                     submit(nxt)
                 if time.monotonic() - last_index > INDEX_EVERY_S:
                     write_index(index_path, [o.row for o in outcomes])
@@ -307,13 +308,3 @@ def _run_on_dask(
         except BaseException:
             client.cancel([f for f, _ in by_key.values()])
             raise
-
-
-def _take(iterator: Iterator[CaptureTask], count: int) -> list[CaptureTask]:
-    items = []
-    for _ in range(count):
-        try:
-            items.append(next(iterator))
-        except StopIteration:
-            break
-    return items
