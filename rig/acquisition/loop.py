@@ -54,6 +54,7 @@ from drivers.errors import (
 from drivers.projector import Projector
 from drivers.trigger_box import TriggerBox
 from rig.errors import CaptureError
+from rig.events import ProgressSink
 from rig.store.capture import CaptureWriter
 
 log = logging.getLogger(__name__)
@@ -472,12 +473,6 @@ def frame_metadata(frame: Frame, attempts: int) -> dict[str, Any]:
     return meta
 
 
-class Progress(Protocol):
-    """What the loop reports progress to (:class:`rig.progress.Progress` fits)."""
-
-    def step(self, note: str = "", count: int = 1) -> None: ...
-
-
 def run_scan(
     path: str | Path,
     patterns: Sequence[Mapping[str, Any]],
@@ -489,7 +484,7 @@ def run_scan(
     extra: Mapping[str, Any] | None = None,
     exposure_us: float | None = None,
     gain: float | None = None,
-    progress: Progress | None = None,
+    progress: ProgressSink | None = None,
     overwrite: bool = False,
     background_writer: bool = True,
 ) -> ScanResult:
@@ -511,7 +506,7 @@ def run_scan(
         capture.json's ``scene`` and extra top-level keys.
     exposure_us, gain : float, optional
         Camera settings for the scan (restored afterwards); None keeps the current ones.
-    progress : Progress, optional
+    progress : ProgressSink, optional
         Stepped once per stored frame.
     overwrite : bool
         Replace an existing capture at ``path``.
