@@ -20,7 +20,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from rig.commands._common import LazyChoices
+from rig.commands._common import LazyChoices, split_size
 from rig.errors import ConfigError
 
 if TYPE_CHECKING:
@@ -35,7 +35,7 @@ def _pattern_sets() -> tuple[str, ...]:
 
 def _size(text: str) -> tuple[int, int]:
     try:
-        width, height = (int(part) for part in text.lower().split("x"))
+        width, height = split_size(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 640x480, found {text!r}") from None
     if width < 8 or height < 8:
