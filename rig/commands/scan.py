@@ -66,10 +66,11 @@ def run(args: argparse.Namespace) -> int:
     )
 
     output = args.output or default_capture_path()
+    destination = args.process_output or output.with_name(output.name + "-processed")
     if args.process:  # both outputs must be writable before the scan starts
         from rig.pipeline.outputs import check_output_directory
 
-        check_output_directory(args.process_output or output.with_name(output.name + "-processed"))
+        check_output_directory(destination)
     with Progress(f"scan {output}", total=len(config.scan.patterns())) as progress:
         result = scan(config, output, scene=args.scene, overwrite=args.overwrite, progress=progress)
     print(
@@ -87,7 +88,6 @@ def run(args: argparse.Namespace) -> int:
         from rig.pipeline.plan import DEFAULT_CORRECTION, ProcessOptions
         from rig.pipeline.run import process_capture, total_steps
 
-        destination = args.process_output or output.with_name(output.name + "-processed")
         with Progress(f"process {output}", total=total_steps(with_reference=True)) as progress:
             report = process_capture(
                 output, args.calibration, destination, ProcessOptions(correction=DEFAULT_CORRECTION), progress=progress
