@@ -162,23 +162,15 @@ def parse_params(items: list[str]) -> dict[str, object]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from rig.pipeline.outputs import check_output_directory, write_outputs
-    from rig.pipeline.run import process, total_steps
+    from rig.pipeline.outputs import check_output_directory
+    from rig.pipeline.run import process_capture, total_steps
 
     out = args.output or args.capture.with_name(args.capture.name + "-processed")
     options = processing_options(args)
     check_output_directory(out)  # an unwritable output fails now, not after the computation
     steps = total_steps(args.calibration is not None) + 1
     with Progress(f"process {args.capture}", total=steps, quiet=args.quiet) as progress:
-        result = process(
-            args.capture,
-            args.calibration,
-            options,
-            progress=progress,
-            salvage=args.salvage,
-            reference_cache_to_disk=True,
-        )
-        report = write_outputs(result, out)
+        report = process_capture(args.capture, args.calibration, out, options, progress=progress, salvage=args.salvage)
         progress.step("outputs")
     if args.json:
         print_json(summary(report, out))
