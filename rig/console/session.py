@@ -725,11 +725,15 @@ class ConsoleSession:
             self._finish(job)
         self._publish_status()
 
-    def _show(self, view: ResultView, job: Job, final: bool) -> None:
+    def _keep(self, view: ResultView) -> None:
+        """Hold ``view`` in memory as the newest result, dropping the oldest beyond RESULTS_KEPT."""
         self.results[view.name] = view
         self.results.move_to_end(view.name)
         while len(self.results) > RESULTS_KEPT:
             self.results.popitem(last=False)
+
+    def _show(self, view: ResultView, job: Job, final: bool) -> None:
+        self._keep(view)
         since = time.time() - job.last_frame if job.last_frame else None
         self.publish(
             {
@@ -749,9 +753,7 @@ class ConsoleSession:
             return self.results[name]
         path = self.data.existing("results", name)
         view = ResultView.from_directory(name, path)
-        self.results[name] = view
-        while len(self.results) > RESULTS_KEPT:
-            self.results.popitem(last=False)
+        self._keep(view)
         return view
 
     def stop(self, job_id: str | None = None) -> list[str]:
