@@ -23,14 +23,10 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import breadth_first_order, connected_components, minimum_spanning_tree
 
 from processing import _validate
+from processing.angles import wrap_to_pi
 
 TWO_PI = 2.0 * np.pi
 QUALITY_KINDS = ("variance",)
-
-
-def _wrap(x: np.ndarray) -> np.ndarray:
-    """x wrapped into [-pi, pi)."""
-    return x - TWO_PI * np.floor((x + np.pi) / TWO_PI)
 
 
 def phase_derivative_variance(phi: np.ndarray, window: int = 3) -> np.ndarray:
@@ -58,10 +54,10 @@ def phase_derivative_variance(phi: np.ndarray, window: int = 3) -> np.ndarray:
     dx = np.zeros_like(p)
     dy = np.zeros_like(p)
     if p.shape[1] > 1:
-        dx[:, :-1] = _wrap(np.diff(p, axis=1))
+        dx[:, :-1] = wrap_to_pi(np.diff(p, axis=1))
         dx[:, -1] = dx[:, -2]
     if p.shape[0] > 1:
-        dy[:-1] = _wrap(np.diff(p, axis=0))
+        dy[:-1] = wrap_to_pi(np.diff(p, axis=0))
         dy[-1] = dy[-2]
     spread = np.zeros_like(p)
     for d in (dx, dy):
