@@ -40,11 +40,12 @@ def fringe_step_rad(absolute_phase: np.ndarray, valid: np.ndarray, axis: int) ->
         raise ValueError(f"valid: expected the shape of absolute_phase {phase.shape}, found {mask.shape}")
     if axis not in (0, 1):
         raise ValueError(f"axis: expected 0 or 1, found {axis!r}")
-    both = mask & np.roll(mask, -1, axis=axis)
-    both[(slice(None), -1) if axis == 1 else (-1, slice(None))] = False
+    head = (slice(None), slice(None, -1)) if axis == 1 else (slice(None, -1), slice(None))
+    tail = (slice(None), slice(1, None)) if axis == 1 else (slice(1, None), slice(None))
+    both = mask[head] & mask[tail]
     if not both.any():
         return float("nan")
-    steps = np.abs(np.roll(phase, -1, axis=axis) - phase)[both]
+    steps = np.abs(phase[tail][both] - phase[head][both])
     steps = steps[np.isfinite(steps)]
     return float(np.median(steps)) if steps.size else float("nan")
 
