@@ -211,6 +211,11 @@ def stage_wrapped(state: SceneState, options: ProcessOptions) -> None:
         out.valid &= shadow_mask(amplitude, background, min_ratio=options.min_modulation_ratio)
     state.wrapped = out
     state.info["valid_after_modulation"] = float(out.valid.mean())
+    _note_other_axis(state)
+
+
+def _note_other_axis(state: SceneState) -> None:
+    """Say which sinusoids along the other axis the wrapped stage left unused."""
     other = sorted({g.frequency for g in state.groups.sinusoids if g.axis != state.axis})
     if other:
         state.notes.append(f"sinusoids along the other axis (frequencies {other}) not used; choose them with --axis")
@@ -270,9 +275,7 @@ def _fused_pass(state: SceneState, options: ProcessOptions) -> bool:
         phase=phase, valid=mask, frequency=freqs[-1], method=method, absolute=True, orders=scan.orders
     )
     state.info["fused_pass"] = "phase shifting, modulation mask and unwrapping in one float32 pass"
-    other = sorted({g.frequency for g in state.groups.sinusoids if g.axis != state.axis})
-    if other:
-        state.notes.append(f"sinusoids along the other axis (frequencies {other}) not used; choose them with --axis")
+    _note_other_axis(state)
     return True
 
 
