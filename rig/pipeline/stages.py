@@ -482,7 +482,7 @@ def _rescue_rejected(state: SceneState, phase: np.ndarray, mask: np.ndarray, mod
     if not np.any(modulated > mask):  # no modulated pixel was rejected: nothing to take back
         state.info["neighbour_rescue"] = {"readmitted": 0, "off": "--param neighbour_rescue=false"}
         return mask
-    rescued = rescue(phase, mask, modulated & np.isfinite(phase))
+    rescued = rescue(phase, mask, modulated)  # rescue skips non-finite phases itself
     state.info["neighbour_rescue"] = {
         "readmitted": int(np.count_nonzero(rescued & ~mask)),
         "off": "--param neighbour_rescue=false",
