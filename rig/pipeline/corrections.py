@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from calibration.errors import CalibrationError
+from processing.angles import wrap_to_pi
 from processing.correction import CORRECTIONS as NUMERIC_CORRECTIONS
 from processing.correction_method import CorrectionMethod
 from rig.errors import ProcessingError
@@ -73,7 +74,7 @@ def stage_correction(state: SceneState, options: ProcessOptions) -> None:
     if state.wrapped is not None and unwrapped.frequency in state.wrapped.frequencies:
         wrapped = state.wrapped.phase[state.wrapped.frequencies.index(unwrapped.frequency)]
     if wrapped is None or not np.isfinite(wrapped[unwrapped.valid]).all():
-        wrapped = np.angle(np.exp(1j * np.nan_to_num(unwrapped.phase)))  # Phi = phi + 2 pi k wraps back to phi
+        wrapped = wrap_to_pi(np.nan_to_num(unwrapped.phase))  # Phi = phi + 2 pi k wraps back to phi
     try:
         phase, info = method(
             unwrapped.phase,
