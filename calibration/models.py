@@ -130,8 +130,13 @@ def height_from_phase(
         delta = _delta(object_phase, reference_phase, calibration)
         assert calibration.l0_mm is not None and calibration.d0_mm is not None  # checked when read
         with np.errstate(invalid="ignore", divide="ignore"):
-            return phase_to_height(
-                delta, calibration.l0_mm, calibration.d0_mm, calibration.per_mm(frequency), dtype=delta.dtype.type
+            return phase_to_height(  # _delta's array is our own: heights written into it
+                delta,
+                calibration.l0_mm,
+                calibration.d0_mm,
+                calibration.per_mm(frequency),
+                dtype=delta.dtype.type,
+                in_place=True,
             )
     if calibration.model == POLYNOMIAL:
         polynomial = load_polynomial(calibration.to_dict(), getattr(calibration, "path", None), calibration.where)
@@ -163,15 +168,22 @@ def points_from_phase(
     return np.where(np.isfinite(height)[..., None], points, np.nan), height
 
 
-def plane_points_finite(calibration: CalibrationLike, height: np.ndarray) -> np.ndarray:
-    """Where :func:`plane_points` of ``height`` is finite in float32: the height and both lateral coordinates."""
+def plane_points_finite(
+    calibration: CalibrationLike, height: np.ndarray, finite: np.ndarray | None = None
+) -> np.ndarray:
+    """Where :func:`plane_points` of ``height`` is finite in float32: the height and both lateral coordinates.
+
+    ``finite``: ``np.isfinite(height)`` of float32 heights when the caller has it already (it
+    is returned, possibly narrowed in place, instead of a new mask).
+    """
     h = np.asarray(height)
     pixel = calibration.pixel_mm
     if pixel is None:
         raise CalibrationError(f"{calibration.where}: pixel_mm: missing (needed for lateral point coordinates)")
     reach = max(h.shape[1] - 1, h.shape[0] - 1) / 2.0 * abs(pixel)  # largest |x - cx| pixel_mm
     limit = float(np.finfo(np.float32).max)
-    finite = np.isfinite(h) & (np.abs(h) <= limit)
+    if finite is None or h.dtype != np.float32:  # a finite float32 is within the float32 range
+        finite = np.isfinite(h) & (np.abs(h) <= limit)
     if not calibration.l0_mm:
         return finite if reach < limit else np.zeros_like(finite)
     # |X| <= reach |l0 - h| / l0: finite while |l0 - h| stays under this bound (always, for real rigs)
@@ -179,7 +191,8 @@ def plane_points_finite(calibration: CalibrationLike, height: np.ndarray) -> np.
     if bound >= 2.0 * limit:
         return finite
     with np.errstate(over="ignore", invalid="ignore"):
-        return finite & (np.abs(calibration.l0_mm - h.astype(np.float64)) < bound)
+        finite &= np.abs(calibration.l0_mm - h.astype(np.float64)) < bound
+    return finite
 
 
 def plane_points(calibration: CalibrationLike, height: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:

@@ -8,7 +8,12 @@ from processing._validate import finite_pixels
 
 
 def phase_to_height(
-    delta_phase: np.ndarray, l0_mm: float, d0_mm: float, f0_per_mm: float, dtype: type = np.float64
+    delta_phase: np.ndarray,
+    l0_mm: float,
+    d0_mm: float,
+    f0_per_mm: float,
+    dtype: type = np.float64,
+    in_place: bool = False,
 ) -> np.ndarray:
     """Height from the phase difference object - reference (thesis eq. 1.15).
 
@@ -24,16 +29,28 @@ def phase_to_height(
     dtype : float64 or float32
         Working and result precision; float32 (relative rounding 6e-8, far below any phase
         noise) halves the memory traffic of a full image.
+    in_place : bool
+        Write the heights into ``delta_phase`` when it is an array of ``dtype`` (no full-size
+        temporary: a fresh image costs more to allocate than to compute).
     """
     _check_geometry(l0_mm, d0_mm, f0_per_mm)
     if dtype not in (np.float64, np.float32):
         raise ValueError(f"dtype: expected numpy.float64 or numpy.float32, found {dtype!r}")
-    dphi = np.asarray(delta_phase, dtype=dtype)
-    # One temporary instead of three: a full-size image costs more to allocate than to compute.
-    height = np.asarray(dphi - dtype(2.0 * np.pi * f0_per_mm * d0_mm))
-    np.divide(dphi, height, out=height)
-    height *= dtype(l0_mm)
-    return height if height.ndim else height[()]
+    reuse = (
+        in_place
+        and isinstance(delta_phase, np.ndarray)
+        and delta_phase.dtype == dtype
+        and delta_phase.ndim > 0
+        and delta_phase.flags.writeable
+    )
+    height = delta_phase if reuse else np.array(delta_phase, dtype=dtype, ndmin=1)
+    # h = l0 / (1 - 2 pi f0 d0 / dPhi): three passes over one array, rounding as the quotient
+    # form (dPhi = 0 gives 1 - inf and h = 0; NaN stays NaN).
+    with np.errstate(divide="ignore"):
+        np.divide(dtype(2.0 * np.pi * f0_per_mm * d0_mm), height, out=height)
+    np.subtract(dtype(1.0), height, out=height)
+    np.divide(dtype(l0_mm), height, out=height)
+    return height if np.ndim(delta_phase) else height[0]
 
 
 def height_to_phase(height_mm: np.ndarray, l0_mm: float, d0_mm: float, f0_per_mm: float) -> np.ndarray:

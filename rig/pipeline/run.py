@@ -221,14 +221,15 @@ def process(
             points, height = stage_height(obj, ref, calibration, notes)
             # valid only where the stored (float32) height and point are finite: no infinity in any output
             height32 = np.asarray(height).astype(np.float32, copy=False)  # stage_height's own array
+            finite = np.isfinite(height32)
             if points is not None:
-                finite_points = np.isfinite(np.asarray(points).astype(np.float32)).all(axis=-1)
+                finite &= np.isfinite(np.asarray(points).astype(np.float32)).all(axis=-1)
             else:  # plane models: points are made from the heights when written
-                finite_points = calibration_models.plane_points_finite(calibration, height32)
+                finite = calibration_models.plane_points_finite(calibration, height32, finite)
         if ref is not None:
             assert ref.unwrapped is not None
             mask &= ref.unwrapped.valid
-        mask &= np.isfinite(height32) & finite_points
+        mask &= finite
         height = height32  # our own float32 array: masked in place
         np.copyto(height, np.float32(np.nan), where=~mask)
     else:
