@@ -198,13 +198,16 @@ class _DingTables:
 
 
 def _ding_tables(frequencies: Sequence[int], used: Sequence[int]) -> _DingTables | None:
-    """The tables of the pair that ``used`` picks, or None when m + f1 can exceed an 8-bit index."""
+    """The tables of the pair that ``used`` picks, or None when m + f1 can reach the last 8-bit index.
+
+    The last index marks unmodulated pixels: NaN phase, not reachable.
+    """
     f1, f2 = (int(frequencies[i]) for i in used)
-    if f1 + f2 >= _LUT_SIZE:
+    if f1 + f2 >= _LUT_SIZE - 1:
         return None
     table = pair_table(f1, f2)
     size = table.kb.shape[0]
-    phase = np.zeros(_LUT_SIZE, dtype=np.float32)
+    phase = np.full(_LUT_SIZE, np.nan, dtype=np.float32)
     phase[:size] = table.kb * TWO_PI
     orders = np.zeros(_LUT_SIZE, dtype=np.int32)
     orders[:size] = table.kb
@@ -224,6 +227,7 @@ def fringe_pass(
     keep_all: bool = False,
     opencv: bool = True,
     threads: int = 1,
+    orders: bool = True,
 ) -> FringePass:
     """Wrapped phases, modulation mask and (optionally) temporal unwrapping in one pass.
 
@@ -255,6 +259,9 @@ def fringe_pass(
         :data:`ANGLE_TOLERANCE` of exact); False: numpy only.
     threads : int
         Threads sharing the blocks (numpy and OpenCV release the GIL in their loops).
+    orders : bool
+        Keep the fringe-order map (False: ``orders`` is None, for callers that read only the
+        phase; it follows from ``phase`` and the wrapped phase).
 
     Returns
     -------
@@ -302,7 +309,7 @@ def fringe_pass(
         max(ratio * _sampled_high(flat, spec, (height, width), cv2), float(np.finfo(np.float32).tiny)) for spec in specs
     ]
     kept = list(range(len(lists))) if keep_all else [len(lists) - 1]
-    out = _Outputs.allocate(pixels, len(kept), method is not None)
+    out = _Outputs.allocate(pixels, len(kept), method is not None, orders)
     nonnegative = np.issubdtype(stack.dtype, np.unsignedinteger) and all((s.weights[0] >= 0).all() for s in specs)
     plan = _Plan(flat, specs, thresholds, ratio, kept, kernel, used, tables, cv2, nonnegative)
     bounds = _thread_ranges(pixels, threads)
@@ -363,7 +370,7 @@ class _Outputs:
     background: list[np.ndarray]
 
     @classmethod
-    def allocate(cls, pixels: int, kept: int, unwrapping: bool) -> _Outputs:
+    def allocate(cls, pixels: int, kept: int, unwrapping: bool, orders: bool = True) -> _Outputs:
         # One allocation for the float32 maps: large enough for numpy to ask for huge pages, and
         # a few big blocks instead of many 3 MiB ones keep the allocator from returning them to
         # the system between runs (fresh pages cost more to touch than the pass to compute).
@@ -371,7 +378,7 @@ class _Outputs:
         rows = list(maps)
         return cls(
             phase=rows.pop() if unwrapping else None,
-            orders=np.empty(pixels, dtype=np.int32) if unwrapping else None,
+            orders=np.empty(pixels, dtype=np.int32) if unwrapping and orders else None,
             valid=np.empty(pixels, dtype=bool),
             modulated=np.empty(pixels, dtype=bool) if unwrapping else None,
             wrapped=rows[:kept],
@@ -425,17 +432,19 @@ class _Plan:
                 valid &= scratch.test
         if self.kernel is None:
             return
-        assert out.phase is not None and out.orders is not None and out.modulated is not None
+        assert out.phase is not None and out.modulated is not None
         np.copyto(out.modulated[window], valid)
-        phase, orders = out.phase[window], out.orders[window]
-        if self.tables is not None:
+        phase = out.phase[window]
+        orders = None if out.orders is None else out.orders[window]
+        if self.tables is not None:  # NaN outside the modulated pixels comes from the tables
             self._ding_opencv(angles[self.used[0]], angles[self.used[1]], phase, orders, valid, scratch)
-        else:
-            turns = [np.minimum(angles[i] * np.float32(1.0 / TWO_PI), _BELOW_ONE) for i in self.used]
-            absolute, k, consistent = self.kernel(turns)
-            np.copyto(phase, absolute, casting="same_kind")
+            return
+        turns = [np.minimum(angles[i] * np.float32(1.0 / TWO_PI), _BELOW_ONE) for i in self.used]
+        absolute, k, consistent = self.kernel(turns)
+        np.copyto(phase, absolute, casting="same_kind")
+        if orders is not None:
             np.copyto(orders, k, casting="unsafe")
-            valid &= consistent
+        valid &= consistent
         np.logical_not(out.modulated[window], out=scratch.test)
         np.copyto(phase, np.float32(np.nan), where=scratch.test)
 
@@ -454,18 +463,25 @@ class _Plan:
         low: np.ndarray,
         high: np.ndarray,
         phase: np.ndarray,
-        orders: np.ndarray,
+        orders: np.ndarray | None,
         valid: np.ndarray,
         scratch: _Scratch,
     ) -> None:
-        """Ding's look-up as OpenCV tables: index m + f1 = round(f2 t1 - f1 t2 + f1), rounded by addWeighted."""
+        """Ding's look-up as OpenCV tables: index m + f1 = round(f2 t1 - f1 t2 + f1), rounded by addWeighted.
+
+        Pixels outside ``valid`` (the modulation mask on entry) get the last index, whose phase
+        is NaN and which reaches nothing.
+        """
         cv2, tables = self.cv2, self.tables
         assert cv2 is not None and tables is not None
         f1, f2 = tables.f1, tables.f2
         index = cv2.addWeighted(low, f2 / TWO_PI, high, -f1 / TWO_PI, float(f1), dtype=cv2.CV_8U)
+        unmodulated = np.subtract(valid.view(np.uint8), np.uint8(1), out=scratch.reach)  # 255 outside, 0 inside
+        np.bitwise_or(index, unmodulated, out=index)
         cv2.LUT(index, tables.phase, dst=phase)
         phase += high
-        cv2.LUT(index, tables.orders, dst=orders)
+        if orders is not None:
+            cv2.LUT(index, tables.orders, dst=orders)
         valid &= cv2.LUT(index, tables.reach, dst=scratch.reach).view(bool)
 
 

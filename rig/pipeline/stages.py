@@ -251,6 +251,7 @@ def _fused_pass(state: SceneState, options: ProcessOptions) -> bool:
             min_ratio=options.min_modulation_ratio,
             max_residual=max_residual,
             keep_all=state.calibration is None or check,
+            orders=False,  # the corrections re-derive orders from the phases; nothing else reads them
         )
     except ValueError:
         return False  # e.g. frequencies the method refuses: the stage-by-stage path reports it as before
@@ -262,15 +263,15 @@ def _fused_pass(state: SceneState, options: ProcessOptions) -> bool:
     state.wrapped = WrappedPhase(
         freqs, kept(scan.wrapped), kept(scan.modulation), kept(scan.background), scan.modulated
     )
-    state.info["valid_after_modulation"] = float(scan.modulated.mean())
+    state.info["valid_after_modulation"] = np.count_nonzero(scan.modulated) / scan.modulated.size
     if check:
         _check_convention(state, options, "heterodyne", scan.wrapped, [int(f) for f in freqs])
     assert scan.phase is not None
-    mask = scan.valid
+    mask, phase = scan.valid, scan.phase
     if options.params.get("neighbour_rescue", True) is not False:
-        mask = _rescue_rejected(state, scan.phase, mask, scan.modulated)
-    phase = scan.phase
-    np.copyto(phase, np.float32(np.nan), where=~mask)  # the pass's own array: NaN outside the mask
+        mask = _rescue_rejected(state, phase, mask, scan.modulated)
+    if np.any(scan.modulated > mask):  # rejected pixels, whose phase the pass kept: NaN there too
+        np.copyto(phase, np.float32(np.nan), where=~mask)  # the pass's own array
     state.unwrapped = UnwrappedPhase(
         phase=phase, valid=mask, frequency=freqs[-1], method=method, absolute=True, orders=scan.orders
     )
