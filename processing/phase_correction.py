@@ -26,8 +26,14 @@ import numpy as np
 
 from processing import _validate
 from processing.angles import wrap_to_pi
-from processing.fringe_regions import order_break_pixels
-from processing.rpca import RPCAResult, robust_noise_sigma, rpca_ialm
+from processing.fringe_regions import order_breaks_at
+from processing.rpca import (
+    RPCAResult,
+    masked_second_differences,
+    noise_sigma_from_second_differences,
+    robust_noise_sigma,
+    rpca_ialm,
+)
 from processing.shadow_fill import fill_shadows, valid_mask
 
 TWO_PI = 2.0 * np.pi
@@ -95,6 +101,13 @@ def phase_noise_sigma(phase: np.ndarray, mask: np.ndarray | None = None) -> floa
     stable RPCA stopped far too early (NMSE_h 1.6 instead of 0.06).
     """
     return robust_noise_sigma(phase, mask, wrap=True)
+
+
+def phase_noise_and_breaks(phase: np.ndarray, valid: np.ndarray) -> tuple[float, int]:
+    """:func:`phase_noise_sigma` and :func:`order_breaks` of one map, from one set of its second differences."""
+    seconds = masked_second_differences(phase, valid)
+    sigma = noise_sigma_from_second_differences((s[np.isfinite(s)] for s in seconds), wrap=True)
+    return sigma, _count_breaks(seconds)
 
 
 def reorder_from_low_rank(
@@ -251,14 +264,14 @@ def order_breaks(phase: np.ndarray, valid: np.ndarray) -> int:
     steep but continuous phase keeps well below pi (real steps also count, equally for all
     candidates of one map).
     """
-    masked = np.where(valid, phase, np.nan)
+    return _count_breaks(masked_second_differences(phase, valid))
+
+
+def _count_breaks(seconds: tuple[np.ndarray, np.ndarray]) -> int:
+    """Second differences beyond pi (NaN, an invalid pixel of the three, never counts)."""
     breaks = 0
-    for second in (
-        masked[:, 2:] - 2.0 * masked[:, 1:-1] + masked[:, :-2],
-        masked[2:, :] - 2.0 * masked[1:-1, :] + masked[:-2, :],
-    ):
-        np.abs(second, out=second)
-        breaks += int(np.count_nonzero(second > np.pi))  # NaN (an invalid pixel of the three) never counts
+    for second in seconds:
+        breaks += int(np.count_nonzero(np.abs(second) > np.pi))
     return breaks
 
 
@@ -304,7 +317,9 @@ def keep_coherent_detail(
     # A lone departure far beyond any noise (2 k_sigma sigma) is structure too (a one-pixel
     # feature, fringes too dense for L), unless the measured pixel breaks with its neighbours
     # (a wrong order left in it).
-    lone = (np.abs(residual) > 2.0 * k_sigma * sigma) & ~order_break_pixels(np.where(valid, measured, np.nan))
+    lone = np.abs(residual) > 2.0 * k_sigma * sigma  # rare: the order-break test runs at these pixels only
+    rows, cols = np.nonzero(lone)
+    lone[rows, cols] = ~order_breaks_at(measured, valid, rows, cols)
     keep = valid & (coherent | lone)
     out = np.where(keep, measured, estimate)
     return np.where(valid, out, np.nan)

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -121,19 +121,26 @@ def second_differences(d: np.ndarray, mask: np.ndarray | None = None) -> Iterato
     """The finite second differences along rows, then along columns (two 1-D arrays).
 
     With ``mask``, only differences of three valid pixels count. An axis shorter than three
-    pixels gives an empty array.
+    pixels gives an empty array. The column differences come in row-major order (their
+    statistics, not their order, are what callers read).
     """
+    for second in masked_second_differences(d, mask):
+        yield second[np.isfinite(second)]
+
+
+def masked_second_differences(d: np.ndarray, mask: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Second differences along rows ``(H, W - 2)`` and down columns ``(H - 2, W)``, NaN unless
+    all three pixels are valid (``mask``) and finite; float64. An axis shorter than three pixels
+    gives an empty array."""
     arr = np.asarray(d, dtype=np.float64)
-    keep = None if mask is None else np.asarray(mask, dtype=bool)
-    for data, valid in ((arr, keep), (arr.T, None if keep is None else keep.T)):
-        if data.shape[1] < 3:
-            yield np.empty(0)
-            continue
-        second = data[:, 2:] - 2.0 * data[:, 1:-1] + data[:, :-2]
-        ok = np.isfinite(second)
-        if valid is not None:
-            ok &= valid[:, 2:] & valid[:, 1:-1] & valid[:, :-2]
-        yield second[ok]
+    if arr.ndim != 2:
+        raise ValueError(f"d: expected a 2-D array, found {arr.ndim} dimensions")
+    if mask is not None:
+        arr = np.where(np.asarray(mask, dtype=bool), arr, np.nan)
+    rows, cols = arr.shape
+    along = arr[:, 2:] - 2.0 * arr[:, 1:-1] + arr[:, :-2] if cols >= 3 else np.empty((rows, 0))
+    down = arr[2:, :] - 2.0 * arr[1:-1, :] + arr[:-2, :] if rows >= 3 else np.empty((0, cols))
+    return along, down
 
 
 def robust_noise_sigma(d: np.ndarray, mask: np.ndarray | None = None, wrap: bool = False) -> float:
@@ -147,8 +154,13 @@ def robust_noise_sigma(d: np.ndarray, mask: np.ndarray | None = None, wrap: bool
     three valid pixels count (filled shadows would bias it low). ``wrap``: wrap the differences
     into [-pi, pi) first, for phase maps whose 2 pi order errors must not count as noise.
     """
+    return noise_sigma_from_second_differences(second_differences(d, mask), wrap)
+
+
+def noise_sigma_from_second_differences(seconds: Iterable[np.ndarray], wrap: bool = False) -> float:
+    """:func:`robust_noise_sigma` from the finite second differences of each axis."""
     estimates = []
-    for second in second_differences(d, mask):
+    for second in seconds:
         if wrap:
             second = wrap_to_pi(second)
         if second.size:
