@@ -88,11 +88,23 @@ def _fringe_regions(
     step[:, :-1] = np.abs(across) > cut
     step[:-1, :] |= np.abs(down) > cut
     # A kink: the wrapped slope changes by more than ``bend`` (second difference, wrapped).
-    step[:, 1:-1] |= np.abs(wrap_to_pi(np.diff(across, axis=1))) > bend
-    step[1:-1, :] |= np.abs(wrap_to_pi(np.diff(down, axis=0))) > bend
+    step[:, 1:-1] |= _beyond_wrapped(np.diff(across, axis=1), bend)
+    step[1:-1, :] |= _beyond_wrapped(np.diff(down, axis=0), bend)
     core = valid & ~step
     count, labels = cv2.connectedComponents(core.view(np.uint8), connectivity=4, ltype=cv2.CV_32S)
     return core, labels, int(count)
+
+
+def _beyond_wrapped(values: np.ndarray, bound: float) -> np.ndarray:
+    """``|wrap_to_pi(values)| > bound`` for ``bound`` < pi, wrapping only the values beyond it.
+
+    Below pi in magnitude the wrap is the identity, so a value within the bound stays within;
+    only the others (a few per cent: the fringe jumps) are wrapped and tested again.
+    """
+    beyond = np.abs(values) > bound
+    at = np.flatnonzero(beyond)
+    beyond.reshape(-1)[at] = np.abs(wrap_to_pi(values.reshape(-1)[at])) > bound
+    return beyond
 
 
 def _drop_small_regions(
@@ -155,34 +167,56 @@ def _window_majority(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Most frequent order in the window around each (row, col), among pixels of its own region.
 
-    Returns the winners and their vote counts (0 where the window holds no vote).
+    Returns the winners (ties: the smaller order) and their vote counts (0, and winner
+    ``_NO_VOTE``, where the window holds no vote). A window pixel's region and order are
+    packed into one code (label x span + order offset), so each window is one strided copy;
+    the sorted windows are scanned with the window position as the leading axis, where
+    numpy's running maximum and maximum are vectorised across pixels.
     """
+    from numpy.lib.stride_tricks import sliding_window_view
+
     side = 2 * radius + 1
-    k = np.pad(orders.astype(np.int32), radius)
-    lab = np.pad(labels, radius)
-    winners = np.zeros(rows.size, dtype=np.int64)
+    size = side * side
+    low = int(orders.min())
+    span = int(orders.max()) - low + 1
+    code_type = np.int64 if (int(labels.max()) + 1) * span >= 1 << 31 else np.int32
+    code = np.zeros((labels.shape[0] + 2 * radius, labels.shape[1] + 2 * radius), dtype=code_type)
+    inner = code[radius : radius + labels.shape[0], radius : radius + labels.shape[1]]
+    np.multiply(labels, span, out=inner, casting="unsafe")
+    inner += orders
+    inner -= low
+    windows = sliding_window_view(code, (side, side))  # windows[y, x]: the window centred on pixel (y, x)
+    # Runs and the packed (run, order) key below must fit: int16 for the usual small spans.
+    small = np.int16 if size * (span + 1) + span < 1 << 15 else np.int64
+    unsigned = np.uint64 if code_type == np.int64 else np.uint32
+    position = np.arange(size, dtype=small)[:, None]
+    winners = np.full(rows.size, _NO_VOTE, dtype=np.int64)
     support = np.zeros(rows.size, dtype=np.int64)
-    stride = lab.shape[1]
-    offsets = (np.arange(-radius, radius + 1)[:, None] * stride + np.arange(-radius, radius + 1)[None, :]).ravel()
-    flat_k, flat_lab = k.reshape(-1), lab.reshape(-1)
-    small = np.int16 if side * side < 1 << 15 else np.int32  # run lengths: the narrowest type that holds them
     for start in range(0, rows.size, _CHUNK):
-        r = rows[start : start + _CHUNK] + radius
-        c = cols[start : start + _CHUNK] + radius
-        at = r * stride + c
-        near = at[:, None] + offsets[None, :]  # the window's flat indices, row by row
-        window = np.where(flat_lab[near] == flat_lab[at][:, None], flat_k[near], _NO_VOTE).astype(np.int32)
-        window.sort(axis=1)
-        # Length of the run each sorted entry ends; the longest run is the majority.
-        index = np.broadcast_to(np.arange(side * side, dtype=small), window.shape)
-        new = np.ones(window.shape, dtype=bool)
-        new[:, 1:] = window[:, 1:] != window[:, :-1]
-        run = index - np.maximum.accumulate(np.where(new, index, small(0)), axis=1) + small(1)
-        run[window == _NO_VOTE] = 0
-        best = np.argmax(run, axis=1)
-        picked = np.arange(r.size)
-        winners[start : start + r.size] = window[picked, best]
-        support[start : start + r.size] = run[picked, best]
+        r, c = rows[start : start + _CHUNK], cols[start : start + _CHUNK]
+        window = windows[r, c].reshape(r.size, size)
+        window -= (labels[r, c].astype(code_type) * span)[:, None]  # the order offset, in [0, span) in the region
+        # Any other region's pixel (negative, or beyond span as unsigned) becomes span, sorted last.
+        value = np.empty(window.shape, dtype=small)
+        np.minimum(window.view(unsigned), unsigned(span), out=value, casting="unsafe")
+        value.sort(axis=1)
+        value = np.ascontiguousarray(value.T)  # (size, pixels)
+        # Length of the run each sorted entry ends (the longest run is the majority) ...
+        new = np.ones(value.shape, dtype=bool)
+        np.not_equal(value[1:], value[:-1], out=new[1:])
+        run = np.where(new, position, small(0))
+        for i in range(1, size):  # running maximum down the window positions, all pixels at once
+            np.maximum(run[i], run[i - 1], out=run[i])
+        np.subtract(position + small(1), run, out=run)
+        run[value == span] = 0
+        # ... packed with the order so that one maximum finds the longest run, ties the smaller order.
+        run *= small(span + 1)
+        run += small(span)
+        run -= value
+        key = run.max(axis=0).astype(np.int64)
+        votes = key // (span + 1)
+        support[start : start + r.size] = votes
+        winners[start : start + r.size] = np.where(votes > 0, span - key % (span + 1) + low, _NO_VOTE)
     return winners, support
 
 
@@ -199,6 +233,22 @@ def order_break_pixels(phase: np.ndarray) -> np.ndarray:
     return out
 
 
+def order_breaks_at(phase: np.ndarray, valid: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """:func:`order_break_pixels` of ``phase`` masked to ``valid`` (NaN elsewhere), at the given pixels only."""
+    height, width = phase.shape
+    here = phase[rows, cols]
+    here = np.where(valid[rows, cols], here, np.nan)
+    out = np.zeros(rows.size, dtype=bool)
+    for dy, dx in ((0, 1), (0, -1), (1, 0), (-1, 0)):
+        y, x = rows + dy, cols + dx
+        inside = (y >= 0) & (y < height) & (x >= 0) & (x < width)
+        y, x = y[inside], x[inside]
+        near = np.where(valid[y, x], phase[y, x], np.nan)
+        with np.errstate(invalid="ignore"):
+            out[inside] |= np.abs(near - here[inside]) > np.pi
+    return out
+
+
 def fill_from_neighbours(
     phase: np.ndarray, wrapped_phase: np.ndarray, todo: np.ndarray, passes: int = 16
 ) -> np.ndarray:
@@ -208,22 +258,23 @@ def fill_from_neighbours(
     from the neighbour q whose wrapped phase is closest to its own (most likely the same
     surface); pixels reached by no pass stay NaN. ``phase`` is filled in place and returned.
     """
-    padded = np.pad(phase, 1, constant_values=np.nan)
-    padded_phi = np.pad(wrapped_phase, 1)
-    flat, flat_phi = padded.reshape(-1), padded_phi.reshape(-1)
-    stride = padded.shape[1]
-    ys, xs = np.nonzero(todo & np.isnan(phase))
-    at = (ys + 1) * stride + (xs + 1)  # flat indices into the padded maps
+    height, width = phase.shape
+    work = phase if phase.flags.c_contiguous else np.ascontiguousarray(phase)  # flat writes reach it
+    flat, flat_phi = work.reshape(-1), np.ravel(wrapped_phase)
+    ys, xs = np.nonzero(todo & np.isnan(work))
     for _ in range(passes):
-        if not at.size:
+        if not ys.size:
             break
+        at = ys * width + xs
         phi = flat_phi[at]
         best = np.full(at.size, np.nan)
         distance = np.full(at.size, np.inf)
         for dy, dx in NEIGHBOURS:
-            near = at + (dy * stride + dx)
-            value = flat[near]
-            gap = np.abs(wrap_to_pi(flat_phi[near] - phi))
+            y, x = ys + dy, xs + dx
+            inside = (y >= 0) & (y < height) & (x >= 0) & (x < width)
+            near = np.where(inside, y * width + x, 0)  # beyond the border: no value (NaN below)
+            value = np.where(inside, flat[near], np.nan)
+            gap = np.abs(wrap_to_pi(np.where(inside, flat_phi[near], 0.0) - phi))
             closer = (gap < distance) & np.isfinite(value)
             best[closer] = value[closer]
             distance[closer] = gap[closer]
@@ -232,8 +283,9 @@ def fill_from_neighbours(
             break
         # Every pixel of a pass reads its neighbours before any of them is written (one sweep).
         flat[at[found]] = phi[found] + TWO_PI * np.rint((best[found] - phi[found]) / TWO_PI)
-        at = at[~found]
-    phase[...] = padded[1:-1, 1:-1]
+        ys, xs = ys[~found], xs[~found]
+    if work is not phase:
+        phase[...] = work
     return phase
 
 

@@ -4,7 +4,17 @@ from __future__ import annotations
 
 import numpy as np
 
-from processing.fringe_regions import fill_from_neighbours, fringe_regions, pool_region_orders, region_cut
+from processing.angles import wrap_to_pi
+from processing.fringe_regions import (
+    _beyond_wrapped,
+    _window_majority,
+    fill_from_neighbours,
+    fringe_regions,
+    order_break_pixels,
+    order_breaks_at,
+    pool_region_orders,
+    region_cut,
+)
 
 TWO_PI = 2.0 * np.pi
 
@@ -75,3 +85,55 @@ def test_fill_takes_the_order_of_the_neighbour_nearest_in_wrapped_phase() -> Non
     phase = np.array([[6.1 + TWO_PI * 2, np.nan, 0.2 + TWO_PI * 3]])
     out = fill_from_neighbours(phase.copy(), wrapped, np.ones(wrapped.shape, dtype=bool))
     assert out[0, 1] == 0.1 + TWO_PI * 3  # continuous with 0.2 (same fringe), not with 6.1
+
+
+def _brute_window_majority(orders, labels, rows, cols, radius):
+    """Per-pixel reference: count the window's same-region orders one by one (ties: the smaller)."""
+    winners, support = [], []
+    height, width = orders.shape
+    for y, x in zip(rows, cols, strict=True):
+        counts: dict[int, int] = {}
+        for yy in range(max(0, y - radius), min(height, y + radius + 1)):
+            for xx in range(max(0, x - radius), min(width, x + radius + 1)):
+                if labels[yy, xx] == labels[y, x]:
+                    counts[int(orders[yy, xx])] = counts.get(int(orders[yy, xx]), 0) + 1
+        best = max(counts.values())
+        winners.append(min(k for k, v in counts.items() if v == best))
+        support.append(best)
+    return np.array(winners), np.array(support)
+
+
+def test_window_majority_matches_a_per_pixel_count_with_ties_borders_and_regions() -> None:
+    rng = np.random.default_rng(3)
+    orders = rng.integers(-3, 4, size=(23, 31)).astype(np.int32)  # many ties in a 5 x 5 window
+    labels = (rng.random((23, 31)) < 0.7).astype(np.int32) + (np.arange(31) >= 15).astype(np.int32) * 2
+    rows, cols = np.nonzero(labels > 0)
+    winners, support = _window_majority(orders, labels, rows, cols, radius=2)
+    expected_winners, expected_support = _brute_window_majority(orders, labels, rows, cols, 2)
+    np.testing.assert_array_equal(support, expected_support)
+    np.testing.assert_array_equal(winners, expected_winners)
+
+
+def test_beyond_wrapped_equals_the_wrapped_test_everywhere() -> None:
+    values = np.random.default_rng(4).uniform(-4.5 * np.pi, 4.5 * np.pi, size=(200, 300))
+    values[0, :5] = [1.2, -1.2, np.nextafter(1.2, 2.0), np.pi, np.nan]
+    np.testing.assert_array_equal(_beyond_wrapped(values, 1.2), np.abs(wrap_to_pi(values)) > 1.2)
+
+
+def test_order_breaks_at_pixels_equals_the_full_map_test() -> None:
+    rng = np.random.default_rng(5)
+    phase = np.cumsum(rng.normal(0.0, 0.3, size=(40, 50)), axis=1)
+    phase[rng.random(phase.shape) < 0.05] += 2 * np.pi  # order errors
+    valid = rng.random(phase.shape) > 0.1
+    rows, cols = np.nonzero(np.ones(phase.shape, dtype=bool))
+    full = order_break_pixels(np.where(valid, phase, np.nan))
+    np.testing.assert_array_equal(order_breaks_at(phase, valid, rows, cols), full.reshape(-1))
+
+
+def test_fill_writes_into_a_non_contiguous_map() -> None:
+    wrapped = np.tile(np.linspace(0.0, 1.0, 8), (6, 1))
+    phase = np.asfortranarray(wrapped + 2 * np.pi * 3)
+    phase[2:4, 3:5] = np.nan
+    filled = fill_from_neighbours(phase, wrapped, np.ones(phase.shape, dtype=bool))
+    assert filled is phase and np.isfinite(phase).all()
+    np.testing.assert_allclose(phase, wrapped + 2 * np.pi * 3)
