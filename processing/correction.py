@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from processing.concurrency import side_by_side
 from processing.correction_method import CorrectionMethod
 from processing.fringe_regions import pool_region_orders
 from processing.order_correction import correct_orders_rpca
@@ -37,7 +38,7 @@ from processing.phase_correction import (
     keep_coherent_detail,
     low_rank_misfit,
     order_breaks,
-    phase_noise_sigma,
+    phase_noise_and_breaks,
     phase_pair,
     reorder_from_low_rank,
     settle_orders,
@@ -203,20 +204,24 @@ def correct_auto(
     """
     start = time.perf_counter()
     phase, wrapped, valid = _inputs(absolute_phase, wrapped_phase, mask)
-    sigma = phase_noise_sigma(phase, valid)
-    pooled = pool_region_orders(phase, wrapped, valid)
-    # RPCA on the pooled phase (far sparser errors) unless pooling left more order breaks.
-    base_breaks = {"regions": order_breaks(pooled, valid)}
-    # Measured breaks only matter if pooling left some (ties keep the pooled phase).
-    base_breaks["measured"] = order_breaks(phase, valid) if base_breaks["regions"] else base_breaks["regions"]
-    base_name = min(base_breaks, key=base_breaks.__getitem__)  # ties: the pooled phase
-    base = pooled if base_name == "regions" else phase
+    pooled, (sigma, measured_breaks) = side_by_side(
+        lambda: pool_region_orders(phase, wrapped, valid), lambda: phase_noise_and_breaks(phase, valid)
+    )
     decimate = default_decimation(phase.shape) if decimate is None else int(decimate)
-    if decimate > 1:
-        low_rank, result, rough = decimated_low_rank(base, valid, decimate, sigma, tau=tau, svd=svd)
-    else:
+
+    def low_rank_of(base: np.ndarray) -> tuple[np.ndarray, RPCAResult, np.ndarray]:
+        if decimate > 1:
+            return decimated_low_rank(base, valid, decimate, sigma, tau=tau, svd=svd)
         low_rank, result = correct_phase_rpca(base, valid, tau=tau, stable=True, svd=svd, noise_sigma=sigma)
-        rough = np.zeros(valid.shape, dtype=bool)
+        return low_rank, result, np.zeros(valid.shape, dtype=bool)
+
+    # RPCA on the pooled phase (far sparser errors) unless pooling left more order breaks than the
+    # measured phase (ties keep the pooled phase): solved while its breaks are counted, and solved
+    # again on the measured phase in that rare case. Measured breaks only matter if pooling left some.
+    solved, regions_breaks = side_by_side(lambda: low_rank_of(pooled), lambda: order_breaks(pooled, valid))
+    base_breaks = {"regions": regions_breaks, "measured": measured_breaks if regions_breaks else regions_breaks}
+    base_name = min(base_breaks, key=base_breaks.__getitem__)
+    low_rank, result, rough = solved if base_name == "regions" else low_rank_of(phase)
     # Candidate order maps, the one with fewest order breaks kept: the pooled orders, alone and
     # with L's orders where L fits the wrapped phase. Only where pooling left more order breaks
     # than the measured phase (fringes too dense for regions) are L's orders also guarded (where
@@ -227,8 +232,10 @@ def correct_auto(
     breaks = {"regions": base_breaks["regions"]}
     misfit = np.zeros(valid.shape, dtype=bool)
     if breaks["regions"] > 0:
-        proposed = reorder_from_low_rank(low_rank, wrapped, valid)
-        misfit = low_rank_misfit(low_rank, wrapped, valid) | (rough & valid)
+        proposed, misfit = side_by_side(
+            lambda: reorder_from_low_rank(low_rank, wrapped, valid),
+            lambda: low_rank_misfit(low_rank, wrapped, valid) | (rough & valid),
+        )
         candidates["regions+low-rank"] = np.where(misfit, pooled, proposed)
         breaks["regions+low-rank"] = order_breaks(candidates["regions+low-rank"], valid)
     if min(breaks.values()) > base_breaks["measured"]:
@@ -240,8 +247,10 @@ def correct_auto(
     reordered = candidates[guard_name]
     if not float(k_sigma) > 0:
         raise ValueError(f"k_sigma: expected > 0, found {k_sigma}")
-    out = keep_coherent_detail(low_rank, reordered, valid, float(k_sigma), sigma)
-    changed = valid & (np.abs(reordered - phase) > np.pi)
+    out, changed = side_by_side(
+        lambda: keep_coherent_detail(low_rank, reordered, valid, float(k_sigma), sigma),
+        lambda: np.count_nonzero(valid & (np.abs(reordered - phase) > np.pi)),
+    )
     parameters = {
         "tau": tau if tau is not None else default_tau(phase.shape),
         "stable": True,
@@ -257,7 +266,7 @@ def correct_auto(
         steps=["pool-region-orders", "rpca-phase", "reorder-if-consistent"]
         + (["settle-orders"] if len(candidates) > 2 else [])
         + ["restore-detail"],
-        orders_changed=int(np.count_nonzero(changed)),
+        orders_changed=int(changed),
         misfit_pixels=int(np.count_nonzero(misfit)),
         guard=guard_name,
         order_breaks=breaks,

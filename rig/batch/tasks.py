@@ -137,9 +137,10 @@ def _compare(task: CaptureTask, main: Any, main_seconds: float) -> list[CompareR
 
 
 def _single_threaded_worker() -> None:
-    """One thread per worker: the cluster runs a worker per core, so OpenCV's thread pool and the
-    frame-reading threads would only oversubscribe the cores (BLAS is limited around each task).
-    Only inside a Dask worker process: a task run in the caller's process changes nothing."""
+    """One thread per worker: the cluster runs a worker per core, so OpenCV's thread pool, the
+    frame-reading threads and the side-by-side steps of ``auto`` would only oversubscribe the
+    cores (BLAS is limited around each task). Only inside a Dask worker process: a task run in
+    the caller's process changes nothing."""
     try:
         from distributed import get_worker
 
@@ -148,10 +149,12 @@ def _single_threaded_worker() -> None:
         return
     import cv2
 
+    from processing import concurrency
     from rig.store import capture
 
     cv2.setNumThreads(1)
     capture.LOAD_THREADS = 1
+    concurrency.THREADS = 1
 
 
 def run_task(task: CaptureTask) -> TaskOutcome:
