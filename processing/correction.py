@@ -203,6 +203,9 @@ def correct_auto(
     4.7e-5); at 25 dB 3.4e-6 (``rpca-phase`` 6.9e-6). About 0.2 - 0.3 s of CPU per map there.
     """
     start = time.perf_counter()
+    if not float(k_sigma) > 0:
+        raise ValueError(f"k_sigma: expected > 0, found {k_sigma}")
+    k_sigma = float(k_sigma)
     phase, wrapped, valid = _inputs(absolute_phase, wrapped_phase, mask)
     pooled, (sigma, measured_breaks) = side_by_side(
         lambda: pool_region_orders(phase, wrapped, valid), lambda: phase_noise_and_breaks(phase, valid)
@@ -231,13 +234,17 @@ def correct_auto(
     candidates = {"regions": pooled}
     breaks = {"regions": base_breaks["regions"]}
     misfit = np.zeros(valid.shape, dtype=bool)
+    pooled_detail = None  # step 5 on the pooled orders, done while the other candidate's breaks are counted
     if breaks["regions"] > 0:
         proposed, misfit = side_by_side(
             lambda: reorder_from_low_rank(low_rank, wrapped, valid),
             lambda: low_rank_misfit(low_rank, wrapped, valid) | (rough & valid),
         )
-        candidates["regions+low-rank"] = np.where(misfit, pooled, proposed)
-        breaks["regions+low-rank"] = order_breaks(candidates["regions+low-rank"], valid)
+        candidate = candidates["regions+low-rank"] = np.where(misfit, pooled, proposed)
+        pooled_detail, breaks["regions+low-rank"] = side_by_side(
+            lambda: keep_coherent_detail(low_rank, pooled, valid, k_sigma, sigma),
+            lambda: order_breaks(candidate, valid),
+        )
     if min(breaks.values()) > base_breaks["measured"]:
         for guard_name, guard in (("measured", phase), ("vote", vote_row_orders(phase, wrapped, valid))):
             guarded = np.where(misfit, accept_if_consistent(proposed, guard, valid), proposed)
@@ -245,10 +252,12 @@ def correct_auto(
             breaks[guard_name] = order_breaks(candidates[guard_name], valid)
     guard_name = min(breaks, key=breaks.__getitem__)  # ties: the first
     reordered = candidates[guard_name]
-    if not float(k_sigma) > 0:
-        raise ValueError(f"k_sigma: expected > 0, found {k_sigma}")
     out, changed = side_by_side(
-        lambda: keep_coherent_detail(low_rank, reordered, valid, float(k_sigma), sigma),
+        lambda: (
+            pooled_detail
+            if guard_name == "regions" and pooled_detail is not None
+            else keep_coherent_detail(low_rank, reordered, valid, k_sigma, sigma)
+        ),
         lambda: np.count_nonzero(valid & (np.abs(reordered - phase) > np.pi)),
     )
     parameters = {

@@ -274,10 +274,10 @@ def fill_from_neighbours(
             inside = (y >= 0) & (y < height) & (x >= 0) & (x < width)
             near = np.where(inside, y * width + x, 0)  # beyond the border: no value (NaN below)
             value = np.where(inside, flat[near], np.nan)
-            gap = np.abs(wrap_to_pi(np.where(inside, flat_phi[near], 0.0) - phi))
+            gap = np.abs(wrap_to_pi(flat_phi[near] - phi))  # meaningless where value is NaN, never used
             closer = (gap < distance) & np.isfinite(value)
-            best[closer] = value[closer]
-            distance[closer] = gap[closer]
+            np.copyto(best, value, where=closer)
+            np.copyto(distance, gap, where=closer)
         found = np.isfinite(best)
         if not found.any():
             break
@@ -328,12 +328,19 @@ def pool_region_orders(
     """
     phase = np.asarray(absolute_phase, dtype=np.float64)
     phi = np.where(valid, np.asarray(wrapped_phase, dtype=np.float64), 0.0)
-    with np.errstate(invalid="ignore"):
-        orders = np.where(valid, np.rint((phase - phi) / TWO_PI), 0.0).astype(np.int32)
-    steps = _steps(phi)
-    core, labels, count = _fringe_regions(steps, valid, _region_cut(steps, valid) if cut is None else cut, bend)
+
+    def measured_orders() -> np.ndarray:
+        with np.errstate(invalid="ignore"):
+            return np.where(valid, np.rint((phase - phi) / TWO_PI), 0.0).astype(np.int32)
+
+    def regions() -> tuple[np.ndarray, np.ndarray, int]:
+        steps = _steps(phi)
+        core, labels, count = _fringe_regions(steps, valid, _region_cut(steps, valid) if cut is None else cut, bend)
+        return _drop_small_regions(labels, core, count, min_votes)
+
+    labels, core, count = regions()
+    orders = measured_orders()
     out = np.full(phase.shape, np.nan)
-    labels, core, count = _drop_small_regions(labels, core, count, min_votes)
     if count > 1:
         pieces, piece_count = _tile_pieces(labels, core, count, tile)
         winners, sizes = _tally(pieces[core], orders[core], piece_count)

@@ -310,19 +310,22 @@ def keep_coherent_detail(
     estimate: np.ndarray, measured: np.ndarray, valid: np.ndarray, k_sigma: float, sigma: float
 ) -> np.ndarray:
     """:func:`restore_detail` on maps already validated (finite wherever ``valid``), ``k_sigma`` > 0."""
-    residual = np.where(valid, measured - estimate, 0.0).astype(np.float32)
+    invalid = ~valid
+    residual = np.subtract(measured, estimate, out=np.empty(valid.shape, dtype=np.float32), casting="same_kind")
+    np.copyto(residual, np.float32(0.0), where=invalid)
+    size = np.abs(residual)
     mean = _box_sum_3x3(residual) / 9.0
-    departing = _box_sum_3x3((np.abs(residual) > 2.0 * sigma).astype(np.float32))
+    departing = _box_count_3x3(size > 2.0 * sigma)
     coherent = (np.abs(mean) > k_sigma * sigma / 3.0) & (departing >= 3)
     # A lone departure far beyond any noise (2 k_sigma sigma) is structure too (a one-pixel
     # feature, fringes too dense for L), unless the measured pixel breaks with its neighbours
     # (a wrong order left in it).
-    lone = np.abs(residual) > 2.0 * k_sigma * sigma  # rare: the order-break test runs at these pixels only
+    lone = size > 2.0 * k_sigma * sigma  # rare: the order-break test runs at these pixels only
     rows, cols = np.nonzero(lone)
     lone[rows, cols] = ~order_breaks_at(measured, valid, rows, cols)
-    keep = valid & (coherent | lone)
-    out = np.where(keep, measured, estimate)
-    return np.where(valid, out, np.nan)
+    out = np.where(valid & (coherent | lone), measured, estimate)
+    np.copyto(out, np.nan, where=invalid)
+    return out
 
 
 def _box_sum_3x3(values: np.ndarray) -> np.ndarray:
@@ -330,6 +333,11 @@ def _box_sum_3x3(values: np.ndarray) -> np.ndarray:
     padded = np.pad(values, 1)
     across = padded[:, :-2] + padded[:, 1:-1] + padded[:, 2:]
     return across[:-2, :] + across[1:-1, :] + across[2:, :]
+
+
+def _box_count_3x3(mask: np.ndarray) -> np.ndarray:
+    """True pixels in each pixel's 3 x 3 neighbourhood (uint8: at most 9), as :func:`_box_sum_3x3`."""
+    return _box_sum_3x3(mask.view(np.uint8))
 
 
 def block_means(values: np.ndarray, valid: np.ndarray, factor: int) -> tuple[np.ndarray, np.ndarray]:
