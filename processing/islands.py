@@ -16,9 +16,20 @@ regions.
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
 DEFAULT_MIN_FRACTION = 0.005
+_scratch = threading.local()
+
+
+def _label_buffer(shape: tuple[int, ...]) -> np.ndarray:
+    """This thread's int32 label image of ``shape``, kept between calls."""
+    buffer = getattr(_scratch, "labels", None)
+    if buffer is None or buffer.shape != shape:
+        buffer = _scratch.labels = np.empty(shape, dtype=np.int32)
+    return buffer
 
 
 def island_mask(valid: np.ndarray, min_fraction: float = DEFAULT_MIN_FRACTION) -> np.ndarray:
@@ -50,13 +61,20 @@ def island_mask(valid: np.ndarray, min_fraction: float = DEFAULT_MIN_FRACTION) -
 
 
 def _regions(valid: np.ndarray, opencv: bool = True) -> tuple[np.ndarray, int]:
-    """8-connected region labels of ``valid`` (0 = background) and the number of labels (background included)."""
+    """8-connected region labels of ``valid`` (0 = background) and the number of labels (background included).
+
+    The labels are scratch (OpenCV writes them into this thread's buffer of the last shape, so
+    repeated scans reuse its pages): read them before the next call in the same thread.
+    """
     try:
         import cv2
     except ImportError:
         cv2 = None
     if opencv and cv2 is not None:
-        count, labels = cv2.connectedComponents(np.ascontiguousarray(valid).view(np.uint8), connectivity=8)
+        labels = _label_buffer(valid.shape)
+        count, labels = cv2.connectedComponents(
+            np.ascontiguousarray(valid).view(np.uint8), labels=labels, connectivity=8, ltype=cv2.CV_32S
+        )
         return labels, int(count)
     from scipy import ndimage
 
