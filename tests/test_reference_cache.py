@@ -136,3 +136,25 @@ def test_frames_in_memory_give_the_same_result_and_are_checked(small_capture) ->
         process(small_capture.capture, small_capture.calibration, options, frames=frames[1:])
     with pytest.raises(ProcessingError, match="frames: expected dtype"):
         process(small_capture.capture, small_capture.calibration, options, frames=frames.astype(np.float64))
+
+
+def test_calibration_and_reference_manifests_are_read_again_when_their_files_change(small_capture) -> None:
+    options = ProcessOptions(correction="none")
+    first = process(small_capture.capture, small_capture.calibration, options)
+    again = process(small_capture.capture, small_capture.calibration, options)
+    assert again.calibration is first.calibration  # unchanged files: read and checked once
+    assert again.reference is not None and first.reference is not None
+    assert again.reference.capture is first.reference.capture
+    path = small_capture.calibration / "calibration.json"
+    data = json.loads(path.read_text())
+    data["l0_mm"] *= 1.1
+    path.write_text(json.dumps(data))
+    recalibrated = process(small_capture.capture, small_capture.calibration, options)
+    assert recalibrated.calibration is not first.calibration
+    assert recalibrated.calibration.l0_mm == pytest.approx(data["l0_mm"])
+    assert recalibrated.height is not None and first.height is not None
+    assert not np.allclose(recalibrated.height[first.mask], first.height[first.mask])
+    manifest = small_capture.calibration / "reference" / "capture.json"
+    manifest.write_text(manifest.read_text())  # rewritten: another file version, read again
+    rewritten = process(small_capture.capture, small_capture.calibration, options)
+    assert rewritten.reference is not None and rewritten.reference.capture is not recalibrated.reference.capture

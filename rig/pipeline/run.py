@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import time
+from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -127,27 +128,61 @@ def load_calibration_for(
     Everything the two share must fit (:func:`rig.pipeline.fit.check_fit`): camera and projector
     size, fringe axis (``axis``, default the capture's first sinusoid's), patterns, units.
     """
+    calibration, reference = _calibration_and_reference(calibration_path)
+    if axis is None:
+        groups = group_patterns(capture.patterns, str(capture.manifest_path))
+        axis = _fringe_axis(groups, ProcessOptions(), str(capture.manifest_path))
+    check_fit(capture, calibration, axis, reference)
+    return calibration, reference
+
+
+# Calibrations read, with their reference captures, by the identity of the files they came from:
+# every scan a calibration serves reads the same two manifests again (a long-running console or
+# batch worker skips reading and checking them until either file changes).
+_READ: OrderedDict[tuple[Any, ...], tuple[Calibration, Capture | None, tuple[int, ...] | None]] = OrderedDict()
+_READ_ENTRIES = 4
+
+
+def _identity(path: Path) -> tuple[int, ...] | None:
+    """A file's device, inode, size and change times (None when it cannot be read)."""
+    try:
+        info = path.stat()
+    except OSError:
+        return None
+    return (info.st_dev, info.st_ino, info.st_size, info.st_mtime_ns, info.st_ctime_ns)
+
+
+def _calibration_and_reference(calibration_path: str | Path) -> tuple[Calibration, Capture | None]:
+    """The calibration and, when its model needs one, its reference capture (read once per file version)."""
+    path = Path(calibration_path)
+    key = (str(path), _identity(path if path.suffix == ".json" else path / "calibration.json"))
+    cached = _READ.get(key) if key[1] is not None else None
+    if cached is not None:
+        calibration, reference, reference_identity = cached
+        if reference is None or _identity(reference.manifest_path) == reference_identity:
+            _READ.move_to_end(key)
+            return calibration, reference
     calibration = read_calibration(calibration_path)
     if calibration.model not in calibration_models.MODELS:
         raise CalibrationError(
             f"{calibration.where}: model: expected one of {', '.join(calibration_models.MODELS)}, found {calibration.model!r}"
         )
-    if axis is None:
-        groups = group_patterns(capture.patterns, str(capture.manifest_path))
-        axis = _fringe_axis(groups, ProcessOptions(), str(capture.manifest_path))
-    if not calibration_models.needs_reference(calibration):
-        check_fit(capture, calibration, axis)
-        return calibration, None
-    if calibration.reference is None or calibration.path is None:
-        raise CalibrationError(f"{calibration.where}: reference: missing (the reference-plane capture)")
-    # relative, and inside the calibration directory once every link is resolved
-    ref_path = files.contained(
-        calibration.path, calibration.reference, calibration.where, "reference", CalibrationError
-    )
-    if not (ref_path / "capture.json").is_file():
-        raise CalibrationError(f"{calibration.where}: reference: no capture at {ref_path}")
-    reference = read_capture(ref_path, verify=False)  # verified when loaded
-    check_fit(capture, calibration, axis, reference)
+    reference, reference_identity = None, None
+    if calibration_models.needs_reference(calibration):
+        if calibration.reference is None or calibration.path is None:
+            raise CalibrationError(f"{calibration.where}: reference: missing (the reference-plane capture)")
+        # relative, and inside the calibration directory once every link is resolved
+        ref_path = files.contained(
+            calibration.path, calibration.reference, calibration.where, "reference", CalibrationError
+        )
+        if not (ref_path / "capture.json").is_file():
+            raise CalibrationError(f"{calibration.where}: reference: no capture at {ref_path}")
+        reference_identity = _identity(ref_path / "capture.json")  # before reading: a later change misses
+        reference = read_capture(ref_path, verify=False)  # verified when loaded
+    if key[1] is not None:
+        _READ[key] = (calibration, reference, reference_identity)
+        while len(_READ) > _READ_ENTRIES:
+            _READ.popitem(last=False)
     return calibration, reference
 
 
