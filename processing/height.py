@@ -6,6 +6,8 @@ import numpy as np
 
 from processing._validate import finite_pixels
 
+_PIECE = 1 << 16  # values per piece of phase_to_height: its temporary stays in the CPU cache
+
 
 def phase_to_height(
     delta_phase: np.ndarray,
@@ -41,15 +43,20 @@ def phase_to_height(
         and isinstance(delta_phase, np.ndarray)
         and delta_phase.dtype == dtype
         and delta_phase.ndim > 0
+        and delta_phase.flags.c_contiguous
         and delta_phase.flags.writeable
     )
     height = delta_phase if reuse else np.array(delta_phase, dtype=dtype, ndmin=1)
-    # h = l0 / (1 - 2 pi f0 d0 / dPhi): three passes over one array, rounding as the quotient
-    # form (dPhi = 0 gives 1 - inf and h = 0; NaN stays NaN).
-    with np.errstate(divide="ignore"):
-        np.divide(dtype(2.0 * np.pi * f0_per_mm * d0_mm), height, out=height)
-    np.subtract(dtype(1.0), height, out=height)
-    np.divide(dtype(l0_mm), height, out=height)
+    # In place over cache-sized pieces, with one small temporary for dPhi - 2 pi f0 d0.
+    offset, scale = dtype(2.0 * np.pi * f0_per_mm * d0_mm), dtype(l0_mm)
+    flat = height.reshape(-1)
+    scratch = np.empty(min(flat.size, _PIECE), dtype=dtype)
+    for start in range(0, flat.size, _PIECE):
+        piece = flat[start : start + _PIECE]
+        below = scratch[: piece.size]
+        np.subtract(piece, offset, out=below)
+        np.divide(piece, below, out=piece)
+        piece *= scale
     return height if np.ndim(delta_phase) else height[0]
 
 
