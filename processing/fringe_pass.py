@@ -31,7 +31,7 @@ import math
 import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import Any
 
@@ -134,9 +134,11 @@ class FringePass:
     valid : bool map
         ``modulated`` and, with a method, consistent for it (see processing.temporal).
     kept : list of int
-        Groups whose ``wrapped``, ``modulation`` and ``background`` maps were kept (in order).
+        Groups whose ``wrapped``, ``modulation`` and ``background`` (or ``brightness``) maps were
+        kept (in order).
     wrapped, modulation, background : lists of float32 maps, one per kept group
-        Wrapped phase in [0, 2 pi), fringe amplitude B and mean intensity A.
+        Wrapped phase in [0, 2 pi), fringe amplitude B and mean intensity A (these two empty when
+        ``brightness`` was asked for).
     thresholds : list of float
         Minimum modulation of each group's mask.
     phase_frequency : float
@@ -155,6 +157,7 @@ class FringePass:
     background: list[np.ndarray]
     thresholds: list[float]
     phase_frequency: float
+    brightness: list[np.ndarray] = field(default_factory=list)  # A + B per kept group, when asked for
 
 
 @dataclass(frozen=True)
@@ -229,6 +232,7 @@ def fringe_pass(
     opencv: bool = True,
     threads: int = 1,
     orders: bool = True,
+    brightness: bool = False,
 ) -> FringePass:
     """Wrapped phases, modulation mask and (optionally) temporal unwrapping in one pass.
 
@@ -263,6 +267,9 @@ def fringe_pass(
     orders : bool
         Keep the fringe-order map (False: ``orders`` is None, for callers that read only the
         phase; it follows from ``phase`` and the wrapped phase).
+    brightness : bool
+        Keep A + B of each kept group (a texture: the brightest the pixel gets) instead of A and
+        B apart: one full-size map instead of two.
 
     Returns
     -------
@@ -310,7 +317,7 @@ def fringe_pass(
         max(ratio * _sampled_high(flat, spec, (height, width), cv2), float(np.finfo(np.float32).tiny)) for spec in specs
     ]
     kept = list(range(len(lists))) if keep_all else [len(lists) - 1]
-    out = _Outputs.allocate(pixels, len(kept), method is not None, orders)
+    out = _Outputs.allocate(pixels, len(kept), method is not None, orders, brightness)
     nonnegative = np.issubdtype(stack.dtype, np.unsignedinteger) and all((s.weights[0] >= 0).all() for s in specs)
     plan = _Plan(flat, specs, thresholds, ratio, kept, kernel, used, tables, cv2, nonnegative)
     bounds = _thread_ranges(pixels, threads)
@@ -334,6 +341,7 @@ def fringe_pass(
         background=[m.reshape(shape) for m in out.background],
         thresholds=thresholds,
         phase_frequency=freqs[used[-1]] if used else freqs[-1],
+        brightness=[m.reshape(shape) for m in out.brightness],
     )
 
 
@@ -369,13 +377,17 @@ class _Outputs:
     wrapped: list[np.ndarray]
     modulation: list[np.ndarray]
     background: list[np.ndarray]
+    brightness: list[np.ndarray]
 
     @classmethod
-    def allocate(cls, pixels: int, kept: int, unwrapping: bool, orders: bool = True) -> _Outputs:
+    def allocate(
+        cls, pixels: int, kept: int, unwrapping: bool, orders: bool = True, brightness: bool = False
+    ) -> _Outputs:
         # One allocation for the float32 maps: large enough for numpy to ask for huge pages, and
         # a few big blocks instead of many 3 MiB ones keep the allocator from returning them to
         # the system between runs (fresh pages cost more to touch than the pass to compute).
-        maps = np.empty((3 * kept + (1 if unwrapping else 0), pixels), dtype=np.float32)
+        per_group = 2 if brightness else 3
+        maps = np.empty((per_group * kept + (1 if unwrapping else 0), pixels), dtype=np.float32)
         rows = list(maps)
         return cls(
             phase=rows.pop() if unwrapping else None,
@@ -383,8 +395,9 @@ class _Outputs:
             valid=np.empty(pixels, dtype=bool),
             modulated=np.empty(pixels, dtype=bool) if unwrapping else None,
             wrapped=rows[:kept],
-            modulation=rows[kept : 2 * kept],
-            background=rows[2 * kept :],
+            modulation=[] if brightness else rows[kept : 2 * kept],
+            background=[] if brightness else rows[2 * kept :],
+            brightness=rows[kept:] if brightness else [],
         )
 
 
@@ -424,9 +437,11 @@ class _Plan:
             slot = self.kept.index(g) if g in self.kept else -1
             angle = out.wrapped[slot][window] if slot >= 0 else scratch.angle[g]
             angles.append(_angle_into(coeffs[1], coeffs[2], angle, cv2, below_two_pi=slot >= 0 or self.tables is None))
-            modulation = out.modulation[slot][window] if slot >= 0 else scratch.modulation
+            modulation = out.modulation[slot][window] if slot >= 0 and out.modulation else scratch.modulation
             _magnitude_into(coeffs[1], coeffs[2], modulation, cv2)
-            if slot >= 0:
+            if slot >= 0 and out.brightness:
+                np.add(coeffs[0], modulation, out=out.brightness[slot][window])
+            elif slot >= 0:
                 np.copyto(out.background[slot][window], coeffs[0])
             self._mask(coeffs[0], modulation, self.thresholds[g], valid if g == 0 else scratch.test, scratch)
             if g:

@@ -22,6 +22,7 @@ before the projector's gamma. The projector pixel coordinate ``u`` runs along th
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
@@ -82,6 +83,18 @@ def _check_axis(value: Any) -> None:
 # --------------------------------------------------------------------------- the kinds
 
 
+@functools.cache
+def _compared_fields(kind: type) -> tuple[str, ...]:
+    """Fields a pattern of ``kind`` compares by (extra keys aside); looked up once per kind."""
+    return tuple(f.name for f in dataclasses.fields(kind) if f.compare and f.name != "extra")
+
+
+@functools.cache
+def _field_defaults(kind: type) -> dict[str, Any]:
+    """Default value of each field of ``kind`` that has one (callers only read it)."""
+    return {f.name: f.default for f in dataclasses.fields(kind) if f.default is not dataclasses.MISSING}
+
+
 @dataclass(frozen=True, kw_only=True, eq=False)
 class Pattern(Mapping[str, Any]):
     """Base of the pattern kinds: the JSON round trip and the unknown keys.
@@ -114,7 +127,7 @@ class Pattern(Mapping[str, Any]):
         """Raise :class:`PatternError` on the first value the format does not allow."""
 
     def _defaults(self) -> dict[str, Any]:
-        return {f.name: f.default for f in dataclasses.fields(self) if f.default is not dataclasses.MISSING}
+        return _field_defaults(type(self))
 
     def to_dict(self) -> dict[str, Any]:
         """The capture.json entry (format v1); the exact entry it was parsed from, if unchanged."""
@@ -133,7 +146,7 @@ class Pattern(Mapping[str, Any]):
         return {key: values[key] for key in order if written(key)}
 
     def _values(self) -> tuple[Any, ...]:
-        return tuple(getattr(self, f.name) for f in dataclasses.fields(self) if f.compare and f.name != "extra")
+        return tuple(getattr(self, name) for name in _compared_fields(type(self)))
 
     def __eq__(self, other: object) -> bool:
         """Same kind and values (key order aside); equal to a mapping holding its capture.json entry."""

@@ -151,6 +151,20 @@ def test_opencv_and_numpy_paths_agree_and_threads_change_nothing() -> None:
     np.testing.assert_allclose(a.modulation[0], c.modulation[0], rtol=1e-6)
 
 
+def test_brightness_and_no_orders_keep_the_same_phase_and_one_map_for_two() -> None:
+    stack, groups, _, _ = _scan([7, 8], snr_db=30.0)
+    full = fringe_pass(stack, groups, [7, 8], "two-frequency", keep_all=True)
+    lean = fringe_pass(stack, groups, [7, 8], "two-frequency", keep_all=True, orders=False, brightness=True)
+    assert lean.orders is None and lean.modulation == [] and lean.background == []
+    assert full.brightness == [] and len(lean.brightness) == 2
+    for bright, background, modulation in zip(lean.brightness, full.background, full.modulation, strict=True):
+        np.testing.assert_array_equal(bright, background + modulation)  # the same float32 sum
+    np.testing.assert_array_equal(lean.phase, full.phase)
+    np.testing.assert_array_equal(lean.valid, full.valid)
+    for a, b in zip(lean.wrapped, full.wrapped, strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
 def test_large_image_uses_several_blocks_and_thread_ranges_cover_it() -> None:
     """Blocks of 16k pixels with a partial last one: the same result as the stage functions everywhere."""
     stack, groups, _, _ = _scan([7, 8])

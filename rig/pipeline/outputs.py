@@ -202,12 +202,16 @@ def write_report(path: Path, report: Mapping[str, Any]) -> Path:
 
 def _texture(state: SceneState, mask: np.ndarray) -> np.ndarray | None:
     """Grey level (N,) of the valid pixels: A + B of the highest frequency, 255 at its 99.5th percentile."""
-    if state.wrapped is None or not state.wrapped.background:
+    wrapped = state.wrapped
+    if wrapped is None:
         return None
-    background, modulation = state.wrapped.background[-1], state.wrapped.modulation[-1]
-    if background is None or modulation is None:
-        return None
-    bright = background + modulation
+    bright = wrapped.brightness[-1] if wrapped.brightness else None
+    if bright is None:  # the stage-by-stage path keeps A and B apart
+        background = wrapped.background[-1] if wrapped.background else None
+        modulation = wrapped.modulation[-1] if wrapped.modulation else None
+        if background is None or modulation is None:
+            return None
+        bright = background + modulation
     top = float(np.percentile(bright[::4, ::4], 99.5)) or 1.0  # a display scale: a 1/16 subsample is plenty
     grey = bright[mask]
     grey *= 255.0 / top

@@ -45,6 +45,8 @@ class WrappedPhase:
     modulation: list[np.ndarray | None]
     background: list[np.ndarray | None]
     valid: np.ndarray
+    # A + B per frequency instead of the two apart (the fused pass: the texture is all that reads them)
+    brightness: list[np.ndarray | None] | None = None
 
 
 @dataclass
@@ -252,6 +254,7 @@ def _fused_pass(state: SceneState, options: ProcessOptions) -> bool:
             max_residual=max_residual,
             keep_all=state.calibration is None or check,
             orders=False,  # the corrections re-derive orders from the phases; nothing else reads them
+            brightness=True,  # A + B, the texture, instead of A and B apart: one map fewer
         )
     except ValueError:
         return False  # e.g. frequencies the method refuses: the stage-by-stage path reports it as before
@@ -260,17 +263,17 @@ def _fused_pass(state: SceneState, options: ProcessOptions) -> bool:
     def kept(values: list[np.ndarray]) -> list[np.ndarray | None]:
         return [values[maps[i]] if i in maps else None for i in range(len(freqs))]
 
-    state.wrapped = WrappedPhase(
-        freqs, kept(scan.wrapped), kept(scan.modulation), kept(scan.background), scan.modulated
-    )
+    none: list[np.ndarray | None] = [None] * len(freqs)
+    state.wrapped = WrappedPhase(freqs, kept(scan.wrapped), none, list(none), scan.modulated, kept(scan.brightness))
     state.info["valid_after_modulation"] = np.count_nonzero(scan.modulated) / scan.modulated.size
     if check:
         _check_convention(state, options, "heterodyne", scan.wrapped, [int(f) for f in freqs])
     assert scan.phase is not None
     mask, phase = scan.valid, scan.phase
+    rejected = bool(np.any(scan.modulated > mask))  # modulated pixels the method's test rejected
     if options.params.get("neighbour_rescue", True) is not False:
-        mask = _rescue_rejected(state, phase, mask, scan.modulated)
-    if np.any(scan.modulated > mask):  # rejected pixels, whose phase the pass kept: NaN there too
+        mask = _rescue_rejected(state, phase, mask, scan.modulated, rejected)
+    if rejected and np.any(scan.modulated > mask):  # their phase, kept by the pass, becomes NaN
         np.copyto(phase, np.float32(np.nan), where=~mask)  # the pass's own array
     state.unwrapped = UnwrappedPhase(
         phase=phase, valid=mask, frequency=freqs[-1], method=method, absolute=True, orders=scan.orders
@@ -476,11 +479,16 @@ def _gray_threshold(state: SceneState) -> np.ndarray | None:
     return None
 
 
-def _rescue_rejected(state: SceneState, phase: np.ndarray, mask: np.ndarray, modulated: np.ndarray) -> np.ndarray:
-    """Take back modulated pixels a temporal residual test rejected where neighbours vouch for their phase."""
+def _rescue_rejected(
+    state: SceneState, phase: np.ndarray, mask: np.ndarray, modulated: np.ndarray, rejected: bool | None = None
+) -> np.ndarray:
+    """Take back modulated pixels a temporal residual test rejected where neighbours vouch for their phase.
+
+    ``rejected``: whether any modulated pixel is outside ``mask``, when the caller knows.
+    """
     from processing.neighbour_rescue import rescue
 
-    if not np.any(modulated > mask):  # no modulated pixel was rejected: nothing to take back
+    if not (np.any(modulated > mask) if rejected is None else rejected):  # nothing to take back
         state.info["neighbour_rescue"] = {"readmitted": 0, "off": "--param neighbour_rescue=false"}
         return mask
     rescued = rescue(phase, mask, modulated)  # rescue skips non-finite phases itself

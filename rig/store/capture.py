@@ -165,6 +165,9 @@ def check_relative_path(where: str, field: str, file: Any) -> PurePosixPath:
     return files.relative_path(file, where, field, CaptureError)
 
 
+_HEX_DIGITS = frozenset("0123456789abcdef")
+
+
 def validate_manifest(manifest: Any, where: str) -> list[Pattern]:
     """Check a parsed capture.json against capture-format.md v1; raise CaptureError on the first problem.
 
@@ -216,7 +219,7 @@ def validate_manifest(manifest: Any, where: str) -> list[Pattern]:
             raise CaptureError(f"{where}: {field}.file: {file!r} is also frames[{names[file]}].file")
         names[file] = i
         digest = frame.get("sha256")
-        if not isinstance(digest, str) or len(digest) != 64 or any(c not in "0123456789abcdef" for c in digest.lower()):
+        if not isinstance(digest, str) or len(digest) != 64 or not _HEX_DIGITS.issuperset(digest.lower()):
             raise _fail(where, f"{field}.sha256", "a 64-digit hex sha256 digest", digest)
     if manifest["complete"]:
         missing = [i for i in range(len(patterns)) if i not in owner]

@@ -220,7 +220,7 @@ def _depth(value: Any, limit: int) -> int:
             if deepest > limit:
                 return deepest
             children = item.values() if isinstance(item, dict) else item
-            stack.extend((child, depth + 1) for child in children)
+            stack.extend((child, depth + 1) for child in children if isinstance(child, (dict, list)))
     return deepest
 
 
