@@ -40,9 +40,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from measure import cpu_description, load_line, print_table  # noqa: E402
+from benchmarks.measure import cpu_description, load_line, print_table  # noqa: E402
 
 PEER = 'peer: python -c "import numpy, cv2"'
 

@@ -48,6 +48,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from benchmarks.measure import cpu_description, interleaved, load_line, print_table  # noqa: E402
 from mock_devices import scenes, synth  # noqa: E402
 from processing.fringe_pass import fringe_pass  # noqa: E402
 from processing.height import phase_to_height  # noqa: E402
@@ -56,9 +57,6 @@ from processing.temporal import unwrap_two_frequency  # noqa: E402
 from rig.hardware.synthesis import simulate_scan, write_simulated_scan  # noqa: E402
 from rig.pipeline.plan import DEFAULT_CORRECTION, ProcessOptions  # noqa: E402
 from rig.pipeline.run import process  # noqa: E402
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from measure import cpu_description, interleaved, load_line, print_table  # noqa: E402
 
 STEPS = 6
 PEER = "OpenCV PSP 2x computePhaseMap + unwrapPhaseMap"
