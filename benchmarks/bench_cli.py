@@ -36,12 +36,13 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from benchmarks.measure import cpu_description, load_line, print_table  # noqa: E402
+from benchmarks.measure import cpu_description, interleaved, load_line, print_table  # noqa: E402
 
 PEER = 'peer: python -c "import numpy, cv2"'
 
@@ -77,6 +78,17 @@ def run_child(command: list[str]) -> tuple[float, float, int]:
             return wall, float(user) + float(system), int(rss)
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime), 0
+
+
+def timed_row(command: list[str], peak_rss: list[int]) -> Callable[[], tuple[float, float]]:
+    """A row for :func:`interleaved`: one run of ``command``, its (wall s, CPU s); its peak RSS goes to ``peak_rss``."""
+
+    def once() -> tuple[float, float]:
+        wall, cpu, rss = run_child(command)
+        peak_rss.append(rss)
+        return wall, cpu
+
+    return once
 
 
 def prepare(directory: Path, size: tuple[int, int]) -> tuple[Path, Path]:
@@ -121,13 +133,9 @@ def main(argv: list[str] | None = None) -> int:
             run_child(command)
         load_before = os.getloadavg()
         print(f"timing {args.runs} interleaved runs of {len(rows)} rows ...", file=sys.stderr)
-        samples: dict[str, list[tuple[float, float]]] = {name: [] for name in rows}
         memory: dict[str, list[int]] = {name: [] for name in rows}
-        for _ in range(args.runs):
-            for name, command in rows.items():
-                wall, cpu, rss = run_child(command)
-                samples[name].append((wall, cpu))
-                memory[name].append(rss)
+        timed = {name: timed_row(command, memory[name]) for name, command in rows.items()}
+        samples = interleaved(timed, args.runs, warm_up=False)  # warmed up above, before the load is read
         load_after = os.getloadavg()
     print(f"`rig` command line, {width}x{height} capture (2 frequencies x 6 steps, 8-bit PNG), fresh process per run")
     for line in cpu_description():
