@@ -28,7 +28,6 @@ view, four times the pixels).
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import os
 import resource
 import statistics
@@ -94,10 +93,9 @@ def timed_row(command: list[str], peak_rss: list[int]) -> Callable[[], tuple[flo
 def prepare(directory: Path, size: tuple[int, int]) -> tuple[Path, Path]:
     """A simulated capture and calibration of ``size`` (width, height) in ``directory``."""
     from mock_devices import scenes, synth
-    from rig.hardware.synthesis import simulate_scan, write_simulated_scan
+    from rig.hardware.synthesis import demo_geometry, simulate_scan, write_simulated_scan
 
-    base = synth.RigGeometry()  # the same field of view at the requested size
-    geometry = dataclasses.replace(base.with_camera(*size), pixel_mm=base.pixel_mm * base.camera_width / size[0])
+    geometry = demo_geometry(*size)  # the same field of view at the requested size
     heights = scenes.sphere_cap(geometry.camera_height, geometry.camera_width, geometry.pixel_mm)
     scan = simulate_scan(
         heights,
