@@ -40,6 +40,7 @@ from mock_devices import scenes, synth  # noqa: E402
 from processing.correction import correct_auto, correct_rpca_phase  # noqa: E402
 from processing.fringe_pass import fringe_pass  # noqa: E402
 from processing.height import phase_to_height  # noqa: E402
+from rig.hardware.synthesis import simulate_scan  # noqa: E402
 
 TWO_PI = 2.0 * np.pi
 CASES = {
@@ -52,16 +53,12 @@ def simulate(case: str, seed: int = 0):
     """Object and reference frames of one case on a 1024 x 768 rig (d0 = 1250 mm: no height pole)."""
     _, frequencies, snr_db = CASES[case]
     geometry = synth.RigGeometry(d0_mm=1250.0)
-    rng = np.random.default_rng(seed)
     appearance = synth.Appearance(snr_db=snr_db, bit_depth=8)
     patterns = synth.sinusoid_patterns(frequencies, STEPS)
     rows, cols, pixel = geometry.camera_height, geometry.camera_width, geometry.pixel_mm
     heights = scenes.sphere_cap(rows, cols, pixel) if case == "cap" else scenes.isolated_objects(rows, cols, pixel)
-    obj_map = synth.projector_coordinates(heights, geometry)
-    ref_map = synth.projector_coordinates(np.zeros_like(heights), geometry)
-    obj = synth.render_stack(patterns, obj_map, geometry, appearance, rng)
-    ref = synth.render_stack(patterns, ref_map, geometry, appearance, rng)
-    return geometry, frequencies, obj_map, obj, ref
+    scan = simulate_scan(heights, geometry=geometry, patterns=patterns, appearance=appearance, seed=seed)
+    return geometry, frequencies, scan.object_map, scan.object_frames, scan.reference_frames
 
 
 def auto_pipeline(stack, frequencies, reference_phase, geometry) -> np.ndarray:
