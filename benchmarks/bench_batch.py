@@ -58,7 +58,6 @@ from rig.pipeline.plan import DEFAULT_CORRECTION, ProcessOptions  # noqa: E402
 from rig.pipeline.run import process  # noqa: E402
 from rig.store.files import INCOMPLETE_MARK, REPLACED_MARK  # noqa: E402
 
-REPO = Path(__file__).resolve().parents[1]
 ARRAYS = ("height.npy", "phase.npy", "mask.npy")
 
 
