@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from realdata import REAL_DATA, needs_real_data
 
 from calibration.jsonfile import write_json_atomic
 from drivers.projector import validate_pattern as projector_validate
@@ -30,7 +31,6 @@ from rig.pipeline.plan import group_patterns
 from rig.store.capture import read_capture, validate_pattern
 
 ROOT = Path(__file__).resolve().parents[1]
-REAL_DATA = ROOT.parent / "shared" / "real-data"
 
 
 def _rewritten_bytes(manifest_path: Path, tmp_path: Path) -> tuple[bytes, bytes]:
@@ -57,7 +57,7 @@ def test_written_capture_round_trips_byte_identical(tmp_path: Path, scan: ScanCo
     assert read_capture(paths.capture).pattern_models == scan.pattern_models()
 
 
-@pytest.mark.skipif(not REAL_DATA.is_dir(), reason=f"real data not present at {REAL_DATA}")
+@needs_real_data
 @pytest.mark.parametrize(
     ("folder", "spec", "options"),
     [
