@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import os
 import shutil
-import socket
 import tempfile
 import threading
 import time
@@ -28,6 +27,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from benchmarks.dask_cluster import free_port
 from rig.config import load_config
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
@@ -55,12 +55,6 @@ scene = "hemisphere"
 """
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 @pytest.fixture(scope="module")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]]:
     """The console on the simulated rig (640x480, with an exact calibration) served by uvicorn."""
@@ -79,7 +73,7 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]]
     scan(config, cal / "reference", scene="reference")
     write_calibration(cal, exact_calibration(geometry_from_config(config)))
     app = create_app(config, root / "data", fault_injection=True)
-    port = _free_port()
+    port = free_port()
     uv = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning", ws="websockets-sansio"))
     thread = threading.Thread(target=uv.run, daemon=True)
     thread.start()
