@@ -219,10 +219,10 @@ def correct_auto(
         return low_rank, result, np.zeros(valid.shape, dtype=bool)
 
     # RPCA on the pooled phase (far sparser errors) unless pooling left more order breaks than the
-    # measured phase (ties keep the pooled phase): solved while its breaks are counted, and solved
-    # again on the measured phase in that rare case. Measured breaks only matter if pooling left some.
+    # measured phase (ties keep the pooled phase, so pooled orders without a break always win):
+    # solved while its breaks are counted, and solved again on the measured phase in that rare case.
     solved, regions_breaks = side_by_side(lambda: low_rank_of(pooled), lambda: order_breaks(pooled, valid))
-    base_breaks = {"regions": regions_breaks, "measured": measured_breaks if regions_breaks else regions_breaks}
+    base_breaks = {"regions": regions_breaks, "measured": measured_breaks}
     base_name = min(base_breaks, key=base_breaks.__getitem__)
     low_rank, result, rough = solved if base_name == "regions" else low_rank_of(phase)
     # Candidate order maps, the one with fewest order breaks kept: the pooled orders, alone and
