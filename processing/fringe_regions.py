@@ -328,19 +328,11 @@ def pool_region_orders(
     """
     phase = np.asarray(absolute_phase, dtype=np.float64)
     phi = np.where(valid, np.asarray(wrapped_phase, dtype=np.float64), 0.0)
-
-    def measured_orders() -> np.ndarray:
-        with np.errstate(invalid="ignore"):
-            return np.where(valid, np.rint((phase - phi) / TWO_PI), 0.0).astype(np.int32)
-
-    def regions() -> tuple[np.ndarray, np.ndarray, int]:
-        steps = _steps(phi)
-        core, labels, count = _fringe_regions(steps, valid, _region_cut(steps, valid) if cut is None else cut, bend)
-        return _drop_small_regions(labels, core, count, min_votes)
-
-    labels, core, count = regions()
-    orders = measured_orders()
-    out = np.full(phase.shape, np.nan)
+    steps = _steps(phi)
+    core, labels, count = _fringe_regions(steps, valid, _region_cut(steps, valid) if cut is None else cut, bend)
+    labels, core, count = _drop_small_regions(labels, core, count, min_votes)
+    with np.errstate(invalid="ignore"):
+        orders = np.where(valid, np.rint((phase - phi) / TWO_PI), 0.0).astype(np.int32)
     if count > 1:
         pieces, piece_count = _tile_pieces(labels, core, count, tile)
         winners, sizes = _tally(pieces[core], orders[core], piece_count)
@@ -354,6 +346,8 @@ def pool_region_orders(
             local, support = _window_majority(orders, labels, ys, xs, radius)
             enough = support >= min_votes
             out[ys[enough], xs[enough]] = phi[ys[enough], xs[enough]] + TWO_PI * local[enough]
+    else:
+        out = np.full(phase.shape, np.nan)
     out = fill_from_neighbours(out, phi, valid)
     unsettled = valid & np.isnan(out)
     out[unsettled] = phase[unsettled]
