@@ -22,13 +22,12 @@ measured on the thesis' Table 4.1 protocol (see :func:`correct_auto`).
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 from processing.concurrency import side_by_side
-from processing.correction_method import CorrectionMethod
+from processing.correction_method import CorrectionMethod, Result
 from processing.fringe_regions import pool_region_orders
 from processing.order_correction import correct_orders_rpca
 from processing.phase_correction import (
@@ -47,9 +46,6 @@ from processing.rpca import RPCAResult, default_tau
 from processing.voting import vote_row_orders
 
 TWO_PI = 2.0 * np.pi
-
-Result = tuple[np.ndarray, dict[str, Any]]
-Correction = Callable[..., Result]
 
 
 def _inputs(

@@ -10,38 +10,25 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
 Result = tuple[np.ndarray, dict[str, Any]]
 
 
-class PhaseCorrection(Protocol):
-    """``f(absolute_phase, wrapped_phase, orders=None, mask=None, frequency=None, **params) -> (phase, info)``."""
-
-    def __call__(
-        self,
-        absolute_phase: np.ndarray,
-        wrapped_phase: np.ndarray,
-        orders: np.ndarray | None = ...,
-        mask: np.ndarray | None = ...,
-        frequency: float | None = ...,
-        **params: Any,
-    ) -> Result: ...
-
-
 @dataclass(frozen=True)
 class CorrectionMethod:
     """One registered correction; calling it calls ``run``.
 
-    ``needs``: inputs beyond the phase pair, passed by the caller as keyword arguments of these
-    names (``"phase_error"``: a calibration's phase-error table). ``description``: one line for
-    ``--help`` and the docs.
+    ``run``: ``f(absolute_phase, wrapped_phase, orders=None, mask=None, frequency=None, **params)
+    -> (phase, info)``. ``needs``: inputs beyond the phase pair, passed by the caller as keyword
+    arguments of these names (``"phase_error"``: a calibration's phase-error table).
+    ``description``: one line for ``--help`` and the docs.
     """
 
     name: str
-    run: PhaseCorrection | Callable[..., Result]
+    run: Callable[..., Result]
     description: str
     needs: tuple[str, ...] = ()
 
