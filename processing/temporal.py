@@ -118,6 +118,15 @@ def _run(kernel: Callable[..., tuple[np.ndarray, ...]], maps: Sequence[np.ndarra
     return UnwrapResult(phase=phase.reshape(shape), orders=orders.reshape(shape), valid=valid.reshape(shape))
 
 
+def _run_turns(on_turns: TurnKernel, maps: Sequence[np.ndarray]) -> UnwrapResult:
+    """:func:`_run` of a method on normalised turns, every map taken into turns block by block."""
+
+    def kernel(*raw: np.ndarray) -> tuple[np.ndarray, ...]:
+        return on_turns([_turns(r) for r in raw])
+
+    return _run(kernel, maps)
+
+
 # --------------------------------------------------------------------------- number-theoretic (Ding)
 
 
@@ -349,11 +358,7 @@ def unwrap_three_frequency(phis: Sequence[np.ndarray], frequencies: Sequence[int
     """
     on_turns = _three_frequency_turns(frequencies)
     maps = _validate.phase_maps(phis, "phis", 3, refuse_infinity=False)
-
-    def kernel(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, ...]:
-        return on_turns([_turns(a), _turns(b), _turns(c)])
-
-    return _run(kernel, maps)
+    return _run_turns(on_turns, maps)
 
 
 def _three_frequency_turns(frequencies: Sequence[int]) -> TurnKernel:
@@ -447,11 +452,7 @@ def unwrap_hierarchical(
     """
     on_turns, count = _hierarchical_turns(frequencies, max_residual)
     maps = _validate.phase_maps(phis, "phis", count, refuse_infinity=False)
-
-    def kernel(*raw: np.ndarray) -> tuple[np.ndarray, ...]:
-        return on_turns([_turns(r) for r in raw])
-
-    return _run(kernel, maps)
+    return _run_turns(on_turns, maps)
 
 
 def _hierarchical_turns(frequencies: Sequence[int], max_residual: float) -> tuple[TurnKernel, int]:
@@ -498,11 +499,7 @@ def unwrap_heterodyne(
     """
     on_turns, count = _heterodyne_turns(frequencies, max_residual)
     maps = _validate.phase_maps(phis, "phis", count, refuse_infinity=False)
-
-    def kernel(*raw: np.ndarray) -> tuple[np.ndarray, ...]:
-        return on_turns([_turns(r) for r in raw])
-
-    return _run(kernel, maps)
+    return _run_turns(on_turns, maps)
 
 
 def _heterodyne_turns(frequencies: Sequence[int], max_residual: float) -> tuple[TurnKernel, int]:
