@@ -360,13 +360,13 @@ def parse_pattern(entry: Any) -> Pattern:
 
 def as_pattern(pattern: Pattern | Mapping[str, Any]) -> Pattern:
     """``pattern`` itself if typed, else :func:`parse_pattern` of the entry."""
-    return pattern if isinstance(pattern, Pattern) else parse_pattern(pattern)
+    return parse_pattern(pattern)
 
 
 def same_projection(a: Pattern | Mapping[str, Any], b: Pattern | Mapping[str, Any]) -> bool:
     """True when two patterns project the same image (extra keys and key order aside)."""
     pa, pb = as_pattern(a), as_pattern(b)
-    return pa == pb or dataclasses.replace(pa, extra={}) == dataclasses.replace(pb, extra={})
+    return type(pa) is type(pb) and pa._values() == pb._values()
 
 
 # --------------------------------------------------------------------------- intensities
