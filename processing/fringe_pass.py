@@ -29,7 +29,7 @@ from __future__ import annotations
 import itertools
 import math
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from functools import lru_cache
@@ -39,7 +39,7 @@ import numpy as np
 
 from processing import _validate
 from processing.phase_shift import robust_high, sample_stride, shift_weights
-from processing.temporal import TEMPORAL_METHODS, pair_table, turn_kernel
+from processing.temporal import TEMPORAL_METHODS, TurnKernel, pair_table, turn_kernel
 
 TWO_PI = 2.0 * np.pi
 BLOCK = 16384  # pixels per block: each float32 temporary is 64 KiB
@@ -295,7 +295,7 @@ def fringe_pass(
         raise ValueError(f"min_ratio: expected a fraction in (0, 1], found {min_ratio!r}")
     threads = _validate.positive_int(threads, "threads")
     cv2 = _backend(opencv)
-    kernel: Callable[[Sequence[np.ndarray]], tuple[np.ndarray, ...]] | None = None
+    kernel: TurnKernel | None = None
     used: list[int] = []
     tables: _DingTables | None = None
     if method is not None:
@@ -410,7 +410,7 @@ class _Plan:
     thresholds: list[float]
     ratio: float
     kept: list[int]
-    kernel: Callable[[Sequence[np.ndarray]], tuple[np.ndarray, ...]] | None
+    kernel: TurnKernel | None
     used: list[int]
     tables: _DingTables | None
     cv2: Any | None
