@@ -18,16 +18,17 @@ First = TypeVar("First")
 Second = TypeVar("Second")
 
 
-def _cpus() -> int:
+def available_cpus() -> int:
+    """CPUs this process may run on (its affinity set where the OS has one), at least 1."""
     try:
-        return len(os.sched_getaffinity(0))
+        return max(len(os.sched_getaffinity(0)), 1)
     except AttributeError:  # not on Linux
         return os.cpu_count() or 1
 
 
 # Threads for side-by-side steps: 1 runs everything in the caller's thread (rig's Dask workers
 # set it: they already run one worker per core).
-THREADS = min(2, _cpus())
+THREADS = min(2, available_cpus())
 _pool: ThreadPoolExecutor | None = None
 _pool_lock = threading.Lock()
 

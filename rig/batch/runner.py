@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from processing.concurrency import available_cpus
 from rig.batch.discovery import FoundCapture, discover
 from rig.batch.index import CompareRow, IndexRow, write_compare, write_index
 from rig.batch.resume import calibration_digest, fingerprint, options_key, remove_stale, reusable_report
@@ -63,10 +64,7 @@ class BatchResult:
 
 def default_workers() -> int:
     """One single-threaded worker process per CPU this process may run on."""
-    try:
-        return max(len(os.sched_getaffinity(0)), 1)
-    except AttributeError:  # not on Linux
-        return max(os.cpu_count() or 1, 1)
+    return available_cpus()
 
 
 def _dashboard_available() -> bool:
