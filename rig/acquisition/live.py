@@ -44,6 +44,7 @@ class FrameFigures:
     modulation: np.ndarray | None  # (H, W) fringe amplitude as a fraction of full scale (fringe shown)
     valid: np.ndarray | None  # (H, W) bool: pixels whose phase the pipeline would keep
     valid_fraction: float | None
+    levels: np.ndarray  # (H, W) uint8: the frame scaled to 0 .. 255, as the figures read it
 
 
 def frame_figures(image: np.ndarray, max_value: int, fringe_axis: str | None = None) -> FrameFigures:
@@ -73,4 +74,5 @@ def frame_figures(image: np.ndarray, max_value: int, fringe_axis: str | None = N
         modulation=modulation,
         valid=valid,
         valid_fraction=valid_fraction,
+        levels=levels,
     )

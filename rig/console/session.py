@@ -334,7 +334,7 @@ class ConsoleSession:
             return
         max_value = devices.camera.pixel_format.max_value
         figures = frame_figures(image, max_value, self.projector.fringe_axis)
-        picture = self._live_picture(image, max_value, figures)
+        picture = self._live_picture(figures)
         ok, jpeg = cv2.imencode(".jpg", picture, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
         now = time.monotonic()
         self._frame_times = [t for t in self._frame_times if now - t < 2.0] + [now]
@@ -361,14 +361,14 @@ class ConsoleSession:
         if ok:
             self.publish(header, jpeg.tobytes())
 
-    def _live_picture(self, image: np.ndarray, max_value: int, figures: Any) -> np.ndarray:
+    def _live_picture(self, figures: Any) -> np.ndarray:
         """The picture sent to the page: the frame (saturation in red) or the modulation map."""
         if self.live.view == "modulation" and figures.modulation is not None:
             top = float(np.percentile(figures.modulation, 99)) or 1.0
             picture = colour_map(figures.modulation, 0.0, top)
             picture[~figures.valid] //= 3  # where the pipeline would drop the phase
             return picture
-        grey = image if image.dtype == np.uint8 else np.clip(image * (255.0 / max_value), 0, 255).astype(np.uint8)
+        grey = figures.levels
         if not (self.live.overlay and figures.saturated_fraction > 0):
             return grey
         picture = cv2.cvtColor(grey, cv2.COLOR_GRAY2BGR)
