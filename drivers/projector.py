@@ -52,11 +52,10 @@ def apply_gamma_lut(image: np.ndarray, lut: np.ndarray | None) -> np.ndarray:
     return np.interp(x * (lut.size - 1), positions, lut).astype(np.float32)
 
 
-def validate_pattern(pattern: Pattern | Mapping[str, Any], size: tuple[int, int] | None = None) -> Pattern:
+def validate_pattern(pattern: Pattern | Mapping[str, Any]) -> Pattern:
     """The typed pattern of ``pattern`` (a Pattern or its capture.json entry); ``ValueError`` naming the problem.
 
-    ``size`` is accepted for callers that pass the projector's size; every pattern kind can be
-    shown at any size.
+    Every pattern kind can be shown at any projector size.
     """
     try:
         return as_pattern(pattern)

@@ -36,7 +36,6 @@ import cv2
 import numpy as np
 
 from drivers.errors import DeviceError
-from drivers.projector import validate_pattern
 from rig.acquisition.live import frame_figures, grab_frame
 from rig.config import RigConfig
 from rig.console.datadir import DataDir
@@ -419,9 +418,7 @@ class ConsoleSession:
 
         def apply() -> None:
             devices = self._open()
-            pattern = setting.capture_pattern()
-            validate_pattern(pattern, devices.projector.size)
-            devices.projector.show(pattern)
+            devices.projector.show(setting.capture_pattern())  # show() refuses a bad pattern first
             self.projector = setting
 
         self.call(apply)
