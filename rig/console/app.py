@@ -310,7 +310,7 @@ def create_app(
 
     # -- data
     @app.get("/api/captures", tags=["data"])
-    async def captures() -> dict[str, Any]:
+    def captures() -> dict[str, Any]:
         from rig.api import load_capture
 
         rows = []
@@ -332,7 +332,7 @@ def create_app(
         return {"captures": rows}
 
     @app.get("/api/captures/{name}", tags=["data"])
-    async def capture(name: str) -> dict[str, Any]:
+    def capture(name: str) -> dict[str, Any]:
         from rig.api import load_capture
 
         loaded = load_capture(data.existing("captures", name))
@@ -340,7 +340,7 @@ def create_app(
         return {"name": name, "manifest": loaded.manifest, "results": results}
 
     @app.get("/api/results", tags=["data"])
-    async def results() -> dict[str, Any]:
+    def results() -> dict[str, Any]:
         return {"results": [{"name": name, "capture": _result_capture(data, name)} for name in data.names("results")]}
 
     @app.get("/api/results/{name}", tags=["data"], summary="a result's key figures")
@@ -402,7 +402,7 @@ def create_app(
         return Response(colour_bar_png(), media_type="image/png")
 
     @app.get("/api/calibrations", tags=["calibration"])
-    async def calibrations() -> dict[str, Any]:
+    def calibrations() -> dict[str, Any]:
         return {"calibrations": data.names("calibrations"), "active": session.calibration}
 
     @app.put("/api/calibration", tags=["calibration"], summary="the calibration scans are processed with")
