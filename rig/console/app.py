@@ -31,7 +31,7 @@ from starlette.concurrency import run_in_threadpool
 from starlette.types import ASGIApp, Receive, Scope, Send
 
 from rig.config import RigConfig
-from rig.console.datadir import DataDir, OutsideDataError
+from rig.console.datadir import DataDir
 from rig.console.results import colour_bar_png, difference, difference_png
 from rig.console.session import Busy, ConsoleSession, ProjectorSetting
 from rig.errors import RigError
@@ -244,10 +244,6 @@ def create_app(
     @app.exception_handler(FileNotFoundError)
     async def not_found(_: Request, exc: FileNotFoundError) -> JSONResponse:
         return JSONResponse({"error": str(exc)}, status_code=404)
-
-    @app.exception_handler(OutsideDataError)
-    async def outside(_: Request, exc: OutsideDataError) -> JSONResponse:
-        return JSONResponse({"error": str(exc)}, status_code=400)
 
     def client_of(request: Request) -> str | None:
         return request.headers.get(CLIENT_HEADER)
