@@ -41,7 +41,6 @@ function showView(name) {
   document.querySelectorAll(".view").forEach((v) => v.classList.toggle("active", v.id === "view-" + name));
   if (name === "captures") loadCaptures();
   if (name === "result" && window.Plotly && state.result) Plotly.Plots.resize($("result-3d"));
-  if (name === "calibration" && window.calibrationView) window.calibrationView();
 }
 
 // ------------------------------------------------------------------ events websocket
