@@ -12,8 +12,6 @@ from typing import Any
 
 from calibration.jsonfile import write_text_atomic
 
-STATUSES = ("ok", "error", "skipped")
-
 
 @dataclass
 class IndexRow:

@@ -205,25 +205,15 @@ def simulated_paths(out: str | os.PathLike[str]) -> SimulatedPaths:
     )
 
 
-def write_simulated_scan(scan: SimulatedScan, out: str | os.PathLike[str], overwrite: bool = False) -> SimulatedPaths:
+def write_simulated_scan(scan: SimulatedScan, out: str | os.PathLike[str]) -> SimulatedPaths:
     """Write the object capture, the calibration with its reference capture, and the true heights."""
     paths = simulated_paths(out)
     root = paths.root
     g = scan.geometry
     projector = {"width": g.projector_width, "height": g.projector_height}
     extra = {"simulation": dict(scan.description)}
-    write_capture(
-        paths.capture, scan.object_frames, scan.patterns, projector, scene="object", extra=extra, overwrite=overwrite
-    )
-    write_capture(
-        paths.reference,
-        scan.reference_frames,
-        scan.patterns,
-        projector,
-        scene="reference",
-        extra=extra,
-        overwrite=overwrite,
-    )
+    write_capture(paths.capture, scan.object_frames, scan.patterns, projector, scene="object", extra=extra)
+    write_capture(paths.reference, scan.reference_frames, scan.patterns, projector, scene="reference", extra=extra)
     write_calibration(paths.calibration, scan.calibration(reference="reference"))
     root.mkdir(parents=True, exist_ok=True)
     np.save(paths.truth, scan.height_mm.astype(np.float32))
