@@ -18,7 +18,6 @@ On disk (:func:`write_simulated_scan`)::
 from __future__ import annotations
 
 import os
-import shutil
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -239,16 +238,19 @@ def write_simulated_archive(
     """
     root = Path(out)
     geometry = demo_geometry(width, height)
+    projector = {"width": geometry.projector_width, "height": geometry.projector_height}
     archive = root / "archive"
     first: SimulatedScan | None = None
     for i in range(count):
         scan = simulate_scan(scene_names[i % len(scene_names)], geometry=geometry, seed=seed + i)
-        paths = write_simulated_scan(scan, archive / f"scan-{i:03d}")
-        shutil.rmtree(paths.calibration)  # one calibration for the whole archive, written below
+        # each scan keeps only its object capture and truth: one calibration for the whole archive, written below
+        paths = simulated_paths(archive / f"scan-{i:03d}")
+        extra = {"simulation": dict(scan.description)}
+        write_capture(paths.capture, scan.object_frames, scan.patterns, projector, scene="object", extra=extra)
+        np.save(paths.truth, scan.height_mm.astype(np.float32))
         first = first or scan
     calibration = root / "calibration"
     scan = first if first is not None else simulate_scan(scene_names[0], geometry=geometry, seed=seed)
-    projector = {"width": geometry.projector_width, "height": geometry.projector_height}
     write_capture(calibration / "reference", scan.reference_frames, scan.patterns, projector, scene="reference")
     write_calibration(calibration, scan.calibration(reference="reference"))
     return archive, calibration
