@@ -153,9 +153,7 @@ def simulate_scan(
     appearance = demo_appearance() if appearance is None else appearance
     if isinstance(scene, str):
         name = scene
-        height = scenes.make_scene(
-            scene, geometry.camera_height, geometry.camera_width, geometry.pixel_mm, **(scene_params or {})
-        )
+        height = scene_height(scene, geometry, **(scene_params or {}))
     else:
         name = "custom"
         height = np.asarray(scene, dtype=np.float64)
