@@ -263,9 +263,9 @@ def _run_on_dask(
     with dask_client(plan) as client:
         if progress is not None:
             link = dashboard_link(client)
-            threads = sum(client.nthreads().values())
+            nthreads = client.nthreads()  # one scheduler round trip for both counts
+            threads, workers = sum(nthreads.values()), len(nthreads)
             where = plan.scheduler or "a local cluster"
-            workers = len(client.nthreads())
             progress.message(
                 f"dask: {workers} worker{'' if workers == 1 else 's'}, {threads} thread{'' if threads == 1 else 's'} on {where}"
                 + (f"; dashboard {link}" if link else ""),
