@@ -56,6 +56,9 @@ try:  # pyserial's POSIX backend lets termios errors through when a tty vanishes
 except ImportError:  # Windows
     _PORT_ERRORS = (serial.SerialException, OSError)
 
+# opening the port can also fail on its settings (pyserial raises ValueError for a bad baud rate or timeout)
+_OPEN_ERRORS: tuple[type[BaseException], ...] = (*_PORT_ERRORS, ValueError)
+
 
 class TriggerBoxRefusedError(DeviceError, ValueError):
     """The box rejected an argument (``ERR 2 BAD_ARGUMENT``)."""
@@ -270,7 +273,7 @@ class SerialTriggerBox(TriggerBox):
                 self.url, baudrate=self.baudrate, timeout=self.timeout_s, write_timeout=self.timeout_s
             )
             self._port.reset_input_buffer()
-        except (serial.SerialException, OSError, ValueError) as exc:  # _PORT_ERRORS and bad settings
+        except _OPEN_ERRORS as exc:
             raise DeviceNotFoundError(
                 f"cannot open trigger box port {self.url}: {exc}; check the cable, the port name "
                 "and that you may open it (Linux: be in the 'dialout' group)"
