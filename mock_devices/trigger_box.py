@@ -120,7 +120,6 @@ class _BoxFirmware:
         self.last_reply = b""
         self.last_line_at = now
         self.polarity = polarity  # kept in EEPROM: survives RESET and reboots
-        self.active = False  # the pulse output's logical level
         self.last_edge_at: float | None = None
         self.busy_until = 0.0
         self._defaults()
@@ -136,8 +135,12 @@ class _BoxFirmware:
 
     @property
     def pin_level(self) -> int:
-        """Electrical level of the pulse output: 1 high, 0 low."""
-        return int(self.active == (self.polarity is tp.Polarity.ACTIVE_HIGH))
+        """Electrical level of the pulse output: 1 high, 0 low.
+
+        Pulses are not drawn on the pin here, so it rests at the polarity's idle level: low when
+        pulses are active high, high when they are active low.
+        """
+        return int(self.polarity is not tp.Polarity.ACTIVE_HIGH)
 
     # -- input ----------------------------------------------------------------------------------
     def handle_line(self, line: bytes, now: float) -> _Output:
@@ -217,7 +220,6 @@ class _BoxFirmware:
         if self.state == "ARMED":
             return tp.encode_error(rid, tp.ErrorCode.STATE, "armed RESET first")
         self.width_us, self.delay_us, self.polarity = width, delay, polarity
-        self.active = False
         return tp.encode_ok(rid, width, delay, polarity.value)
 
     def _cmd_arm(self, rid: int, args: tuple[str, ...], out: _Output) -> bytes:
