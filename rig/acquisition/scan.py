@@ -47,10 +47,9 @@ def scan(
     from rig.hardware.assembly import open_rig
 
     # fail before opening any device: an existing non-capture is never replaced, an unwritable place never tried
-    files.check_target(
+    files.check_writable(
         Path(output), ("capture",), overwrite, CaptureError, hint=" (choose another -o or pass --overwrite)"
     )
-    files.check_writable(Path(output), ("capture",), overwrite, CaptureError)
     patterns = config.scan.patterns() if patterns is None else list(patterns)
     if progress is not None:
         progress.begin(len(patterns), f"scan {output}")

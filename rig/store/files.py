@@ -493,9 +493,10 @@ def make_staging(target: Path, error: ErrorType) -> Path:
     return staging
 
 
-def check_writable(target: Path, kinds: tuple[str, ...], replace: bool, error: ErrorType) -> None:
-    """Before any work: the target is acceptable and a staging directory can be made beside it."""
-    check_target(target, kinds, replace, error)
+def check_writable(target: Path, kinds: tuple[str, ...], replace: bool, error: ErrorType, hint: str = "") -> None:
+    """Before any work: the target is acceptable (:func:`check_target`, with its ``hint``) and a
+    staging directory can be made beside it."""
+    check_target(target, kinds, replace, error, hint)
     staging = make_staging(target, error)
     os.rmdir(staging)
 
