@@ -563,9 +563,8 @@ def compute(
         extra.update({k: v for k, v in poly.save(output).items() if k != "model"})
         lines.append(f"polynomial degree {plan.degree}: residual RMS {poly.residual_rms_mm:.4f} mm")
 
-    if output.resolve() != directory.resolve():  # a calibration carries its reference inside it (a relative path)
+    if not files.same_path(output, directory):  # a calibration carries its reference inside it (a relative path)
         _copy_capture(directory / REFERENCE_DIR, output / REFERENCE_DIR)
-    reference_rel = REFERENCE_DIR
     calibration = Calibration(
         model=plan.model,
         l0_mm=fit.l0_mm,
@@ -573,7 +572,7 @@ def compute(
         f0_per_mm=f0.f0_per_mm,
         f0_frequency=frequency,
         pixel_mm=pixel_mm,
-        reference=Path(reference_rel).as_posix(),
+        reference=REFERENCE_DIR,
         extra=extra,
     )
     write_calibration(output, calibration)
