@@ -286,9 +286,11 @@ def parse_crop(text: str) -> tuple[int, int, int, int]:
     return x, y, w, h
 
 
-def read_source_image(path: Path, options: ImportOptions) -> tuple[np.ndarray, list[str]]:
-    """One source image as single-channel uint8/uint16/float32, cropped and downsampled; notes of conversions."""
+def read_source_image(path: Path, options: ImportOptions) -> tuple[np.ndarray, list[str], str]:
+    """One source image as single-channel uint8/uint16/float32, cropped and downsampled; notes of conversions;
+    the sha256 of the file's bytes as read (the file is read once, through the safe layer)."""
     data = files_layer.read_regular(path, str(path), CaptureError)  # a regular file, size-limited
+    digest = hashlib.sha256(data).hexdigest()
     image = files_layer.decode_image(data, str(path), CaptureError)  # header checked before decoding
     notes: list[str] = []
     if image.ndim == 3:
@@ -316,7 +318,7 @@ def read_source_image(path: Path, options: ImportOptions) -> tuple[np.ndarray, l
         rows, cols = (image.shape[0] // k) * k, (image.shape[1] // k) * k
         blocks = image[:rows, :cols].astype(np.float64).reshape(rows // k, k, cols // k, k).mean(axis=(1, 3))
         image = np.rint(blocks).astype(image.dtype) if image.dtype != np.float32 else blocks.astype(np.float32)
-    return np.ascontiguousarray(image), notes
+    return np.ascontiguousarray(image), notes, digest
 
 
 def import_folder(
@@ -365,9 +367,10 @@ def import_folder(
             pattern = pattern.replace(shift_rad=-pattern.shift)  # the rig shifted the other way
         patterns.append(pattern)
     images: list[np.ndarray] = []
+    digests: list[str] = []
     notes: set[str] = set()
     for _, path in pairs:
-        image, image_notes = read_source_image(path, options)
+        image, image_notes, digest = read_source_image(path, options)
         notes.update(image_notes)
         if images and (image.shape != images[0].shape or image.dtype != images[0].dtype):
             raise CaptureError(
@@ -375,6 +378,7 @@ def import_folder(
                 f"found {image.shape[1]}x{image.shape[0]} {image.dtype}"
             )
         images.append(image)
+        digests.append(digest)
     height, width = images[0].shape
     projector = {
         "width": int(options.projector_width or width),
@@ -402,8 +406,6 @@ def import_folder(
         extra={"import": provenance},
         overwrite=options.overwrite,
     ) as writer:
-        for i, ((_, path), image) in enumerate(zip(pairs, images)):
-            writer.add_frame(
-                i, image, source_file=path.name, source_sha256=hashlib.sha256(path.read_bytes()).hexdigest()
-            )
+        for i, ((_, path), image, digest) in enumerate(zip(pairs, images, digests)):
+            writer.add_frame(i, image, source_file=path.name, source_sha256=digest)
     return read_capture(output)
