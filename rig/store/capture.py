@@ -29,7 +29,6 @@ import copy
 import functools
 import hashlib
 import logging
-import math
 import os
 import time
 from collections.abc import Iterable, Mapping, Sequence
@@ -103,21 +102,6 @@ def _int(where: str, obj: Mapping[str, Any], key: str, field: str, minimum: int 
     if isinstance(value, bool) or not isinstance(value, int) or (minimum is not None and value < minimum):
         raise _fail(where, field, "an integer" + (f" >= {minimum}" if minimum is not None else ""), value)
     return value
-
-
-def _number(where: str, obj: Mapping[str, Any], key: str, field: str, positive: bool = False) -> float:
-    if key not in obj:
-        raise CaptureError(f"{where}: {field}: missing")
-    value = obj[key]
-    try:
-        finite = not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
-    except OverflowError:  # an integer too large for a float
-        finite = False
-    if not finite:
-        raise _fail(where, field, "a finite number", files.shorten(repr(value)))
-    if positive and value <= 0:
-        raise _fail(where, field, "a positive number", value)
-    return float(value)
 
 
 def _mapping(where: str, obj: Mapping[str, Any], key: str) -> Mapping[str, Any]:
