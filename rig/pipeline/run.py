@@ -163,10 +163,6 @@ def _calibration_and_reference(calibration_path: str | Path) -> tuple[Calibratio
             _READ.move_to_end(key)
             return calibration, reference
     calibration = read_calibration(calibration_path)
-    if calibration.model not in calibration_models.MODELS:
-        raise CalibrationError(
-            f"{calibration.where}: model: expected one of {', '.join(calibration_models.MODELS)}, found {calibration.model!r}"
-        )
     reference, reference_identity = None, None
     if calibration_models.needs_reference(calibration):
         if calibration.reference is None or calibration.path is None:
