@@ -121,17 +121,14 @@ def total_steps(with_reference: bool) -> int:
 
 
 def load_calibration_for(
-    capture: Capture, calibration_path: str | Path, axis: str | None = None
+    capture: Capture, calibration_path: str | Path, axis: str
 ) -> tuple[Calibration, Capture | None]:
     """Read a calibration and (when its model needs one) its reference capture, checked against ``capture``.
 
     Everything the two share must fit (:func:`rig.pipeline.fit.check_fit`): camera and projector
-    size, fringe axis (``axis``, default the capture's first sinusoid's), patterns, units.
+    size, fringe axis (``axis``, the one the capture is processed along), patterns, units.
     """
     calibration, reference = _calibration_and_reference(calibration_path)
-    if axis is None:
-        groups = group_patterns(capture.patterns, str(capture.manifest_path))
-        axis = _fringe_axis(groups, ProcessOptions(), str(capture.manifest_path))
     check_fit(capture, calibration, axis, reference)
     return calibration, reference
 
