@@ -273,8 +273,8 @@ def process(
         obj.info["islands_dropped"] = dropped
         if dropped:
             mask &= ~islands
-            if height is not None:
-                height = np.where(mask, height, np.nan).astype(np.float32)
+            if height is not None:  # our own float32 array, already NaN outside the mask
+                np.copyto(height, np.float32(np.nan), where=islands)
             notes.append(
                 f"{dropped} valid pixels in isolated islands (regions under {options.min_island_fraction:g} of the "
                 "largest) dropped as background specks; --keep-islands keeps them"
