@@ -106,18 +106,16 @@ def cache_root() -> Path | None:
     return Path(base) / "fpp-rig"
 
 
-def _cache_dir(state: SceneState) -> Path | None:
+def _cache_dir() -> Path | None:
     root = cache_root()
     return None if root is None else root / DIRECTORY
 
 
-def load(state: SceneState, key: str, from_disk: bool = True) -> bool:
-    """Fill ``state`` (unwrapped phase, info, notes) from memory or the calibration's cache; False on a miss."""
+def load(state: SceneState, key: str) -> bool:
+    """Fill ``state`` (unwrapped phase, info, notes) from memory or the cache directory; False on a miss."""
     entry = _MEMORY.get(key)
     if entry is None:
-        if not from_disk:
-            return False
-        directory = _cache_dir(state)
+        directory = _cache_dir()
         entry = None if directory is None else _read(directory / f"{PREFIX}{key}.npz", key)
         if entry is None:
             return False
@@ -178,7 +176,7 @@ def store(state: SceneState, key: str, to_disk: bool = True) -> None:
     _remember(key, {"phase": phase, "valid": valid, "meta": json.loads(meta_text)})
     if not to_disk:
         return
-    directory = _cache_dir(state)
+    directory = _cache_dir()
     if directory is None:
         return
     try:

@@ -220,7 +220,7 @@ def process(
         if state is ref and reference_cache.cacheable(state):
             t0 = time.perf_counter()
             key = reference_cache.cache_key(state, options)
-            if reference_cache.load(state, key, from_disk=True):
+            if reference_cache.load(state, key):
                 state.timings["cached"] = time.perf_counter() - t0
                 if progress is not None:
                     for name, _ in SCENE_STAGES:
