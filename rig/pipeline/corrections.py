@@ -9,7 +9,6 @@ it is missing.
 
 from __future__ import annotations
 
-import inspect
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
@@ -21,6 +20,7 @@ from processing.correction import CORRECTIONS as NUMERIC_CORRECTIONS
 from processing.correction_method import CorrectionMethod
 from rig.errors import ProcessingError
 from rig.pipeline.gamma_correction import GAMMA_TABLE
+from rig.pipeline.plan import accepted_params
 
 if TYPE_CHECKING:
     from calibration.store import Calibration
@@ -36,9 +36,8 @@ def help_text() -> str:
 
 
 def method_params(method: CorrectionMethod, params: Mapping[str, Any]) -> dict[str, Any]:
-    """The ``--param`` entries that the method's function takes as keyword arguments."""
-    accepted = inspect.signature(method.run).parameters
-    return {key: value for key, value in params.items() if key in accepted and key not in method.needs}
+    """The ``--param`` entries that the method's function takes as keyword arguments (not what it ``needs``)."""
+    return {key: value for key, value in accepted_params(method.run, params).items() if key not in method.needs}
 
 
 def needed_inputs(method: CorrectionMethod, calibration: Calibration | None) -> dict[str, Any]:

@@ -40,9 +40,10 @@ plane shows in the region) and says so in the report.
 
 from __future__ import annotations
 
+import inspect
 import logging
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -79,6 +80,12 @@ class ProcessOptions:
     min_island_fraction: float = 0.005
     axis: str | None = None
     params: dict[str, Any] = field(default_factory=dict)
+
+
+def accepted_params(function: Callable[..., Any], params: Mapping[str, Any]) -> dict[str, Any]:
+    """The ``--param`` entries that ``function`` takes as keyword arguments."""
+    accepted = inspect.signature(function).parameters
+    return {key: value for key, value in params.items() if key in accepted}
 
 
 @dataclass

@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -22,6 +22,7 @@ from rig.pipeline.plan import (
     PatternGroups,
     ProcessOptions,
     _all_integers,
+    accepted_params,
     choose_unwrap,
 )
 from rig.store.capture import Capture, dtype_for_bit_depth
@@ -134,21 +135,13 @@ def _denoise_none(frames: np.ndarray, groups: PatternGroups, options: ProcessOpt
     return frames
 
 
-def _method_params(method: Callable[..., Any], params: Mapping[str, Any]) -> dict[str, Any]:
-    """The ``--param`` entries that ``method`` takes as keyword arguments."""
-    import inspect
-
-    accepted = inspect.signature(method).parameters
-    return {key: value for key, value in params.items() if key in accepted}
-
-
 def _denoise_rpca(
     frames: np.ndarray, groups: PatternGroups, options: ProcessOptions
 ) -> tuple[np.ndarray, dict[str, Any]]:
     """Thesis ch. 2.4: each frame's low-rank part (stable inexact ALM RPCA); returns frames and stage info."""
     from processing.denoise import rpca_denoise_stack
 
-    params = _method_params(rpca_denoise_stack, options.params)
+    params = accepted_params(rpca_denoise_stack, options.params)
     start = time.perf_counter()
     try:
         denoised, results = rpca_denoise_stack(frames, **params)
@@ -316,7 +309,7 @@ def _single_shot_parameters(options: ProcessOptions) -> tuple[dict[str, Any], di
 
     from processing.single_shot import single_shot_unwrap
 
-    given = {k: v for k, v in _method_params(single_shot_unwrap, options.params).items() if k not in _SINGLE_SHOT_OWN}
+    given = {k: v for k, v in accepted_params(single_shot_unwrap, options.params).items() if k not in _SINGLE_SHOT_OWN}
     defaults = {
         name: p.default
         for name, p in inspect.signature(single_shot_unwrap).parameters.items()
