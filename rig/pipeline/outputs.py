@@ -349,11 +349,11 @@ def _write_files(
             shows, unit = report["quantity"], "mm"
             preview = pool.submit(write_preview, out / "preview.png", result.height, unit, shows)
         files["phase"] = write_array(out / "phase.npy", phase).name
-        files["mask"] = write_array(out / "mask.npy", result.mask.astype(bool)).name
+        files["mask"] = write_array(out / "mask.npy", np.asarray(result.mask, dtype=bool)).name
         if result.height is None:
             files["wrapped"] = write_array(out / "wrapped.npy", _wrapped_maps(obj)).name
         else:
-            files["height"] = write_array(out / "height.npy", result.height.astype(np.float32)).name
+            files["height"] = write_array(out / "height.npy", np.asarray(result.height, dtype=np.float32)).name
             files["points"] = write_ply(out / "points.ply", result.valid_points(), _texture(obj, result.mask)).name
         low, high = preview.result()
     report["preview"] = {"shows": shows, "unit": unit, "range": [low, high]}
