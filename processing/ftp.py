@@ -129,6 +129,27 @@ def ftp_phase(
     return phase, 2.0 * np.abs(analytic)
 
 
+def fringe_background(fringe: np.ndarray, carrier: float, axis: int = 1) -> np.ndarray:
+    """Background A of a fringe image: its mean over one fringe period (``1 / |carrier|`` pixels,
+    rounded) along ``axis``, borders reflected; float64 (H, W).
+
+    Parameters
+    ----------
+    fringe : (H, W) array
+        Fringe image I = A + B cos(phi).
+    carrier : float
+        Carrier in cycles per pixel along ``axis`` (:func:`ftp_phase`); 0 leaves the image as it is.
+    axis : int
+        1: fringes vary along x; 0: along y.
+    """
+    import cv2
+
+    axis = _check_axis(axis)
+    period = max(int(round(1.0 / abs(carrier))), 1) if carrier else 1
+    kernel = (period, 1) if axis == 1 else (1, period)
+    return cv2.blur(np.asarray(fringe, dtype=np.float64), kernel, borderType=cv2.BORDER_REFLECT)
+
+
 @dataclass
 class FringeParts:
     """What the height and correction stages need from one FTP-phased fringe image, all (H, W)."""
@@ -157,13 +178,9 @@ def ftp_fringe_parts(
     min_modulation : float
         A pixel is valid where its amplitude exceeds this fraction of the median amplitude.
     """
-    import cv2
-
     axis = _check_axis(axis)
     phase, amplitude = ftp_phase(fringe, carrier=carrier, axis=axis, bandwidth=bandwidth)
     amplitude = np.asarray(amplitude, dtype=np.float64)
-    period = max(int(round(1.0 / abs(carrier))), 1) if carrier else 1
-    kernel = (period, 1) if axis == 1 else (1, period)
-    background = cv2.blur(np.asarray(fringe, dtype=np.float64), kernel, borderType=cv2.BORDER_REFLECT)
+    background = fringe_background(fringe, carrier, axis)
     valid = amplitude > min_modulation * float(np.median(amplitude))
     return FringeParts(np.asarray(phase, dtype=np.float64), amplitude, background, valid)

@@ -285,17 +285,13 @@ def _ftp_frame(image: np.ndarray, axis: str, shift: float) -> tuple[np.ndarray, 
 
     The background is the mean over one fringe period along the axis (the detected carrier).
     """
-    import cv2
-
-    from processing.ftp import detect_carrier, ftp_phase
+    from processing.ftp import detect_carrier, fringe_background, ftp_phase
 
     img = np.asarray(image, dtype=np.float64)
     along = 1 if axis == "x" else 0
     phase, amplitude = ftp_phase(img, axis=along)
     phase = np.angle(np.exp(1j * (phase - shift)))
-    period = max(int(round(1.0 / abs(detect_carrier(img, along)))), 1)
-    kernel = (period, 1) if axis == "x" else (1, period)
-    background = cv2.blur(img, kernel, borderType=cv2.BORDER_REFLECT)
+    background = fringe_background(img, detect_carrier(img, along), along)
     return phase, np.asarray(amplitude, dtype=np.float64), background
 
 
