@@ -21,6 +21,8 @@ from rig.config import load_config
 from rig.console.app import create_app
 
 WIDTH, HEIGHT = 320, 240
+BASE = "http://127.0.0.1:8765"  # a name the console answers to (the Host header is checked)
+WS = "ws://127.0.0.1:8765"
 
 
 @pytest.fixture
@@ -34,7 +36,7 @@ def rig_toml(tmp_path: Path, simulated_rig_toml: Callable[..., str]) -> Path:
 @pytest.fixture
 def console(tmp_path: Path, rig_toml: Path) -> Iterator[TestClient]:
     app = create_app(load_config(rig_toml), tmp_path / "data", fault_injection=True)
-    with TestClient(app) as client:
+    with TestClient(app, base_url=BASE) as client:
         yield client
 
 
@@ -147,7 +149,7 @@ def test_scan_with_a_calibration_gives_heights(
 ) -> None:
     data = tmp_path / "data"
     exact_calibration(rig_toml, data / "calibrations" / "cal")
-    with TestClient(create_app(load_config(rig_toml), data)) as client:
+    with TestClient(create_app(load_config(rig_toml), data), base_url=BASE) as client:
         assert client.get("/api/calibrations").json() == {"calibrations": ["cal"], "active": "cal"}
         job = client.post("/api/scan", json={"name": "part", "options": {"correction": "none"}}).json()["job"]
         assert wait_job(client, job["id"])["state"] == "done"
@@ -164,14 +166,14 @@ def test_scan_with_a_calibration_gives_heights(
 
 
 def test_stop_cancels_the_scan_and_leaves_no_complete_capture(console: TestClient) -> None:
-    with console.websocket_connect("/api/events") as socket:
+    with console.websocket_connect(WS + "/api/events") as socket:
         socket.receive_text()  # hello
         job = console.post("/api/scan", json={"name": "stopped"}).json()["job"]
         while True:
             message = socket.receive()
             if message.get("text") and json.loads(message["text"]).get("type") == "progress":
                 break
-        assert console.post("/api/stop").json()["stopped"] == [job["id"]]
+        assert console.post("/api/stop", json={}).json()["stopped"] == [job["id"]]
     finished = wait_job(console, job["id"])
     assert finished["state"] == "cancelled" and "stopped" in finished["error"]
     root = console.app.state.session.data.root / "captures"
@@ -187,7 +189,7 @@ def test_stop_cancels_the_scan_and_leaves_no_complete_capture(console: TestClien
 
 def test_live_frames_follow_the_exposure(console: TestClient) -> None:
     assert console.put("/api/projector", json={"pattern": "white"}).status_code == 200
-    with console.websocket_connect("/api/events") as socket:
+    with console.websocket_connect(WS + "/api/events") as socket:
         socket.receive_text()
         socket.send_text(json.dumps({"live": True}))
         bright = live_frames(socket, 3)[-1]
@@ -231,19 +233,19 @@ def test_errors_are_one_readable_line(console: TestClient) -> None:
 
 
 def test_token_is_required_when_set(tmp_path: Path, rig_toml: Path) -> None:
-    app = create_app(load_config(rig_toml), tmp_path / "data", token="s3cret")
-    with TestClient(app) as client:
+    app = create_app(load_config(rig_toml), tmp_path / "data", token="s3cret-0123456789abcdef")
+    with TestClient(app, base_url=BASE) as client:
         assert client.get("/api/status").status_code == 401
         assert client.get("/api/status", headers={"Authorization": "Bearer wrong"}).status_code == 401
-        assert client.get("/api/status", headers={"Authorization": "Bearer s3cret"}).status_code == 200
-        page = client.get("/?token=s3cret")
-        assert page.status_code == 200 and "rig_console_token=s3cret" in page.headers["set-cookie"]
+        assert client.get("/api/status", headers={"Authorization": "Bearer s3cret-0123456789abcdef"}).status_code == 200
+        page = client.get("/?token=s3cret-0123456789abcdef")
+        assert page.status_code == 200 and "rig_console_token=s3cret-0123456789abcdef" in page.headers["set-cookie"]
         assert client.get("/api/status").status_code == 200  # the cookie now carries it
         client.cookies.clear()
         from starlette.websockets import WebSocketDisconnect
 
         with pytest.raises(WebSocketDisconnect):
-            with client.websocket_connect("/api/events") as socket:
+            with client.websocket_connect(WS + "/api/events") as socket:
                 socket.receive_text()
 
 
@@ -253,7 +255,7 @@ def test_requests_from_another_origin_are_refused(console: TestClient) -> None:
 
 
 def test_a_device_fault_is_reported_and_the_next_scan_works(console: TestClient) -> None:
-    with console.websocket_connect("/api/events") as socket:
+    with console.websocket_connect(WS + "/api/events") as socket:
         socket.receive_text()
         job, error = scan_into_fault(console, socket, "camera-gone", "faulty")
     assert "disappeared" in error
@@ -266,7 +268,7 @@ def test_a_device_fault_is_reported_and_the_next_scan_works(console: TestClient)
 
 
 def test_fault_injection_is_off_unless_asked_for(tmp_path: Path, rig_toml: Path) -> None:
-    with TestClient(create_app(load_config(rig_toml), tmp_path / "data")) as client:
+    with TestClient(create_app(load_config(rig_toml), tmp_path / "data"), base_url=BASE) as client:
         assert client.post("/api/simulation/fault", json={"fault": "camera-gone"}).status_code in (404, 405)
 
 
@@ -287,7 +289,7 @@ def test_reprocess_and_compare(console: TestClient) -> None:
 
 
 def test_calibration_wizard_runs_unattended_on_the_simulated_rig(console: TestClient) -> None:
-    with console.websocket_connect("/api/events") as socket:
+    with console.websocket_connect(WS + "/api/events") as socket:
         socket.receive_text()
         reply = console.post("/api/calibrate", json={"name": "cal", "heights_mm": [25, 50, 100], "board_views": 0})
         assert reply.status_code == 202
@@ -321,7 +323,7 @@ def test_the_alignment_grid_shows_in_the_live_frame(console: TestClient) -> None
         image = np.roll(pattern_image({"kind": "grid", "pitch_px": pitch}, config.projector.size), roll, axis=(0, 1))
         return sample_projector_image(image, mapping)[mapping.lit]
 
-    with console.websocket_connect("/api/events") as socket:
+    with console.websocket_connect(WS + "/api/events") as socket:
         socket.receive_text()
         socket.send_text(json.dumps({"live": True}))
         live_frames(socket, 2)  # frames taken before the pattern reached the camera are past
@@ -342,7 +344,7 @@ def test_the_alignment_grid_shows_in_the_live_frame(console: TestClient) -> None
 
 
 def test_a_trigger_timeout_is_reported_and_the_next_scan_works(console: TestClient) -> None:
-    with console.websocket_connect("/api/events") as socket:
+    with console.websocket_connect(WS + "/api/events") as socket:
         socket.receive_text()
         job, error = scan_into_fault(console, socket, "trigger-timeout", "stalled")
     print(f"trigger-timeout error: {error}")
@@ -366,7 +368,7 @@ def test_calibration_wizard_options_model_and_gamma(console: TestClient) -> None
     assert bad.status_code == 400 and bad.json()["error"].startswith("gamma_levels: expected")
     assert console.post("/api/calibrate", json={"model": "affine"}).status_code == 400
     assert not (console.app.state.session.data.root / "calibrations" / "st").exists()
-    with console.websocket_connect("/api/events") as socket:
+    with console.websocket_connect(WS + "/api/events") as socket:
         socket.receive_text()
         reply = console.post(
             "/api/calibrate",
@@ -398,7 +400,7 @@ def test_a_real_rig_prompt_waits_for_the_answer_from_the_page(console: TestClien
     from rig.events import Cancelled
 
     session = console.app.state.session
-    job = session._new_job("calibrate", "manual", None)
+    job = session.jobs.start("calibrate", "manual")
     operator = session.operator(job)
     done: list[str] = []
 
@@ -409,8 +411,8 @@ def test_a_real_rig_prompt_waits_for_the_answer_from_the_page(console: TestClien
         except Cancelled as exc:
             done.append(f"cancelled: {exc}")
 
-    assert console.post("/api/calibrate/answer").status_code == 400  # nothing asked yet
-    with console.websocket_connect("/api/events") as socket:
+    assert console.post("/api/calibrate/answer", json={}).status_code == 400  # nothing asked yet
+    with console.websocket_connect(WS + "/api/events") as socket:
         socket.receive_text()
         worker = threading.Thread(target=plane)
         worker.start()
@@ -423,15 +425,15 @@ def test_a_real_rig_prompt_waits_for_the_answer_from_the_page(console: TestClien
         assert console.get("/api/status").json()["prompt"]["text"] == "move the plane to 50 mm"
         time.sleep(0.3)
         assert worker.is_alive() and not done  # still waiting for the operator
-        assert console.post("/api/calibrate/answer").json() == {"answered": True}
+        assert console.post("/api/calibrate/answer", json={}).json() == {"answered": True}
         worker.join(timeout=10)
     assert done == ["answered"] and console.get("/api/status").json()["prompt"] is None
-    assert console.post("/api/calibrate/answer").status_code == 400  # answered once
+    assert console.post("/api/calibrate/answer", json={}).status_code == 400  # answered once
 
     worker = threading.Thread(target=plane)
     worker.start()
     while session.prompt is None:
         time.sleep(0.01)
-    assert console.post("/api/stop", params={"job": job.id}).json()["stopped"] == [job.id]
+    assert console.post("/api/stop", params={"job": job.id}, json={}).json()["stopped"] == [job.id]
     worker.join(timeout=10)
     assert done[-1].startswith("cancelled") and session.prompt is None

@@ -6,6 +6,11 @@ Layout::
     DATA/captures/NAME/        captures (capture.json + frames), scans made from the console
     DATA/results/NAME/         outputs of processing a capture (report.json, height.npy, points.ply, ...)
     DATA/calibrations/NAME/    calibrations (calibration.json); scans are processed with the chosen one
+
+Staging folders the file layer writes into (``NAME.incomplete-XXXX``, ``NAME.replaced-XXXX``) are
+never names: a kill between writing and renaming leaves one behind, and it must not pass for a
+capture, a result or a calibration. If the directory (or one of its folders) is removed while the
+console runs, the layout is made again on the next use; if that fails, the error says so.
 """
 
 from __future__ import annotations
@@ -16,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from rig.errors import RigError
+from rig.store.files import INCOMPLETE_MARK, REPLACED_MARK
 
 KINDS = ("captures", "results", "calibrations")
 MARKERS = {"captures": "capture.json", "results": "report.json", "calibrations": "calibration.json"}
@@ -26,13 +32,28 @@ class OutsideDataError(RigError):
     """A name the API received is not a plain name inside the data directory."""
 
 
+def is_staging(name: str) -> bool:
+    """Whether ``name`` is one of the file layer's staging names (never a real entry)."""
+    return INCOMPLETE_MARK in name or REPLACED_MARK in name
+
+
 class DataDir:
-    """The data directory of one console; created if missing."""
+    """The data directory of one console; created if missing (and again if removed meanwhile)."""
 
     def __init__(self, root: str | Path) -> None:
         self.root = Path(root).resolve()
+        self.ensure()
+
+    def ensure(self) -> None:
+        """Make DATA and its three folders if any is missing; a RigError naming the folder if it cannot."""
         for kind in KINDS:
-            (self.root / kind).mkdir(parents=True, exist_ok=True)
+            folder = self.root / kind
+            if folder.is_dir():
+                continue
+            try:
+                folder.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise RigError(f"data directory {folder}: cannot be made again: {exc.strerror or exc}") from None
 
     def path(self, kind: str, name: str) -> Path:
         """``DATA/kind/name``, refused unless ``name`` is a plain name that stays inside DATA.
@@ -46,6 +67,11 @@ class DataDir:
             raise OutsideDataError(
                 f"{kind} name: expected a plain name (letters, digits, '.', '_', '-'; no '/' or '..'), found {name!r}"
             )
+        if is_staging(name):
+            raise OutsideDataError(
+                f"{kind} name {name!r}: {INCOMPLETE_MARK!r} and {REPLACED_MARK!r} mark unfinished writes, not names"
+            )
+        self.ensure()
         path = self.root / kind / name
         if not path.resolve().is_relative_to(self.root):
             raise OutsideDataError(f"{kind} name {name!r}: leads outside the data directory")
@@ -60,16 +86,20 @@ class DataDir:
 
     def names(self, kind: str) -> list[str]:
         """Complete entries of ``kind``, newest first (by the marker file's modification time)."""
+        self.ensure()
         folder = self.root / kind
         entries = []
         for child in folder.iterdir():
             marker = child / MARKERS[kind]
-            if NAME.fullmatch(child.name) and marker.is_file() and child.resolve().is_relative_to(self.root):
+            if not NAME.fullmatch(child.name) or is_staging(child.name):
+                continue
+            if marker.is_file() and child.resolve().is_relative_to(self.root):
                 entries.append((marker.stat().st_mtime, child.name))
         return [name for _, name in sorted(entries, reverse=True)]
 
     def new_name(self, kind: str, prefix: str) -> str:
         """A name not yet used in ``kind``: ``prefix-YYYYmmdd-HHMMSS`` (``-2``, ``-3`` ... if taken)."""
+        self.ensure()
         stamp = datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S")
         base = f"{prefix}-{stamp}"
         name, n = base, 1
@@ -77,6 +107,23 @@ class DataDir:
             n += 1
             name = f"{base}-{n}"
         return name
+
+    def interrupted(self, kind: str) -> list[str]:
+        """Staging folders of ``kind`` left by an interrupted write (a stopped scan), newest first.
+
+        Listed so that the operator can salvage or discard them; :meth:`path` never accepts them.
+        """
+        self.ensure()
+        entries = []
+        for child in (self.root / kind).iterdir():
+            if INCOMPLETE_MARK in child.name and child.is_dir() and not child.is_symlink():
+                entries.append((child.stat().st_mtime, child.name))
+        return [name for _, name in sorted(entries, reverse=True)]
+
+    def staged(self, kind: str, name: str) -> bool:
+        """Whether a write of ``kind``/``name`` is under way (a staging folder of that name exists)."""
+        folder = self.root / kind
+        return any(p.name.startswith(name + INCOMPLETE_MARK) for p in folder.iterdir())
 
     def describe(self) -> dict[str, Any]:
         return {"root": str(self.root), **{kind: len(self.names(kind)) for kind in KINDS}}
