@@ -17,7 +17,7 @@ In order (the first that fails answers; a websocket is closed with code 1008 and
    sets an HttpOnly cookie and the page then drops it from its address bar), the cookie, or
    ``Authorization: Bearer``. Answer: 401.
 5. **Body size**: at most :data:`MAX_BODY_BYTES` per request, by ``Content-Length`` and as it
-   streams in. Answer: 413.
+   streams in (bodies are read whole before a route runs; the API takes only small JSON). Answer: 413.
 """
 
 from __future__ import annotations
@@ -152,33 +152,28 @@ class AccessMiddleware:
         if scope["type"] != "http":
             await self.app(scope, receive, send)
             return
-        started = False
-
-        async def tracked(message: MutableMapping[str, Any]) -> None:
-            nonlocal started
-            started = started or message["type"] == "http.response.start"
-            await send(message)
-
         try:
-            await self.app(scope, self._limited(receive), tracked)
-        except Refused as refused:  # the body grew past the limit while a route read it
-            if started:
-                raise
+            body = await self._read_body(receive)
+        except Refused as refused:
             await _refuse(scope, receive, send, refused)
+            return
+        await self.app(scope, _replay(body, receive), send)
 
-    def _limited(self, receive: Receive) -> Receive:
-        """``receive`` that stops a body streaming in beyond the limit (chunked, or a lying length)."""
-        seen = 0
-
-        async def limited() -> Message:
-            nonlocal seen
+    async def _read_body(self, receive: Receive) -> bytes:
+        """The whole request body, refused as soon as it grows past the limit (chunked, or a lying length)."""
+        parts: list[bytes] = []
+        size = 0
+        while True:
             message = await receive()
-            seen += len(message.get("body", b""))
-            if seen > self.max_body:
+            if message["type"] != "http.request":
+                break
+            parts.append(message.get("body", b""))
+            size += len(parts[-1])
+            if size > self.max_body:
                 raise Refused(413, f"request body: expected at most {self.max_body} bytes")
-            return message
-
-        return limited
+            if not message.get("more_body", False):
+                break
+        return b"".join(parts)
 
     def _with_cookie(self, send: Send) -> Send:
         cookie = f"{TOKEN_COOKIE}={self.rules.token}; Path=/; HttpOnly; SameSite=Strict".encode("latin-1")
@@ -189,6 +184,20 @@ class AccessMiddleware:
             await send(message)
 
         return wrapped
+
+
+def _replay(body: bytes, receive: Receive) -> Receive:
+    """A ``receive`` that gives ``body`` once, then whatever the client sends next (a disconnect)."""
+    given = False
+
+    async def replay() -> Message:
+        nonlocal given
+        if given:
+            return await receive()
+        given = True
+        return {"type": "http.request", "body": body, "more_body": False}
+
+    return replay
 
 
 async def _refuse(scope: Scope, receive: Receive, send: Send, refused: Refused) -> None:
