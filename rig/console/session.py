@@ -9,9 +9,12 @@
   (:func:`rig.pipeline.run.process`) runs on a processing thread so the rig is free again at once:
   first without fringe-order correction (on screen within a second), then with the requested
   options, whose outputs are written (:func:`rig.pipeline.outputs.write_outputs`).
-- Progress comes from the services' :class:`rig.events.Reporter` events, published with every
-  state change through ``publish`` (the app fans them out to the websocket clients); each job
-  has a :class:`rig.events.CancelToken` (Stop button, closed page, shutdown).
+- Scans, processing runs and calibrations are jobs of :class:`rig.jobs.Jobs` (thread-safe; every
+  job ends done, failed or cancelled, whatever it raises). Their progress comes from the services'
+  :class:`rig.events.Reporter` events, published through ``publish`` with the kind of what they
+  count (scan: frames, process: stages, calibrate: steps); each job has a
+  :class:`rig.events.CancelToken` (Stop button, shutdown). A page that closes stops nothing: jobs
+  belong to the console, and a page that opens is shown the running ones and the newest result.
 - A device error closes the rig and is published as a readable message; the next request (or live
   frame, after a short pause) opens the rig again.
 """
