@@ -9,55 +9,17 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+from console_client import BASE, HEIGHT, WIDTH, WS, wait_job, wait_saved
 from fastapi.testclient import TestClient
 
 from rig.config import load_config
 from rig.console.app import create_app
-
-WIDTH, HEIGHT = 320, 240
-BASE = "http://127.0.0.1:8765"  # a name the console answers to (the Host header is checked)
-WS = "ws://127.0.0.1:8765"
-
-
-@pytest.fixture
-def rig_toml(tmp_path: Path, simulated_rig_toml: Callable[..., str]) -> Path:
-    path = tmp_path / "rig.toml"
-    text = simulated_rig_toml((456, 570), (WIDTH, HEIGHT), 35.0)
-    path.write_text(text.replace("[scan]\n", "[scan]\nfetch_timeout_s = 0.5\nretries = 1\n"))
-    return path
-
-
-@pytest.fixture
-def console(tmp_path: Path, rig_toml: Path) -> Iterator[TestClient]:
-    app = create_app(load_config(rig_toml), tmp_path / "data", fault_injection=True)
-    with TestClient(app, base_url=BASE) as client:
-        yield client
-
-
-def wait_job(client: TestClient, job_id: str, timeout_s: float = 60.0) -> dict[str, Any]:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        job = client.get(f"/api/jobs/{job_id}").json()
-        if job["state"] != "running":
-            return job
-        time.sleep(0.05)
-    raise AssertionError(f"job {job_id} still running after {timeout_s} s")
-
-
-def wait_saved(client: TestClient, name: str, timeout_s: float = 60.0) -> dict[str, Any]:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        reply = client.get(f"/api/results/{name}")
-        if reply.status_code == 200 and reply.json()["saved"]:
-            return reply.json()
-        time.sleep(0.05)
-    raise AssertionError(f"result {name} not saved after {timeout_s} s")
 
 
 def live_frames(socket: Any, count: int) -> list[dict[str, Any]]:
@@ -145,11 +107,11 @@ def test_scan_gives_a_result_and_a_second_scan_is_refused_as_busy(console: TestC
 
 
 def test_scan_with_a_calibration_gives_heights(
-    tmp_path: Path, rig_toml: Path, exact_calibration: Callable[[Path, Path], Path]
+    tmp_path: Path, console_rig_toml: Path, exact_calibration: Callable[[Path, Path], Path]
 ) -> None:
     data = tmp_path / "data"
-    exact_calibration(rig_toml, data / "calibrations" / "cal")
-    with TestClient(create_app(load_config(rig_toml), data), base_url=BASE) as client:
+    exact_calibration(console_rig_toml, data / "calibrations" / "cal")
+    with TestClient(create_app(load_config(console_rig_toml), data), base_url=BASE) as client:
         assert client.get("/api/calibrations").json() == {"calibrations": ["cal"], "active": "cal"}
         job = client.post("/api/scan", json={"name": "part", "options": {"correction": "none"}}).json()["job"]
         assert wait_job(client, job["id"])["state"] == "done"
@@ -157,7 +119,7 @@ def test_scan_with_a_calibration_gives_heights(
         heights = np.frombuffer(client.get("/api/results/part/values.f32").content, dtype="<f4").reshape(HEIGHT, WIDTH)
     from rig.hardware.simulated import geometry_from_config, scene_height
 
-    config = load_config(rig_toml)
+    config = load_config(console_rig_toml)
     truth = scene_height(config, "object", geometry_from_config(config))
     valid = np.isfinite(heights)
     assert summary["shows"] == "height" and valid.mean() > 0.9
@@ -232,8 +194,8 @@ def test_errors_are_one_readable_line(console: TestClient) -> None:
     assert reply.status_code == 404 and "captures/missing: not found" in reply.json()["error"]
 
 
-def test_token_is_required_when_set(tmp_path: Path, rig_toml: Path) -> None:
-    app = create_app(load_config(rig_toml), tmp_path / "data", token="s3cret-0123456789abcdef")
+def test_token_is_required_when_set(tmp_path: Path, console_rig_toml: Path) -> None:
+    app = create_app(load_config(console_rig_toml), tmp_path / "data", token="s3cret-0123456789abcdef")
     with TestClient(app, base_url=BASE) as client:
         assert client.get("/api/status").status_code == 401
         assert client.get("/api/status", headers={"Authorization": "Bearer wrong"}).status_code == 401
@@ -267,8 +229,8 @@ def test_a_device_fault_is_reported_and_the_next_scan_works(console: TestClient)
     assert console.get("/api/devices").json()["devices"][1]["state"] == "open"
 
 
-def test_fault_injection_is_off_unless_asked_for(tmp_path: Path, rig_toml: Path) -> None:
-    with TestClient(create_app(load_config(rig_toml), tmp_path / "data"), base_url=BASE) as client:
+def test_fault_injection_is_off_unless_asked_for(tmp_path: Path, console_rig_toml: Path) -> None:
+    with TestClient(create_app(load_config(console_rig_toml), tmp_path / "data"), base_url=BASE) as client:
         assert client.post("/api/simulation/fault", json={"fault": "camera-gone"}).status_code in (404, 405)
 
 

@@ -63,6 +63,7 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]]
     from calibration.store import write_calibration
     from rig.acquisition.scan import scan
     from rig.console.app import create_app
+    from rig.console.server import server_config
     from rig.hardware.simulated import geometry_from_config
     from rig.hardware.synthesis import exact_calibration
 
@@ -74,7 +75,7 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]]
     write_calibration(cal, exact_calibration(geometry_from_config(config)))
     app = create_app(config, root / "data", fault_injection=True)
     port = free_port()
-    uv = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning", ws="websockets-sansio"))
+    uv = uvicorn.Server(server_config(app, "127.0.0.1", port))
     thread = threading.Thread(target=uv.run, daemon=True)
     thread.start()
     deadline = time.monotonic() + 30
@@ -362,3 +363,34 @@ def test_a_scan_survives_a_reload_and_shows_in_a_second_tab_without_moving_it(
     assert other.get_by_test_id("calibration-name").input_value() == "typing-here"
     assert page.locator("#view-live").evaluate("v => v.classList.contains('active')")  # nor the reloaded page
     other.context.close()
+
+
+def test_the_page_drops_the_token_from_its_address(browser: Any, server: dict[str, Any], tmp_path: Path) -> None:
+    """Issue 22: with a token, ``?token=`` opens the page once; the cookie carries it from then on
+    and the address bar (history, a copied link) no longer shows it."""
+    import uvicorn
+
+    from rig.console.app import create_app
+    from rig.console.server import server_config
+
+    token = "t0ken-for-the-address-bar-test"
+    port = free_port()
+    app = create_app(server["config"], tmp_path / "data", token=token)
+    uv = uvicorn.Server(server_config(app, "127.0.0.1", port))
+    thread = threading.Thread(target=uv.run, daemon=True)
+    thread.start()
+    try:
+        deadline = time.monotonic() + 60
+        while not uv.started:
+            assert time.monotonic() < deadline, "console did not start"
+            time.sleep(0.05)
+        page = browser.new_context().new_page()
+        page.goto(f"http://127.0.0.1:{port}/?token={token}")
+        page.wait_for_function("!location.search.includes('token')")
+        page.wait_for_function("document.querySelector('[data-testid=rig-state]').textContent !== 'connecting'")
+        assert token not in page.url
+        assert page.get_by_test_id("rig-state").inner_text() != "disconnected"  # the cookie let the websocket in
+        page.context.close()
+    finally:
+        uv.should_exit = True
+        thread.join(timeout=30)

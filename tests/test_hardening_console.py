@@ -22,9 +22,9 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from console_client import BASE, WS, wait_job
 from fastapi.testclient import TestClient
 from starlette.websockets import WebSocketDisconnect
-from test_console_api import BASE, WS, console, rig_toml, wait_job  # noqa: F401 - fixtures
 
 from rig.config import load_config
 from rig.console.app import create_app
@@ -52,9 +52,9 @@ def test_a_foreign_host_name_is_refused_on_http_and_the_websocket(console: TestC
 
 
 def test_allowed_host_names_a_reverse_proxy_and_a_wildcard_address_takes_ip_literals(
-    tmp_path: Path, rig_toml: Path
+    tmp_path: Path, console_rig_toml: Path
 ) -> None:
-    app = create_app(load_config(rig_toml), tmp_path / "data", host="0.0.0.0", allowed_hosts=["scanner.lab"])
+    app = create_app(load_config(console_rig_toml), tmp_path / "data", host="0.0.0.0", allowed_hosts=["scanner.lab"])
     with TestClient(app, base_url=BASE) as client:
         assert client.get("/api/status", headers={"Host": "scanner.lab"}).status_code == 200
         assert client.get("/api/status", headers={"Host": "192.168.7.20:8765"}).status_code == 200
@@ -88,9 +88,9 @@ def test_a_state_change_needs_a_json_body_or_the_console_header(console: TestCli
 
 
 @pytest.mark.parametrize("token", ["", "short", "x" * 15])
-def test_an_empty_or_short_token_is_refused(tmp_path: Path, rig_toml: Path, token: str) -> None:
+def test_an_empty_or_short_token_is_refused(tmp_path: Path, console_rig_toml: Path, token: str) -> None:
     with pytest.raises(ConfigError, match="--token: expected at least 16 characters"):
-        create_app(load_config(rig_toml), tmp_path / "data", token=token)
+        create_app(load_config(console_rig_toml), tmp_path / "data", token=token)
 
 
 def test_the_command_refuses_an_empty_token_with_one_line(tmp_path: Path) -> None:
@@ -108,14 +108,14 @@ def test_the_command_refuses_an_empty_token_with_one_line(tmp_path: Path) -> Non
 # ------------------------------------------------------------------ 5: staging names after a kill
 
 
-def _calibrated_data(tmp_path: Path, rig_toml: Path) -> Path:
+def _calibrated_data(tmp_path: Path, console_rig_toml: Path) -> Path:
     """A data directory with calibration ``cal``, and what a kill mid-commit leaves beside it."""
     from calibration.store import write_calibration
     from rig.acquisition.scan import scan
     from rig.hardware.simulated import geometry_from_config
     from rig.hardware.synthesis import exact_calibration
 
-    config = load_config(rig_toml)
+    config = load_config(console_rig_toml)
     data = tmp_path / "data"
     cal = data / "calibrations" / "cal"
     scan(config, cal / "reference", scene="reference")
@@ -127,9 +127,9 @@ def _calibrated_data(tmp_path: Path, rig_toml: Path) -> Path:
     return data
 
 
-def test_staging_folders_are_never_listed_or_activated(tmp_path: Path, rig_toml: Path) -> None:
-    data = _calibrated_data(tmp_path, rig_toml)
-    with TestClient(create_app(load_config(rig_toml), data), base_url=BASE) as client:
+def test_staging_folders_are_never_listed_or_activated(tmp_path: Path, console_rig_toml: Path) -> None:
+    data = _calibrated_data(tmp_path, console_rig_toml)
+    with TestClient(create_app(load_config(console_rig_toml), data), base_url=BASE) as client:
         assert client.get("/api/calibrations").json() == {"calibrations": ["cal"], "active": "cal"}
         reply = client.put("/api/calibration", json={"name": "zz.incomplete-k1ll"})
         assert reply.status_code == 400 and "unfinished writes" in reply.json()["error"]
@@ -273,14 +273,14 @@ def test_a_large_body_is_refused_before_it_is_read(console: TestClient) -> None:
 
 
 @pytest.fixture
-def served(tmp_path: Path, rig_toml: Path) -> Iterator[int]:
+def served(tmp_path: Path, console_rig_toml: Path) -> Iterator[int]:
     """The console under uvicorn as ``rig console`` serves it, with a 0.5 s header deadline; its port."""
     import uvicorn
 
     from benchmarks.dask_cluster import free_port
     from rig.console.server import server_config
 
-    app = create_app(load_config(rig_toml), tmp_path / "data")
+    app = create_app(load_config(console_rig_toml), tmp_path / "data")
     port = free_port()
     server = uvicorn.Server(server_config(app, "127.0.0.1", port, header_timeout_s=0.5))
     thread = threading.Thread(target=server.run, daemon=True)
