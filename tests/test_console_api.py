@@ -399,3 +399,43 @@ def test_a_real_rig_prompt_waits_for_the_answer_from_the_page(console: TestClien
     assert console.post("/api/stop", params={"job": job.id}, json={}).json()["stopped"] == [job.id]
     worker.join(timeout=10)
     assert done[-1].startswith("cancelled") and session.prompt is None
+
+
+def _interrupted_copy(console: TestClient, name: str) -> Path:
+    """A complete scan ``name`` copied to ``name.incomplete-k1ll`` marked incomplete: what a kill
+    after the last frame but before the commit leaves behind."""
+    import shutil
+
+    job = console.post("/api/scan", json={"name": name, "process": False}).json()["job"]
+    assert wait_job(console, job["id"])["state"] == "done"
+    captures = Path(console.get("/api/status").json()["data"]["root"]) / "captures"
+    staged = captures / f"{name}.incomplete-k1ll"
+    shutil.copytree(captures / name, staged)
+    manifest = json.loads((staged / "capture.json").read_text())
+    (staged / "capture.json").write_text(json.dumps({**manifest, "complete": False}))
+    return staged
+
+
+def test_an_interrupted_scan_is_listed_and_can_be_salvaged(console: TestClient) -> None:
+    staged = _interrupted_copy(console, "cut")
+    rows = {row["name"]: row for row in console.get("/api/captures").json()["captures"]}
+    assert rows[staged.name]["complete"] is False and "salvage or discard" in rows[staged.name]["error"]
+    assert console.post("/api/process", json={"capture": staged.name}).status_code == 400  # not a capture name
+    reply = console.post(f"/api/captures/{staged.name}/salvage", json={"options": {"correction": "none"}})
+    assert reply.status_code == 202
+    job = wait_job(console, reply.json()["job"]["id"])
+    assert job["state"] == "done" and job["name"].startswith("cut-salvaged-none")
+    assert wait_saved(console, job["name"])["shows"] == "phase"
+    assert staged.is_dir()  # salvaging reads, never moves or deletes
+
+
+def test_discarding_an_interrupted_scan_moves_it_to_the_trash(console: TestClient) -> None:
+    staged = _interrupted_copy(console, "cut")
+    files = sorted(p.relative_to(staged) for p in staged.rglob("*"))
+    reply = console.post(f"/api/captures/{staged.name}/discard", json={})
+    assert reply.status_code == 200 and reply.json()["moved_to"] == f"trash/captures/{staged.name}"
+    trash = staged.parent.parent / "trash" / "captures" / staged.name
+    assert not staged.exists() and sorted(p.relative_to(trash) for p in trash.rglob("*")) == files
+    assert staged.name not in [row["name"] for row in console.get("/api/captures").json()["captures"]]
+    assert console.post("/api/captures/cut/discard", json={}).status_code == 404  # only interrupted writes
+    assert (staged.parent / "cut" / "capture.json").is_file()

@@ -6,6 +6,7 @@ Layout::
     DATA/captures/NAME/        captures (capture.json + frames), scans made from the console
     DATA/results/NAME/         outputs of processing a capture (report.json, height.npy, points.ply, ...)
     DATA/calibrations/NAME/    calibrations (calibration.json); scans are processed with the chosen one
+    DATA/trash/KIND/NAME/      what the operator discarded (an interrupted scan), kept until removed by hand
 
 Staging folders the file layer writes into (``NAME.incomplete-XXXX``, ``NAME.replaced-XXXX``) are
 never names: a kill between writing and renaming leaves one behind, and it must not pass for a
@@ -24,6 +25,7 @@ from rig.errors import RigError
 from rig.store.files import INCOMPLETE_MARK, REPLACED_MARK
 
 KINDS = ("captures", "results", "calibrations")
+TRASH = "trash"  # what the operator discarded, moved rather than deleted
 MARKERS = {"captures": "capture.json", "results": "report.json", "calibrations": "calibration.json"}
 NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,99}")
 
@@ -108,7 +110,7 @@ class DataDir:
             name = f"{base}-{n}"
         return name
 
-    def interrupted(self, kind: str) -> list[str]:
+    def interrupted_names(self, kind: str) -> list[str]:
         """Staging folders of ``kind`` left by an interrupted write (a stopped scan), newest first.
 
         Listed so that the operator can salvage or discard them; :meth:`path` never accepts them.
@@ -119,6 +121,23 @@ class DataDir:
             if INCOMPLETE_MARK in child.name and child.is_dir() and not child.is_symlink():
                 entries.append((child.stat().st_mtime, child.name))
         return [name for _, name in sorted(entries, reverse=True)]
+
+    def interrupted(self, kind: str, name: str) -> Path:
+        """DATA/kind/NAME for an interrupted write's folder listed by :meth:`interrupted_names`."""
+        if not isinstance(name, str) or name not in self.interrupted_names(kind):
+            raise FileNotFoundError(f"{kind}/{name}: no interrupted write of that name in the data directory")
+        return self.root / kind / name
+
+    def to_trash(self, kind: str, name: str) -> str:
+        """Move the interrupted write ``kind``/``name`` to DATA/trash/kind/NAME (renamed, never deleted)."""
+        source = self.interrupted(kind, name)
+        trash = self.root / TRASH / kind
+        trash.mkdir(parents=True, exist_ok=True)
+        target = trash / name
+        if target.exists():
+            raise RigError(f"{TRASH}/{kind}/{name}: already in the trash; remove it there first")
+        source.rename(target)
+        return f"{TRASH}/{kind}/{name}"
 
     def staged(self, kind: str, name: str) -> bool:
         """Whether a write of ``kind``/``name`` is under way (a staging folder of that name exists)."""

@@ -48,6 +48,7 @@ from rig.hardware.assembly import RigDevices, open_rig
 from rig.jobs import Job, Jobs
 from rig.pipeline.outputs import colour_map
 from rig.pipeline.plan import DEFAULT_CORRECTION, ProcessOptions
+from rig.store.files import INCOMPLETE_MARK
 
 log = logging.getLogger(__name__)
 
@@ -628,21 +629,47 @@ class ConsoleSession:
                 self._device_failed(exc, "projector")
 
     def process(
-        self, capture: str, options: ProcessOptions | None = None, name: str | None = None, client: str | None = None
+        self,
+        capture: str,
+        options: ProcessOptions | None = None,
+        name: str | None = None,
+        client: str | None = None,
+        salvage: bool = False,
     ) -> Job:
         """Reprocess DATA/captures/CAPTURE with ``options`` into DATA/results/NAME (queued).
 
         A NAME already in DATA/results is refused with :class:`Conflict`: a result is never replaced.
+        ``salvage``: CAPTURE is an interrupted scan's folder (``NAME.incomplete-XXXX``); what it
+        holds is processed, which fails with one line if frames the processing needs are missing.
         """
-        path = self.data.existing("captures", capture)
+        if salvage:
+            path = self.data.interrupted("captures", capture)
+            base = f"{capture.partition(INCOMPLETE_MARK)[0]}-salvaged"
+        else:
+            path = self.data.existing("captures", capture)
+            base = capture
         options = options or ProcessOptions(correction=DEFAULT_CORRECTION)
-        name, _ = self._new_entry("results", name, f"{capture}-{options.correction}")
+        name, _ = self._new_entry("results", name, f"{base}-{options.correction}")
         job = self._job("process", name, client)
-        self._processing.submit(self._process, job, path, name, options, False)
+        self._processing.submit(self._process, job, path, name, options, False, salvage)
         self._publish_status()
         return job
 
-    def _process(self, job: Job, capture: Path, name: str, options: ProcessOptions | None, quick_first: bool) -> None:
+    def discard(self, capture: str) -> str:
+        """Move an interrupted scan's folder into DATA/trash (nothing is deleted); its new place."""
+        moved = self.data.to_trash("captures", capture)
+        self._publish_status()
+        return moved
+
+    def _process(
+        self,
+        job: Job,
+        capture: Path,
+        name: str,
+        options: ProcessOptions | None,
+        quick_first: bool,
+        salvage: bool = False,
+    ) -> None:
         """Processing thread: the capture to a result on screen, then its files."""
         from rig.pipeline.outputs import write_outputs
         from rig.pipeline.run import process
@@ -654,10 +681,12 @@ class ConsoleSession:
             calibration = self.data.existing("calibrations", self.calibration) if self.calibration else None
             if quick_first and options.correction != "none":
                 reporter = Reporter(f"process {name} (quick)", sink=sink, cancel=job.token)
-                quick = process(capture, calibration, replace(options, correction="none"), progress=reporter)
+                quick = process(
+                    capture, calibration, replace(options, correction="none"), progress=reporter, salvage=salvage
+                )
                 self._show(ResultView.from_result(name, quick), job, final=False)
             reporter = Reporter(f"process {name}", sink=sink, cancel=job.token)
-            result = process(capture, calibration, options, progress=reporter)
+            result = process(capture, calibration, options, progress=reporter, salvage=salvage)
             view = ResultView.from_result(name, result)
             self._show(view, job, final=True)
             destination = self.data.path("results", name)

@@ -47,8 +47,8 @@ def captures(session: ConsoleSession = Depends(session_of)) -> dict[str, Any]:
                 "created": capture.manifest.get("created_utc"),
             }
         )
-    for name in session.data.interrupted("captures"):
-        rows.append({"name": name, "complete": False, "error": "interrupted: not a complete capture"})
+    for name in session.data.interrupted_names("captures"):
+        rows.append({"name": name, "complete": False, "error": "interrupted scan: salvage or discard it"})
     return {"captures": rows}
 
 

@@ -72,6 +72,31 @@ async def get_job(job_id: str, session: ConsoleSession = Depends(session_of)) ->
     return job
 
 
+class SalvageBody(Body):
+    name: str | None = Field(
+        None, description="result name in DATA/results (default <capture>-salvaged-...); 409 if taken"
+    )
+    options: OptionsBody = Field(default_factory=OptionsBody)
+
+
+@router.post(
+    "/captures/{capture}/salvage",
+    tags=["results"],
+    status_code=202,
+    summary="process what an interrupted scan's folder holds (fails with one line if frames are missing)",
+)
+async def salvage(
+    capture: str, body: SalvageBody, request: Request, session: ConsoleSession = Depends(session_of)
+) -> dict[str, Any]:
+    job = session.process(capture, body.options.options(), body.name, client_of(request), salvage=True)
+    return job_reply(job, session)
+
+
+@router.post("/captures/{capture}/discard", tags=["results"], summary="move an interrupted scan's folder to DATA/trash")
+async def discard(capture: str, session: ConsoleSession = Depends(session_of)) -> dict[str, Any]:
+    return {"discarded": capture, "moved_to": session.discard(capture)}
+
+
 @router.post("/process", tags=["results"], status_code=202, summary="process a capture with other options")
 async def process(body: ProcessBody, request: Request, session: ConsoleSession = Depends(session_of)) -> dict[str, Any]:
     job = session.process(body.capture, body.options.options(), body.name, client_of(request))

@@ -13,7 +13,7 @@ export async function loadCaptures() {
     const li = document.createElement("li");
     li.textContent = c.error ? `${c.name} (${c.error})` : `${c.name} — ${c.scene}, ${c.width}x${c.height}, ${c.frames} frames`;
     li.dataset.name = c.name;
-    if (c.error) li.classList.add("incomplete");
+    if (c.error) interruptedButtons(li, c.name);
     else li.onclick = () => openCapture(c.name);
     li.classList.toggle("selected", selected === c.name);
     list.appendChild(li);
@@ -22,6 +22,26 @@ export async function loadCaptures() {
   fillSelect($("compare-a"), names, $("compare-a").value || names[0] || "");
   fillSelect($("compare-b"), names, $("compare-b").value || names[1] || names[0] || "");
   if (selected) await openCapture(selected);
+}
+
+// An interrupted scan: process what it holds, or move it to the data directory's trash.
+function interruptedButtons(li, name) {
+  li.classList.add("incomplete");
+  const salvage = document.createElement("button");
+  salvage.textContent = "Salvage"; salvage.dataset.testid = "salvage";
+  salvage.onclick = async () => {
+    const options = { correction: $("opt-correction").value };
+    const reply = await api("POST", `/api/captures/${encodeURIComponent(name)}/salvage`, { options }).catch(() => null);
+    if (reply) { reprocessJob = reply.job.id; $("reprocess-note").textContent = `salvaging into ${reply.job.name}`; }
+  };
+  const discard = document.createElement("button");
+  discard.textContent = "Discard"; discard.dataset.testid = "discard";
+  discard.onclick = async () => {
+    if (!confirm(`Move ${name} to the trash folder of the data directory?`)) return;
+    const reply = await api("POST", `/api/captures/${encodeURIComponent(name)}/discard`, {}).catch(() => null);
+    if (reply) { $("reprocess-note").textContent = `${name} moved to ${reply.moved_to}`; loadCaptures().catch(() => {}); }
+  };
+  li.append(" ", salvage, " ", discard);
 }
 
 async function openCapture(name) {
