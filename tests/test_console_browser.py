@@ -394,3 +394,23 @@ def test_the_page_drops_the_token_from_its_address(browser: Any, server: dict[st
     finally:
         uv.should_exit = True
         thread.join(timeout=30)
+
+
+def test_a_stopped_scan_is_discarded_from_the_captures_page(page: Any) -> None:
+    """Issue 24: a stopped scan appears as an interrupted capture with Salvage and Discard; Discard
+    moves it to the data directory's trash and the list no longer shows it."""
+    wait_frames(page, 1)
+    page.get_by_test_id("scan-button").click()
+    page.wait_for_function("Number(document.querySelector('[data-testid=scan-progress]').value) >= 1")
+    page.get_by_test_id("stop-button").click()
+    page.wait_for_function("document.querySelector('[data-testid=scan-note]').textContent.includes('stopped')")
+    page.locator("nav button[data-view=captures]").click()
+    interrupted = page.get_by_test_id("capture-list").locator("li.incomplete")
+    interrupted.first.wait_for()
+    count = interrupted.count()
+    name = interrupted.first.get_attribute("data-name")
+    assert ".incomplete-" in name and interrupted.first.get_by_test_id("salvage").is_visible()
+    page.once("dialog", lambda dialog: dialog.accept())
+    interrupted.first.get_by_test_id("discard").click()
+    page.wait_for_function(f"document.querySelectorAll('#capture-list li.incomplete').length === {count - 1}")
+    assert f"trash/captures/{name}" in page.get_by_test_id("reprocess-note").inner_text()
