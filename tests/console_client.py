@@ -3,6 +3,8 @@ shared by the console's API and hardening tests; the fixtures are registered in 
 
 from __future__ import annotations
 
+import contextlib
+import threading
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -13,10 +15,12 @@ from fastapi.testclient import TestClient
 
 from rig.config import load_config
 from rig.console.app import create_app
+from rig.console.server import HEADER_TIMEOUT_S, server_config
 
 WIDTH, HEIGHT = 320, 240
 BASE = "http://127.0.0.1:8765"  # a name the console answers to (the Host header is checked)
 WS = "ws://127.0.0.1:8765"
+STARTUP_S = 60  # a bound on a loaded machine, not a timing assertion
 
 
 @pytest.fixture
@@ -52,3 +56,25 @@ def wait_saved(client: TestClient, name: str, timeout_s: float = 60.0) -> dict[s
             return dict(reply.json())
         time.sleep(0.05)
     raise AssertionError(f"result {name} not saved after {timeout_s} s")
+
+
+@contextlib.contextmanager
+def served(app: Any, header_timeout_s: float = HEADER_TIMEOUT_S) -> Iterator[int]:
+    """``app`` under uvicorn on a free loopback port, configured as ``rig console`` serves it; the port."""
+    import uvicorn
+
+    from benchmarks.dask_cluster import free_port
+
+    port = free_port()
+    server = uvicorn.Server(server_config(app, "127.0.0.1", port, header_timeout_s=header_timeout_s))
+    thread = threading.Thread(target=server.run, daemon=True)
+    thread.start()
+    try:
+        deadline = time.monotonic() + STARTUP_S
+        while not server.started:
+            assert time.monotonic() < deadline, "console did not start"
+            time.sleep(0.05)
+        yield port
+    finally:
+        server.should_exit = True
+        thread.join(timeout=30)

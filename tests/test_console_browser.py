@@ -18,16 +18,14 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
-import threading
-import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+from console_client import served
 
-from benchmarks.dask_cluster import free_port
 from rig.config import load_config
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
@@ -58,12 +56,9 @@ scene = "hemisphere"
 @pytest.fixture(scope="module")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]]:
     """The console on the simulated rig (640x480, with an exact calibration) served by uvicorn."""
-    import uvicorn
-
     from calibration.store import write_calibration
     from rig.acquisition.scan import scan
     from rig.console.app import create_app
-    from rig.console.server import server_config
     from rig.hardware.simulated import geometry_from_config
     from rig.hardware.synthesis import exact_calibration
 
@@ -74,17 +69,8 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]]
     scan(config, cal / "reference", scene="reference")
     write_calibration(cal, exact_calibration(geometry_from_config(config)))
     app = create_app(config, root / "data", fault_injection=True)
-    port = free_port()
-    uv = uvicorn.Server(server_config(app, "127.0.0.1", port))
-    thread = threading.Thread(target=uv.run, daemon=True)
-    thread.start()
-    deadline = time.monotonic() + 30
-    while not uv.started:
-        assert time.monotonic() < deadline, "console did not start"
-        time.sleep(0.05)
-    yield {"url": f"http://127.0.0.1:{port}/", "config": config, "app": app}
-    uv.should_exit = True
-    thread.join(timeout=30)
+    with served(app) as port:
+        yield {"url": f"http://127.0.0.1:{port}/", "config": config, "app": app}
 
 
 @pytest.fixture(scope="module")
@@ -368,22 +354,11 @@ def test_a_scan_survives_a_reload_and_shows_in_a_second_tab_without_moving_it(
 def test_the_page_drops_the_token_from_its_address(browser: Any, server: dict[str, Any], tmp_path: Path) -> None:
     """Issue 22: with a token, ``?token=`` opens the page once; the cookie carries it from then on
     and the address bar (history, a copied link) no longer shows it."""
-    import uvicorn
-
     from rig.console.app import create_app
-    from rig.console.server import server_config
 
     token = "t0ken-for-the-address-bar-test"
-    port = free_port()
     app = create_app(server["config"], tmp_path / "data", token=token)
-    uv = uvicorn.Server(server_config(app, "127.0.0.1", port))
-    thread = threading.Thread(target=uv.run, daemon=True)
-    thread.start()
-    try:
-        deadline = time.monotonic() + 60
-        while not uv.started:
-            assert time.monotonic() < deadline, "console did not start"
-            time.sleep(0.05)
+    with served(app) as port:
         page = browser.new_context().new_page()
         page.goto(f"http://127.0.0.1:{port}/?token={token}")
         page.wait_for_function("!location.search.includes('token')")
@@ -391,9 +366,6 @@ def test_the_page_drops_the_token_from_its_address(browser: Any, server: dict[st
         assert token not in page.url
         assert page.get_by_test_id("rig-state").inner_text() != "disconnected"  # the cookie let the websocket in
         page.context.close()
-    finally:
-        uv.should_exit = True
-        thread.join(timeout=30)
 
 
 def test_a_stopped_scan_is_discarded_from_the_captures_page(page: Any) -> None:

@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from console_client import BASE, WS, wait_job
+from console_client import BASE, WS, served, wait_job
 from fastapi.testclient import TestClient
 from starlette.websockets import WebSocketDisconnect
 
@@ -273,29 +273,14 @@ def test_a_large_body_is_refused_before_it_is_read(console: TestClient) -> None:
 
 
 @pytest.fixture
-def served(tmp_path: Path, console_rig_toml: Path) -> Iterator[int]:
+def port(tmp_path: Path, console_rig_toml: Path) -> Iterator[int]:
     """The console under uvicorn as ``rig console`` serves it, with a 0.5 s header deadline; its port."""
-    import uvicorn
-
-    from benchmarks.dask_cluster import free_port
-    from rig.console.server import server_config
-
-    app = create_app(load_config(console_rig_toml), tmp_path / "data")
-    port = free_port()
-    server = uvicorn.Server(server_config(app, "127.0.0.1", port, header_timeout_s=0.5))
-    thread = threading.Thread(target=server.run, daemon=True)
-    thread.start()
-    deadline = time.monotonic() + 60
-    while not server.started:
-        assert time.monotonic() < deadline, "console did not start"
-        time.sleep(0.05)
-    yield port
-    server.should_exit = True
-    thread.join(timeout=30)
+    with served(create_app(load_config(console_rig_toml), tmp_path / "data"), header_timeout_s=0.5) as port:
+        yield port
 
 
-def test_a_client_that_trickles_its_headers_is_cut_off(served: int) -> None:
-    with socket.create_connection(("127.0.0.1", served), timeout=30) as slow:
+def test_a_client_that_trickles_its_headers_is_cut_off(port: int) -> None:
+    with socket.create_connection(("127.0.0.1", port), timeout=30) as slow:
         slow.sendall(b"GET /api/status HTTP/1.1\r\nHost: 127.0.0.1\r\n")
         for _ in range(3):  # a header line now and then, never the blank line that ends them
             time.sleep(0.3)
@@ -304,7 +289,7 @@ def test_a_client_that_trickles_its_headers_is_cut_off(served: int) -> None:
             except OSError:
                 break
         assert slow.recv(1024) == b""  # closed by the server (the 30 s socket timeout would raise)
-    with socket.create_connection(("127.0.0.1", served), timeout=30) as quick:
+    with socket.create_connection(("127.0.0.1", port), timeout=30) as quick:
         quick.sendall(b"GET /api/status HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n")
         assert quick.recv(64).startswith(b"HTTP/1.1 200")
 
