@@ -307,3 +307,18 @@ def test_processing_into_an_existing_result_name_is_a_conflict(console: TestClie
     reply = console.post("/api/process", json={"capture": "other", "name": "part"})
     assert reply.status_code == 409 and "results/part: already exists" in reply.json()["error"]
     assert {p.name: p.stat().st_mtime_ns for p in (root / "results" / "part").iterdir()} == before
+
+
+def test_a_linked_file_in_a_result_is_not_served(console: TestClient, tmp_path: Path) -> None:
+    """Issue 22 class 9 (downloads): a symbolic link planted in a result folder is not followed."""
+    job = console.post("/api/scan", json={"name": "linked", "options": {"correction": "none"}}).json()["job"]
+    assert wait_job(console, job["id"])["state"] == "done"
+    root = Path(console.get("/api/status").json()["data"]["root"])
+    secret = tmp_path / "outside.json"
+    secret.write_text('{"secret": 1}')
+    report = root / "results" / "linked" / "report.json"
+    assert console.get("/api/results/linked/files/report.json").status_code == 200
+    report.unlink()
+    report.symlink_to(secret)
+    reply = console.get("/api/results/linked/files/report.json")
+    assert reply.status_code == 404 and "secret" not in reply.text

@@ -495,7 +495,7 @@ class ConsoleSession:
             self._restore_projector()
             if process:
                 self.jobs.update(job, stage="processing", result=job.name)
-                self._processing.submit(self._process, job, path, job.name, options, True)
+                self._queue_processing(job, path, job.name, options, True)
             else:
                 self.jobs.update(job, result=job.name)
         self._publish_status()
@@ -651,9 +651,16 @@ class ConsoleSession:
         options = options or ProcessOptions(correction=DEFAULT_CORRECTION)
         name, _ = self._new_entry("results", name, f"{base}-{options.correction}")
         job = self._job("process", name, client)
-        self._processing.submit(self._process, job, path, name, options, False, salvage)
+        self._queue_processing(job, path, name, options, False, salvage)
         self._publish_status()
         return job
+
+    def _queue_processing(self, job: Job, *args: Any) -> None:
+        """Hand ``job`` to the processing thread; if it is gone (shutting down), the job fails there and then."""
+        try:
+            self._processing.submit(self._process, job, *args)
+        except RuntimeError as exc:
+            self.jobs.finish(job, RigError(f"not processed: {exc}"))
 
     def discard(self, capture: str) -> str:
         """Move an interrupted scan's folder into DATA/trash (nothing is deleted); its new place."""

@@ -108,8 +108,10 @@ async def result_file(name: str, file: str, session: ConsoleSession = Depends(se
     if file not in DOWNLOADS:
         raise HTTPException(404, f"file: expected one of {', '.join(DOWNLOADS)}, found {file!r}")
     path = session.data.existing("results", name) / file
-    if not path.is_file():
+    if not path.is_file():  # also refuses a FIFO or a device
         raise HTTPException(404, f"results/{name}/{file}: not written (yet)")
+    if path.is_symlink() or not path.resolve().is_relative_to(session.data.root):
+        raise HTTPException(404, f"results/{name}/{file}: not a file of this result (a link)")
     return FileResponse(path, media_type=DOWNLOADS[file], filename=f"{name}-{file}")
 
 
