@@ -121,6 +121,15 @@ def world_operator(devices: RigDevices, board: BoardSpec | None = None) -> Any:
     return WorldOperator(devices.simulation, board)
 
 
+def artefact_world(devices: RigDevices, artefacts: Any) -> Any:
+    """The operator that places verification artefacts by itself (simulated rig), or None on a real rig."""
+    if devices.simulation is None:
+        return None
+    from rig.hardware.simulated import ArtefactWorld
+
+    return ArtefactWorld(devices.simulation, artefacts)
+
+
 @contextlib.contextmanager
 def open_rig(config: RigConfig, scene: str = "object", fault: str | None = None) -> Iterator[RigDevices]:
     """Open every device of ``config``; ``scene`` chooses what a simulated camera looks at.

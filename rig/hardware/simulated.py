@@ -278,3 +278,50 @@ class WorldOperator:
 
     def clear(self) -> None:
         self.rig.place("reference")
+
+
+def artefact_shapes(placement: Any, artefacts: Any) -> list[Any]:
+    """The ray-cast shapes of a verification placement (:class:`rig.verify.guideline.Placement`).
+
+    A sphere, two spheres joined by a bar a fifth of their diameter thick, or a flat plate, with
+    the calibrated sizes of ``artefacts`` (:class:`rig.verify.artefacts.Artefacts`).
+    """
+    from mock_devices import artefacts as shapes
+
+    if placement.kind == "sphere":
+        return [shapes.Sphere(placement.centres[0], artefacts.sphere_diameter_mm / 2)]
+    if placement.kind == "ball-bar":
+        radius = artefacts.ball_bar_sphere_diameter_mm / 2
+        first, second = placement.centres
+        bar = shapes.Cylinder(first, second, radius / 5)
+        return [shapes.Sphere(first, radius), shapes.Sphere(second, radius), bar]
+    if placement.kind == "plane":
+        return [
+            shapes.Plate(
+                placement.centres[0], placement.along, placement.across, artefacts.plane_length_mm, artefacts.plane_width_mm
+            )
+        ]
+    raise ConfigError(f"placement: expected a sphere, ball-bar or plane, found {placement.kind!r}")
+
+
+class ArtefactWorld:
+    """The simulated rig's hands in a verification session: it puts each artefact where it is asked.
+
+    Implements :class:`rig.verify.operator.Operator`, so that `rig verify` runs unattended on
+    the simulated rig through the same acquisition code as with a person at a real rig.
+    """
+
+    def __init__(self, rig: SimulatedRig, artefacts: Any) -> None:
+        self.rig = rig
+        self.artefacts = artefacts
+
+    def place(self, placement: Any) -> None:
+        from mock_devices.artefacts import ray_cast_heights
+
+        g = self.rig.geometry
+        shapes = artefact_shapes(placement, self.artefacts)
+        height = ray_cast_heights(g.camera_height, g.camera_width, g.pixel_mm, g.l0_mm, shapes)
+        self.rig.camera.set_scene(height)
+        matte = appearance_from_config(self.rig.config).reflectivity
+        self.rig.camera.appearance = replace(self.rig.camera.appearance, reflectivity=matte)
+        self.rig.scene, self.rig.height_mm = placement.name, height
