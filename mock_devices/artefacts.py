@@ -48,7 +48,9 @@ Shape = Sphere | Cylinder | Plate
 def _rays(height: int, width: int, pixel_mm: float, l0_mm: float) -> tuple[np.ndarray, np.ndarray]:
     """Pupil (3,) and ray directions (H*W, 3) through each pixel's point on the reference plane."""
     if height < 1 or width < 1 or not pixel_mm > 0 or not l0_mm > 0:
-        raise ValueError(f"camera: expected positive size, pixel_mm and l0_mm, found {width}x{height}, {pixel_mm}, {l0_mm}")
+        raise ValueError(
+            f"camera: expected positive size, pixel_mm and l0_mm, found {width}x{height}, {pixel_mm}, {l0_mm}"
+        )
     x = (np.arange(width) - (width - 1) / 2.0) * pixel_mm
     y = (np.arange(height) - (height - 1) / 2.0) * pixel_mm
     gx, gy = np.meshgrid(x, y)
@@ -97,9 +99,7 @@ def _plate_t(pupil: np.ndarray, d: np.ndarray, shape: Plate) -> np.ndarray:
     return np.where(inside & np.isfinite(t), t, np.inf)
 
 
-def ray_cast_heights(
-    height: int, width: int, pixel_mm: float, l0_mm: float, shapes: Sequence[Shape]
-) -> np.ndarray:
+def ray_cast_heights(height: int, width: int, pixel_mm: float, l0_mm: float, shapes: Sequence[Shape]) -> np.ndarray:
     """(H, W) heights (mm) of the first surface of ``shapes`` each camera ray meets; 0 where none.
 
     Shapes must lie below the pupil (z < l0); what lies below the reference plane is not seen.

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from rig.verify import fits, guideline, model
-from rig.verify.artefacts import Artefacts, parse_artefacts
+from rig.verify.artefacts import Artefacts, load_artefacts, parse_artefacts
 from rig.verify.session import VerificationPlan
 
 SMALL_CAMERA = (256, 192)
@@ -121,15 +121,13 @@ def test_placements_follow_the_guideline_and_fit_the_volume() -> None:
         guideline.sphere_placements(volume, 200.0)
 
 
-def test_artefacts_file_errors_name_the_field() -> None:
+def test_artefacts_file_errors_name_the_field(tmp_path: Path) -> None:
     from rig.errors import ConfigError
 
-    import tomllib
-
-    data = tomllib.loads(ARTEFACTS_TOML)
-    assert parse_artefacts(data, "a.toml").ball_bar_length_mm == 200.0
-    data["ball_bar"]["length_mm"] = -1
-    with pytest.raises(ConfigError, match=r"a.toml: \[ball_bar\] length_mm: expected a positive"):
+    (tmp_path / "a.toml").write_text(ARTEFACTS_TOML)
+    assert load_artefacts(tmp_path / "a.toml").ball_bar_length_mm == 200.0
+    data = {"sphere": {"diameter_mm": 60.0}, "ball_bar": {"length_mm": -1}}
+    with pytest.raises(ConfigError, match=r"a.toml: \[sphere\] uncertainty_mm: expected a number"):
         parse_artefacts(data, "a.toml")
     with pytest.raises(ConfigError, match=r"\[spheres\]: unknown table"):
         parse_artefacts({"spheres": {}}, "a.toml")
@@ -158,7 +156,7 @@ def session(tmp_path_factory, simulated_rig_toml, exact_calibration):
     config = _small_config(tmp, simulated_rig_toml, 40)
     cal = exact_calibration(config, tmp / "cal")
     (tmp / "artefacts.toml").write_text(ARTEFACTS_TOML)
-    artefacts = parse_artefacts(__import__("tomllib").loads(ARTEFACTS_TOML), str(tmp / "artefacts.toml"))
+    artefacts = load_artefacts(tmp / "artefacts.toml")
     result = verify(load_config(config), _plan(), artefacts, cal, tmp / "report")
     return tmp, cal, artefacts, result
 
@@ -177,7 +175,13 @@ def test_the_exact_calibration_passes_its_mpe(session) -> None:
     assert report["L0_mm"] == pytest.approx(report["volume"]["l0_mm"])
     assert report["calibration"]["path"] == str(cal)
     assert any("reduced procedure" in n for n in report["notes"])
-    for name in ("positions.png", "residuals-sphere.png", "residuals-ball-bar.png", "residuals-plane.png", "history.png"):
+    for name in (
+        "positions.png",
+        "residuals-sphere.png",
+        "residuals-ball-bar.png",
+        "residuals-plane.png",
+        "history.png",
+    ):
         assert (tmp / "report" / "figures" / name).stat().st_size > 1000
     history = (cal / "verification-history.jsonl").read_text().splitlines()
     assert json.loads(history[0])["worst_mm"]["SD"] == report["SD"]["worst_mm"]
@@ -224,7 +228,20 @@ def test_cli_from_with_l0_off_prints_fail_naming_the_quantity(session, capsys) -
     data["l0_mm"] *= 1.01
     (off / "calibration.json").write_text(json.dumps(data))
     mpe = ",".join(str(SMALL_MPE[q]) for q in guideline.QUANTITIES)
-    code = main(["verify", "--from", str(tmp / "report"), "--calibration", str(off), "-o", str(tmp / "off"), "--mpe-mm", mpe, "-q"])
+    code = main(
+        [
+            "verify",
+            "--from",
+            str(tmp / "report"),
+            "--calibration",
+            str(off),
+            "-o",
+            str(tmp / "off"),
+            "--mpe-mm",
+            mpe,
+            "-q",
+        ]
+    )
     out, err = capsys.readouterr()
     assert code == 2
     assert out.startswith("FAIL") and "SD" in out

@@ -45,10 +45,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "flatness error F with the declared MPE; writes REPORT/report.json, report.md and figures, and "
         "appends to CAL/verification-history.jsonl.",
     )
-    parser.add_argument("--config", type=Path, metavar="RIG.toml", help="rig config file (default: the built-in simulated rig)")
-    parser.add_argument("--calibration", type=Path, required=True, metavar="CAL", help="calibration directory to verify")
     parser.add_argument(
-        "--artefacts", type=Path, metavar="ARTEFACTS.toml", help="calibrated artefact values (default: the simulated rig's)"
+        "--config", type=Path, metavar="RIG.toml", help="rig config file (default: the built-in simulated rig)"
+    )
+    parser.add_argument(
+        "--calibration", type=Path, required=True, metavar="CAL", help="calibration directory to verify"
+    )
+    parser.add_argument(
+        "--artefacts",
+        type=Path,
+        metavar="ARTEFACTS.toml",
+        help="calibrated artefact values (default: the simulated rig's)",
     )
     parser.add_argument(
         "--mpe-mm",
@@ -56,8 +63,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="PF,PS,SD,F",
         help="maximum permissible errors in mm (required on a real rig; simulated rig default 0.5,0.15,0.1,0.4)",
     )
-    parser.add_argument("--from", dest="from_dir", type=Path, metavar="DIR", help="recompute from a stored verification")
-    parser.add_argument("-o", "--output", type=Path, metavar="REPORT", help="report directory (default: verification; with --from: DIR)")
+    parser.add_argument(
+        "--from", dest="from_dir", type=Path, metavar="DIR", help="recompute from a stored verification"
+    )
+    parser.add_argument(
+        "-o", "--output", type=Path, metavar="REPORT", help="report directory (default: verification; with --from: DIR)"
+    )
     parser.add_argument("--spheres", type=_count, default=None, metavar="N", help="sphere positions (default 10)")
     parser.add_argument("--overwrite", action="store_true", help="replace an existing verification directory")
     add_report_options(parser, json_help="print report.json on stdout")

@@ -298,7 +298,11 @@ def artefact_shapes(placement: Any, artefacts: Any) -> list[Any]:
     if placement.kind == "plane":
         return [
             shapes.Plate(
-                placement.centres[0], placement.along, placement.across, artefacts.plane_length_mm, artefacts.plane_width_mm
+                placement.centres[0],
+                placement.along,
+                placement.across,
+                artefacts.plane_length_mm,
+                artefacts.plane_width_mm,
             )
         ]
     raise ConfigError(f"placement: expected a sphere, ball-bar or plane, found {placement.kind!r}")

@@ -92,7 +92,9 @@ def _number(data: dict[str, Any], table: str, key: str, where: str, zero_ok: boo
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ConfigError(f"{where}: [{table}] {key}: expected a number in mm, found {value!r}")
     if not (value >= 0 if zero_ok else value > 0) or value != value or value == float("inf"):
-        raise ConfigError(f"{where}: [{table}] {key}: expected a {'non-negative' if zero_ok else 'positive'} finite number, found {value!r}")
+        raise ConfigError(
+            f"{where}: [{table}] {key}: expected a {'non-negative' if zero_ok else 'positive'} finite number, found {value!r}"
+        )
     return float(value)
 
 

@@ -39,7 +39,7 @@ def _view(volume: Volume, spots: Sequence[Placement], axis: int, title: str, siz
     lo, hi = (-volume.length_mm / 2, volume.length_mm / 2) if axis == 1 else (0.0, volume.depth_mm)
     scale = (size - 60) / max(w, hi - lo)
 
-    def px(p: Sequence[float]) -> tuple[int, int]:
+    def px(p: Any) -> tuple[int, int]:
         return int(30 + (p[0] + w / 2) * scale), int(size - 30 - (p[axis] - lo) * scale)
 
     cv2.rectangle(canvas, px((-w / 2, lo, lo)), px((w / 2, hi, hi)), GREY, 1)
@@ -61,7 +61,16 @@ def _view(volume: Volume, spots: Sequence[Placement], axis: int, title: str, siz
         else:
             anchor = px(spot.centres[0])
             cv2.circle(canvas, anchor, 6, colour, 2, cv2.LINE_AA)
-        cv2.putText(canvas, f"{spot.kind[0].upper()}{spot.index}", (anchor[0] + 6, anchor[1] - 4), FONT, 0.35, colour, 1, cv2.LINE_AA)
+        cv2.putText(
+            canvas,
+            f"{spot.kind[0].upper()}{spot.index}",
+            (anchor[0] + 6, anchor[1] - 4),
+            FONT,
+            0.35,
+            colour,
+            1,
+            cv2.LINE_AA,
+        )
     return canvas
 
 

@@ -24,7 +24,6 @@ from rig.verify.artefacts import Artefacts
 from rig.verify.fits import FormFit, find_plane, find_sphere, fit_form
 from rig.verify.guideline import CLEARANCE_MM, Placement
 
-
 # Pixels this close (in pixels) to the edge of an artefact's image straddle it: not its surface.
 RIM_PX = 2
 
@@ -117,9 +116,7 @@ def measure_sphere(grid: np.ndarray, mask: np.ndarray, placement: Placement, art
     return PositionResult(placement, values, [fit], [_residual_map(grid, chosen, fit)], _fit_notes([fit]))
 
 
-def measure_ball_bar(
-    grid: np.ndarray, mask: np.ndarray, placement: Placement, artefacts: Artefacts
-) -> PositionResult:
+def measure_ball_bar(grid: np.ndarray, mask: np.ndarray, placement: Placement, artefacts: Artefacts) -> PositionResult:
     """SD of the ball bar in one scan: both spheres found, fitted with free radius, centres compared."""
     free = _candidates(grid, mask)
     diameter = artefacts.ball_bar_sphere_diameter_mm

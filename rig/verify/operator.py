@@ -32,4 +32,6 @@ class PromptOperator:
         try:
             self._ask(placement.prompt())
         except EOFError:
-            raise ConfigError("verification needs an operator at the console to place the artefacts (no input)") from None
+            raise ConfigError(
+                "verification needs an operator at the console to place the artefacts (no input)"
+            ) from None

@@ -177,11 +177,19 @@ def markdown(report: dict[str, Any], history: list[dict[str, Any]], figures: Seq
     for q in QUANTITIES:
         e = report[q]
         lines.append(f"| {q} | {_value(q, e['worst_mm'])} | {e['mpe_mm']:g} | {'pass' if e['pass'] else 'FAIL'} |")
-    lines += ["", "## Per position", "", "| position | where | quantity | value (mm) | result |", "| --- | --- | --- | --- | --- |"]
+    lines += [
+        "",
+        "## Per position",
+        "",
+        "| position | where | quantity | value (mm) | result |",
+        "| --- | --- | --- | --- | --- |",
+    ]
     for q in QUANTITIES:
         for p in report[q]["positions"]:
             why = f" ({p['why']})" if "why" in p else ""
-            lines.append(f"| {p['position']} | {p['where']} | {q} | {_value(q, p['value_mm'])}{why} | {'pass' if p['pass'] else 'FAIL'} |")
+            lines.append(
+                f"| {p['position']} | {p['where']} | {q} | {_value(q, p['value_mm'])}{why} | {'pass' if p['pass'] else 'FAIL'} |"
+            )
     lines += _trend_lines(report, history)
     lines += ["", "## Figures", ""] + [f"![{name}]({FIGURES_DIR}/{name})" for name in figures]
     return "\n".join(lines) + "\n"

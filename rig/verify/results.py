@@ -63,12 +63,23 @@ def quantity_summary(
         if name in r.values:
             value = float(r.values[name])
             positions.append(
-                {"position": r.placement.name, "where": r.placement.where, "value_mm": value, "pass": abs(value) <= mpe_mm}
+                {
+                    "position": r.placement.name,
+                    "where": r.placement.where,
+                    "value_mm": value,
+                    "pass": abs(value) <= mpe_mm,
+                }
             )
     for f in failed:
         if f.placement.kind == SOURCE[name]:
             positions.append(
-                {"position": f.placement.name, "where": f.placement.where, "value_mm": None, "pass": False, "why": f.reason}
+                {
+                    "position": f.placement.name,
+                    "where": f.placement.where,
+                    "value_mm": None,
+                    "pass": False,
+                    "why": f.reason,
+                }
             )
     positions.sort(key=lambda p: p["position"])
     worst = _worst(name, [p["value_mm"] for p in positions if p["value_mm"] is not None])

@@ -64,7 +64,11 @@ class VerificationPlan:
         )
         for name, count, required, least in counts:
             if count < required:
-                out.append(f"reduced procedure: {name} at {count} positions, the guideline asks {least} {required}".replace("  ", " "))
+                out.append(
+                    f"reduced procedure: {name} at {count} positions, the guideline asks {least} {required}".replace(
+                        "  ", " "
+                    )
+                )
         return out
 
 
@@ -86,13 +90,17 @@ def volume_for(calibration_dir: Path, artefacts: Artefacts) -> Volume:
 
     cal = read_calibration(calibration_dir)
     if cal.pixel_mm is None or cal.reference is None:
-        raise ConfigError(f"{calibration_dir}: the measuring volume needs a calibration with pixel_mm and a reference capture")
+        raise ConfigError(
+            f"{calibration_dir}: the measuring volume needs a calibration with pixel_mm and a reference capture"
+        )
     depth = artefacts.depth_mm
     if depth is None:
         session = Path(calibration_dir) / "session.json"
         heights = files.read_json(session, ConfigError, strict=False).get("heights_mm") if session.is_file() else None
         if not heights:
-            raise ConfigError(f"{artefacts.source}: [volume] depth_mm: missing (the calibration records no plane heights)")
+            raise ConfigError(
+                f"{artefacts.source}: [volume] depth_mm: missing (the calibration records no plane heights)"
+            )
         depth = float(max(heights))
     reference = read_capture(Path(calibration_dir) / cal.reference, verify=False)
     try:
@@ -105,7 +113,9 @@ def placements(volume: Volume, artefacts: Artefacts, plan: VerificationPlan) -> 
     """Every artefact position of ``plan`` in ``volume``, in the order they are scanned."""
     try:
         spheres = guideline.sphere_placements(volume, artefacts.sphere_diameter_mm, plan.sphere_positions)
-        bars = guideline.ball_bar_placements(volume, artefacts.ball_bar_length_mm, artefacts.ball_bar_sphere_diameter_mm)
+        bars = guideline.ball_bar_placements(
+            volume, artefacts.ball_bar_length_mm, artefacts.ball_bar_sphere_diameter_mm
+        )
         planes = guideline.plane_placements(volume, artefacts.plane_length_mm, artefacts.plane_width_mm)
     except ValueError as exc:
         raise ConfigError(f"{artefacts.source}: {exc}") from None
@@ -124,11 +134,17 @@ def size_notes(volume: Volume, artefacts: Artefacts) -> list[str]:
     lo, hi = guideline.SPHERE_DIAMETER_L0
     out = []
     if not lo * l0 <= artefacts.sphere_diameter_mm <= hi * l0:
-        out.append(f"sphere diameter {artefacts.sphere_diameter_mm:g} mm outside {lo:g}..{hi:g} L0 ({lo * l0:.0f}..{hi * l0:.0f} mm)")
+        out.append(
+            f"sphere diameter {artefacts.sphere_diameter_mm:g} mm outside {lo:g}..{hi:g} L0 ({lo * l0:.0f}..{hi * l0:.0f} mm)"
+        )
     if artefacts.ball_bar_length_mm < guideline.BALL_BAR_MIN_L0 * l0:
-        out.append(f"ball bar {artefacts.ball_bar_length_mm:g} mm shorter than {guideline.BALL_BAR_MIN_L0:g} L0 ({guideline.BALL_BAR_MIN_L0 * l0:.0f} mm)")
+        out.append(
+            f"ball bar {artefacts.ball_bar_length_mm:g} mm shorter than {guideline.BALL_BAR_MIN_L0:g} L0 ({guideline.BALL_BAR_MIN_L0 * l0:.0f} mm)"
+        )
     if artefacts.plane_length_mm < guideline.PLANE_MIN_L0 * l0:
-        out.append(f"plane {artefacts.plane_length_mm:g} mm shorter than {guideline.PLANE_MIN_L0:g} L0 ({guideline.PLANE_MIN_L0 * l0:.0f} mm)")
+        out.append(
+            f"plane {artefacts.plane_length_mm:g} mm shorter than {guideline.PLANE_MIN_L0:g} L0 ({guideline.PLANE_MIN_L0 * l0:.0f} mm)"
+        )
     return out
 
 
@@ -190,7 +206,9 @@ def load_session(directory: Path) -> tuple[list[Placement], Artefacts, dict[str,
     path = Path(directory) / SESSION_FILE
     data = files.read_json(path, CaptureError, "missing (not a verification directory?)")
     if not isinstance(data, dict) or data.get("format") != SESSION_FORMAT:
-        raise CaptureError(f"{path}: format: expected {SESSION_FORMAT!r}, found {data.get('format') if isinstance(data, dict) else data!r}")
+        raise CaptureError(
+            f"{path}: format: expected {SESSION_FORMAT!r}, found {data.get('format') if isinstance(data, dict) else data!r}"
+        )
     try:
         spots = [Placement.from_dict(p) for p in data["placements"]]
         a = data["artefacts"]
@@ -275,7 +293,9 @@ def recompute(
         verification = write_in_place(from_dir, results, failed, plan, artefacts, volume, calibration_dir)
         return _commit_history(verification, calibration_dir, from_dir)
     with files.staged_directory(output, VERIFICATION_KINDS, overwrite, OutputError) as staging:
-        verification = finish(staging, output, results, failed, plan, artefacts, volume, calibration_dir, captures=from_dir)
+        verification = finish(
+            staging, output, results, failed, plan, artefacts, volume, calibration_dir, captures=from_dir
+        )
     return _commit_history(verification, calibration_dir, output)
 
 
