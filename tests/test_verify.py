@@ -188,7 +188,7 @@ def test_the_exact_calibration_passes_its_mpe(session) -> None:
 
 
 def test_l0_off_by_one_percent_moves_ps_and_sd_as_the_model_predicts(session) -> None:
-    from rig.verify.session import compute, load_session
+    from rig.verify.session import compute, load_session, stored_captures
 
     tmp, cal, _, result = session
     off = tmp / "cal-off"
@@ -197,7 +197,7 @@ def test_l0_off_by_one_percent_moves_ps_and_sd_as_the_model_predicts(session) ->
     data["l0_mm"] *= 1.01
     (off / "calibration.json").write_text(json.dumps(data))
     spots, artefacts, _ = load_session(tmp / "report")
-    moved, failed = compute(tmp / "report", off, spots, artefacts)
+    moved, failed = compute(stored_captures(tmp / "report", spots), off, artefacts)
     assert not failed and not result.failed
     before = {r.placement.name: r for r in result.results}
     for r in moved:
@@ -278,8 +278,12 @@ def test_a_noisier_camera_grows_pf(session, tmp_path, simulated_rig_toml) -> Non
 def test_cli_user_errors_are_one_line(tmp_path, capsys) -> None:
     from rig.cli import main
 
-    assert main(["verify", "--calibration", str(tmp_path / "nowhere"), "--from", str(tmp_path)]) == 1
-    assert "session.json: missing" in capsys.readouterr().err
+    good = tmp_path / "good.toml"
+    good.write_text(ARTEFACTS_TOML)
+    (tmp_path / "empty").mkdir()
+    args = ["verify", "--calibration", str(tmp_path), "--from", str(tmp_path / "empty"), "--artefacts", str(good)]
+    assert main(args) == 1
+    assert "no session.json and no capture (capture.json) in it or below it" in capsys.readouterr().err
     bad = tmp_path / "a.toml"
     bad.write_text("[sphere]\ndiameter_mm = 'big'\n")
     assert main(["verify", "--calibration", str(tmp_path), "--artefacts", str(bad)]) == 1
@@ -295,3 +299,24 @@ def test_artefact_defaults_meet_the_guideline_for_the_simulated_rig() -> None:
     volume = guideline.volume_of_view(1024, 768, 0.4, 1000.0, 150.0)
     assert size_notes(volume, Artefacts()) == []
     assert size_notes(volume, Artefacts(sphere_diameter_mm=20.0))[0].startswith("sphere diameter 20 mm outside")
+
+
+def test_from_plain_captures_named_after_their_artefact(session, tmp_path, capsys) -> None:
+    """Captures taken outside a session (a real rig's, say) give their figures by name alone."""
+    from rig.cli import main
+
+    tmp, cal, _, result = session
+    shutil.copytree(tmp / "report" / "captures" / "sphere-01", tmp_path / "plain" / "sphere-a")
+    shutil.copytree(tmp / "report" / "captures" / "plane-01", tmp_path / "plain" / "plane-b")
+    args = ["verify", "--from", str(tmp_path / "plain"), "--calibration", str(cal), "-o", str(tmp_path / "out")]
+    args += ["--mpe-mm", ",".join(str(SMALL_MPE[q]) for q in guideline.QUANTITIES)]
+    assert main([*args, "-q"]) == 1  # no session.json: the artefacts' values must be given
+    assert "give the artefacts' calibrated values (--artefacts)" in capsys.readouterr().err
+    assert main([*args, "--artefacts", str(tmp / "artefacts.toml"), "-q"]) == 2
+    out, err = capsys.readouterr()
+    assert out.startswith("FAIL") and "SD fails: no position measured" in err
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    before = {r.placement.name: r.values for r in result.results}
+    assert report["PF"]["positions"][0]["value_mm"] == pytest.approx(before["sphere-01"]["PF"], abs=1e-9)
+    assert report["F"]["positions"][0]["value_mm"] == pytest.approx(before["plane-01"]["F"], abs=1e-9)
+    assert report["PF"]["pass"] and report["F"]["pass"] and not report["pass"]

@@ -94,9 +94,14 @@ def run(args: argparse.Namespace) -> int:
     from rig.verify.session import recompute, verify
 
     if args.from_dir is not None:
+        from rig.verify.artefacts import load_artefacts
+
         plan = _plan(args, simulated=True)  # recomputing needs no rig; the MPE default is the simulated rig's
+        artefacts = load_artefacts(args.artefacts) if args.artefacts is not None else None
         with Progress(f"verify --from {args.from_dir}", total=1, quiet=args.quiet) as bar:
-            result = recompute(args.from_dir, args.calibration, plan, args.output, bar.reporter(), args.overwrite)
+            result = recompute(
+                args.from_dir, args.calibration, plan, args.output, bar.reporter(), args.overwrite, artefacts
+            )
     else:
         from rig.config import load_config
         from rig.hardware.assembly import rig_sets_up_scenes

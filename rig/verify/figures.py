@@ -46,6 +46,8 @@ def _view(volume: Volume, spots: Sequence[Placement], axis: int, title: str, siz
     cv2.putText(canvas, title, (8, 16), FONT, 0.45, BLACK, 1, cv2.LINE_AA)
     kinds = {"sphere": PALETTE[1], "ball-bar": PALETTE[2], "plane": PALETTE[3]}
     for spot in spots:
+        if len(spot.centres) < (2 if spot.kind == "ball-bar" else 1):
+            continue  # captures taken outside a session: where they stood is not known
         colour = kinds.get(spot.kind, BLACK)
         if spot.kind == "plane":
             c = np.asarray(spot.centres[0])

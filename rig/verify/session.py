@@ -17,6 +17,7 @@ cancel token stops the session between frames; a stopped or failed session leave
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -218,10 +219,40 @@ def load_session(directory: Path) -> tuple[list[Placement], Artefacts, dict[str,
     return spots, artefacts, data
 
 
+def stored_captures(directory: Path, spots: Sequence[Placement]) -> list[tuple[Placement, Path]]:
+    """Each placement of a stored verification with its capture directory."""
+    return [(spot, Path(directory) / CAPTURES_DIR / spot.name) for spot in spots]
+
+
+def named_captures(directory: Path) -> list[tuple[Placement, Path]]:
+    """Captures taken outside a verification session: ``DIR`` itself or its capture subdirectories,
+    each named after the artefact it holds (``sphere...``, ``ball-bar...``, ``plane...``)."""
+    directory = Path(directory)
+    found = (
+        [directory]
+        if (directory / "capture.json").is_file()
+        else sorted(p for p in directory.iterdir() if (p / "capture.json").is_file())
+        if directory.is_dir()
+        else []
+    )
+    if not found:
+        raise CaptureError(f"{directory}: no session.json and no capture (capture.json) in it or below it")
+    out = []
+    for path in found:
+        kind = next((k for k in sorted(guideline.KINDS, key=len, reverse=True) if path.name.startswith(k)), None)
+        if kind is None:
+            raise CaptureError(
+                f"{path}: name: expected it to start with what the capture holds ({', '.join(guideline.KINDS)}), found {path.name!r}"
+            )
+        same = [p for p in found if p.name.startswith(kind)]
+        index = same.index(path) + 1
+        out.append((Placement(kind, index, len(same), f"capture {path.name}", ()), path))
+    return out
+
+
 def compute(
-    directory: Path,
+    captures: Sequence[tuple[Placement, Path]],
     calibration_dir: Path,
-    spots: list[Placement],
     artefacts: Artefacts,
     options: ProcessOptions | None = None,
     progress: Reporter | None = None,
@@ -231,9 +262,8 @@ def compute(
 
     results, failed = [], []
     if progress is not None:  # after an acquisition in the same session, these steps come on top of its frames
-        progress.begin(progress.done + len(spots), f"compute {directory}")
-    for spot in spots:
-        capture = Path(directory) / CAPTURES_DIR / spot.name
+        progress.begin(progress.done + len(captures), f"compute {len(captures)} positions")
+    for spot, capture in captures:
         result = api.process(capture, calibration=calibration_dir, options=options)
         try:
             if result.points is None:
@@ -266,7 +296,7 @@ def verify(
     files.check_writable(output, VERIFICATION_KINDS, overwrite, OutputError)
     with files.staged_directory(output, VERIFICATION_KINDS, overwrite, OutputError) as staging:
         spots = acquire(config, plan, artefacts, calibration_dir, staging, operator, progress)
-        results, failed = compute(staging, calibration_dir, spots, artefacts, plan.options, progress)
+        results, failed = compute(stored_captures(staging, spots), calibration_dir, artefacts, plan.options, progress)
         volume = volume_for(calibration_dir, artefacts)
         verification = finish(staging, output, results, failed, plan, artefacts, volume, calibration_dir)
     return _commit_history(verification, calibration_dir, output)
@@ -279,16 +309,29 @@ def recompute(
     output: Path | None = None,
     progress: Reporter | None = None,
     overwrite: bool = False,
+    artefacts: Artefacts | None = None,
 ) -> Verification:
-    """The figures of a stored verification again (``rig verify --from``), written to ``output`` or in place."""
+    """The figures of stored captures (``rig verify --from``), written to ``output`` or in place.
+
+    ``from_dir`` is a stored verification (its session.json says what each capture holds), or
+    captures named after their artefact (:func:`named_captures`), which need ``artefacts``.
+    ``artefacts`` given replaces the values a session recorded.
+    """
     from rig.verify.report import finish, write_in_place
 
     from_dir = Path(from_dir)
-    spots, artefacts, record = load_session(from_dir)
-    depth = float(record.get("volume", {}).get("depth_mm", 0)) or None
-    artefacts = Artefacts(**{**artefacts.__dict__, "depth_mm": depth, "source": str(from_dir / SESSION_FILE)})
+    if (from_dir / SESSION_FILE).is_file():
+        spots, recorded, record = load_session(from_dir)
+        depth = float(record.get("volume", {}).get("depth_mm", 0)) or None
+        chosen = artefacts or Artefacts(**{**recorded.__dict__, "source": str(from_dir / SESSION_FILE)})
+        artefacts = Artefacts(**{**chosen.__dict__, "depth_mm": chosen.depth_mm or depth})
+        captures = stored_captures(from_dir, spots)
+    elif artefacts is None:
+        raise ConfigError(f"{from_dir}: no session.json: give the artefacts' calibrated values (--artefacts)")
+    else:
+        captures = named_captures(from_dir)
     volume = volume_for(calibration_dir, artefacts)
-    results, failed = compute(from_dir, calibration_dir, spots, artefacts, plan.options, progress)
+    results, failed = compute(captures, calibration_dir, artefacts, plan.options, progress)
     if output is None or files.same_path(output, from_dir):
         verification = write_in_place(from_dir, results, failed, plan, artefacts, volume, calibration_dir)
         return _commit_history(verification, calibration_dir, from_dir)
