@@ -320,3 +320,8 @@ def test_from_plain_captures_named_after_their_artefact(session, tmp_path, capsy
     assert report["PF"]["positions"][0]["value_mm"] == pytest.approx(before["sphere-01"]["PF"], abs=1e-9)
     assert report["F"]["positions"][0]["value_mm"] == pytest.approx(before["plane-01"]["F"], abs=1e-9)
     assert report["PF"]["pass"] and report["F"]["pass"] and not report["pass"]
+
+
+def test_example_artefacts_are_the_simulated_rigs() -> None:
+    example = load_artefacts(Path(__file__).parent.parent / "examples" / "artefacts.toml")
+    assert {**example.__dict__, "source": ""} == {**Artefacts().__dict__, "source": ""}
