@@ -325,3 +325,37 @@ def test_from_plain_captures_named_after_their_artefact(session, tmp_path, capsy
 def test_example_artefacts_are_the_simulated_rigs() -> None:
     example = load_artefacts(Path(__file__).parent.parent / "examples" / "artefacts.toml")
     assert {**example.__dict__, "source": ""} == {**Artefacts().__dict__, "source": ""}
+
+
+def test_operator_is_prompted_and_stop_leaves_nothing(session, tmp_path) -> None:
+    from rig.config import load_config
+    from rig.events import CancelToken, Cancelled, Reporter
+    from rig.verify.operator import PromptOperator
+    from rig.verify.session import verify
+
+    tmp, cal, artefacts, _ = session
+    history = (cal / "verification-history.jsonl").read_text()
+    prompts: list[str] = []
+    token = CancelToken()
+
+    def ask(message: str) -> None:
+        prompts.append(message)
+        if len(prompts) == 2:
+            token.cancel()  # the operator presses Stop during the second position
+
+    with pytest.raises(Cancelled):
+        verify(
+            load_config(tmp / "rig-40.toml"),
+            _plan(2, 1, 1),
+            artefacts,
+            cal,
+            tmp_path / "stopped",
+            PromptOperator(ask),
+            Reporter("verify", cancel=token),
+        )
+    assert prompts == [
+        "sphere, position 1 of 2: low, near corner -x -y, press Enter ",
+        "sphere, position 2 of 2: low, corner +x -y, press Enter ",
+    ]
+    assert list(tmp_path.iterdir()) == []  # no report, no staging directory
+    assert (cal / "verification-history.jsonl").read_text() == history
