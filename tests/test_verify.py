@@ -329,7 +329,7 @@ def test_example_artefacts_are_the_simulated_rigs() -> None:
 
 def test_operator_is_prompted_and_stop_leaves_nothing(session, tmp_path) -> None:
     from rig.config import load_config
-    from rig.events import CancelToken, Cancelled, Reporter
+    from rig.events import Cancelled, CancelToken, Reporter
     from rig.verify.operator import PromptOperator
     from rig.verify.session import verify
 
