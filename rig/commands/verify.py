@@ -61,7 +61,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--mpe-mm",
         type=_mpe,
         metavar="PF,PS,SD,F",
-        help="maximum permissible errors in mm (required on a real rig; simulated rig default 0.5,0.15,0.1,0.4)",
+        help="maximum permissible errors in mm (default on the simulated rig 0.5,0.15,0.1,0.4; with --from: "
+        "the stored report's; required otherwise)",
     )
     parser.add_argument(
         "--from", dest="from_dir", type=Path, metavar="DIR", help="recompute from a stored verification"
@@ -74,13 +75,29 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_report_options(parser, json_help="print report.json on stdout")
 
 
+def _stored_mpe(from_dir: Path) -> dict[str, float] | None:
+    """The MPE a stored verification's report declared, if it has one."""
+    from rig.errors import OutputError
+    from rig.verify.guideline import QUANTITIES
+    from rig.verify.report import read_report
+
+    try:
+        report = read_report(from_dir)
+        return {q: float(report[q]["mpe_mm"]) for q in QUANTITIES}
+    except (OutputError, KeyError, TypeError, ValueError):
+        return None
+
+
 def _plan(args: argparse.Namespace, simulated: bool):
     from rig.errors import ConfigError
     from rig.verify.session import VerificationPlan
 
     plan = VerificationPlan()
+    stored = _stored_mpe(args.from_dir) if args.from_dir is not None and args.mpe_mm is None else None
     if args.mpe_mm is not None:
         plan.mpe_mm = args.mpe_mm
+    elif stored is not None:
+        plan.mpe_mm = stored
     elif not simulated:
         raise ConfigError("--mpe-mm: missing: declare the rig's maximum permissible errors PF,PS,SD,F in mm")
     if args.spheres is not None:
@@ -96,7 +113,7 @@ def run(args: argparse.Namespace) -> int:
     if args.from_dir is not None:
         from rig.verify.artefacts import load_artefacts
 
-        plan = _plan(args, simulated=True)  # recomputing needs no rig; the MPE default is the simulated rig's
+        plan = _plan(args, simulated=False)  # the MPE: --mpe-mm, or what the stored report declared
         artefacts = load_artefacts(args.artefacts) if args.artefacts is not None else None
         with Progress(f"verify --from {args.from_dir}", total=1, quiet=args.quiet) as bar:
             result = recompute(
