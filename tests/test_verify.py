@@ -282,7 +282,9 @@ def test_cli_user_errors_are_one_line(tmp_path, capsys) -> None:
     good.write_text(ARTEFACTS_TOML)
     (tmp_path / "empty").mkdir()
     args = ["verify", "--calibration", str(tmp_path), "--from", str(tmp_path / "empty"), "--artefacts", str(good)]
-    assert main(args) == 1
+    assert main(args) == 1  # captures of a real rig: the MPE must be declared
+    assert "--mpe-mm: missing: declare the rig's maximum permissible errors" in capsys.readouterr().err
+    assert main([*args, "--mpe-mm", "1,1,1,1"]) == 1
     assert "no session.json and no capture (capture.json) in it or below it" in capsys.readouterr().err
     bad = tmp_path / "a.toml"
     bad.write_text("[sphere]\ndiameter_mm = 'big'\n")
