@@ -187,15 +187,29 @@ def test_the_exact_calibration_passes_its_mpe(session) -> None:
     assert json.loads(history[0])["worst_mm"]["SD"] == report["SD"]["worst_mm"]
 
 
-def test_l0_off_by_one_percent_moves_ps_and_sd_as_the_model_predicts(session) -> None:
+def _calibration_off(cal: Path, target: Path, field: str, factor: float) -> Path:
+    """A copy of ``cal`` whose ``field`` is ``factor`` times the true value (no history)."""
+    shutil.copytree(cal, target, ignore=shutil.ignore_patterns("*.jsonl"))
+    data = json.loads((target / "calibration.json").read_text())
+    data[field] *= factor
+    (target / "calibration.json").write_text(json.dumps(data))
+    return target
+
+
+@pytest.mark.parametrize("field", ["l0_mm", "f0_per_mm"])
+def test_a_one_percent_calibration_error_moves_ps_and_sd_as_the_model_predicts(session, field) -> None:
+    """Same captures, calibration with l0 (or the projector's fringe pitch f0) 1 % off: first-order model."""
     from rig.verify.session import compute, load_session, stored_captures
 
     tmp, cal, _, result = session
-    off = tmp / "cal-off"
-    shutil.copytree(cal, off, ignore=shutil.ignore_patterns("*.jsonl"))
-    data = json.loads((off / "calibration.json").read_text())
-    data["l0_mm"] *= 1.01
-    (off / "calibration.json").write_text(json.dumps(data))
+    off = _calibration_off(cal, tmp / f"cal-{field}", field, 1.01)
+    l0 = json.loads((cal / "calibration.json").read_text())["l0_mm"]
+
+    def move(points: np.ndarray) -> np.ndarray:
+        if field == "l0_mm":
+            return model.l0_displacement(points, 0.01)
+        return model.f0_displacement(points, l0, 0.01)
+
     spots, artefacts, _ = load_session(tmp / "report")
     moved, failed = compute(stored_captures(tmp / "report", spots), off, artefacts)
     assert not failed and not result.failed
@@ -203,18 +217,17 @@ def test_l0_off_by_one_percent_moves_ps_and_sd_as_the_model_predicts(session) ->
     for r in moved:
         base = before[r.placement.name]
         if r.placement.kind == "sphere":
-            fit = base.fits[0]
-            predicted = model.predicted_ps_change(fit, model.l0_displacement(fit.points, 0.01))
+            predicted = model.predicted_ps_change(base.fits[0], move(base.fits[0].points))
             change = r.values["PS"] - base.values["PS"]
         elif r.placement.kind == "ball-bar":
             f1, f2 = base.fits
-            moves = (model.l0_displacement(f1.points, 0.01), model.l0_displacement(f2.points, 0.01))
-            predicted = model.predicted_sd_change(f1, f2, moves)
+            predicted = model.predicted_sd_change(f1, f2, (move(f1.points), move(f2.points)))
             change = r.values["SD"] - base.values["SD"]
-            rise = abs(f2.centre[2] - f1.centre[2])
-            assert predicted == pytest.approx(0.01 * rise**2 / 200.0, rel=0.1)  # dSD = e dz^2 / L
+            if field == "l0_mm":  # dSD = e dz^2 / L
+                assert predicted == pytest.approx(0.01 * (f2.centre[2] - f1.centre[2]) ** 2 / 200.0, rel=0.1)
         else:
             continue
+        assert abs(predicted) > 0.05 or r.placement.kind == "ball-bar"
         assert change == pytest.approx(predicted, rel=0.1, abs=0.01), r.placement.name
 
 
@@ -222,11 +235,7 @@ def test_cli_from_with_l0_off_prints_fail_naming_the_quantity(session, capsys) -
     from rig.cli import main
 
     tmp, cal, _, _ = session
-    off = tmp / "cal-off-cli"
-    shutil.copytree(cal, off, ignore=shutil.ignore_patterns("*.jsonl"))
-    data = json.loads((off / "calibration.json").read_text())
-    data["l0_mm"] *= 1.01
-    (off / "calibration.json").write_text(json.dumps(data))
+    off = _calibration_off(cal, tmp / "cal-off-cli", "l0_mm", 1.01)
     mpe = ",".join(str(SMALL_MPE[q]) for q in guideline.QUANTITIES)
     code = main(
         [
