@@ -370,3 +370,21 @@ def test_operator_is_prompted_and_stop_leaves_nothing(session, tmp_path) -> None
     ]
     assert list(tmp_path.iterdir()) == []  # no report, no staging directory
     assert (cal / "verification-history.jsonl").read_text() == history
+
+
+def test_history_appends_whole_lines_and_refuses_a_link(tmp_path: Path) -> None:
+    from rig.errors import OutputError
+    from rig.store import files
+    from rig.verify.history import HISTORY_FILE, read_history
+
+    path = tmp_path / HISTORY_FILE
+    files.append_line(path, '{"created": "2", "worst_mm": {}}', OutputError)
+    files.append_line(path, '{"created": "1", "worst_mm": {}}', OutputError)
+    path.write_text(path.read_text() + "torn{\n")
+    assert [e["created"] for e in read_history(tmp_path)] == ["1", "2"]  # oldest first, the torn line skipped
+    with pytest.raises(OutputError, match="one line"):
+        files.append_line(path, "a\nb", OutputError)
+    (tmp_path / "elsewhere").mkdir()
+    (tmp_path / "elsewhere" / HISTORY_FILE).symlink_to(path)
+    with pytest.raises(OutputError, match="symbolic link"):
+        files.append_line(tmp_path / "elsewhere" / HISTORY_FILE, "{}", OutputError)
