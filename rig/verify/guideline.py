@@ -20,7 +20,9 @@ camera's view on the reference plane, z the height above it).
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import Any
 
 SPHERE_DIAMETER_L0 = (0.1, 0.2)
 BALL_BAR_MIN_L0 = 0.3
@@ -89,7 +91,7 @@ class Placement:
         label = self.kind.replace("-", " ")
         return f"{label}, position {self.index} of {self.total}: {self.where}, press Enter "
 
-    def as_dict(self) -> dict[str, object]:
+    def as_dict(self) -> dict[str, Any]:
         return {
             "kind": self.kind,
             "index": self.index,
@@ -101,17 +103,19 @@ class Placement:
         }
 
     @classmethod
-    def from_dict(cls, data: dict[str, object]) -> Placement:
-        def vec(value: object) -> Vector:
-            x, y, z = (float(v) for v in value)  # type: ignore[attr-defined]
+    def from_dict(cls, data: dict[str, Any]) -> Placement:
+        """The placement :meth:`as_dict` wrote; KeyError, TypeError or ValueError when it is not one."""
+
+        def vec(value: Any) -> Vector:
+            x, y, z = (float(v) for v in value)
             return (x, y, z)
 
         return cls(
             kind=str(data["kind"]),
-            index=int(data["index"]),  # type: ignore[call-overload]
-            total=int(data["total"]),  # type: ignore[call-overload]
+            index=int(data["index"]),
+            total=int(data["total"]),
             where=str(data["where"]),
-            centres=tuple(vec(c) for c in data["centres"]),  # type: ignore[attr-defined]
+            centres=tuple(vec(c) for c in data["centres"]),
             along=vec(data.get("along", (1.0, 0.0, 0.0))),
             across=vec(data.get("across", (0.0, 1.0, 0.0))),
         )
@@ -168,9 +172,9 @@ def ball_bar_placements(volume: Volume, length_mm: float, sphere_diameter_mm: fl
     out = []
     for i, (direction, where) in enumerate(directions):
         u = _unit(direction)
-        ends = tuple(tuple(c + s * length_mm / 2 * ui for c, ui in zip(centre, u)) for s in (-1.0, 1.0))
-        _check_inside(volume, ends, sphere_diameter_mm / 2, f"ball bar position {i + 1}")  # type: ignore[arg-type]
-        out.append(Placement("ball-bar", i + 1, len(directions), where, ends, along=u))  # type: ignore[arg-type]
+        ends = tuple(_along(centre, u, side * length_mm / 2) for side in (-1.0, 1.0))
+        _check_inside(volume, ends, sphere_diameter_mm / 2, f"ball bar position {i + 1}")
+        out.append(Placement("ball-bar", i + 1, len(directions), where, ends, along=u))
     return out
 
 
@@ -203,8 +207,13 @@ def plane_placements(volume: Volume, length_mm: float, width_mm: float, tilt_deg
     return out
 
 
-def _check_inside(volume: Volume, points: object, margin: float, what: str) -> None:
-    for x, y, z in points:  # type: ignore[attr-defined]
+def _along(start: Vector, direction: Vector, distance: float) -> Vector:
+    x, y, z = (s + distance * d for s, d in zip(start, direction))
+    return (x, y, z)
+
+
+def _check_inside(volume: Volume, points: Iterable[Vector], margin: float, what: str) -> None:
+    for x, y, z in points:
         inside = abs(x) + margin <= volume.width_mm / 2 + 1e-6 and abs(y) + margin <= volume.length_mm / 2 + 1e-6
         if not inside or z - margin < -1e-6 or z + margin > volume.depth_mm + 1e-6:
             raise ValueError(f"{what}: the artefact does not fit the measuring volume {volume.as_dict()}")

@@ -59,17 +59,13 @@ class VerificationPlan:
         """Where this plan departs from the guideline (a reduced procedure is said so in the report)."""
         out = []
         counts = (
-            ("sphere", self.sphere_positions, guideline.SPHERE_POSITIONS, "at least"),
+            ("sphere", self.sphere_positions, guideline.SPHERE_POSITIONS, "at least "),
             ("ball bar", self.ball_bar_positions, guideline.BALL_BAR_POSITIONS, ""),
             ("plane", self.plane_positions, guideline.PLANE_POSITIONS, ""),
         )
         for name, count, required, least in counts:
             if count < required:
-                out.append(
-                    f"reduced procedure: {name} at {count} positions, the guideline asks {least} {required}".replace(
-                        "  ", " "
-                    )
-                )
+                out.append(f"reduced procedure: {name} at {count} positions, the guideline asks {least}{required}")
         return out
 
 
