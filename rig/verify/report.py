@@ -146,11 +146,11 @@ def finish(
 
 def write_in_place(
     directory: Path, results: Sequence[PositionResult], failed: Sequence[Failed], plan: VerificationPlan,
-    artefacts: Artefacts, volume: Volume, calibration_dir: Path,
+    artefacts: Artefacts, volume: Volume, calibration_dir: Path, captures: Path | None = None,
 ) -> Verification:  # fmt: skip
-    """Rewrite the report of a stored verification beside its captures (each file replaced atomically)."""
+    """Rewrite the report of stored captures beside them (each file replaced atomically, report.json last)."""
     files.check_writable_directory(directory, OutputError)
-    return _complete(directory, directory, results, failed, plan, artefacts, volume, calibration_dir, None)
+    return _complete(directory, directory, results, failed, plan, artefacts, volume, calibration_dir, captures)
 
 
 def _value(q: str, value: float | None) -> str:

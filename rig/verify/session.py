@@ -316,7 +316,8 @@ def recompute(
     from rig.verify.report import finish, write_in_place
 
     from_dir = Path(from_dir)
-    if (from_dir / SESSION_FILE).is_file():
+    session = (from_dir / SESSION_FILE).is_file()
+    if session:
         spots, recorded, record = load_session(from_dir)
         depth = float(record.get("volume", {}).get("depth_mm", 0)) or None
         chosen = artefacts or Artefacts(**{**recorded.__dict__, "source": str(from_dir / SESSION_FILE)})
@@ -329,7 +330,8 @@ def recompute(
     volume = volume_for(calibration_dir, artefacts)
     results, failed = compute(captures, calibration_dir, artefacts, plan.options, progress)
     if output is None or files.same_path(output, from_dir):
-        verification = write_in_place(from_dir, results, failed, plan, artefacts, volume, calibration_dir)
+        where = None if session else from_dir  # a session's captures are under captures/
+        verification = write_in_place(from_dir, results, failed, plan, artefacts, volume, calibration_dir, where)
         return _commit_history(verification, calibration_dir, from_dir)
     with files.staged_directory(output, VERIFICATION_KINDS, overwrite, OutputError) as staging:
         verification = finish(
