@@ -48,15 +48,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         run,
         help="turn a capture into absolute phase, a height map and a point cloud",
         description="Process a capture (and the reference-plane capture of its calibration) into "
-        "height.npy, phase.npy, mask.npy, points.ply, report.json and preview.png. Without "
-        "--calibration only the phase is computed (phase.npy, wrapped.npy, mask.npy, a phase preview).",
+        "height.npy, phase.npy, mask.npy, points.ply, report.json and preview.png (--format adds meshes "
+        "and E57). Without --calibration only the phase is computed (phase.npy, wrapped.npy, mask.npy, "
+        "a phase preview).",
     )
     add_capture_argument(parser)
     parser.add_argument("--calibration", type=Path, metavar="CAL", help="calibration directory (calibration.json)")
     parser.add_argument(
         "-o", "--output", type=Path, metavar="OUT", help="output directory (default: CAPTURE-processed)"
     )
+    parser.add_argument(
+        "--overwrite", action="store_true", help="replace an existing output directory (an earlier result only)"
+    )
     add_processing_options(parser)
+    add_format_option(parser)
     parser.add_argument("--salvage", action="store_true", help="accept an incomplete capture (interrupted scan)")
     add_report_options(parser)
 
@@ -121,6 +126,23 @@ def add_processing_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _format_help() -> str:
+    from rig.store.results import DEFAULT_FORMATS, FORMATS
+
+    listed = "; ".join(f"{f.name}: {f.file} ({f.what})" for f in FORMATS.values())
+    return f"point and mesh files to write with a calibration, comma-separated (default {','.join(DEFAULT_FORMATS)}): {listed}"
+
+
+def add_format_option(parser: argparse.ArgumentParser) -> None:
+    """--format, shared by `rig process` and `rig batch` (the names of rig.store.results.FORMATS)."""
+    parser.add_argument(
+        "--format",
+        dest="formats",
+        metavar="NAMES",
+        help=LazyHelp(_format_help),  # type: ignore[arg-type]  # argparse calls str() on it
+    )
+
+
 def processing_options(args: argparse.Namespace) -> ProcessOptions:
     """The :class:`ProcessOptions` of the options :func:`add_processing_options` added."""
     return ProcessOptions(
@@ -162,15 +184,23 @@ def parse_params(items: list[str]) -> dict[str, object]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from rig.pipeline.outputs import check_output_directory
-    from rig.pipeline.run import process_capture, total_steps
+    from rig.api import process_steps, process_to
+    from rig.store.results import default_output
 
-    out = args.output or args.capture.with_name(args.capture.name + "-processed")
+    out = args.output or default_output(args.capture)
     options = processing_options(args)
-    check_output_directory(out)  # an unwritable output fails now, not after the computation
-    steps = total_steps(args.calibration is not None) + 1
+    steps = process_steps(args.calibration is not None) + 1
     with Progress(f"process {args.capture}", total=steps, quiet=args.quiet) as progress:
-        report = process_capture(args.capture, args.calibration, out, options, progress=progress, salvage=args.salvage)
+        report = process_to(
+            args.capture,
+            out,
+            args.calibration,
+            options,
+            progress,
+            formats=None if args.formats is None else args.formats.split(","),
+            overwrite=args.overwrite,
+            salvage=args.salvage,
+        )
         progress.step("outputs")
     if args.json:
         print_json(summary(report, out))
