@@ -209,9 +209,9 @@ def check_target(out_dir: str | Path, overwrite: bool) -> None:
     :class:`ResultExistsError` when it exists and ``overwrite`` is false; OutputError for anything else.
     """
     target = Path(out_dir)
+    files.check_writable(target, RESULT_KINDS, True, OutputError)  # anything but an earlier result: refused
     if not overwrite and os.path.lexists(target) and not files.is_empty_directory(target):
         raise ResultExistsError(f"{target}: already exists; refusing to replace it (--overwrite replaces a result)")
-    files.check_writable(target, RESULT_KINDS, True, OutputError)
 
 
 def write_result(
