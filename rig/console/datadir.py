@@ -48,8 +48,8 @@ class DataDir:
             raise OutsideDataError(
                 f"{kind} name: expected a plain name (letters, digits, '.', '_', '-'; no '/' or '..'), found {name!r}"
             )
-        if is_staging_name(name):
-            raise OutsideDataError(f"{kind} name {name!r}: a staging name of an interrupted write, never an entry")
+        if kind == "results" and is_staging_name(name):
+            raise OutsideDataError(f"{kind} name {name!r}: a staging name of an interrupted write, never a result")
         path = self.root / kind / name
         if not path.resolve().is_relative_to(self.root):
             raise OutsideDataError(f"{kind} name {name!r}: leads outside the data directory")
@@ -70,7 +70,7 @@ class DataDir:
             marker = child / MARKERS[kind]
             if (
                 NAME.fullmatch(child.name)
-                and not is_staging_name(child.name)
+                and not (kind == "results" and is_staging_name(child.name))
                 and marker.is_file()
                 and child.resolve().is_relative_to(self.root)
             ):
