@@ -180,7 +180,11 @@ def is_staging_name(name: str) -> bool:
     return files.INCOMPLETE_MARK in name or files.REPLACED_MARK in name
 
 
-def default_name(base: str, suffix: str, limit: int = files.MAX_NAME_BYTES) -> str:
+# The longest default name: its staging sibling (NAME.incomplete-XXXXXXXX) must fit in one file name too.
+NAME_LIMIT = files.MAX_NAME_BYTES - len(files.INCOMPLETE_MARK) - 8
+
+
+def default_name(base: str, suffix: str, limit: int = NAME_LIMIT) -> str:
     """``base + suffix``, or when that is longer than ``limit`` bytes, ``base`` cut short with a short hash of it.
 
     Deterministic (the same base gives the same name) and distinct for bases that share their start.
@@ -319,11 +323,8 @@ def _read_array(directory: Path, file: str, where: str) -> np.ndarray:
 
 
 def has_file(directory: str | Path, file: str) -> bool:
-    """Whether the result holds ``file`` as a regular file (a link or FIFO of that name does not count)."""
-    try:
-        return os.path.isfile(Path(directory) / file) and not os.path.islink(Path(directory) / file)
-    except OSError:
-        return False
+    """Whether the result has an entry named ``file`` (reading it then insists on a regular file)."""
+    return os.path.lexists(Path(directory) / file)
 
 
 @dataclass
@@ -394,7 +395,7 @@ def list_results(root: str | Path) -> list[str]:
     with os.scandir(root) as children:
         for child in children:
             if is_result(child.path):
-                entries.append((os.stat(Path(child.path) / REPORT).st_mtime, child.name))
+                entries.append((os.lstat(Path(child.path) / REPORT).st_mtime, child.name))
     return [name for _, name in sorted(entries, reverse=True)]
 
 
