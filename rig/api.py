@@ -32,7 +32,8 @@ from typing import TYPE_CHECKING, Any, Union
 
 import numpy as np
 
-from rig.errors import CaptureError, ConfigError
+from calibration.errors import CalibrationError
+from rig.errors import CaptureError, ConfigError, OutputError, ResultExistsError
 from rig.events import Cancelled, CancelToken, Event, ProgressSink, Reporter
 from rig.pipeline.plan import DEFAULT_CORRECTION, ProcessOptions
 
@@ -45,12 +46,16 @@ if TYPE_CHECKING:
 
 __all__ = [
     "DEFAULT_CORRECTION",
+    "CalibrationError",
+    "CaptureError",
     "CancelToken",
     "Cancelled",
     "Event",
     "FrameStack",
+    "OutputError",
     "ProcessOptions",
     "Reporter",
+    "ResultExistsError",
     "check_scan_then_process",
     "load_capture",
     "load_calibration",
@@ -225,6 +230,8 @@ def process_to(
     from rig.store.results import check_target, parse_formats
 
     chosen = parse_formats(formats)
+    if calibration is None and formats is not None:
+        raise ConfigError(f"--format {','.join(chosen)}: points and meshes need a calibration (--calibration CAL)")
     check_target(out_dir, overwrite)  # an unwritable or taken output fails now, not after the computation
     result = process(source, calibration, options, progress, salvage=salvage, cache_reference=True)
     return write_outputs(result, out_dir, chosen, overwrite=overwrite)

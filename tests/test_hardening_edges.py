@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 from cli_steps import assert_one_line, calibrate_on_plane, run
 
+from rig.api import process
 from rig.cli import main
 from rig.errors import OutputError
-from rig.api import process
 from rig.store import files
 from rig.store import result_files as outputs
 from rig.store.result_files import write_preview

@@ -167,4 +167,3 @@ def test_rig_process_of_a_long_named_capture_writes_its_default_output(capsys, s
     assert code == 0, err
     out = results.default_output(long_name)
     assert out.parent == long_name.parent and (out / results.REPORT).is_file()
-

@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from rig.api import process_to
 from rig.pipeline import reference_cache
 from rig.pipeline.plan import ProcessOptions
-from rig.api import process_to
 from rig.pipeline.run import process
 
 

@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from rig.errors import ConfigError, OutputError
+from rig.errors import ConfigError, OutputError, ResultExistsError
 from rig.pipeline.result import ProcessResult, build_report
 from rig.store import files
 from rig.store import result_files as encode
@@ -54,10 +54,6 @@ POINTS_E57 = "points.e57"
 
 RESULT_KINDS = ("output",)  # what files.KINDS calls a result directory (its report.json says "fpp-rig ...")
 OCTET = "application/octet-stream"
-
-
-class ResultExistsError(OutputError):
-    """The result directory exists and replacing it was not asked for (the console answers 409)."""
 
 
 # --------------------------------------------------------------------------- output formats
