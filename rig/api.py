@@ -163,9 +163,15 @@ def process(
 
     ``quick``: called first with a result computed without the correction (fast, on screen in
     seconds) when the options ask for one; then the full run is returned. That is the console's
-    quick-then-full pass: ``progress`` receives both runs, each starting with its own ``begin``.
-    ``cache_reference``: also keep the processed reference plane in the calibration directory's
-    cache (what ``rig process`` does; see :mod:`rig.pipeline.reference_cache`).
+    quick-then-full pass: ``progress`` receives both runs, each starting with its own ``begin``::
+
+        result = api.process(capture_dir, calibration_dir, options, progress=reporter,
+                             quick=lambda first: show(first, final=False))
+        show(result, final=True)
+        api.write_outputs(result, data / "results" / name)  # ResultExistsError (HTTP 409) if taken
+
+    ``cache_reference``: also write the processed reference plane to the on-disk reference cache
+    (what ``rig process`` does; memory is always used; see :mod:`rig.pipeline.reference_cache`).
     """
     from rig.pipeline.run import process as run
 

@@ -16,7 +16,7 @@ from rig.commands._common import (
     print_json,
 )
 from rig.errors import ConfigError
-from rig.pipeline.plan import DEFAULT_CORRECTION, UNWRAP_METHODS, ProcessOptions
+from rig.pipeline.plan import UNWRAP_METHODS, ProcessOptions
 from rig.progress import Progress
 
 # The pipeline (numpy, OpenCV) is imported when a command runs, not to build the parser: `rig --help`
@@ -38,7 +38,7 @@ def _corrections() -> list[str]:
 def _correction_help() -> str:
     from rig.pipeline.corrections import help_text
 
-    return f"phase / fringe-order correction (default {DEFAULT_CORRECTION}); {help_text()}"
+    return f"phase / fringe-order correction (default {ProcessOptions().correction}); {help_text()}"
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -67,24 +67,28 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def add_processing_options(parser: argparse.ArgumentParser) -> None:
-    """The pipeline's options (--unwrap, --denoise, --correction, ...), shared by `rig process` and `rig batch`."""
+    """The pipeline's options (--unwrap, --denoise, --correction, ...), shared by `rig process` and `rig batch`.
+
+    Their defaults are :class:`ProcessOptions`' own, so the command and the API cannot drift apart.
+    """
+    defaults = ProcessOptions()
     parser.add_argument(
         "--unwrap",
-        default="auto",
+        default=defaults.unwrap,
         choices=UNWRAP_METHODS,
         help="phase unwrapping method (default auto: gray or spatial for one frequency, hierarchical when "
         "frequency 1 is present, two-frequency for 2 coprime, heterodyne or three-frequency for 3)",
     )
     parser.add_argument(
         "--denoise",
-        default="none",
+        default=defaults.denoise,
         choices=LazyChoices(_denoisers),
         metavar="METHOD",
         help="fringe denoising before phase: %(choices)s (default none)",
     )
     parser.add_argument(
         "--correction",
-        default=DEFAULT_CORRECTION,
+        default=defaults.correction,
         choices=LazyChoices(_corrections),
         metavar="METHOD",
         help=LazyHelp(_correction_help),  # type: ignore[arg-type]  # argparse calls str() on it
@@ -92,14 +96,14 @@ def add_processing_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--min-modulation",
         type=float,
-        default=0.2,
+        default=defaults.min_modulation_ratio,
         metavar="RATIO",
         help="valid pixels need fringe modulation B >= RATIO x background and x the image's 99th percentile of B (default 0.2)",
     )
     parser.add_argument(
         "--min-island",
         type=float,
-        default=0.005,
+        default=defaults.min_island_fraction,
         metavar="FRACTION",
         dest="min_island",
         help="drop isolated valid regions smaller than FRACTION of the largest (background specks; default 0.005)",

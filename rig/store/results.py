@@ -19,6 +19,11 @@ Writing is atomic (a staging sibling renamed into place, :mod:`rig.store.files`)
 replaces an existing result unless asked (:class:`ResultExistsError` otherwise). Reading goes
 through the safe file layer: regular files only (no FIFO, device or symbolic link), inside the
 directory, size-capped; staging names (``*.incomplete-*``, ``*.replaced-*``) are never results.
+
+For a front-end: :func:`write_result` (map ResultExistsError to "409, choose another name"),
+:func:`list_results`, :func:`read_result` (the map, mask, points and report of a saved result),
+:func:`describe_result` (key figures and the files held, with media types), :func:`result_file`
+(the checked path of a file to download) and :data:`MEDIA_TYPES` (every downloadable name).
 """
 
 from __future__ import annotations
