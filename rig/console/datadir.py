@@ -16,10 +16,10 @@ from pathlib import Path
 from typing import Any
 
 from rig.errors import RigError
-from rig.store.results import default_name, is_staging_name
+from rig.store.results import REPORT, default_name, is_staging_name
 
 KINDS = ("captures", "results", "calibrations")
-MARKERS = {"captures": "capture.json", "results": "report.json", "calibrations": "calibration.json"}
+MARKERS = {"captures": "capture.json", "results": REPORT, "calibrations": "calibration.json"}
 NAME_LENGTH = 100
 NAME = re.compile(rf"[A-Za-z0-9][A-Za-z0-9._-]{{0,{NAME_LENGTH - 1}}}")
 
