@@ -129,19 +129,41 @@ def test_quick_pass_comes_first_without_the_correction(small_capture) -> None:
     assert len(quick) == 1  # nothing to be quick about without a correction
 
 
-def test_only_rig_api_imports_the_pipeline_run() -> None:
+def _imports() -> dict[str, set[str]]:
+    """Module -> the modules of this project it imports (anywhere in it, type-only imports included)."""
     import ast
 
-    root = Path(api.__file__).resolve().parent
-    importers = []
-    for path in sorted(root.rglob("*.py")):
+    root = Path(api.__file__).resolve().parents[1]
+    paths = {p: ".".join(p.relative_to(root).with_suffix("").parts) for p in root.glob("rig/**/*.py")}
+    modules = {name.removesuffix(".__init__") for name in paths.values()}
+    graph: dict[str, set[str]] = {}
+    for path, name in paths.items():
+        found: set[str] = set()
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
-            names = [node.module] if isinstance(node, ast.ImportFrom) else []
-            names += [alias.name for alias in node.names] if isinstance(node, ast.Import) else []
-            if "rig.pipeline.run" in names:
-                importers.append(path.relative_to(root.parent).as_posix())
+            if isinstance(node, ast.ImportFrom) and node.module:
+                found |= {node.module, *(f"{node.module}.{alias.name}" for alias in node.names)}
+            elif isinstance(node, ast.Import):
+                found |= {alias.name for alias in node.names}
+        graph[name.removesuffix(".__init__")] = found & modules
+    return graph
+
+
+def test_only_rig_api_imports_the_pipeline_run() -> None:
+    importers = {name for name, imported in _imports().items() if "rig.pipeline.run" in imported}
     # the console's session is being moved onto rig.api in its own change
-    assert sorted(set(importers) - {"rig/console/session.py"}) == ["rig/api.py"]
+    assert importers - {"rig.console.session"} == {"rig.api"}
+
+
+def test_the_run_its_result_and_the_result_store_import_no_circle() -> None:
+    graph = _imports()
+    for start in ("rig.pipeline.run", "rig.pipeline.result", "rig.pipeline.outputs", "rig.store.results", "rig.api"):
+        seen, todo = set(), list(graph[start])
+        while todo:
+            module = todo.pop()
+            assert module != start, f"{start} imports itself through {sorted(seen)}"
+            if module not in seen:
+                seen.add(module)
+                todo.extend(graph.get(module, ()))
 
 
 def test_scan_then_process_checks_everything_before_the_scan(small_capture, tmp_path) -> None:
