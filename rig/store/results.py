@@ -201,8 +201,8 @@ def default_name(base: str, suffix: str, limit: int = NAME_LIMIT) -> str:
 
 def default_output(capture: Path) -> Path:
     """Where ``rig process CAPTURE`` writes without ``-o``: ``CAPTURE-processed`` (a valid name however long)."""
-    capture = Path(capture)
-    return capture.with_name(default_name(capture.name or capture.resolve().name, "-processed"))
+    capture = Path(capture) if Path(capture).name else Path(capture).resolve()  # "." names its folder
+    return capture.with_name(default_name(capture.name, "-processed"))
 
 
 # --------------------------------------------------------------------------- writing
