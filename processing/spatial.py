@@ -24,6 +24,7 @@ from scipy.sparse.csgraph import breadth_first_order, connected_components, mini
 
 from processing import _validate
 from processing.angles import wrap_to_pi
+from processing.temporal import UnwrapResult
 
 TWO_PI = 2.0 * np.pi
 QUALITY_KINDS = ("variance",)
@@ -176,6 +177,27 @@ def unwrap_quality_guided(
     result = flat_phi + TWO_PI * wraps
     out.ravel()[flat_valid] = result[flat_valid]
     return out
+
+
+def unwrap_spatial(phi: np.ndarray, mask: np.ndarray | None = None) -> UnwrapResult:
+    """:func:`unwrap_quality_guided` as an :class:`~processing.temporal.UnwrapResult`, the type every
+    unwrapping method returns.
+
+    Parameters
+    ----------
+    phi : (H, W) array
+        Wrapped phase (any 2 pi representation); NaN pixels are excluded.
+    mask : (H, W) bool array, optional
+        Pixels to unwrap (True); default every finite pixel of ``phi``.
+
+    Returns
+    -------
+    UnwrapResult
+        ``phase`` continuous up to 2 pi k per connected region (NaN outside the mask), ``orders``
+        None, ``valid`` where ``phase`` is finite, ``absolute`` False.
+    """
+    phase = unwrap_quality_guided(phi, mask=mask)
+    return UnwrapResult(phase=phase, orders=None, valid=np.isfinite(phase), absolute=False)
 
 
 def remove_region_offsets(delta: np.ndarray) -> np.ndarray:

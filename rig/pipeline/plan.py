@@ -58,7 +58,19 @@ TWO_PI = 2.0 * math.pi
 # The correction a user gets without asking (rig process, rig scan --process, rig demo): the best
 # measured. ProcessOptions() itself corrects nothing, so calibration fits see the measured phase.
 DEFAULT_CORRECTION = "auto"
-UNWRAP_METHODS = ("auto", "two-frequency", "three-frequency", "hierarchical", "heterodyne", "gray", "spatial", "ftp")
+
+
+def __getattr__(name: str) -> Any:
+    """``UNWRAP_METHODS``: what ``--unwrap`` accepts, from :mod:`rig.pipeline.unwrapping`'s registry.
+
+    Loaded on first use: this module is imported to build the command line's parser, which must
+    not load numpy (``rig --help`` stays quick).
+    """
+    if name == "UNWRAP_METHODS":
+        from rig.pipeline.unwrapping import UNWRAP_METHODS
+
+        return UNWRAP_METHODS
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 # --------------------------------------------------------------------------- options and pattern groups
@@ -223,7 +235,8 @@ def choose_unwrap(groups: PatternGroups, axis: str) -> str:
             return "heterodyne"
         if math.gcd(*ints) == 1:
             return "three-frequency"
+    from rig.pipeline.unwrapping import REGISTRY  # numpy: not for the parser
+
     raise ProcessingError(
-        f"frequencies {ints}: no automatic unwrapping method fits; choose one with --unwrap "
-        f"({', '.join(UNWRAP_METHODS[1:])})"
+        f"frequencies {ints}: no automatic unwrapping method fits; choose one with --unwrap ({', '.join(REGISTRY)})"
     )
