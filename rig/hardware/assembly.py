@@ -17,9 +17,9 @@ import numpy as np
 
 from drivers.camera import Camera
 from drivers.projector import Projector
-from rig.acquisition.loop import BoxTrigger, SoftwareTrigger
 from rig.config import RigConfig
 from rig.errors import ConfigError
+from rig.hardware.trigger_paths import BoxTrigger, SoftwareTrigger
 
 if TYPE_CHECKING:
     from calibration.camera import BoardSpec

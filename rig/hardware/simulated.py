@@ -23,6 +23,7 @@ import numpy as np
 from mock_devices import scenes, synth
 from rig.config import RigConfig
 from rig.errors import ConfigError
+from rig.hardware.scenes import check_scene_name
 
 if TYPE_CHECKING:
     from calibration.camera import BoardSpec
@@ -65,6 +66,7 @@ def scene_height(config: RigConfig, scene: str, geometry: synth.RigGeometry) -> 
     """
     h, w, pixel_mm = geometry.camera_height, geometry.camera_width, geometry.pixel_mm
     if scene == "object":
+        check_scene_name(config.simulation.scene, str(config.source) if config.source is not None else "rig config")
         return scenes.make_scene(config.simulation.scene, h, w, pixel_mm)
     if scene == "reference":
         return np.zeros((h, w))
