@@ -39,8 +39,13 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
+from scipy import ndimage
 
 from processing import _validate
+from processing.ftp import detect_carrier, ftp_phase
+from processing.rpca import rpca_ialm
+from processing.spatial import unwrap_quality_guided
+from processing.voting import vote_row_orders
 
 log = logging.getLogger(__name__)
 
@@ -141,7 +146,6 @@ def separate_fringe_speckle(
     fringe, speckle : (H, W) float32
     result : RPCAResult
     """
-    from processing.rpca import rpca_ialm
 
     scale = float(np.max(np.abs(image))) or 1.0
     result = rpca_ialm(
@@ -207,8 +211,6 @@ def prepare_reference(
         absolute = None if absolute is None else absolute.T
     fringe, speckle, _ = _split(ref, tau, rpca_tol, separate, svd)
     if carrier is None:
-        from processing.ftp import detect_carrier
-
         carrier = detect_carrier(fringe, axis=1)
     wrapped, _ = _ftp_wrapped(fringe, carrier, bandwidth)
     if absolute is None:
@@ -265,7 +267,6 @@ def _split(image: np.ndarray, tau, rpca_tol, separate: bool, svd: str):
 
 def _ftp_wrapped(fringe: np.ndarray, carrier: float, bandwidth: float) -> tuple[np.ndarray, np.ndarray]:
     """FTP wrapped phase and amplitude of a fringe part (fringes along x)."""
-    from processing.ftp import ftp_phase
 
     phase, amplitude = ftp_phase(fringe, carrier=carrier, axis=1, bandwidth=bandwidth)
     return np.asarray(phase, dtype=np.float64), np.asarray(amplitude, dtype=np.float64)
@@ -330,7 +331,6 @@ def _consistent_unwrap(
     offset by whole periods towards the reference, interpolated back to full size, and every
     pixel's n taken as the whole number of periods nearest to it.
     """
-    from processing.spatial import unwrap_quality_guided
 
     rows, cols = wrapped_phase.shape
     valid = np.ones((rows, cols), dtype=bool) if mask is None else mask
@@ -485,7 +485,6 @@ def vote_fringe_segments(
     winners : (H, W) int64, the segment's order; -1 where no segment vote applies
     labels : (H, W) int32 labels of the voted segments (0 where ``winners`` is -1)
     """
-    from scipy import ndimage
 
     phi = np.where(valid, wrapped_phase, 0.0)
     jump = np.zeros(valid.shape, dtype=bool)
@@ -666,8 +665,6 @@ def single_shot_unwrap(
     absolute = np.where(valid, wrapped + TWO_PI * corr_orders, np.nan)
     t0 = time.perf_counter()
     if vote and valid.any():
-        from processing.voting import vote_row_orders
-
         absolute = np.asarray(vote_row_orders(absolute, wrapped, mask=valid), dtype=np.float64)
         absolute = np.where(valid, absolute, np.nan)
     timings["voting"] = time.perf_counter() - t0

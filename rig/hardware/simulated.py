@@ -20,7 +20,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from mock_devices import scenes, synth
+from drivers.camera import PixelFormat
+from drivers.projector_gl import GLProjector
+from drivers.trigger_box import SerialTriggerBox
+from mock_devices import board_synth, scenes, synth
+from mock_devices.camera import CameraFaults, SimulatedCamera
+from mock_devices.trigger_box import FakeTriggerBox, TriggerFaults
 from rig.config import RigConfig
 from rig.errors import ConfigError
 from rig.hardware.scenes import check_scene_name
@@ -94,8 +99,6 @@ FAULTS = {
 
 def fault_arguments(fault: str, config: RigConfig) -> dict[str, Any]:
     """:class:`SimulatedRig` arguments injecting the named fault of :data:`FAULTS`."""
-    from mock_devices.camera import CameraFaults
-    from mock_devices.trigger_box import TriggerFaults
 
     if fault == "camera-gone":
         return {"camera_faults": CameraFaults(disappear_after=3)}
@@ -151,9 +154,6 @@ class SimulatedRig:
         }
 
     def __enter__(self) -> SimulatedRig:
-        from drivers.camera import PixelFormat
-        from drivers.projector_gl import GLProjector
-        from mock_devices.camera import SimulatedCamera
 
         try:
             # GLProjector reads each frame back when it is shown, in the thread that owns its
@@ -198,8 +198,6 @@ class SimulatedRig:
         self.scene, self.height_mm = scene, height
 
     def _open_trigger_box(self) -> None:
-        from drivers.trigger_box import SerialTriggerBox
-        from mock_devices.trigger_box import FakeTriggerBox
 
         self.fake_box = self._stack.enter_context(
             FakeTriggerBox(on_pulse=self.camera.pulse, faults=self.trigger_faults, **self.fake_box_options)
@@ -220,7 +218,6 @@ def board_albedo(config: RigConfig, board: BoardSpec, index: int) -> np.ndarray:
     The simulated camera looks straight down at l0 with ``pixel_mm`` per pixel on the plane: a
     pinhole of focal l0 / pixel_mm without distortion. Poses are seeded by the config and index.
     """
-    from mock_devices import board_synth
 
     g = geometry_from_config(config)
     camera = board_synth.PinholeCamera.simple(g.camera_width, g.camera_height, g.l0_mm / g.pixel_mm)

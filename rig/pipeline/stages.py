@@ -24,16 +24,13 @@ from calibration.store import Calibration
 from processing.convention import gray_offset, heterodyne_offset
 from processing.denoise import rpca_denoise_stack
 from processing.fringe_pass import FringePass, fringe_pass
-from processing.ftp import detect_carrier, fringe_background, ftp_phase
 from processing.neighbour_rescue import rescue
 from processing.phase_shift import phase_shift, shadow_mask
-from processing.spatial import remove_region_offsets
 from rig.blas import rpca_blas
 from rig.errors import ProcessingError
 from rig.pipeline import convention_check
 from rig.pipeline.corrections import stage_correction
 from rig.pipeline.plan import PatternGroups, ProcessOptions, _all_integers, accepted_params, choose_unwrap
-from rig.pipeline.single_shot_phase import SINGLE_SHOT
 from rig.pipeline.state import SceneState, UnwrappedPhase, WrappedPhase
 from rig.pipeline.unwrapping import REGISTRY as UNWRAPPERS
 from rig.pipeline.unwrapping import UNWRAP_METHODS, GrayPlanes, UnwrapInputs, UnwrapMethod
@@ -170,6 +167,9 @@ def stage_phase(state: SceneState, options: ProcessOptions) -> None:
     """
     assert state.frames is not None
     if state.groups.single_shot:
+        # RPCA, FTP and scipy: loaded for single-shot captures only (rig process starts ~0.3 s sooner)
+        from rig.pipeline.single_shot_phase import SINGLE_SHOT
+
         with rpca_blas():
             SINGLE_SHOT[state.groups.single_shot[0].kind](state, options)
         return
@@ -295,6 +295,8 @@ def _ftp_frame(image: np.ndarray, axis: str, shift: float) -> tuple[np.ndarray, 
 
     The background is the mean over one fringe period along the axis (the detected carrier).
     """
+    from processing.ftp import detect_carrier, fringe_background, ftp_phase  # scipy.fft: single frames only
+
     img = np.asarray(image, dtype=np.float64)
     along = 1 if axis == "x" else 0
     phase, amplitude = ftp_phase(img, axis=along)
@@ -452,6 +454,8 @@ def stage_height(
                 f"{obj.capture.manifest_path}: spatial unwrapping gives phase only up to 2 pi k, and the "
                 f"{calibration.model!r} calibration has no reference plane to fix k; capture temporal patterns"
             )
+        from processing.spatial import remove_region_offsets  # scipy: only spatial unwrapping pays for it
+
         obj_phase = ref_phase + remove_region_offsets(obj_phase - ref_phase)
         notes.append(
             "spatial unwrapping: phase known up to 2 pi k per connected region; removed from each region the "

@@ -19,7 +19,6 @@ from typing import Any, Protocol
 import numpy as np
 
 from processing import temporal
-from processing.spatial import unwrap_spatial
 from processing.temporal import UnwrapResult
 from rig.errors import ProcessingError
 
@@ -133,6 +132,8 @@ def _gray(inputs: UnwrapInputs) -> UnwrapResult:
 
 
 def _spatial(inputs: UnwrapInputs) -> UnwrapResult:
+    from processing.spatial import unwrap_spatial  # scipy: ~0.3 s the default path of rig process does not pay
+
     return unwrap_spatial(inputs.phases[-1], mask=inputs.valid)
 
 
