@@ -395,6 +395,56 @@ def frame_metadata(frame: Frame, attempts: int) -> dict[str, Any]:
     return meta
 
 
+def _capture_writer(
+    path: str | Path,
+    patterns: Sequence[Mapping[str, Any]],
+    projector: Projector,
+    camera: Camera,
+    trigger: TriggerPath,
+    scene: str,
+    extra: Mapping[str, Any] | None,
+    overwrite: bool,
+) -> CaptureWriter:
+    """The capture's writer, its manifest naming the devices and the camera's staged settings."""
+    camera_info = {"width": camera.width, "height": camera.height, "bit_depth": camera.pixel_format.bit_depth}
+    projector_info = {"width": projector.width, "height": projector.height}
+    capture_extra = {"devices": {"projector": projector.name, "camera": camera.name, "trigger": type(trigger).__name__}}
+    capture_extra.update(extra or {})
+    return CaptureWriter(
+        path, camera_info, projector_info, patterns, scene=scene, extra=capture_extra, overwrite=overwrite
+    )
+
+
+def _acquire_all(
+    patterns: Sequence[Mapping[str, Any]],
+    projector: Projector,
+    camera: Camera,
+    trigger: TriggerPath,
+    settings: AcquisitionSettings,
+    times: StepTimes,
+    background: BackgroundWriter | InlineWriter,
+    records: list[dict[str, Any]],
+    progress: ProgressSink | None,
+) -> tuple[int, int]:
+    """One frame per pattern, handed to the writer in order; returns (attempts, discarded frames) in all."""
+    attempts_total = discarded_total = 0
+    triggers = _TriggerLog()
+    for index, pattern in enumerate(patterns):
+        frame, attempts, discarded = acquire_pattern(
+            index, pattern, len(patterns), projector, camera, trigger, settings, triggers, times
+        )
+        attempts_total += attempts
+        discarded_total += discarded
+        stored = time.perf_counter()
+        meta = frame_metadata(frame, attempts)
+        background.put(index, frame.image, meta)
+        records.append({"pattern": index, **meta})
+        times.store_s += time.perf_counter() - stored
+        if progress is not None:
+            progress.step(f"frame {index + 1}")
+    return attempts_total, discarded_total
+
+
 def run_scan(
     path: str | Path,
     patterns: Sequence[Mapping[str, Any]],
@@ -441,36 +491,16 @@ def run_scan(
     started = time.perf_counter()
     times = StepTimes()
     records: list[dict[str, Any]] = []
-    attempts_total = discarded_total = 0
-    triggers = _TriggerLog()
     with staged_camera(camera, trigger.source, TriggerMode.ONCE, exposure_us, gain):
-        camera_info = {"width": camera.width, "height": camera.height, "bit_depth": camera.pixel_format.bit_depth}
-        projector_info = {"width": projector.width, "height": projector.height}
-        capture_extra = {
-            "devices": {"projector": projector.name, "camera": camera.name, "trigger": type(trigger).__name__}
-        }
-        capture_extra.update(extra or {})
-        writer = CaptureWriter(
-            path, camera_info, projector_info, patterns, scene=scene, extra=capture_extra, overwrite=overwrite
-        )
+        writer = _capture_writer(path, patterns, projector, camera, trigger, scene, extra, overwrite)
         with writer:
             sink = BackgroundWriter(writer) if background_writer else InlineWriter(writer)
             with sink as background:
                 trigger.prepare(len(patterns) * (settings.retries + 1))
                 try:
-                    for index, pattern in enumerate(patterns):
-                        frame, attempts, discarded = acquire_pattern(
-                            index, pattern, len(patterns), projector, camera, trigger, settings, triggers, times
-                        )
-                        attempts_total += attempts
-                        discarded_total += discarded
-                        stored = time.perf_counter()
-                        meta = frame_metadata(frame, attempts)
-                        background.put(index, frame.image, meta)
-                        records.append({"pattern": index, **meta})
-                        times.store_s += time.perf_counter() - stored
-                        if progress is not None:
-                            progress.step(f"frame {index + 1}")
+                    attempts_total, discarded_total = _acquire_all(
+                        patterns, projector, camera, trigger, settings, times, background, records, progress
+                    )
                 finally:
                     trigger.finish()
                 finishing = time.perf_counter()
