@@ -2,22 +2,26 @@
 
 Each capture (the object, and the calibration's reference plane) goes through the same stages::
 
-    load -> undistort -> denoise -> wrapped -> unwrap -> correction
+    load -> undistort -> denoise -> phase -> correction
 
 then the two meet in ``height`` (:mod:`calibration.models`: thesis eq. 1.15 on Phi_object -
 Phi_reference for the reference-plane model) and ``outputs``.
-Every stage is a plain function of a :class:`SceneState` and the :class:`ProcessOptions`; its
-wall-clock time goes into report.json. Methods plug in through registries, so a new denoiser or
-phase correction is one entry, not a new code path:
+Every stage is a plain function of a :class:`rig.pipeline.state.SceneState` and the
+:class:`ProcessOptions`; its wall-clock time goes into report.json. Methods plug in through
+registries, so a new method is one entry, not a new code path:
 
-- :data:`DENOISERS` ``name -> f(frames, groups, options) -> frames`` (``--denoise``);
+- :data:`rig.pipeline.unwrapping.REGISTRY` ``name -> UnwrapMethod`` (``--unwrap``): what each
+  needs of the pattern groups, and ``run(inputs) -> UnwrapResult``;
+- :data:`rig.pipeline.stages.DENOISERS` ``name -> Denoiser`` (``--denoise``);
 - :data:`rig.pipeline.corrections.REGISTRY` ``name -> CorrectionMethod`` (``--correction``):
   typed entries, ``f(absolute, wrapped, orders, mask, frequency, **params) -> (phase, info)``,
   with what each needs from the calibration (``needs``);
-- :data:`SINGLE_SHOT` ``pattern kind -> f(state, options) -> None`` filling ``state.unwrapped``
-  for single-shot patterns (``speckle-sinusoid``);
+- :data:`rig.pipeline.single_shot_phase.SINGLE_SHOT` ``pattern kind -> f(state, options) -> None``
+  filling ``state.wrapped`` and ``state.unwrapped`` for single-shot patterns (``speckle-sinusoid``);
 - heights and points come from :mod:`calibration.models` (reference-plane, polynomial, stereo),
   whatever the calibration's model; the reference plane is processed when the model needs it.
+
+:func:`rig.pipeline.registry.available_options` lists every choice for the front-ends.
 
 Automatic choice of the unwrapping method (``--unwrap auto``), from the sinusoid frequencies
 along the fringe axis (the axis of the first sinusoid pattern):
