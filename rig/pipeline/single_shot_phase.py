@@ -43,6 +43,18 @@ METHOD = (
 
 
 @dataclass
+class _Shot:
+    """The frame to phase and how: its pattern group, the image axis across the fringes, the
+    ``--param`` entries given and every setting with its default."""
+
+    image: np.ndarray
+    group: SinusoidGroup
+    axis: int
+    given: dict[str, Any]
+    settings: dict[str, Any]
+
+
+@dataclass
 class _Phased:
     """What either role (reference or object) computed: FTP parts, absolute phase, orders, RPCA, step times."""
 
@@ -97,14 +109,7 @@ def _prepare_reference(
     return dataclasses.replace(prepared, speckle=speckle), rpca
 
 
-def _phase_reference(
-    state: SceneState,
-    image: np.ndarray,
-    group: SinusoidGroup,
-    axis: int,
-    given: dict[str, Any],
-    settings: dict[str, Any],
-) -> _Phased:
+def _phase_reference(state: SceneState, shot: _Shot) -> _Phased:
     """The reference plane: prepared once for the objects (kept in the state), its FTP phase made absolute."""
     if state.name != "reference":
         raise ProcessingError(
@@ -113,7 +118,8 @@ def _phase_reference(
             "(rig calibrate itself needs phase-shifting patterns)"
         )
     start = time.perf_counter()
-    prepared, rpca = _prepare_reference(image, group.frequency, axis, given, settings)
+    image, group, axis, settings = shot.image, shot.group, shot.axis, shot.settings
+    prepared, rpca = _prepare_reference(image, group.frequency, axis, shot.given, settings)
     prepared.seconds = time.perf_counter() - start
     state.single_shot_reference = prepared
     parts = ftp_fringe_parts(prepared.fringe, prepared.carrier, axis, settings["bandwidth"], settings["min_modulation"])
@@ -122,14 +128,7 @@ def _phase_reference(
     return _Phased(parts, parts.valid, absolute, orders, rpca, {"reference": prepared.seconds})
 
 
-def _phase_object(
-    state: SceneState,
-    image: np.ndarray,
-    group: SinusoidGroup,
-    axis: int,
-    given: dict[str, Any],
-    settings: dict[str, Any],
-) -> _Phased:
+def _phase_object(state: SceneState, shot: _Shot) -> _Phased:
     """An object: fringe orders from the reference speckle (the reference's preparation is reported there)."""
     assert state.reference is not None
     prepared = state.reference.single_shot_reference
@@ -137,7 +136,8 @@ def _phase_object(
         raise ProcessingError(
             f"{state.capture.manifest_path}: the reference capture is not a speckle-sinusoid single shot like this capture"
         )
-    result = single_shot_unwrap(image, prepared, None, group.frequency, axis=axis, **given)
+    axis, settings = shot.axis, shot.settings
+    result = single_shot_unwrap(shot.image, prepared, None, shot.group.frequency, axis=axis, **shot.given)
     parts = ftp_fringe_parts(result.fringe, prepared.carrier, axis, settings["bandwidth"], settings["min_modulation"])
     valid = result.mask & np.isfinite(result.absolute_phase)
     timings = dict(result.timings)
@@ -195,7 +195,7 @@ def speckle_single_shot(state: SceneState, options: ProcessOptions) -> None:
     start = time.perf_counter()
     phase = _phase_reference if state.reference is None else _phase_object
     try:
-        phased = phase(state, image, group, axis, given, settings)
+        phased = phase(state, _Shot(image, group, axis, given, settings))
     except ValueError as exc:
         raise ProcessingError(f"{state.capture.manifest_path}: single-shot: {exc}") from None
     _record(state, group, phased, parameters, time.perf_counter() - start)
