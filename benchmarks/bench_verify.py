@@ -25,7 +25,8 @@ from benchmarks.measure import cpu_description, interleaved, load_line, print_ta
 from rig.calibrate.session import CalibrationPlan, calibrate  # noqa: E402
 from rig.config import RigConfig  # noqa: E402
 from rig.verify.artefacts import Artefacts  # noqa: E402
-from rig.verify.session import VerificationPlan, verify  # noqa: E402
+from rig.verify.plan import VerificationPlan
+from rig.verify.session import verify  # noqa: E402
 
 
 def main() -> None:

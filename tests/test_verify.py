@@ -15,7 +15,7 @@ import pytest
 
 from rig.verify import fits, guideline, model
 from rig.verify.artefacts import Artefacts, load_artefacts, parse_artefacts
-from rig.verify.session import VerificationPlan
+from rig.verify.plan import VerificationPlan
 
 SMALL_CAMERA = (256, 192)
 SMALL_PROJECTOR = (228, 285)
@@ -305,7 +305,7 @@ def test_cli_user_errors_are_one_line(tmp_path, capsys) -> None:
 
 
 def test_artefact_defaults_meet_the_guideline_for_the_simulated_rig() -> None:
-    from rig.verify.session import size_notes
+    from rig.verify.plan import size_notes
 
     volume = guideline.volume_of_view(1024, 768, 0.4, 1000.0, 150.0)
     assert size_notes(volume, Artefacts()) == []

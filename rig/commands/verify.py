@@ -90,7 +90,7 @@ def _stored_mpe(from_dir: Path) -> dict[str, float] | None:
 
 def _plan(args: argparse.Namespace, simulated: bool):
     from rig.errors import ConfigError
-    from rig.verify.session import VerificationPlan
+    from rig.verify.plan import VerificationPlan
 
     plan = VerificationPlan()
     stored = _stored_mpe(args.from_dir) if args.from_dir is not None and args.mpe_mm is None else None

@@ -27,8 +27,16 @@ from rig.verify.artefacts import Artefacts
 from rig.verify.guideline import QUANTITIES, Placement, Volume
 from rig.verify.history import Drift, drift, history_entry, read_history
 from rig.verify.measure import PositionResult
-from rig.verify.results import REPORT_FORMAT, REPORT_VERSION, Failed, failures, summarise, summary_line
-from rig.verify.session import CAPTURES_DIR, Verification, VerificationPlan, size_notes
+from rig.verify.plan import VerificationPlan, size_notes
+from rig.verify.results import (
+    REPORT_FORMAT,
+    REPORT_VERSION,
+    Failed,
+    Verification,
+    failures,
+    summarise,
+    summary_line,
+)
 
 REPORT_FILE = "report.json"
 MARKDOWN_FILE = "report.md"
@@ -123,11 +131,11 @@ def _write_outputs(
 
 def _complete(
     directory: Path, output: Path, results: Sequence[PositionResult], failed: Sequence[Failed],
-    plan: VerificationPlan, artefacts: Artefacts, volume: Volume, calibration_dir: Path, captures: Path | None,
+    plan: VerificationPlan, artefacts: Artefacts, volume: Volume, calibration_dir: Path, captures: str,
 ) -> Verification:  # fmt: skip
     report = build_report(results, failed, plan, artefacts, volume, calibration_dir)
     report["report_path"] = str(output)
-    report["captures"] = str(captures) if captures is not None else CAPTURES_DIR
+    report["captures"] = captures
     history = read_history(calibration_dir)
     trend: Drift = drift(history, report)
     report["drift"] = trend.as_dict()
@@ -138,15 +146,18 @@ def _complete(
 
 def finish(
     staging: Path, output: Path, results: Sequence[PositionResult], failed: Sequence[Failed],
-    plan: VerificationPlan, artefacts: Artefacts, volume: Volume, calibration_dir: Path, captures: Path | None = None,
+    plan: VerificationPlan, artefacts: Artefacts, volume: Volume, calibration_dir: Path, captures: str,
 ) -> Verification:  # fmt: skip
-    """Write the report of a new verification into its staging directory (committed as ``output``)."""
+    """Write the report of a new verification into its staging directory (committed as ``output``).
+
+    ``captures``: where its captures are, as report.json records it.
+    """
     return _complete(staging, output, results, failed, plan, artefacts, volume, calibration_dir, captures)
 
 
 def write_in_place(
     directory: Path, results: Sequence[PositionResult], failed: Sequence[Failed], plan: VerificationPlan,
-    artefacts: Artefacts, volume: Volume, calibration_dir: Path, captures: Path | None = None,
+    artefacts: Artefacts, volume: Volume, calibration_dir: Path, captures: str,
 ) -> Verification:  # fmt: skip
     """Rewrite the report of stored captures beside them (each file replaced atomically, report.json last)."""
     files.check_writable_directory(directory, OutputError)

@@ -13,10 +13,14 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from rig.verify.guideline import QUANTITIES, Placement
 from rig.verify.measure import PositionResult
+
+if TYPE_CHECKING:
+    from rig.verify.history import Drift
 
 REPORT_FORMAT = "fpp-verification"
 REPORT_VERSION = 1
@@ -31,6 +35,17 @@ class Failed:
 
     placement: Placement
     reason: str
+
+
+@dataclass
+class Verification:
+    """One verification's outcome: report.json's content, per-position results, and the drift."""
+
+    report: dict[str, Any]
+    results: list[PositionResult]
+    failed: list[Failed]
+    drift: Drift | None = None
+    directory: Path | None = None
 
 
 def parse_mpe(text: str) -> dict[str, float]:

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import json
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -28,56 +27,19 @@ from rig.verify import guideline
 from rig.verify.artefacts import Artefacts, parse_artefacts
 from rig.verify.guideline import Placement, Volume
 from rig.verify.measure import ArtefactNotFound, PositionResult, measure
-from rig.verify.results import Failed
+from rig.verify.plan import VerificationPlan
+from rig.verify.results import Failed, Verification
 
 if TYPE_CHECKING:
     from rig.config import RigConfig
     from rig.events import Reporter
     from rig.pipeline.plan import ProcessOptions
-    from rig.verify.history import Drift
     from rig.verify.operator import Operator
 
 SESSION_FILE = "session.json"
 SESSION_FORMAT = "fpp-verification-session"
 CAPTURES_DIR = "captures"
 VERIFICATION_KINDS = ("verification",)
-# MPE (mm) of the built-in simulated rig: what it meets with margin (docs/verification.md).
-SIMULATED_MPE_MM = {"PF": 0.5, "PS": 0.15, "SD": 0.1, "F": 0.4}
-
-
-@dataclass
-class VerificationPlan:
-    """How many positions of each artefact, the declared MPE, and how scans are processed."""
-
-    sphere_positions: int = guideline.SPHERE_POSITIONS
-    ball_bar_positions: int = guideline.BALL_BAR_POSITIONS
-    plane_positions: int = guideline.PLANE_POSITIONS
-    mpe_mm: dict[str, float] = field(default_factory=lambda: dict(SIMULATED_MPE_MM))
-    options: ProcessOptions | None = None  # None: what `rig process` does without flags
-
-    def notes(self) -> list[str]:
-        """Where this plan departs from the guideline (a reduced procedure is said so in the report)."""
-        out = []
-        counts = (
-            ("sphere", self.sphere_positions, guideline.SPHERE_POSITIONS, "at least "),
-            ("ball bar", self.ball_bar_positions, guideline.BALL_BAR_POSITIONS, ""),
-            ("plane", self.plane_positions, guideline.PLANE_POSITIONS, ""),
-        )
-        for name, count, required, least in counts:
-            if count < required:
-                out.append(f"reduced procedure: {name} at {count} positions, the guideline asks {least}{required}")
-        return out
-
-
-@dataclass
-class Verification:
-    """One verification's outcome: report.json's content, per-position results, and the drift."""
-
-    report: dict[str, Any]
-    results: list[PositionResult]
-    failed: list[Failed]
-    drift: Drift | None = None
-    directory: Path | None = None
 
 
 def volume_for(calibration_dir: Path, artefacts: Artefacts) -> Volume:
@@ -123,26 +85,6 @@ def placements(volume: Volume, artefacts: Artefacts, plan: VerificationPlan) -> 
 
 def _renumber(p: Placement, total: int) -> Placement:
     return Placement(p.kind, p.index, total, p.where, p.centres, p.along, p.across)
-
-
-def size_notes(volume: Volume, artefacts: Artefacts) -> list[str]:
-    """The guideline's size rules relative to L0 that these artefacts do not meet (none: all met)."""
-    l0 = volume.l0_mm
-    lo, hi = guideline.SPHERE_DIAMETER_L0
-    out = []
-    if not lo * l0 <= artefacts.sphere_diameter_mm <= hi * l0:
-        out.append(
-            f"sphere diameter {artefacts.sphere_diameter_mm:g} mm outside {lo:g}..{hi:g} L0 ({lo * l0:.0f}..{hi * l0:.0f} mm)"
-        )
-    if artefacts.ball_bar_length_mm < guideline.BALL_BAR_MIN_L0 * l0:
-        out.append(
-            f"ball bar {artefacts.ball_bar_length_mm:g} mm shorter than {guideline.BALL_BAR_MIN_L0:g} L0 ({guideline.BALL_BAR_MIN_L0 * l0:.0f} mm)"
-        )
-    if artefacts.plane_length_mm < guideline.PLANE_MIN_L0 * l0:
-        out.append(
-            f"plane {artefacts.plane_length_mm:g} mm shorter than {guideline.PLANE_MIN_L0:g} L0 ({guideline.PLANE_MIN_L0 * l0:.0f} mm)"
-        )
-    return out
 
 
 def _session_record(
@@ -294,7 +236,7 @@ def verify(
         spots = acquire(config, plan, artefacts, calibration_dir, staging, operator, progress)
         results, failed = compute(stored_captures(staging, spots), calibration_dir, artefacts, plan.options, progress)
         volume = volume_for(calibration_dir, artefacts)
-        verification = finish(staging, output, results, failed, plan, artefacts, volume, calibration_dir)
+        verification = finish(staging, output, results, failed, plan, artefacts, volume, calibration_dir, CAPTURES_DIR)
     return _commit_history(verification, calibration_dir, output)
 
 
@@ -330,13 +272,11 @@ def recompute(
     volume = volume_for(calibration_dir, artefacts)
     results, failed = compute(captures, calibration_dir, artefacts, plan.options, progress)
     if output is None or files.same_path(output, from_dir):
-        where = None if session else from_dir  # a session's captures are under captures/
+        where = CAPTURES_DIR if session else str(from_dir)  # a session's captures are under captures/
         verification = write_in_place(from_dir, results, failed, plan, artefacts, volume, calibration_dir, where)
         return _commit_history(verification, calibration_dir, from_dir)
     with files.staged_directory(output, VERIFICATION_KINDS, overwrite, OutputError) as staging:
-        verification = finish(
-            staging, output, results, failed, plan, artefacts, volume, calibration_dir, captures=from_dir
-        )
+        verification = finish(staging, output, results, failed, plan, artefacts, volume, calibration_dir, str(from_dir))
     return _commit_history(verification, calibration_dir, output)
 
 
