@@ -388,3 +388,21 @@ def test_history_appends_whole_lines_and_refuses_a_link(tmp_path: Path) -> None:
     (tmp_path / "elsewhere" / HISTORY_FILE).symlink_to(path)
     with pytest.raises(OutputError, match="symbolic link"):
         files.append_line(tmp_path / "elsewhere" / HISTORY_FILE, "{}", OutputError)
+
+
+def test_cli_runs_the_simulated_procedure_unattended(session, tmp_path, capsys) -> None:
+    from rig.cli import main
+
+    tmp, cal, _, _ = session
+    mpe = ",".join(str(SMALL_MPE[q]) for q in guideline.QUANTITIES)
+    args = ["verify", "--config", str(tmp / "rig-40.toml"), "--calibration", str(cal), "--artefacts"]
+    args += [str(tmp / "artefacts.toml"), "--mpe-mm", mpe, "--spheres", "1", "-o", str(tmp_path / "cli"), "-q"]
+    assert main(args) == 0
+    out, err = capsys.readouterr()
+    assert out.startswith("PASS  PF ") and out.rstrip().endswith(" mm") and "!" not in out
+    assert "reduced procedure: sphere at 1 positions, the guideline asks at least 10" in err
+    report = json.loads((tmp_path / "cli" / "report.json").read_text())
+    assert [len(report[q]["positions"]) for q in guideline.QUANTITIES] == [1, 1, 7, 6]
+    assert (tmp_path / "cli" / "report.md").read_text().startswith("# Verification (VDI/VDE 2634 Part 2)")
+    assert main(args) == 1  # the report exists: not replaced without --overwrite
+    assert f"{tmp_path / 'cli'}: already exists" in capsys.readouterr().err
