@@ -32,7 +32,9 @@ def residual_panel(results: Sequence[PositionResult], kind: str) -> np.ndarray |
     return panel(tiles, columns=4, title=title)
 
 
-def _view(volume: Volume, spots: Sequence[Placement], axis: int, title: str, size: int = 420) -> np.ndarray:
+def _view(
+    volume: Volume, spots: Sequence[Placement], axis: int, title: str, plate_mm: float, size: int = 420
+) -> np.ndarray:
     """One orthographic view of the volume (axis 1: top view x-y; axis 2: front view x-z)."""
     canvas = np.full((size, size, 3), 255, np.uint8)
     w = volume.width_mm
@@ -51,7 +53,7 @@ def _view(volume: Volume, spots: Sequence[Placement], axis: int, title: str, siz
         colour = kinds.get(spot.kind, BLACK)
         if spot.kind == "plane":
             c = np.asarray(spot.centres[0])
-            ends = [c - 0.5 * np.asarray(spot.along) * w * 0.4, c + 0.5 * np.asarray(spot.along) * w * 0.4]
+            ends = [c - 0.5 * plate_mm * np.asarray(spot.along), c + 0.5 * plate_mm * np.asarray(spot.along)]
             cv2.line(canvas, px(ends[0]), px(ends[1]), colour, 2, cv2.LINE_AA)
             anchor = px(c)
         elif spot.kind == "ball-bar":
@@ -76,10 +78,10 @@ def _view(volume: Volume, spots: Sequence[Placement], axis: int, title: str, siz
     return canvas
 
 
-def positions_sketch(volume: Volume, spots: Sequence[Placement]) -> np.ndarray:
-    """Top (x-y) and front (x-z) views of the measuring volume with every artefact position."""
-    top = _view(volume, spots, 1, "top view (x right, y up): S sphere, B ball bar, P plane")
-    front = _view(volume, spots, 2, f"front view (x right, z up), L0 = {volume.l0_mm:.0f} mm")
+def positions_sketch(volume: Volume, spots: Sequence[Placement], plate_mm: float) -> np.ndarray:
+    """Top (x-y) and front (x-z) views of the measuring volume with every artefact position (plates ``plate_mm`` long)."""
+    top = _view(volume, spots, 1, "top view (x right, y up): S sphere, B ball bar, P plane", plate_mm)
+    front = _view(volume, spots, 2, f"front view (x right, z up), L0 = {volume.l0_mm:.0f} mm", plate_mm)
     return np.hstack([top, np.full((top.shape[0], 6, 3), 255, np.uint8), front])
 
 

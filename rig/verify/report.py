@@ -112,12 +112,12 @@ def _png(image: Any) -> bytes:
 
 def _write_outputs(
     directory: Path, report: dict[str, Any], results: Sequence[PositionResult], spots: Sequence[Placement],
-    volume: Volume, history: list[dict[str, Any]],
+    volume: Volume, history: list[dict[str, Any]], plate_mm: float,
 ) -> None:  # fmt: skip
     from rig.verify.figures import history_plot, positions_sketch, residual_panel
 
     (directory / FIGURES_DIR).mkdir(exist_ok=True)
-    figures = {"positions.png": positions_sketch(volume, spots)}
+    figures = {"positions.png": positions_sketch(volume, spots, plate_mm)}
     for kind in guideline.KINDS:
         image = residual_panel(results, kind)
         if image is not None:
@@ -140,7 +140,8 @@ def _complete(
     trend: Drift = drift(history, report)
     report["drift"] = trend.as_dict()
     spots = [r.placement for r in results] + [f.placement for f in failed]
-    _write_outputs(directory, report, results, sorted(spots, key=lambda p: p.name), volume, history)
+    spots = sorted(spots, key=lambda p: p.name)
+    _write_outputs(directory, report, results, spots, volume, history, artefacts.plane_length_mm)
     return Verification(report, list(results), list(failed), trend, output)
 
 
