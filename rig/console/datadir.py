@@ -23,20 +23,17 @@ from typing import Any
 
 from rig.errors import RigError
 from rig.store.files import INCOMPLETE_MARK, REPLACED_MARK
+from rig.store.results import REPORT, default_name, is_staging_name
 
 KINDS = ("captures", "results", "calibrations")
 TRASH = "trash"  # what the operator discarded, moved rather than deleted
-MARKERS = {"captures": "capture.json", "results": "report.json", "calibrations": "calibration.json"}
-NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,99}")
+MARKERS = {"captures": "capture.json", "results": REPORT, "calibrations": "calibration.json"}
+NAME_LENGTH = 100
+NAME = re.compile(rf"[A-Za-z0-9][A-Za-z0-9._-]{{0,{NAME_LENGTH - 1}}}")
 
 
 class OutsideDataError(RigError):
     """A name the API received is not a plain name inside the data directory."""
-
-
-def is_staging(name: str) -> bool:
-    """Whether ``name`` is one of the file layer's staging names (never a real entry)."""
-    return INCOMPLETE_MARK in name or REPLACED_MARK in name
 
 
 class DataDir:
@@ -69,7 +66,7 @@ class DataDir:
             raise OutsideDataError(
                 f"{kind} name: expected a plain name (letters, digits, '.', '_', '-'; no '/' or '..'), found {name!r}"
             )
-        if is_staging(name):
+        if is_staging_name(name):
             raise OutsideDataError(
                 f"{kind} name {name!r}: {INCOMPLETE_MARK!r} and {REPLACED_MARK!r} mark unfinished writes, not names"
             )
@@ -93,17 +90,21 @@ class DataDir:
         entries = []
         for child in folder.iterdir():
             marker = child / MARKERS[kind]
-            if not NAME.fullmatch(child.name) or is_staging(child.name):
+            if not NAME.fullmatch(child.name) or is_staging_name(child.name):
                 continue
             if marker.is_file() and child.resolve().is_relative_to(self.root):
                 entries.append((marker.stat().st_mtime, child.name))
         return [name for _, name in sorted(entries, reverse=True)]
 
     def new_name(self, kind: str, prefix: str) -> str:
-        """A name not yet used in ``kind``: ``prefix-YYYYmmdd-HHMMSS`` (``-2``, ``-3`` ... if taken)."""
+        """A name not yet used in ``kind``: ``prefix-YYYYmmdd-HHMMSS`` (``-2``, ``-3`` ... if taken).
+
+        A prefix too long for a name (a long capture's name) is cut short with a hash of it, so that
+        the name is always one :meth:`path` accepts.
+        """
         self.ensure()
         stamp = datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S")
-        base = f"{prefix}-{stamp}"
+        base = default_name(prefix, f"-{stamp}", limit=NAME_LENGTH - len("-999"))
         name, n = base, 1
         while any(p.name == name or p.name.startswith(name + ".incomplete") for p in (self.root / kind).iterdir()):
             n += 1

@@ -7,10 +7,10 @@ from typing import Any
 from fastapi import APIRouter, Depends, HTTPException, Request
 from pydantic import Field
 
-from rig.console.options import process_choices
 from rig.console.routes._common import Body, client_of, job_reply, session_of
 from rig.console.session import ConsoleSession
 from rig.pipeline.plan import DEFAULT_CORRECTION, ProcessOptions
+from rig.pipeline.registry import available_options
 
 router = APIRouter(prefix="/api")
 
@@ -38,9 +38,11 @@ class ProcessBody(Body):
     options: OptionsBody = Field(default_factory=OptionsBody)
 
 
-@router.get("/options", tags=["results"], summary="the processing options a page can offer")
+@router.get(
+    "/options", tags=["results"], summary="unwrap, correction and denoise choices: default, names, one line each"
+)
 async def options() -> dict[str, Any]:
-    return process_choices()
+    return available_options()
 
 
 @router.post(

@@ -108,15 +108,18 @@ async function compare() {
     : `rms ${figures.rms.toFixed(3)} ${figures.unit}, max |d| ${figures.max_abs.toFixed(3)} ${figures.unit}, mean ${figures.mean.toFixed(3)} ${figures.unit}`;
 }
 
-// The option lists come from the server (GET /api/options), never from this page.
+// The option lists come from the server (GET /api/options: the processing registries), never
+// from this page; each choice's one-line description is its tooltip.
 export async function loadOptions() {
   const options = await api("GET", "/api/options");
-  fillSelect($("opt-unwrap"), options.unwrap, "auto");
-  fillSelect($("opt-denoise"), options.denoise, "none");
-  for (const select of document.querySelectorAll("select.correction")) {
-    fillSelect(select, options.correction, options.default_correction);
-    select.dataset.default = options.default_correction;
-  }
+  const fill = (select, option) => {
+    fillSelect(select, option.choices.map((c) => c.name), option.default);
+    for (const [i, choice] of option.choices.entries()) select.options[i].title = choice.description;
+    select.dataset.default = option.default;
+  };
+  fill($("opt-unwrap"), options.unwrap);
+  fill($("opt-denoise"), options.denoise);
+  for (const select of document.querySelectorAll("select.correction")) fill(select, options.correction);
 }
 
 export function bindCaptures() {
