@@ -27,7 +27,7 @@ from rig.console.hub import Hub
 from rig.console.routes import ROUTERS
 from rig.console.routes.live import STATIC
 from rig.console.session import Busy, Conflict, ConsoleSession
-from rig.errors import RigError
+from rig.errors import ResultExistsError, RigError
 
 
 def create_app(
@@ -88,7 +88,7 @@ def _add_error_handlers(app: FastAPI) -> None:
 
     @app.exception_handler(RigError)
     async def rig_error(_: Request, exc: RigError) -> JSONResponse:
-        status = 409 if isinstance(exc, (Busy, Conflict)) else 400
+        status = 409 if isinstance(exc, (Busy, Conflict, ResultExistsError)) else 400
         return JSONResponse({"error": str(exc)}, status_code=status)
 
     @app.exception_handler(FileNotFoundError)

@@ -6,9 +6,9 @@
   (:mod:`rig.acquisition.live`). With no page watching the camera is stopped and the projector dark.
 - One acquisition at a time: a scan while another runs is refused with :class:`Busy`.
 - A scan goes through :func:`rig.acquisition.scan.scan_with` with the held devices; processing
-  (:func:`rig.pipeline.run.process`) runs on a processing thread so the rig is free again at once:
+  (:func:`rig.api.process`) runs on a processing thread so the rig is free again at once:
   first without fringe-order correction (on screen within a second), then with the requested
-  options, whose outputs are written (:func:`rig.pipeline.outputs.write_outputs`).
+  options, whose outputs are written (:func:`rig.api.write_outputs`, which never replaces a result).
 - Scans, processing runs and calibrations are jobs of :class:`rig.jobs.Jobs` (thread-safe; every
   job ends done, failed or cancelled, whatever it raises). Their progress comes from the services'
   :class:`rig.events.Reporter` events, published through ``publish`` with the kind of what they
@@ -677,29 +677,26 @@ class ConsoleSession:
         quick_first: bool,
         salvage: bool = False,
     ) -> None:
-        """Processing thread: the capture to a result on screen, then its files."""
-        from rig.pipeline.outputs import write_outputs
-        from rig.pipeline.run import process
+        """Processing thread: the capture to a result on screen (a quick one first), then its files.
+
+        Through :func:`rig.api.process`, the processing entry of every front-end; the result store
+        refuses to replace an existing result (:class:`rig.errors.ResultExistsError`, HTTP 409).
+        """
+        from rig import api
 
         options = options or ProcessOptions(correction=DEFAULT_CORRECTION)
-        sink = self.jobs.sink(job, "process")
+        reporter = Reporter(f"process {name}", sink=self.jobs.sink(job, "process"), cancel=job.token)
+
+        def show_quick(first: Any) -> None:
+            self._show(ResultView.from_result(name, first), job, final=False)
 
         def run() -> None:
             calibration = self.data.existing("calibrations", self.calibration) if self.calibration else None
-            if quick_first and options.correction != "none":
-                reporter = Reporter(f"process {name} (quick)", sink=sink, cancel=job.token)
-                quick = process(
-                    capture, calibration, replace(options, correction="none"), progress=reporter, salvage=salvage
-                )
-                self._show(ResultView.from_result(name, quick), job, final=False)
-            reporter = Reporter(f"process {name}", sink=sink, cancel=job.token)
-            result = process(capture, calibration, options, progress=reporter, salvage=salvage)
+            quick = show_quick if quick_first else None
+            result = api.process(capture, calibration, options, reporter, salvage=salvage, quick=quick)
             view = ResultView.from_result(name, result)
             self._show(view, job, final=True)
-            destination = self.data.path("results", name)
-            if destination.exists():
-                raise Conflict(f"results/{name}: already exists; the result was not written")
-            write_outputs(result, destination)
+            api.write_outputs(result, self.data.path("results", name))
             view.saved = True
             self.jobs.update(job, result=name)
             self.publish({"type": "saved", "name": name, "job": job.id}, None)
