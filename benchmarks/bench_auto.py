@@ -4,9 +4,9 @@ One 1024 x 768 object capture (two frequencies x 6 steps, uint8) per case; the r
 phase is precomputed, as the calibration stores it. Rows, timed in interleaved runs (run i times
 every row once, in turn, so a change of load hits all rows alike):
 
-- ``none path``: :func:`processing.fringe_pass.fringe_pass` + eq. 1.15 in float32, what
+- ``none path``: :func:`processing.unwrap.fused_pass.fringe_pass` + eq. 1.15 in float32, what
   ``rig process --correction none`` computes (the peer every ratio is taken against);
-- ``auto (correction only)``: :func:`processing.correction.correct_auto` on the object's
+- ``auto (correction only)``: :func:`processing.correction.registry.correct_auto` on the object's
   absolute and wrapped phase (the reference is corrected once and cached, not per capture);
 - ``rpca-phase (correction only)``: plain ch. 4 RPCA, for scale;
 - ``none path + auto``: the two together, what ``rig process`` computes by default.
@@ -37,9 +37,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benchmarks.bench_pipeline import GROUPS, STEPS, fused_pipeline  # noqa: E402
 from benchmarks.measure import cpu_description, interleaved, load_line  # noqa: E402
 from mock_devices import scenes, synth  # noqa: E402
-from processing.correction import correct_auto, correct_rpca_phase  # noqa: E402
-from processing.fringe_pass import fringe_pass  # noqa: E402
-from processing.height import phase_to_height  # noqa: E402
+from processing.correction.registry import correct_auto, correct_rpca_phase  # noqa: E402
+from processing.geometry.height import phase_to_height  # noqa: E402
+from processing.unwrap.fused_pass import fringe_pass  # noqa: E402
 from rig.hardware.synthesis import simulate_scan  # noqa: E402
 
 TWO_PI = 2.0 * np.pi

@@ -9,7 +9,7 @@ load hits all rows alike):
   (the fused pass, correction none), eq. 1.15 and the mask: what ``rig process --correction none``
   computes between decoding the PNGs and writing the outputs;
 - ``rig pipeline, default``: the same with the default correction (``auto``);
-- ``fused kernel``: :func:`processing.fringe_pass.fringe_pass` (phase shifting of both
+- ``fused kernel``: :func:`processing.unwrap.fused_pass.fringe_pass` (phase shifting of both
   frequencies, modulation mask and Ding's two-frequency unwrapping in one float32 pass, OpenCV's
   angle and look-up kernels) then eq. 1.15 in float32 against the reference phase;
 - ``fused kernel, numpy only``: the same with ``opencv=False`` (numpy's arctan2);
@@ -50,10 +50,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.measure import cpu_description, interleaved, load_line, print_table  # noqa: E402
 from mock_devices import scenes, synth  # noqa: E402
-from processing.fringe_pass import fringe_pass  # noqa: E402
-from processing.height import phase_to_height  # noqa: E402
-from processing.phase_shift import phase_shift, shadow_mask  # noqa: E402
-from processing.temporal import unwrap_two_frequency  # noqa: E402
+from processing.geometry.height import phase_to_height  # noqa: E402
+from processing.phase.shifting import phase_shift, shadow_mask  # noqa: E402
+from processing.unwrap.fused_pass import fringe_pass  # noqa: E402
+from processing.unwrap.temporal import unwrap_two_frequency  # noqa: E402
 from rig.hardware.synthesis import simulate_scan, write_simulated_scan  # noqa: E402
 from rig.pipeline.plan import DEFAULT_CORRECTION, ProcessOptions  # noqa: E402
 from rig.pipeline.run import process  # noqa: E402

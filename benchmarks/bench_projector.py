@@ -1,7 +1,7 @@
 """Benchmark: rendering a pattern at projector resolution, moderngl shader vs numpy.
 
 Ours: ``GLProjector.show`` (fragment shader with the gamma LUT, into an 8-bit framebuffer, read
-back as float32: what the simulated camera sees). Peer in the same run: ``processing.patterns
+back as float32: what the simulated camera sees). Peer in the same run: ``processing.projection.patterns
 .pattern_image`` followed by ``apply_gamma_lut`` (the numpy definition the shader is tested
 against). Prints the median time per frame of each kind, the ratio and the largest difference.
 
@@ -22,7 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from drivers.projector import apply_gamma_lut  # noqa: E402
 from drivers.projector_gl import GLProjector  # noqa: E402
-from processing.patterns import pattern_image  # noqa: E402
+from processing.projection.patterns import pattern_image  # noqa: E402
 
 PATTERNS = {
     "sinusoid": {"kind": "sinusoid", "axis": "x", "frequency": 64, "steps": 4, "step": 1},

@@ -30,11 +30,11 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.correction_protocol import ProtocolCase, table41_case  # noqa: E402
-from processing.correction import CORRECTIONS  # noqa: E402
-from processing.order_correction import correct_orders_rpca  # noqa: E402
-from processing.phase_correction import correct_phase_rpca  # noqa: E402
-from processing.rpca import rpca_ialm  # noqa: E402
-from processing.shadow_fill import fill_shadows  # noqa: E402
+from processing.correction.orders import correct_orders_rpca  # noqa: E402
+from processing.correction.phase_rpca import correct_phase_rpca  # noqa: E402
+from processing.correction.registry import CORRECTIONS  # noqa: E402
+from processing.correction.shadow_fill import fill_shadows  # noqa: E402
+from processing.denoise.rpca import rpca_ialm  # noqa: E402
 from rig.blas import rpca_blas  # noqa: E402
 
 TWO_PI = 2.0 * np.pi
@@ -158,10 +158,10 @@ def table41(width: int, height: int, seeds: list[int]) -> None:
 
 def denoise_experiments(size: int, exact: bool) -> None:
     from mock_devices import synth
-    from processing.denoise import rpca_denoise_stack
-    from processing.height import nmse, phase_to_height
-    from processing.phase_shift import phase_shift
-    from processing.temporal import unwrap_two_frequency
+    from processing.denoise.frames import rpca_denoise_stack
+    from processing.geometry.height import nmse, phase_to_height
+    from processing.phase.shifting import phase_shift
+    from processing.unwrap.temporal import unwrap_two_frequency
     from rig.hardware.synthesis import demo_geometry, simulate_scan
 
     print(f"\n== thesis ch. 2.4 fringe denoising at {size}x{size}, 15 dB ==")

@@ -1,6 +1,6 @@
 """Benchmark: single-shot speckle-embedded unwrapping (thesis ch. 2.3) of one 1000 x 1000 image.
 
-Ours: :func:`processing.single_shot.single_shot_unwrap` with a prepared reference (the reference
+Ours: :func:`processing.unwrap.single_shot.single_shot_unwrap` with a prepared reference (the reference
 plane is separated once per calibration): stable inexact ALM with the partial SVD, FTP,
 box-filter NCC over warped reference speckle, row voting, 2-D fringe-segment vote. Target: median <= 5 s.
 
@@ -24,8 +24,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from mock_devices import scenes, synth  # noqa: E402
-from processing.rpca import rpca_ialm  # noqa: E402
-from processing.single_shot import prepare_reference, single_shot_unwrap  # noqa: E402
+from processing.denoise.rpca import rpca_ialm  # noqa: E402
+from processing.unwrap.single_shot import prepare_reference, single_shot_unwrap  # noqa: E402
 from rig.blas import rpca_blas  # noqa: E402
 from rig.study.experiments import RIG, SINGLE_SHOT_FREQUENCY, SINGLE_SHOT_HEMISPHERE_MM, SPECKLE_PATTERN  # noqa: E402
 

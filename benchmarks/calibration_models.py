@@ -33,9 +33,9 @@ from calibration.geometry import fit_f0, fit_l0_d0  # noqa: E402
 from calibration.polynomial import fit_polynomial  # noqa: E402
 from calibration.stereo import StereoModel, board_phase_view, calibrate_stereo, fit_plane, triangulate  # noqa: E402
 from mock_devices import scenes, stereo_synth, synth  # noqa: E402
-from processing.height import phase_to_height  # noqa: E402
-from processing.phase_shift import phase_shift  # noqa: E402
-from processing.temporal import unwrap_hierarchical  # noqa: E402
+from processing.geometry.height import phase_to_height  # noqa: E402
+from processing.phase.shifting import phase_shift  # noqa: E402
+from processing.unwrap.temporal import unwrap_hierarchical  # noqa: E402
 
 FREQUENCIES = (1, 8, 64)
 HEIGHTS = (25.0, 50.0, 100.0, 150.0)

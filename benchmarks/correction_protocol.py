@@ -4,8 +4,8 @@ Sphere cap R = 300 mm, 100 mm high; two frequencies f1 = 5, f2 = 8, six-step pha
 white Gaussian noise at 15 dB SNR on every fringe image; reference plane and object rendered by
 :mod:`rig.hardware.synthesis` with the synthesiser's default rig (l0 = 1000 mm, d0 = 250 mm,
 f0 = 1/64 cycles/mm at 8 fringes, 410 x 307 mm field of view at any resolution, projector
-footprint 1.25x the view). Wrapped phase by :mod:`processing.phase_shift`, orders by
-:func:`processing.temporal.unwrap_two_frequency`; heights by eq. 1.15 at f2.
+footprint 1.25x the view). Wrapped phase by :mod:`processing.phase.shifting`, orders by
+:func:`processing.unwrap.temporal.unwrap_two_frequency`; heights by eq. 1.15 at f2.
 """
 
 from __future__ import annotations
@@ -15,9 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from mock_devices import synth
-from processing.height import nmse, phase_to_height
-from processing.phase_shift import phase_shift
-from processing.temporal import unwrap_two_frequency
+from processing.geometry.height import nmse, phase_to_height
+from processing.phase.shifting import phase_shift
+from processing.unwrap.temporal import unwrap_two_frequency
 from rig.hardware.synthesis import demo_geometry, simulate_scan
 
 TWO_PI = 2.0 * np.pi

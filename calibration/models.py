@@ -21,7 +21,7 @@ from calibration.errors import CalibrationError
 from calibration.polynomial import POLYNOMIAL, load_polynomial
 from calibration.stereo import STEREO, StereoModel, triangulate
 from calibration.store import REFERENCE_PLANE
-from processing.height import phase_to_height
+from processing.geometry.height import phase_to_height
 
 MODELS = (REFERENCE_PLANE, POLYNOMIAL, STEREO)
 

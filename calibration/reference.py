@@ -12,7 +12,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from calibration.errors import CalibrationError
-from processing.patterns import PROJECTION_KEYS
+from processing.projection.patterns import PROJECTION_KEYS
 
 #: Name of the reference-plane capture inside a calibration directory.
 REFERENCE_DIR = "reference"

@@ -26,8 +26,8 @@ import numpy as np
 
 from calibration.camera import detect_board
 from calibration.errors import CalibrationError
-from processing.phase_shift import phase_shift
-from processing.temporal import unwrap_hierarchical
+from processing.phase.shifting import phase_shift
+from processing.unwrap.temporal import unwrap_hierarchical
 
 STEREO = "stereo"
 

@@ -1,6 +1,6 @@
 #version 330 core
 // Every pattern kind of capture-format.md, and the projector-only alignment grid;
-// processing/patterns.py is the definition this follows.
+// processing/projection/patterns.py is the definition this follows.
 // Image row 0 is the top of the screen: v = height - gl_FragCoord.y. Pixel centres are at k + 0.5.
 
 const int KIND_SINUSOID = 0;

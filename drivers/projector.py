@@ -1,4 +1,4 @@
-"""Abstract projector: shows capture-format patterns (the typed model of processing/patterns.py).
+"""Abstract projector: shows capture-format patterns (the typed model of processing/projection/patterns.py).
 
 The base class owns the rules (open/closed state from :class:`~drivers.device.Device`, argument
 checks, logging, the gamma LUT's meaning); a backend fills in the hooks ``_open``, ``_show``,
@@ -21,7 +21,7 @@ import numpy as np
 
 from drivers.device import Device, check_timeout_s
 from drivers.errors import IncompatibleStateError, WaitTimeoutError
-from processing.patterns import Pattern, PatternError, as_pattern
+from processing.projection.patterns import Pattern, PatternError, as_pattern
 
 log = logging.getLogger(__name__)
 

@@ -21,8 +21,8 @@ import numpy as np
 
 from drivers.errors import DeviceNotFoundError
 from drivers.projector import Projector
-from processing.patterns import Flat, Gray, Grid, Pattern, Sinusoid, SpeckleSinusoid
-from processing.speckle import speckle_field
+from processing.projection.patterns import Flat, Gray, Grid, Pattern, Sinusoid, SpeckleSinusoid
+from processing.projection.speckle import speckle_field
 
 log = logging.getLogger(__name__)
 

@@ -18,7 +18,7 @@ import moderngl
 
 from drivers.errors import DeviceError, DeviceNotFoundError, UnsupportedFeatureError
 from drivers.projector_gl import PatternRenderer, RenderedProjector, release_egl_thread
-from processing.patterns import Pattern
+from processing.projection.patterns import Pattern
 
 log = logging.getLogger(__name__)
 

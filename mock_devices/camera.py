@@ -33,7 +33,7 @@ from mock_devices.synth import (
     projector_coordinates,
     sample_projector_image,
 )
-from processing.patterns import pattern_image
+from processing.projection.patterns import pattern_image
 
 log = logging.getLogger(__name__)
 
@@ -69,7 +69,7 @@ class SimulatedCamera(Camera):
     projector : Projector or None
         Whose frames light the scene; None (or nothing shown yet) means darkness plus ambient.
         If the projector cannot hand back its frame, its last pattern is rendered from
-        ``processing.patterns`` through its gamma LUT.
+        ``processing.projection.patterns`` through its gamma LUT.
     geometry : RigGeometry
         Rig geometry; its camera size is the sensor, its projector size must match the projector.
     scene_height_mm : (H, W) array, optional

@@ -23,8 +23,8 @@ from typing import Any
 import cv2
 import numpy as np
 
-from processing.height import height_to_phase
-from processing.patterns import pattern_intensity
+from processing.geometry.height import height_to_phase
+from processing.projection.patterns import pattern_intensity
 
 
 @dataclass(frozen=True)

@@ -98,7 +98,7 @@ class FrameStack:
 
     ``frames``: (N, H, W) camera images, one per pattern in pattern order (uint8 or uint16 for
     8..16-bit cameras, float32 for 32-bit); ``patterns``: N capture-format pattern entries (dicts
-    as in capture.json, or :class:`processing.patterns.Pattern` objects); ``projector_size``:
+    as in capture.json, or :class:`processing.projection.patterns.Pattern` objects); ``projector_size``:
     (width, height) of the projector the patterns were made for. ``name`` is what report.json
     records as the capture.
     """

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from processing.patterns import AXES, Gray, Pattern, Sinusoid, SpeckleSinusoid
+from processing.projection.patterns import AXES, Gray, Pattern, Sinusoid, SpeckleSinusoid
 from rig.errors import ConfigError
 from rig.store import files
 

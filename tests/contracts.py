@@ -22,7 +22,7 @@ from drivers.camera import Camera, Frame, PixelFormat, TriggerMode, TriggerSourc
 from drivers.errors import DeviceTimeoutError, IncompatibleStateError, UnsupportedFeatureError
 from drivers.projector import Projector, apply_gamma_lut
 from drivers.trigger_box import Polarity, TriggerBox
-from processing.patterns import pattern_image
+from processing.projection.patterns import pattern_image
 
 SIZE = (128, 96)
 
@@ -76,7 +76,7 @@ def device_option(request: pytest.FixtureRequest, family: str) -> str | None:
 
 def speckle_available() -> bool:
     try:
-        import processing.speckle  # noqa: F401
+        import processing.projection.speckle  # noqa: F401
     except ImportError:
         return False
     return True
@@ -85,7 +85,7 @@ def speckle_available() -> bool:
 def expected_drive(pattern: dict, size: tuple[int, int], lut: np.ndarray | None = None) -> np.ndarray:
     """What a projector must put out: the pattern maths clipped to [0, 1], then the LUT."""
     if pattern["kind"] == "speckle-sinusoid" and not speckle_available():
-        pytest.skip("processing.speckle is not available: speckle-sinusoid cannot be checked")
+        pytest.skip("processing.projection.speckle is not available: speckle-sinusoid cannot be checked")
     return apply_gamma_lut(pattern_image(pattern, size), lut)
 
 
@@ -93,7 +93,7 @@ class ProjectorContract:
     """Behaviour every :class:`Projector` backend shares.
 
     Set ``renders_frames = False`` for a backend whose ``last_frame`` is always None and
-    ``tolerance`` to the largest allowed difference from ``processing.patterns``.
+    ``tolerance`` to the largest allowed difference from ``processing.projection.patterns``.
     """
 
     renders_frames = True

@@ -24,7 +24,7 @@ from drivers.projector_dlp import DlpVideoProjector
 from mock_devices.camera import CameraFaults, SimulatedCamera
 from mock_devices.dlp_usb import Dlpc350Faults, FakeDlpc350Backend
 from mock_devices.trigger_box import TriggerFaults
-from processing.patterns import sinusoid_shift
+from processing.projection.patterns import sinusoid_shift
 from rig.acquisition.loop import AcquisitionError, AcquisitionSettings, run_scan
 from rig.config import CameraConfig, ProjectorConfig, RigConfig, ScanConfig, SimulationConfig, TriggerConfig
 from rig.hardware.assembly import trigger_path

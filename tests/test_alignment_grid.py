@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from drivers.projector import validate_pattern as projector_validate
-from processing.patterns import CAPTURE_KINDS, Grid, PatternError, parse_pattern, pattern_image
+from processing.projection.patterns import CAPTURE_KINDS, Grid, PatternError, parse_pattern, pattern_image
 from rig.errors import CaptureError
 from rig.hardware.synthesis import demo_geometry, simulate_scan, write_simulated_scan
 from rig.store.capture import read_capture, validate_pattern

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from mock_devices import scenes
-from processing.correction import correct
-from processing.height import nmse
-from processing.phase_correction import order_breaks, phase_noise_sigma
+from processing.correction.phase_rpca import order_breaks, phase_noise_sigma
+from processing.correction.registry import correct
+from processing.geometry.height import nmse
 from rig.study.experiments import RIG, heights, oracle_phase, two_frequency_capture
 
 SIZE = 192

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from processing import _blockwise
-from processing.phase_shift import phase_shift
-from processing.temporal import unwrap_two_frequency
+from processing.phase.shifting import phase_shift
+from processing.unwrap.temporal import unwrap_two_frequency
 
 
 def _kernel(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

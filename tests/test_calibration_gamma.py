@@ -23,8 +23,8 @@ from calibration.gamma import (
 )
 from drivers.projector import apply_gamma_lut, validate_gamma_lut
 from mock_devices import synth
-from processing.patterns import pattern_intensity
-from processing.phase_shift import phase_shift
+from processing.phase.shifting import phase_shift
+from processing.projection.patterns import pattern_intensity
 
 GAMMA = 2.2
 GEOMETRY = synth.RigGeometry(pixel_mm=3.2, camera_width=128, camera_height=96)

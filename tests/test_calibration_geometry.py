@@ -17,8 +17,8 @@ from calibration.geometry import fit_f0, fit_l0_d0, pixel_mm_from_corners
 from calibration.reference import check_same_patterns, phase_frequency
 from mock_devices import synth
 from mock_devices.board_synth import PinholeCamera, board_pose, chessboard_texture, render_board_view
-from processing.height import phase_to_height
-from processing.phase_shift import phase_shift
+from processing.geometry.height import phase_to_height
+from processing.phase.shifting import phase_shift
 
 FREQUENCY = 16.0
 STEPS = 6

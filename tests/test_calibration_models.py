@@ -53,7 +53,7 @@ def test_polynomial_absorbs_what_eq_1_15_misses(planes, tmp_path):
     # the ideal model fitted anyway is worse by orders of magnitude on the same object
     f0 = fit_f0(reference, PLANE_MM / RIG.camera.matrix[0, 0])
     fit = fit_l0_d0(HEIGHTS, deltas, f0.f0_per_mm, flatness_tolerance_mm=None)
-    from processing.height import phase_to_height
+    from processing.geometry.height import phase_to_height
 
     ideal = phase_to_height(obj - reference, fit.l0_mm, fit.d0_mm, f0.f0_per_mm) - truth
     assert np.sqrt(np.nanmean(ideal[on_object] ** 2)) > 20 * np.sqrt(np.nanmean(error[on_object] ** 2))

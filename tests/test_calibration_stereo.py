@@ -14,8 +14,8 @@ from calibration.opencv_yaml import import_opencv_calibration
 from calibration.stereo import StereoModel, board_phase_view, calibrate_stereo, fit_plane, triangulate
 from mock_devices import synth
 from mock_devices.stereo_synth import board_session, calibration_fields, demo_rig, demo_scene, trace
-from processing.phase_shift import phase_shift
-from processing.temporal import decode_gray, unwrap_gray, unwrap_hierarchical
+from processing.phase.shifting import phase_shift
+from processing.unwrap.temporal import decode_gray, unwrap_gray, unwrap_hierarchical
 
 FREQUENCIES = (1, 8, 64)
 STEPS = 6

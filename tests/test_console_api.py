@@ -271,7 +271,7 @@ def test_the_alignment_grid_shows_in_the_live_frame(console: TestClient) -> None
     import cv2
 
     from mock_devices.synth import projector_coordinates, sample_projector_image
-    from processing.patterns import pattern_image
+    from processing.projection.patterns import pattern_image
     from rig.hardware.simulated import geometry_from_config, scene_height
 
     reply = console.put("/api/projector", json={"pattern": "grid", "pitch_px": 32})

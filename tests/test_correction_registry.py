@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from calibration.errors import CalibrationError
-from processing.correction import CORRECTIONS as NUMERIC
-from processing.correction_method import CorrectionMethod
+from processing.correction.method import CorrectionMethod
+from processing.correction.registry import CORRECTIONS as NUMERIC
 from rig.pipeline.corrections import REGISTRY, help_text, needed_inputs
 
 

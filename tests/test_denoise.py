@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from mock_devices import synth
-from processing.denoise import rpca_denoise_frame, rpca_denoise_stack
-from processing.height import phase_mse
-from processing.phase_shift import phase_shift
+from processing.denoise.frames import rpca_denoise_frame, rpca_denoise_stack
+from processing.geometry.height import phase_mse
+from processing.phase.shifting import phase_shift
 from rig.hardware.synthesis import demo_geometry, simulate_scan
 
 

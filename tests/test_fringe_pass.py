@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from mock_devices import scenes, synth
-from processing.fringe_pass import ANGLE_TOLERANCE, fringe_pass, wrapped_angle
-from processing.phase_shift import phase_shift, sample_stride, shadow_mask
-from processing.temporal import (
+from processing.phase.shifting import phase_shift, sample_stride, shadow_mask
+from processing.unwrap.fused_pass import ANGLE_TOLERANCE, fringe_pass, wrapped_angle
+from processing.unwrap.temporal import (
     unwrap_heterodyne,
     unwrap_hierarchical,
     unwrap_three_frequency,

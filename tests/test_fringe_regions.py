@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from processing.angles import wrap_to_pi
-from processing.fringe_regions import (
+from processing.correction.region_orders import (
     _beyond_wrapped,
     _window_majority,
     fill_from_neighbours,

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from mock_devices import scenes, synth
-from processing.ftp import detect_carrier, ftp_phase
-from processing.phase_shift import phase_shift
+from processing.phase.ftp import detect_carrier, ftp_phase
+from processing.phase.shifting import phase_shift
 
 SHAPE = (96, 256)
 CARRIER = 1.0 / 16.0  # cycles per pixel
@@ -114,7 +114,7 @@ def test_bad_input_names_the_argument(kwargs: dict, match: str) -> None:
 
 def test_fringe_parts_recover_phase_background_and_modulation() -> None:
     """ftp_fringe_parts on an analytic fringe: phase, amplitude, background within stated tolerances (issue 9)."""
-    from processing.ftp import ftp_fringe_parts
+    from processing.phase.ftp import ftp_fringe_parts
 
     height, width, f0 = 64, 256, 1 / 16
     x = np.arange(width)[None, :].repeat(height, axis=0)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from mock_devices import scenes, synth
-from processing.height import height_to_phase, nmse, phase_mse, phase_to_height, point_cloud
+from processing.geometry.height import height_to_phase, nmse, phase_mse, phase_to_height, point_cloud
 
 L0, D0, F0 = 1000.0, 250.0, 0.0125
 

@@ -131,7 +131,7 @@ def _violations(graph: dict[str, set[str]], sources: tuple[str, ...], allowed: t
 def test_the_graph_sees_every_kind_of_import() -> None:
     graph = import_graph()
     assert "rig.pipeline.plan" in graph["rig.pipeline.stages"]  # module level
-    assert "processing.patterns" in graph["rig.pipeline.plan"]  # inside a function
+    assert "processing.projection.patterns" in graph["rig.pipeline.plan"]  # inside a function
     assert find_cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}, "e": {"f"}, "f": set()}) == [
         ["a", "b", "c", "a"]
     ]

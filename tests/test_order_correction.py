@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from benchmarks.correction_protocol import ProtocolCase, table41_case
-from processing.order_correction import correct_orders_rpca, monotonic_rows, postprocess_orders
+from processing.correction.orders import correct_orders_rpca, monotonic_rows, postprocess_orders
 
 TWO_PI = 2.0 * np.pi
 

@@ -14,7 +14,7 @@ from realdata import REAL_DATA, needs_real_data
 
 from calibration.jsonfile import write_json_atomic
 from drivers.projector import validate_pattern as projector_validate
-from processing.patterns import (
+from processing.projection.patterns import (
     Flat,
     Gray,
     PatternError,
@@ -214,8 +214,8 @@ def test_grouping_uses_the_typed_patterns() -> None:
 
 
 def test_speckle_module_does_not_import_the_pattern_module() -> None:
-    """processing.speckle is the field; processing.patterns uses it, not the other way round (no cycle)."""
+    """processing.projection.speckle is the field; processing.projection.patterns uses it, not the other way round (no cycle)."""
     tree = ast.parse((ROOT / "processing" / "speckle.py").read_text())
     imported = {node.module for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)}
     imported |= {alias.name for node in ast.walk(tree) if isinstance(node, ast.Import) for alias in node.names}
-    assert "processing.patterns" not in imported
+    assert "processing.projection.patterns" not in imported

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from realdata import REAL_DATA, needs_real_data
 
-from processing.convention import OffsetEstimate, gray_offset, heterodyne_offset
-from processing.patterns import pattern_image
+from processing.phase.convention import OffsetEstimate, gray_offset, heterodyne_offset
+from processing.projection.patterns import pattern_image
 from rig.cli import main
 from rig.store.importer import parse_spec
 

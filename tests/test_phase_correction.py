@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from benchmarks.correction_protocol import ProtocolCase, table41_case
-from processing.correction import CORRECTIONS, correct
-from processing.phase_correction import correct_phase_rpca, reorder_from_low_rank, restore_detail
+from processing.correction.phase_rpca import correct_phase_rpca, reorder_from_low_rank, restore_detail
+from processing.correction.registry import CORRECTIONS, correct
 
 TWO_PI = 2.0 * np.pi
 
@@ -124,7 +124,7 @@ def test_bad_input_names_the_argument(call, name: str) -> None:
 
 
 def test_order_changes_are_accepted_only_where_they_fit_the_neighbours() -> None:
-    from processing.phase_correction import accept_if_consistent
+    from processing.correction.phase_rpca import accept_if_consistent
 
     rng = np.random.default_rng(6)
     truth = np.add.outer(np.linspace(0.0, 2.0, 40), np.arange(60) * 2.5)  # steep: 2.5 rad per pixel
@@ -142,7 +142,7 @@ def test_order_changes_are_accepted_only_where_they_fit_the_neighbours() -> None
 def test_order_fixes_on_the_border_survive_a_wrong_neighbour() -> None:
     # Regression: at the last column only the up-down pair is complete; with the pixel above also
     # wrong, that pair alone rejected the right fix (3 pixels left wrong on 1000 x 1000 Table 4.1).
-    from processing.phase_correction import accept_if_consistent
+    from processing.correction.phase_rpca import accept_if_consistent
 
     truth = np.add.outer(np.linspace(0.0, 1.0, 20), np.arange(30) * 0.2)
     measured = truth.copy()

@@ -8,7 +8,14 @@ import numpy as np
 import pytest
 
 from mock_devices import scenes, synth
-from processing.phase_shift import PhaseShiftResult, phase_shift, quality_map, shadow_mask, shift_weights, wrapped_phase
+from processing.phase.shifting import (
+    PhaseShiftResult,
+    phase_shift,
+    quality_map,
+    shadow_mask,
+    shift_weights,
+    wrapped_phase,
+)
 
 A, B = 120.0, 80.0
 SHAPE = (48, 64)

@@ -1,4 +1,4 @@
-"""The off-screen moderngl projector against processing.patterns (within 1/255, LUT applied)."""
+"""The off-screen moderngl projector against processing.projection.patterns (within 1/255, LUT applied)."""
 
 from __future__ import annotations
 

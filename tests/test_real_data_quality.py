@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 from realdata import REAL_DATA, import_eye, import_eye_calibration, needs_real_data, process_eye
 
-from processing.islands import island_mask
-from processing.neighbour_rescue import rescue
+from processing.correction.islands import island_mask
+from processing.unwrap.neighbour_rescue import rescue
 from rig.cli import main
 from rig.pipeline.plan import ProcessOptions
 from rig.pipeline.run import process
@@ -75,7 +75,7 @@ def test_island_mask_drops_small_regions_only() -> None:
 
 def test_island_regions_same_with_opencv_and_scipy() -> None:
     """Both labelings find the same 8-connected regions: same region sizes per pixel (diagonal links count)."""
-    from processing.islands import _regions
+    from processing.correction.islands import _regions
 
     valid = np.random.default_rng(4).random((120, 90)) < 0.45
     valid[10:12, 10:12] = False

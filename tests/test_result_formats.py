@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from cli_steps import assert_one_line, run
 
-from processing.mesh import grid_triangles
+from processing.geometry.mesh import grid_triangles
 from rig import api
 from rig.store import results
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from processing.rpca import robust_noise_sigma, rpca_adm, rpca_ialm
-from processing.svd import SubspaceState, singular_value_threshold
+from processing.denoise.rpca import robust_noise_sigma, rpca_adm, rpca_ialm
+from processing.denoise.svd import SubspaceState, singular_value_threshold
 
 
 def planted(

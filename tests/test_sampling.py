@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from processing.sampling import SPATIAL_STEP_LIMIT_RAD, fringe_step_rad, undersampled_for_spatial_methods
+from processing.correction.sampling import SPATIAL_STEP_LIMIT_RAD, fringe_step_rad, undersampled_for_spatial_methods
 from rig import api
 from rig.hardware.synthesis import demo_geometry, simulate_scan, write_simulated_scan
 from rig.pipeline.run import ProcessResult

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from mock_devices import scenes, synth
-from processing.single_shot import prepare_reference, single_shot_unwrap
+from processing.unwrap.single_shot import prepare_reference, single_shot_unwrap
 
 SIZE = 160
 FREQUENCY = 16

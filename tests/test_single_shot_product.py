@@ -188,7 +188,7 @@ def test_config_speckle_pattern_set():
 
 
 def test_rig_scan_projects_the_speckle_pattern(tmp_path):
-    # Noiseless, so that the rendered frame can be compared with processing.patterns' definition.
+    # Noiseless, so that the rendered frame can be compared with processing.projection.patterns' definition.
     config_path = tmp_path / "rig.toml"
     config_path.write_text(SPECKLE_RIG.replace("snr_db = 35", 'snr_db = "none"'))
     config = load_config(config_path)

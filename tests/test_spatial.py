@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from mock_devices import scenes, synth
-from processing.phase_shift import phase_shift, quality_map, shadow_mask
-from processing.spatial import phase_derivative_variance, unwrap_quality_guided
+from processing.phase.shifting import phase_shift, quality_map, shadow_mask
+from processing.unwrap.spatial import phase_derivative_variance, unwrap_quality_guided
 
 TWO_PI = 2.0 * np.pi
 SHAPE = (90, 120)
@@ -138,7 +138,7 @@ def test_bad_input_names_the_argument(kwargs: dict, match: str) -> None:
 
 def test_remove_region_offsets_takes_each_regions_nearest_multiple_of_two_pi() -> None:
     """Two regions off by 2 pi k from the reference (plus a small true difference) come back to it (issue 9)."""
-    from processing.spatial import remove_region_offsets
+    from processing.unwrap.spatial import remove_region_offsets
 
     rng = np.random.default_rng(5)
     truth = 0.3 * rng.standard_normal((20, 30))

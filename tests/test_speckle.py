@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from processing.patterns import pattern_image, pattern_intensity, sinusoid_intensity
-from processing.speckle import check_speckle_rules, speckle_dots, speckle_field
+from processing.projection.patterns import pattern_image, pattern_intensity, sinusoid_intensity
+from processing.projection.speckle import check_speckle_rules, speckle_dots, speckle_field
 
 
 @pytest.mark.parametrize("dot_px", [1, 2, 3])

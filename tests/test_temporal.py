@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from mock_devices import scenes, synth
-from processing.patterns import gray_stripe_index
-from processing.phase_shift import phase_shift
-from processing.temporal import (
+from processing.phase.shifting import phase_shift
+from processing.projection.patterns import gray_stripe_index
+from processing.unwrap.temporal import (
     UnwrapResult,
     decode_gray,
     pair_table,

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from processing.temporal import UnwrapResult
+from processing.unwrap.temporal import UnwrapResult
 from rig.commands.process import _unwrap_methods
 from rig.pipeline import plan
 from rig.pipeline.corrections import REGISTRY as CORRECTIONS

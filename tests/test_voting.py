@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from processing.shadow_fill import fill_shadows
-from processing.voting import majority_per_label, segment_labels, vote_row_orders
+from processing.correction.shadow_fill import fill_shadows
+from processing.correction.voting import majority_per_label, segment_labels, vote_row_orders
 
 TWO_PI = 2.0 * np.pi
 

@@ -5,7 +5,7 @@ operator can set exposure, check saturation and focus and place the object. :fun
 takes one frame with a software trigger; :func:`frame_figures` measures it: the saturated fraction
 and mask (pixels at full scale), a 256-bin histogram, a sharpness figure, and — while a fringe is
 projected — the fringe modulation map from that one frame (Fourier-transform profilometry), thresholded the way
-the processing pipeline keeps a pixel's phase (:func:`processing.phase_shift.shadow_mask`).
+the processing pipeline keeps a pixel's phase (:func:`processing.phase.shifting.shadow_mask`).
 """
 
 from __future__ import annotations
@@ -16,8 +16,8 @@ import cv2
 import numpy as np
 
 from drivers.camera import Camera, TriggerMode, TriggerSource
-from processing.ftp import ftp_phase
-from processing.phase_shift import shadow_mask
+from processing.phase.ftp import ftp_phase
+from processing.phase.shifting import shadow_mask
 
 HISTOGRAM_BINS = 256
 

@@ -77,8 +77,8 @@ def truth_height(capture_dir: Path, shape: tuple[int, int]) -> np.ndarray | None
 
 def compare_row(name: str, method: str, result: Any, seconds: float, truth: np.ndarray | None) -> CompareRow:
     """Figures of one correction's result: valid fraction, order breaks left, heights, NMSE_h against truth."""
-    from processing.height import nmse
-    from processing.phase_correction import order_breaks
+    from processing.correction.phase_rpca import order_breaks
+    from processing.geometry.height import nmse
 
     report = result.report
     heights = height_stats(report)

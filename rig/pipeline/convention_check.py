@@ -1,7 +1,7 @@
 """Refuse a capture whose images follow another phase convention than its patterns say.
 
 The evidence (Gray-code positions, heterodyne beats) and its maths are in
-:mod:`processing.convention`; this module turns a suspicious offset into one line naming what
+:mod:`processing.phase.convention`; this module turns a suspicious offset into one line naming what
 is likely wrong and the import option that fixes it. ``--param phase_convention_check=false``
 processes anyway.
 """
@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 from rig.errors import ProcessingError
 
 if TYPE_CHECKING:
-    from processing.convention import OffsetEstimate
+    from processing.phase.convention import OffsetEstimate
     from rig.pipeline.plan import ProcessOptions
 
 

@@ -1,7 +1,7 @@
 """The correction stage and the one registry of corrections ``rig process --correction`` offers.
 
-The registry holds typed entries (:class:`processing.correction_method.CorrectionMethod`): the
-numeric methods of :mod:`processing.correction` and the calibration-backed ``gamma-table``
+The registry holds typed entries (:class:`processing.correction.method.CorrectionMethod`): the
+numeric methods of :mod:`processing.correction.registry` and the calibration-backed ``gamma-table``
 (:mod:`rig.pipeline.gamma_correction`). An entry's ``needs`` names what it takes beyond the
 phase pair; the stage fetches it from the calibration (``phase_error``) and refuses clearly when
 it is missing.
@@ -17,9 +17,9 @@ import numpy as np
 from calibration.errors import CalibrationError
 from calibration.store import Calibration
 from processing.angles import wrap_to_pi
-from processing.correction import CORRECTIONS as NUMERIC_CORRECTIONS
-from processing.correction_method import CorrectionMethod
-from processing.sampling import fringe_step_rad, undersampled_for_spatial_methods
+from processing.correction.method import CorrectionMethod
+from processing.correction.registry import CORRECTIONS as NUMERIC_CORRECTIONS
+from processing.correction.sampling import fringe_step_rad, undersampled_for_spatial_methods
 from rig.errors import ProcessingError
 from rig.pipeline.gamma_correction import GAMMA_TABLE
 from rig.pipeline.plan import ProcessOptions, accepted_params

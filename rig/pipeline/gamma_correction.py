@@ -16,7 +16,7 @@ import numpy as np
 
 from calibration.errors import CalibrationError
 from calibration.gamma import compensate_phase, table_from_fields
-from processing.correction_method import CorrectionMethod, Result
+from processing.correction.method import CorrectionMethod, Result
 
 NAME = "gamma-table"
 

@@ -54,7 +54,7 @@ from typing import TYPE_CHECKING, Any
 from rig.errors import CaptureError, ProcessingError
 
 if TYPE_CHECKING:
-    from processing.patterns import Pattern
+    from processing.projection.patterns import Pattern
 
 log = logging.getLogger(__name__)
 
@@ -92,7 +92,7 @@ class ProcessOptions:
     denoise: str = "none"
     correction: str = DEFAULT_CORRECTION
     min_modulation_ratio: float = 0.2
-    # valid regions smaller than this fraction of the largest are dropped (processing.islands); 0 keeps all
+    # valid regions smaller than this fraction of the largest are dropped (processing.correction.islands); 0 keeps all
     min_island_fraction: float = 0.005
     axis: str | None = None
     params: dict[str, Any] = field(default_factory=dict)
@@ -149,7 +149,13 @@ class PatternGroups:
 
 def group_patterns(patterns: Sequence[Pattern | Mapping[str, Any]], where: str = "capture.json") -> PatternGroups:
     """Group patterns by kind: sinusoids per (axis, frequency), Gray planes per axis, flats."""
-    from processing.patterns import Flat, Gray, Sinusoid, SpeckleSinusoid, as_pattern  # numpy: not for the parser
+    from processing.projection.patterns import (  # numpy: not for the parser
+        Flat,
+        Gray,
+        Sinusoid,
+        SpeckleSinusoid,
+        as_pattern,
+    )
 
     sinusoids: dict[tuple[str, float], SinusoidGroup] = {}
     single: dict[tuple[str, float], SinusoidGroup] = {}
@@ -190,7 +196,7 @@ def _check_separable(group: SinusoidGroup, where: str) -> None:
     """A phase-shifting group whose shifts cannot separate A, B and phi (too few, or all equal) is refused here."""
     import numpy as np
 
-    from processing.phase_shift import shift_weights
+    from processing.phase.shifting import shift_weights
 
     if group.steps < 3:  # one frame goes to FTP; two are refused by the wrapped-phase stage
         return

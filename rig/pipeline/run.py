@@ -260,7 +260,7 @@ def _drop_islands(
     """Drop (in place) valid regions under ``fraction`` of the largest: background specks."""
     if fraction <= 0:
         return
-    from processing.islands import island_mask
+    from processing.correction.islands import island_mask
 
     islands = island_mask(mask, fraction)
     dropped = int(np.count_nonzero(islands))

@@ -1,12 +1,12 @@
-"""The phase of a single-shot capture: ``speckle-sinusoid`` frames (thesis ch. 2.3) through :mod:`processing.single_shot`.
+"""The phase of a single-shot capture: ``speckle-sinusoid`` frames (thesis ch. 2.3) through :mod:`processing.unwrap.single_shot`.
 
 The calibration's reference capture (same pattern, processed first) is separated by RPCA and
-phased by FTP once (:func:`processing.single_shot.prepare_reference`); its absolute phase is its
+phased by FTP once (:func:`processing.unwrap.single_shot.prepare_reference`); its absolute phase is its
 FTP phase unwrapped along the rows with the smallest fringe order 0: a flat plane has no
 discontinuity, and the projector column of the reference's first order is fixed only by the rig's
 geometry, which the reference-plane and polynomial models do not need (they use object minus
 reference). The object frame then gets its fringe orders from the reference speckle
-(:func:`processing.single_shot.single_shot_unwrap`), so both phases share that offset. The result
+(:func:`processing.unwrap.single_shot.single_shot_unwrap`), so both phases share that offset. The result
 fills ``state.wrapped`` / ``state.unwrapped`` for the correction and height stages; method,
 parameters, RPCA iterations and rank and the time of each step go to the report.
 """
@@ -22,8 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from processing.ftp import FringeParts, ftp_fringe_parts
-from processing.single_shot import (
+from processing.phase.ftp import FringeParts, ftp_fringe_parts
+from processing.unwrap.single_shot import (
     SingleShotReference,
     prepare_reference,
     separate_fringe_speckle,
@@ -33,7 +33,7 @@ from rig.errors import ProcessingError
 from rig.pipeline.plan import TWO_PI, ProcessOptions, SinusoidGroup, accepted_params
 from rig.pipeline.state import SceneState, UnwrappedPhase, WrappedPhase
 
-# Arguments of processing.single_shot.single_shot_unwrap that the pipeline supplies itself.
+# Arguments of processing.unwrap.single_shot.single_shot_unwrap that the pipeline supplies itself.
 _SINGLE_SHOT_OWN = ("image", "reference_image", "reference_absolute_phase", "frequency", "axis", "mask")
 
 METHOD = (

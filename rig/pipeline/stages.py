@@ -21,11 +21,11 @@ from calibration import models as calibration_models
 from calibration.camera import undistort_stack
 from calibration.errors import CalibrationError
 from calibration.store import Calibration
-from processing.convention import gray_offset, heterodyne_offset
-from processing.denoise import rpca_denoise_stack
-from processing.fringe_pass import FringePass, fringe_pass
-from processing.neighbour_rescue import rescue
-from processing.phase_shift import phase_shift, shadow_mask
+from processing.denoise.frames import rpca_denoise_stack
+from processing.phase.convention import gray_offset, heterodyne_offset
+from processing.phase.shifting import phase_shift, shadow_mask
+from processing.unwrap.fused_pass import FringePass, fringe_pass
+from processing.unwrap.neighbour_rescue import rescue
 from rig.blas import rpca_blas
 from rig.errors import ProcessingError
 from rig.pipeline import convention_check
@@ -157,7 +157,7 @@ def stage_phase(state: SceneState, options: ProcessOptions) -> None:
     Three paths, each named in the report (``stage_info``):
 
     - phase-shifting groups only and a temporal method the fused float32 pass can run
-      (:mod:`processing.fringe_pass`): wrapped phases, modulation mask and unwrapping in one visit
+      (:mod:`processing.unwrap.fused_pass`): wrapped phases, modulation mask and unwrapping in one visit
       of the frames (``fused_pass``);
     - otherwise the wrapped phase of every sinusoid group (phase shifting, or FTP for a single
       frame), then the unwrapping method of :mod:`rig.pipeline.unwrapping` (``phase_steps_s``: the
@@ -295,7 +295,7 @@ def _ftp_frame(image: np.ndarray, axis: str, shift: float) -> tuple[np.ndarray, 
 
     The background is the mean over one fringe period along the axis (the detected carrier).
     """
-    from processing.ftp import detect_carrier, fringe_background, ftp_phase  # scipy.fft: single frames only
+    from processing.phase.ftp import detect_carrier, fringe_background, ftp_phase  # scipy.fft: single frames only
 
     img = np.asarray(image, dtype=np.float64)
     along = 1 if axis == "x" else 0
@@ -454,7 +454,7 @@ def stage_height(
                 f"{obj.capture.manifest_path}: spatial unwrapping gives phase only up to 2 pi k, and the "
                 f"{calibration.model!r} calibration has no reference plane to fix k; capture temporal patterns"
             )
-        from processing.spatial import remove_region_offsets  # scipy: only spatial unwrapping pays for it
+        from processing.unwrap.spatial import remove_region_offsets  # scipy: only spatial unwrapping pays for it
 
         obj_phase = ref_phase + remove_region_offsets(obj_phase - ref_phase)
         notes.append(

@@ -58,4 +58,4 @@ class SceneState:
     notes: list[str] = field(default_factory=list)
     info: dict[str, Any] = field(default_factory=dict)
     calibration: Calibration | None = None
-    single_shot_reference: Any = None  # processing.single_shot.SingleShotReference of a reference capture
+    single_shot_reference: Any = None  # processing.unwrap.single_shot.SingleShotReference of a reference capture

@@ -2,7 +2,7 @@
 
 Each entry (:class:`UnwrapMethod`) declares what it needs from the capture's pattern groups (how
 many sinusoid frequencies along the fringe axis, whether they must be whole fringe counts, Gray
-planes) and returns one type, :class:`processing.temporal.UnwrapResult`. The phase stage
+planes) and returns one type, :class:`processing.unwrap.temporal.UnwrapResult`. The phase stage
 (:func:`rig.pipeline.stages.stage_phase`) checks the needs, hands the entry an
 :class:`UnwrapInputs` and turns the result into the capture's unwrapped phase; the CLI's choices,
 the console's options (:func:`rig.pipeline.registry.available_options`) and the docs list the
@@ -18,8 +18,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from processing import temporal
-from processing.temporal import UnwrapResult
+from processing.unwrap import temporal
+from processing.unwrap.temporal import UnwrapResult
 from rig.errors import ProcessingError
 
 
@@ -72,8 +72,8 @@ class UnwrapMethod:
     ``frequencies``: sinusoid frequencies along the fringe axis it needs at least; it reads the
     highest ``frequencies`` of them, or all when ``all_frequencies``. ``whole``: the frequencies
     must be whole fringe counts. ``needs``: pattern groups beyond the sinusoids (``"gray"``).
-    ``fused``: a temporal method :func:`processing.fringe_pass.fringe_pass` can run in the same
-    pass as phase shifting (one of :data:`processing.temporal.TEMPORAL_METHODS`). ``rescue``:
+    ``fused``: a temporal method :func:`processing.unwrap.fused_pass.fringe_pass` can run in the same
+    pass as phase shifting (one of :data:`processing.unwrap.temporal.TEMPORAL_METHODS`). ``rescue``:
     modulated pixels its residual test rejects may be taken back where neighbours vouch for them.
     ``description``: one line for ``--help``, the console and the docs.
     """
@@ -132,7 +132,7 @@ def _gray(inputs: UnwrapInputs) -> UnwrapResult:
 
 
 def _spatial(inputs: UnwrapInputs) -> UnwrapResult:
-    from processing.spatial import unwrap_spatial  # scipy: ~0.3 s the default path of rig process does not pay
+    from processing.unwrap.spatial import unwrap_spatial  # scipy: ~0.3 s the default path of rig process does not pay
 
     return unwrap_spatial(inputs.phases[-1], mask=inputs.valid)
 

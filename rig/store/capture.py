@@ -41,7 +41,7 @@ from typing import Any, Literal
 import numpy as np
 
 from calibration.jsonfile import write_json_atomic
-from processing.patterns import (
+from processing.projection.patterns import (
     CAPTURE_KINDS,
     PROJECTION_KEYS,
     PROJECTOR_ONLY_KINDS,

@@ -10,7 +10,7 @@ the patterns of a short description, the *pattern spec*: groups separated by ``;
     ``phase_rad``: a number, ``pi``, ``-pi``, ``pi/2``, ``90deg``), ``shifts`` (non-uniform or
     explicitly listed shifts, ``0/90/180/270deg`` or radians, ``/``-separated), ``axis`` (x|y).
 ``gray:bits=6``
-    Gray-code bit planes, most significant first (processing.patterns' convention);
+    Gray-code bit planes, most significant first (processing.projection.patterns' convention);
     ``inverted=after`` (all planes, then all inverted ones) or ``inverted=interleaved``
     (plane, inverted plane, ...); ``axis``.
 ``flat:level=1`` (also ``white``, ``black``)
@@ -39,7 +39,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from processing.patterns import Flat, Gray, Pattern, Sinusoid
+from processing.projection.patterns import Flat, Gray, Pattern, Sinusoid
 from rig.errors import CaptureError, ConfigError
 from rig.store import files as files_layer
 from rig.store.capture import (

@@ -93,8 +93,8 @@ class OutputFormat:
 
 
 def _mesh(result: ProcessResult) -> tuple[np.ndarray, np.ndarray]:
-    """The valid points (N, 3) in mm and the triangles (M, 3) joining grid neighbours (see processing.mesh)."""
-    from processing.mesh import grid_triangles
+    """The valid points (N, 3) in mm and the triangles (M, 3) joining grid neighbours (see processing.geometry.mesh)."""
+    from processing.geometry.mesh import grid_triangles
 
     grid = result.points
     assert grid is not None

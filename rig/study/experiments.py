@@ -34,14 +34,14 @@ from typing import Any
 
 import numpy as np
 
-from processing.correction import DECIMATE_FROM, DECIMATION
-from processing.denoise import rpca_denoise_stack
-from processing.height import nmse, phase_mse, phase_to_height
-from processing.order_correction import postprocess_orders
-from processing.phase_shift import phase_shift
-from processing.single_shot import prepare_reference, single_shot_unwrap
-from processing.temporal import unwrap_two_frequency
-from processing.voting import vote_row_orders
+from processing.correction.orders import postprocess_orders
+from processing.correction.registry import DECIMATE_FROM, DECIMATION
+from processing.correction.voting import vote_row_orders
+from processing.denoise.frames import rpca_denoise_stack
+from processing.geometry.height import nmse, phase_mse, phase_to_height
+from processing.phase.shifting import phase_shift
+from processing.unwrap.single_shot import prepare_reference, single_shot_unwrap
+from processing.unwrap.temporal import unwrap_two_frequency
 from rig.blas import rpca_blas
 from rig.errors import ConfigError
 from rig.hardware import synthesis
@@ -846,8 +846,8 @@ def write_report(out: Path, config: StudyConfig, rows: Rows, figures: list[tuple
     )
     add("")
     add(
-        "`auto` (processing.correction.correct_auto): first the fringe orders are pooled over 2-D fringe "
-        "regions (processing.fringe_regions): every 4-connected region that no wrapped-phase jump or kink "
+        "`auto` (processing.correction.registry.correct_auto): first the fringe orders are pooled over 2-D fringe "
+        "regions (processing.correction.region_orders): every 4-connected region that no wrapped-phase jump or kink "
         "crosses lies within one fringe and has one order, so it takes the majority of its pixels' orders, voted "
         "per 16 x 16 square and re-voted pixel by pixel over a 9 x 9 window of the region where squares "
         "disagree (a hidden object edge inside the region); then ch. 4's low-rank phase L of that phase (stable "
@@ -909,7 +909,7 @@ def write_report(out: Path, config: StudyConfig, rows: Rows, figures: list[tuple
     add(
         f"Wrong fringe orders of the two-hemisphere object: {_spread(errs_raw)} raw, {_spread(errs_den)} "
         "after denoising. The thesis does not say how it unwrapped the 3-step case; we use the true orders so "
-        "that only the phase noise differs. Each frame is denoised on its own (processing.denoise, stable "
+        "that only the phase noise differs. Each frame is denoised on its own (processing.denoise.frames, stable "
         "inexact ALM)."
     )
     add("")
@@ -925,7 +925,7 @@ def write_report(out: Path, config: StudyConfig, rows: Rows, figures: list[tuple
     add(
         f"Hemisphere (and the reference plane at {config.sweep_snrs[0]:g} dB), f = (5, 8), 6-step, "
         f"{config.sweep_size} x {config.sweep_size} pixels, orders at f2 = 8, one seed. Ch. 3 RPCA "
-        "(processing.order_correction, inexact ALM on the objective t ||E||_1 + (1 - t) ||K||_*) without "
+        "(processing.correction.orders, inexact ALM on the objective t ||E||_1 + (1 - t) ||K||_*) without "
         "post-processing, as in the thesis' figures; `errors` counts pixels whose order is wrong, `post` the "
         "same after the monotonicity pass. The thesis finds the best t in 0.032-0.036."
     )
@@ -1071,7 +1071,7 @@ def write_report(out: Path, config: StudyConfig, rows: Rows, figures: list[tuple
     )
     add("")
     add(
-        "Beyond the thesis, the segment vote (processing.single_shot.vote_fringe_segments): Ding's row vote "
+        "Beyond the thesis, the segment vote (processing.unwrap.single_shot.vote_fringe_segments): Ding's row vote "
         "pools the correlation orders of one row run, about one 27 x 27 window's worth of evidence, so where "
         "neighbouring windows go wrong together whole runs stay wrong. Every 4-connected region that no "
         "wrapped-phase jump crosses lies within one fringe and has one order (Ding's assumption in 2-D), so it "

@@ -5,7 +5,7 @@ values carry it, thesis Fig. 2.1), sparse strong impulsive noise W (speckle, sat
 pixels) and small dense noise Q. RPCA keeps the low-rank part I_f; phase shifting then runs on the
 denoised frames. Each frame is processed on its own, as in the thesis.
 
-The solver is the inexact ALM of :func:`processing.rpca.rpca_ialm`, by default in its stable form
+The solver is the inexact ALM of :func:`processing.denoise.rpca.rpca_ialm`, by default in its stable form
 (stop when the residual reaches the noise level), which leaves the dense noise Q out of I_f.
 """
 
@@ -16,7 +16,7 @@ import logging
 import numpy as np
 
 from processing import _validate
-from processing.rpca import RPCAResult, rpca_ialm
+from processing.denoise.rpca import RPCAResult, rpca_ialm
 
 log = logging.getLogger(__name__)
 

@@ -30,7 +30,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from processing.speckle import DEFAULT_DOT_PX, DEFAULT_SEED, DEFAULT_SPECKLE_GAIN, cached_speckle_field
+from processing.projection.speckle import DEFAULT_DOT_PX, DEFAULT_SEED, DEFAULT_SPECKLE_GAIN, cached_speckle_field
 
 AXES = ("x", "y")
 _MISSING = object()
@@ -232,7 +232,7 @@ class Sinusoid(Pattern):
 class SpeckleSinusoid(Sinusoid):
     """The thesis' single-shot pattern: a :class:`Sinusoid` scaled by (1 - g) plus g times a speckle field.
 
-    ``seed`` and ``dot_px`` choose the field (:func:`processing.speckle.speckle_field`),
+    ``seed`` and ``dot_px`` choose the field (:func:`processing.projection.speckle.speckle_field`),
     ``speckle_gain`` is g in [0, 1].
     """
 
@@ -448,7 +448,7 @@ def speckle_sinusoid_intensity(
     """Intensity in [0, 1] of a ``speckle-sinusoid`` pattern at projector coordinates (u, v).
 
     I = (1 - g) * (offset + amplitude cos(2 pi f u / W + phase)) + g * Z(floor v, floor u), with
-    ``g`` = ``speckle_gain`` and ``Z`` = :func:`processing.speckle.speckle_field` of the whole
+    ``g`` = ``speckle_gain`` and ``Z`` = :func:`processing.projection.speckle.speckle_field` of the whole
     projector frame with the pattern's ``seed`` and ``dot_px``. Scaling the sinusoid by (1 - g)
     keeps the sum inside [0, 1] whenever the sinusoid is; in the thesis' notation
     A = (1 - g) offset, B = (1 - g) amplitude, C = g. The speckle field is fixed to the

@@ -24,7 +24,7 @@ from scipy.sparse.csgraph import breadth_first_order, connected_components, mini
 
 from processing import _validate
 from processing.angles import wrap_to_pi
-from processing.temporal import UnwrapResult
+from processing.unwrap.temporal import UnwrapResult
 
 TWO_PI = 2.0 * np.pi
 QUALITY_KINDS = ("variance",)
@@ -123,7 +123,7 @@ def unwrap_quality_guided(
         no 4-neighbour path joins (isolated objects, islands cut by shadows) are unwrapped
         independently, each anchored at its best pixel, and their offsets are arbitrary.
         Spatial unwrapping cannot recover true jumps of more than pi between neighbours; use
-        temporal unwrapping (:mod:`processing.temporal`) for absolute phase.
+        temporal unwrapping (:mod:`processing.unwrap.temporal`) for absolute phase.
     """
     p = _validate.phase_map(phi, "phi")
     valid = np.isfinite(p)
@@ -195,7 +195,7 @@ def _wraps_to_root(flat_phi: np.ndarray, parent: np.ndarray) -> np.ndarray:
 
 
 def unwrap_spatial(phi: np.ndarray, mask: np.ndarray | None = None) -> UnwrapResult:
-    """:func:`unwrap_quality_guided` as an :class:`~processing.temporal.UnwrapResult`, the type every
+    """:func:`unwrap_quality_guided` as an :class:`~processing.unwrap.temporal.UnwrapResult`, the type every
     unwrapping method returns.
 
     Parameters
@@ -210,6 +210,17 @@ def unwrap_spatial(phi: np.ndarray, mask: np.ndarray | None = None) -> UnwrapRes
     UnwrapResult
         ``phase`` continuous up to 2 pi k per connected region (NaN outside the mask), ``orders``
         None, ``valid`` where ``phase`` is finite, ``absolute`` False.
+
+    Examples
+    --------
+    A ramp of 1.3 rad per pixel, wrapped, comes back whole (up to 2 pi k per region):
+
+    >>> import numpy as np
+    >>> ramp = np.tile(1.3 * np.arange(8.0), (3, 1))
+    >>> result = unwrap_spatial(np.angle(np.exp(1j * ramp)))
+    >>> step = result.phase - ramp
+    >>> bool(np.allclose(step, step[0, 0])), bool(np.isclose(step[0, 0] / (2 * np.pi), round(step[0, 0] / (2 * np.pi))))
+    (True, True)
     """
     phase = unwrap_quality_guided(phi, mask=mask)
     return UnwrapResult(phase=phase, orders=None, valid=np.isfinite(phase), absolute=False)

@@ -1,8 +1,8 @@
 """One pass over a phase-shifted capture: wrapped phases, modulation, shadow mask and temporal
 unwrapping, fused block by block in float32.
 
-Done stage by stage (:func:`processing.phase_shift.phase_shift` per frequency, then
-:func:`processing.phase_shift.shadow_mask` and :mod:`processing.temporal`), a two-frequency
+Done stage by stage (:func:`processing.phase.shifting.phase_shift` per frequency, then
+:func:`processing.phase.shifting.shadow_mask` and :mod:`processing.unwrap.temporal`), a two-frequency
 six-step 1024 x 768 capture writes float64 phase, background and modulation maps of every
 frequency to memory and reads them back several times. Here each block of pixels (16k, a few
 hundred KiB of float32 temporaries that stay in the CPU cache) goes from the raw frames to its
@@ -10,7 +10,7 @@ absolute phase in one visit::
 
     frames (N_i, P) --weights (3, N_i)--> A, B cos phi, B sin phi      one small product per frequency
     -> wrapped phase phi in [0, 2 pi), modulation B, the modulation mask of each frequency
-    -> fringe orders and absolute phase of the highest frequency       (processing.temporal's methods)
+    -> fringe orders and absolute phase of the highest frequency       (processing.unwrap.temporal's methods)
 
 Angles and magnitudes come from OpenCV (``cv2.phase``, ``cv2.magnitude``, imported on first use)
 when it is installed: numpy's arctan2 costs about 20 ms per megapixel on CPUs without AVX-512,
@@ -20,7 +20,7 @@ two-frequency look-up then runs as OpenCV look-up tables on the rounded index. W
 (or with ``opencv=False``) numpy's exact arctan2 and the numpy look-up are used.
 
 The automatic thresholds of the shadow mask (a fraction of the 99th percentile of the modulation,
-as :func:`processing.phase_shift.shadow_mask` derives them) come from the same regular subsample
+as :func:`processing.phase.shifting.shadow_mask` derives them) come from the same regular subsample
 of about 16k pixels, demodulated before the pass, so the mask is known inside it.
 """
 
@@ -38,8 +38,8 @@ from typing import Any
 import numpy as np
 
 from processing import _validate
-from processing.phase_shift import robust_high, sample_stride, shift_weights
-from processing.temporal import TEMPORAL_METHODS, TurnKernel, pair_table, turn_kernel
+from processing.phase.shifting import robust_high, sample_stride, shift_weights
+from processing.unwrap.temporal import TEMPORAL_METHODS, TurnKernel, pair_table, turn_kernel
 
 TWO_PI = 2.0 * np.pi
 BLOCK = 16384  # pixels per block: each float32 temporary is 64 KiB
@@ -129,10 +129,10 @@ class FringePass:
     orders : int32 map or None
         Fringe orders of ``phase_frequency`` (wrapped phase taken in [0, 2 pi)).
     modulated : bool map
-        Lit and modulated in every group (:func:`processing.phase_shift.shadow_mask`'s test with
+        Lit and modulated in every group (:func:`processing.phase.shifting.shadow_mask`'s test with
         ``thresholds``).
     valid : bool map
-        ``modulated`` and, with a method, consistent for it (see processing.temporal).
+        ``modulated`` and, with a method, consistent for it (see processing.unwrap.temporal).
     kept : list of int
         Groups whose ``wrapped``, ``modulation`` and ``background`` (or ``brightness``) maps were
         kept (in order).
@@ -245,14 +245,14 @@ def fringe_pass(
     frequencies : sequence of float
         Fringes across the projector of each group (whole numbers for a temporal method).
     method : str, optional
-        One of :data:`processing.temporal.TEMPORAL_METHODS`; the two- and three-frequency
+        One of :data:`processing.unwrap.temporal.TEMPORAL_METHODS`; the two- and three-frequency
         methods read the two / three highest frequencies (see
-        :func:`processing.temporal.turn_kernel`). None: wrapped phases and mask only.
+        :func:`processing.unwrap.temporal.turn_kernel`). None: wrapped phases and mask only.
     shifts : sequence of (N_i,) arrays or None, optional
         Phase shifts of each group in radians (including the patterns' ``phase_rad``); None
         for 2 pi k / N_i.
     min_ratio : float in (0, 1]
-        Modulation mask of each group as :func:`processing.phase_shift.shadow_mask` with its
+        Modulation mask of each group as :func:`processing.phase.shifting.shadow_mask` with its
         automatic threshold: B >= min_ratio x 99th percentile of B, B >= min_ratio x A, A > 0.
     max_residual : float
         Residual bound of the hierarchical and heterodyne methods (radians).

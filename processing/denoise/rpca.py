@@ -8,7 +8,7 @@ Two solvers of principal component pursuit, min ||L||_* + tau ||S||_1 s.t. L + S
   Yuan & Yang), optionally in the (t, 1 - t) weighting of thesis ch. 3.
 
 Both spend their time in singular value thresholding; ``svd="full"`` is the plain reference
-implementation, ``"auto"``/``"partial"`` the fast partial SVD of :mod:`processing.svd`.
+implementation, ``"auto"``/``"partial"`` the fast partial SVD of :mod:`processing.denoise.svd`.
 
 The many small QR/SVD calls run faster with single-threaded BLAS on a busy machine; this module
 leaves the process's BLAS threads alone, the application sets the limit around the solves
@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from processing.angles import wrap_to_pi
-from processing.svd import SubspaceState, check_svd_method, singular_value_threshold
+from processing.denoise.svd import SubspaceState, check_svd_method, singular_value_threshold
 
 log = logging.getLogger(__name__)
 

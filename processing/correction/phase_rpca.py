@@ -17,7 +17,7 @@ wherever L is within pi of the truth, and every measured detail kept. :func:`res
 combines both: the low-rank phase, except where the re-derived phase departs from it by more
 than the noise explains (structure the low-rank model missed). :func:`low_rank_misfit`,
 :func:`settle_orders` and :func:`order_breaks` guard, tidy and rank re-derived order maps without
-the truth (see :func:`processing.correction.correct_auto`).
+the truth (see :func:`processing.correction.registry.correct_auto`).
 """
 
 from __future__ import annotations
@@ -27,15 +27,15 @@ import numpy as np
 
 from processing import _validate
 from processing.angles import wrap_to_pi
-from processing.fringe_regions import order_breaks_at
-from processing.rpca import (
+from processing.correction.region_orders import order_breaks_at
+from processing.correction.shadow_fill import fill_shadows, valid_mask
+from processing.denoise.rpca import (
     RPCAResult,
     masked_second_differences,
     noise_sigma_from_second_differences,
     robust_noise_sigma,
     rpca_ialm,
 )
-from processing.shadow_fill import fill_shadows, valid_mask
 
 TWO_PI = 2.0 * np.pi
 
@@ -66,7 +66,7 @@ def correct_phase_rpca(
         Stop at the noise level (stable PCP, the default: measured more accurate) rather than
         at ||D - L - S||_F / ||D||_F < tol (the thesis' rule).
     svd : {"auto", "partial", "full"}
-    tol, max_iter : solver controls, see :func:`processing.rpca.rpca_ialm`.
+    tol, max_iter : solver controls, see :func:`processing.denoise.rpca.rpca_ialm`.
     noise_sigma : float, optional
         Phase noise in radians for ``stable``; default :func:`phase_noise_sigma` of the valid pixels.
     dtype : float32 or float64, optional
@@ -94,7 +94,7 @@ def correct_phase_rpca(
 def phase_noise_sigma(phase: np.ndarray, mask: np.ndarray | None = None) -> float:
     """Standard deviation of the noise on a phase map, blind to its 2 pi order errors.
 
-    As :func:`processing.rpca.robust_noise_sigma` (median absolute deviation of the second
+    As :func:`processing.denoise.rpca.robust_noise_sigma` (median absolute deviation of the second
     differences along rows and along columns, the smaller kept), with the differences wrapped into
     [-pi, pi): a wrong fringe order adds a multiple of 2 pi to them, which the wrapping removes,
     so the estimate holds however many orders are wrong. Unwrapped, with 14 % of the orders wrong
@@ -142,7 +142,7 @@ def phase_pair(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Validate a phase map, a second map of its shape and the mask: ``(phase, other, valid)``.
 
-    ``valid`` is :func:`processing.shadow_fill.valid_mask` of ``phase``; ``other`` must be finite
+    ``valid`` is :func:`processing.correction.shadow_fill.valid_mask` of ``phase``; ``other`` must be finite
     wherever ``phase`` is valid. ``names`` name the two maps in the ``ValueError`` messages.
     """
     first = _validate.phase_map(phase, names[0])
@@ -394,7 +394,7 @@ def decimated_low_rank(
 
     The low-rank part of a smooth phase is smooth: stable RPCA (thesis ch. 4) on the block means,
     whose noise is ``noise_sigma / factor``, costs ``factor ** 2`` times less per iteration and
-    stops on a cleaner surface (measured: see :data:`processing.correction.DECIMATION`). Bilinear
+    stops on a cleaner surface (measured: see :data:`processing.correction.registry.DECIMATION`). Bilinear
     interpolation blurs the surface's sharp edges, so the pixels near blocks where it bends by
     more than ``bend`` radians (second difference between blocks) are returned as ``rough``:
     the interpolated value there may be off by more than pi and must not set fringe orders.

@@ -13,9 +13,9 @@ from __future__ import annotations
 import numpy as np
 
 from processing import _validate
-from processing.rpca import RPCAResult, rpca_adm, rpca_ialm
-from processing.shadow_fill import fill_shadows, valid_mask
-from processing.voting import majority_per_label
+from processing.correction.shadow_fill import fill_shadows, valid_mask
+from processing.correction.voting import majority_per_label
+from processing.denoise.rpca import RPCAResult, rpca_adm, rpca_ialm
 
 TWO_PI = 2.0 * np.pi
 ORDER_SOLVERS = ("ialm", "adm")
@@ -84,7 +84,7 @@ def correct_orders_rpca(
     Parameters
     ----------
     orders : (H, W) integer or float array
-        Fringe orders k as :mod:`processing.temporal` defines them:
+        Fringe orders k as :mod:`processing.unwrap.temporal` defines them:
         Phi = (wrapped_phase mod 2 pi) + 2 pi k. Values at invalid pixels are ignored.
     wrapped_phase : (H, W) array
         The wrapped phase the orders belong to (any 2 pi representation).

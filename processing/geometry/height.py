@@ -34,6 +34,18 @@ def phase_to_height(
     in_place : bool
         Write the heights into ``delta_phase`` when it is an array of ``dtype`` (no full-size
         temporary: a fresh image costs more to allocate than to compute).
+
+    Examples
+    --------
+    Points 5 and 10 mm above the plane, with the pupil 500 mm above it, a 200 mm baseline and
+    0.1 fringe / mm: their phase differences and back.
+
+    >>> import numpy as np
+    >>> delta = height_to_phase(np.array([5.0, 10.0]), 500.0, 200.0, 0.1)
+    >>> np.round(delta, 6)
+    array([-1.26933 , -2.564565])
+    >>> np.round(phase_to_height(delta, 500.0, 200.0, 0.1), 9)
+    array([ 5., 10.])
     """
     _check_geometry(l0_mm, d0_mm, f0_per_mm)
     if dtype not in (np.float64, np.float32):

@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from processing import _validate
-from processing.shadow_fill import valid_mask
+from processing.correction.shadow_fill import valid_mask
 
 TWO_PI = 2.0 * np.pi
 

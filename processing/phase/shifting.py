@@ -176,6 +176,19 @@ def phase_shift(stack: np.ndarray, shifts: np.ndarray | None = None) -> PhaseShi
     -------
     PhaseShiftResult
         ``phase`` in [-pi, pi), ``background`` A and ``modulation`` B, each (H, W) float64.
+
+    Examples
+    --------
+    A 4-step stack of one row, A = 100, B = 50, phases -pi/2, pi/4 and pi/2:
+
+    >>> import numpy as np
+    >>> phi = np.array([[-np.pi / 2, np.pi / 4, np.pi / 2]])
+    >>> stack = np.stack([100 + 50 * np.cos(phi + np.pi / 2 * k) for k in range(4)])
+    >>> result = phase_shift(stack)
+    >>> np.round(result.phase, 6)
+    array([[-1.570796,  0.785398,  1.570796]])
+    >>> np.round(result.background, 6), np.round(result.modulation, 6)
+    (array([[100., 100., 100.]]), array([[50., 50., 50.]]))
     """
     arr = check_stack(stack)
     _, height, width = arr.shape
@@ -294,7 +307,7 @@ def quality_map(modulation: np.ndarray, background: np.ndarray) -> np.ndarray:
     """Data modulation gamma = B / A, clipped to [0, 1]; 0 where A <= 0 or either is NaN.
 
     A fringe of full contrast has gamma = 1; shadows, ambient light and defocus lower it. Use it
-    as the quality map of :func:`processing.spatial.unwrap_quality_guided` or for thresholds that
+    as the quality map of :func:`processing.unwrap.spatial.unwrap_quality_guided` or for thresholds that
     do not depend on the surface's reflectivity.
 
     Parameters

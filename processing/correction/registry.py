@@ -27,10 +27,9 @@ from typing import Any
 import numpy as np
 
 from processing.concurrency import side_by_side
-from processing.correction_method import CorrectionMethod, Result
-from processing.fringe_regions import pool_region_orders
-from processing.order_correction import correct_orders_rpca
-from processing.phase_correction import (
+from processing.correction.method import CorrectionMethod, Result
+from processing.correction.orders import correct_orders_rpca
+from processing.correction.phase_rpca import (
     accept_if_consistent,
     correct_phase_rpca,
     decimated_low_rank,
@@ -42,8 +41,9 @@ from processing.phase_correction import (
     reorder_from_low_rank,
     settle_orders,
 )
-from processing.rpca import RPCAResult, default_tau
-from processing.voting import vote_row_orders
+from processing.correction.region_orders import pool_region_orders
+from processing.correction.voting import vote_row_orders
+from processing.denoise.rpca import RPCAResult, default_tau
 
 TWO_PI = 2.0 * np.pi
 
@@ -174,11 +174,11 @@ def correct_auto(
 ) -> Result:
     """The most accurate method measured: region-pooled orders, ch. 4 RPCA, measured detail restored.
 
-    1. pool the fringe orders over 2-D fringe regions (:func:`~processing.fringe_regions.
+    1. pool the fringe orders over 2-D fringe regions (:func:`~processing.correction.region_orders.
        pool_region_orders`: one order per region that no wrapped-phase jump or kink crosses,
        voted per 16 x 16 square, re-voted pixel by pixel where squares disagree);
     2. L = low-rank part of that phase (stable inexact ALM, thesis ch. 4, stopped at the noise
-       level of :func:`~processing.phase_correction.phase_noise_sigma`, blind to order errors),
+       level of :func:`~processing.correction.phase_rpca.phase_noise_sigma`, blind to order errors),
        solved on 4 x 4 block means from :data:`DECIMATE_FROM` pixels on (``decimate``) and
        interpolated back; the measured phase is used instead if pooling left more order breaks;
     3. candidate order maps (only if the pooled orders still break somewhere): the pooled
@@ -189,7 +189,7 @@ def correct_auto(
        settled from their neighbours (the earlier ``auto``);
     4. keep the candidate with fewest order breaks (second differences beyond pi, truth-free);
     5. keep L (denoised) except where the result departs from it coherently beyond the noise
-       (:func:`~processing.phase_correction.restore_detail`, ``k_sigma`` standard deviations
+       (:func:`~processing.correction.phase_rpca.restore_detail`, ``k_sigma`` standard deviations
        of the 3 x 3 mean residual).
 
     Measured (rig study's cases at 1000 x 1000, seeds 0-2, NMSE_h; ``python -m rig.cli study``):

@@ -1,6 +1,6 @@
 """Single-shot absolute phase from one speckle-embedded fringe image (thesis ch. 2.3).
 
-The projected pattern is I = A + B cos(2 pi f0 x) + C Z(x, y) (:mod:`processing.speckle`).
+The projected pattern is I = A + B cos(2 pi f0 x) + C Z(x, y) (:mod:`processing.projection.speckle`).
 From one camera image of the object and one of the flat reference plane:
 
 1. RPCA (inexact ALM) splits each image into a low-rank fringe part and a sparse speckle part;
@@ -44,10 +44,10 @@ import numpy as np
 from scipy import ndimage
 
 from processing import _validate
-from processing.ftp import detect_carrier, ftp_phase
-from processing.rpca import rpca_ialm
-from processing.spatial import unwrap_quality_guided
-from processing.voting import vote_row_orders
+from processing.correction.voting import vote_row_orders
+from processing.denoise.rpca import rpca_ialm
+from processing.phase.ftp import detect_carrier, ftp_phase
+from processing.unwrap.spatial import unwrap_quality_guided
 
 log = logging.getLogger(__name__)
 
@@ -193,7 +193,7 @@ def prepare_reference(
         Fringes across the projector (the number of candidate orders).
     axis : 0 or 1
         Image axis across the fringes (1: fringes vary along x).
-    carrier, bandwidth : FTP parameters (:func:`processing.ftp.ftp_phase`); carrier default: detected
+    carrier, bandwidth : FTP parameters (:func:`processing.phase.ftp.ftp_phase`); carrier default: detected
         on the reference's fringe part. The band is wide (1.0: 0 .. 2 carrier) because RPCA has
         already removed the speckle, and deformed fringes on steep slopes need the room.
     tau, rpca_tol, svd : RPCA parameters; ``separate=False`` skips RPCA: FTP and the correlation
@@ -328,7 +328,7 @@ def _consistent_unwrap(
     Only the indexing of the candidates depends on psi (every order is still tested), but a
     correlation window must see one hypothesis: psi has to be continuous across the window in
     both directions, which row-by-row unwrapping is not (a row that slips at a shadow is offset
-    against its neighbours). So: quality-guided unwrapping (:func:`processing.spatial.unwrap_quality_guided`,
+    against its neighbours). So: quality-guided unwrapping (:func:`processing.unwrap.spatial.unwrap_quality_guided`,
     modulation as quality) on a grid subsampled to ~300 pixels a side, each connected region
     offset by whole periods towards the reference, interpolated back to full size, and every
     pixel's n taken as the whole number of periods nearest to it.

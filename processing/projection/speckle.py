@@ -17,7 +17,7 @@ at once among the positions that do not touch dots already placed. The centre of
 nothing outside its own cell, so every cell always has a legal position.
 
 The pattern that embeds the field in a sinusoid, ``speckle-sinusoid``, is defined with the other
-pattern kinds in :mod:`processing.patterns`, which uses this module (not the other way round).
+pattern kinds in :mod:`processing.projection.patterns`, which uses this module (not the other way round).
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Temporal phase unwrapping: absolute phase from wrapped phases at several frequencies.
 
 Inputs are wrapped phases of ``phi_i = 2 pi f_i u / W`` (capture-format.md; any 2 pi
-representation: [-pi, pi) from :mod:`processing.phase_shift` or [0, 2 pi)), with ``f_i`` the
+representation: [-pi, pi) from :mod:`processing.phase.shifting` or [0, 2 pi)), with ``f_i`` the
 integer number of fringes across the projector. Every method returns the absolute phase at its
 highest frequency, ``Phi = 2 pi f_max u / W`` in [0, 2 pi f_max), with the fringe orders ``k``
 of that frequency (``Phi = phi + 2 pi k``, ``phi`` taken in [0, 2 pi)) and a validity mask.
@@ -20,7 +20,7 @@ Methods
   previous absolute phase scaled by the frequency ratio.
 - :func:`unwrap_heterodyne`: beat phases of two or three frequencies down to a unit beat
   (e.g. 64, 58, 53 -> 6, 5 -> 1), then hierarchically back up to the highest frequency.
-- :func:`decode_gray` and :func:`unwrap_gray`: Gray-code stripe index (processing.patterns'
+- :func:`decode_gray` and :func:`unwrap_gray`: Gray-code stripe index (processing.projection.patterns'
   convention) and fringe orders from it, plain or complementary (Zhang, Su, Xiang and Sun,
   Opt. Lasers Eng. 2012).
 """
@@ -36,7 +36,7 @@ import numpy as np
 
 from processing import _validate
 from processing._blockwise import blockwise
-from processing.phase_shift import block_angle, block_modulation, check_stack, demodulator
+from processing.phase.shifting import block_angle, block_modulation, check_stack, demodulator
 
 TWO_PI = 2.0 * np.pi
 # A method on normalised wrapped turns (phi / 2 pi in [0, 1)) of one block, one array per frequency in
@@ -54,7 +54,7 @@ class UnwrapResult:
         Absolute phase Phi = 2 pi f u / W of the highest frequency; NaN where an input was NaN.
     orders : (H, W) int64 or None
         Fringe order k of that frequency: phase = (wrapped phase in [0, 2 pi)) + 2 pi k; None
-        from spatial unwrapping (:func:`processing.spatial.unwrap_spatial`), which has no orders.
+        from spatial unwrapping (:func:`processing.unwrap.spatial.unwrap_spatial`), which has no orders.
     valid : (H, W) bool
         False where the inputs were NaN or the method detected an inconsistency (see each
         method: a look-up value no position inside the projector produces, a residual beyond
@@ -218,6 +218,19 @@ def unwrap_two_frequency(phi1: np.ndarray, phi2: np.ndarray, f1: int, f2: int) -
         Errors beyond the tolerance elsewhere land on other valid pairs and cannot be detected
         (order errors of several fringes).
 
+    Examples
+    --------
+    Fringe counts 4 and 5 across a projector sampled at five positions u / W:
+
+    >>> import numpy as np
+    >>> u = np.array([[0.06, 0.26, 0.46, 0.66, 0.86]])
+    >>> wrap = lambda p: np.angle(np.exp(1j * p))
+    >>> result = unwrap_two_frequency(wrap(2 * np.pi * 4 * u), wrap(2 * np.pi * 5 * u), 4, 5)
+    >>> result.orders
+    array([[0, 1, 2, 3, 4]])
+    >>> bool(np.allclose(result.phase, 2 * np.pi * 5 * u))
+    True
+
     Notes
     -----
     ``m = round((f2 phi1 - f1 phi2) / 2 pi)`` equals ``k2 f1 - k1 f2``; the look-up table of
@@ -265,7 +278,7 @@ class TwoFrequencyScan:
     unwrapped : UnwrapResult
         Absolute phase, orders and validity at f2, as :func:`unwrap_two_frequency` gives them.
     background, modulation : (H, W) float64
-        A and B of the f2 stack, for :func:`processing.phase_shift.shadow_mask`.
+        A and B of the f2 stack, for :func:`processing.phase.shifting.shadow_mask`.
     """
 
     unwrapped: UnwrapResult
@@ -283,7 +296,7 @@ def unwrap_two_frequency_stacks(
 ) -> TwoFrequencyScan:
     """Phase shifting of two stacks and Ding's two-frequency unwrapping in one pass.
 
-    The same arithmetic as :func:`processing.phase_shift.phase_shift` on each stack followed
+    The same arithmetic as :func:`processing.phase.shifting.phase_shift` on each stack followed
     by :func:`unwrap_two_frequency`, fused block by block: the wrapped phases never leave the
     CPU cache and stay in the stacks' working precision (float32 for integer frames), which
     makes a 1024 x 768 two-frequency scan about a fifth cheaper. The absolute phase then
@@ -591,7 +604,7 @@ def turn_kernel(
 def decode_gray(
     images: np.ndarray, inverted: np.ndarray | None = None, threshold: np.ndarray | float | None = None
 ) -> np.ndarray:
-    """Stripe index from captured Gray-code bit planes (processing.patterns' convention).
+    """Stripe index from captured Gray-code bit planes (processing.projection.patterns' convention).
 
     Parameters
     ----------

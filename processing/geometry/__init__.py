@@ -1,0 +1,29 @@
+"""From phase to geometry: height maps, point clouds and triangle meshes.
+
+Main entry points:
+
+- :func:`phase_to_height` and :func:`height_to_phase` (``height``): the reference-plane phase-height
+  model; :func:`point_cloud` turns a height map into points.
+- :func:`grid_triangles` (``mesh``): triangles over the valid pixel grid, without bridging jumps.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from processing._lazy import lazy_exports
+
+if TYPE_CHECKING:
+    from processing.geometry.height import height_to_phase, phase_to_height, point_cloud
+    from processing.geometry.mesh import grid_triangles
+
+_SOURCES = {
+    "height_to_phase": "height",
+    "phase_to_height": "height",
+    "point_cloud": "height",
+    "grid_triangles": "mesh",
+}
+
+__all__ = ["grid_triangles", "height_to_phase", "phase_to_height", "point_cloud"]
+
+__getattr__, __dir__ = lazy_exports(__name__, _SOURCES)
