@@ -39,7 +39,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from calibration.jsonfile import write_json_atomic
+from calibration.jsonfile import write_bytes_durable, write_json_atomic
 from processing.patterns import (
     CAPTURE_KINDS,
     PROJECTION_KEYS,
@@ -391,11 +391,8 @@ def read_capture(path: str | os.PathLike[str], salvage: bool = False, verify: bo
             f"{manifest_path}: complete: expected true, found false (interrupted or still being written; "
             "salvage it explicitly to read what is there)"
         )
-    if not salvage and INCOMPLETE_MARK in path.resolve().name:
-        raise CaptureError(
-            f"{path}: never committed (its name says the write did not finish, whatever its capture.json says); "
-            "salvage it explicitly to read what is there"
-        )
+    if not salvage:
+        files.check_committed_input(path, "capture", CaptureError, "salvage it explicitly to read what is there")
     if verify:
         capture.verify_checksums()
     return capture
@@ -435,14 +432,6 @@ def check_same_patterns(reference: Capture, capture: Capture) -> None:
 
 
 # --------------------------------------------------------------------------- writing
-
-
-def write_bytes_durable(path: Path, data: bytes) -> None:
-    """Write a file and fsync it."""
-    with open(path, "wb") as handle:
-        handle.write(data)
-        handle.flush()
-        os.fsync(handle.fileno())
 
 
 def encode_image(image: np.ndarray, bit_depth: int) -> tuple[bytes, str]:
