@@ -191,7 +191,7 @@ def _plan(args: argparse.Namespace, base=None):
 
 def run(args: argparse.Namespace) -> int:
     from rig.calibrate.operator import ConsoleOperator, StageCommand
-    from rig.calibrate.session import CALIBRATION_KINDS, CalibrationPlan, calibrate, compute
+    from rig.calibrate.session import CALIBRATION_KINDS, CalibrationPlan, calibrate, compute, compute_calibration
     from rig.progress import Progress
 
     if args.import_opencv is not None:
@@ -218,8 +218,10 @@ def run(args: argparse.Namespace) -> int:
             if in_place:
                 report = compute(args.from_dir, plan, progress=bar.reporter())
             else:  # a new calibration directory (with a copy of the reference), committed as a whole
+                computed = compute_calibration(args.from_dir, plan, progress=bar.reporter())
+                # staged only now: a kill while computing leaves no staging folder behind
                 with files.staged_directory(args.output, CALIBRATION_KINDS, args.overwrite, OutputError) as staging:
-                    report = compute(args.from_dir, plan, output=staging, progress=bar.reporter())
+                    report = computed.write(staging)
                 report.calibration.path = args.output
     else:
         from rig.config import load_config
