@@ -69,6 +69,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "l0, d0, f0 (reference-plane model) or a per-pixel polynomial; or recompute from a stored "
         "session (--from), or import an OpenCV projector-camera calibration (--import-opencv).",
     )
+    _source_options(parser)
+    _session_options(parser)
+    _device_and_import_options(parser)
+    parser.add_argument("--overwrite", action="store_true", help="replace an existing calibration directory")
+    add_report_options(parser, json_help="print calibration.json on stdout")
+
+
+def _source_options(parser: argparse.ArgumentParser) -> None:
+    """Where the calibration goes and where its captures come from."""
     parser.add_argument(
         "-o", "--output", type=Path, metavar="CAL", help="calibration directory to create (default: calibration)"
     )
@@ -78,6 +87,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--from", dest="from_dir", type=Path, metavar="DIR", help="recompute from the captures of a stored session"
     )
+
+
+def _session_options(parser: argparse.ArgumentParser) -> None:
+    """What the session captures and which model it fits."""
     parser.add_argument(
         "--heights",
         type=_heights,
@@ -124,6 +137,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="MM",
         help="largest RMS height spread of a calibration plane (default 1 mm)",
     )
+
+
+def _device_and_import_options(parser: argparse.ArgumentParser) -> None:
+    """A motorised stage, and the import of an OpenCV projector-camera calibration."""
     parser.add_argument(
         "--stage-command",
         metavar="CMD",
@@ -144,8 +161,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="for --import-opencv: where projector pixel k sits in the phase convention "
         "(0.5: this product's patterns; 0: phase 2 pi f k / W at column k, as SLMaster)",
     )
-    parser.add_argument("--overwrite", action="store_true", help="replace an existing calibration directory")
-    add_report_options(parser, json_help="print calibration.json on stdout")
 
 
 def _import_opencv(args: argparse.Namespace) -> int:
