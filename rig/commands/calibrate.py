@@ -150,9 +150,17 @@ def _device_and_import_options(parser: argparse.ArgumentParser) -> None:
         "--import-opencv",
         type=Path,
         metavar="FILE.yml",
-        help="write a 'stereo' calibration from an OpenCV FileStorage file (M1 D1 M4 D4 Rlp Tlp S)",
+        help="write a 'stereo' calibration from an OpenCV FileStorage file (SLMaster's M1 D1 M4 D4 Rlp Tlp S, "
+        "or stereoCalibrate's results as K1 D1 K2 D2 R T, M1 D1 M2 D2 R T or cameraMatrix1 distCoeffs1 "
+        "cameraMatrix2 distCoeffs2 R T; camera first, projector second)",
     )
     parser.add_argument("--projector-size", type=_size, metavar="WxH", help="projector resolution for --import-opencv")
+    parser.add_argument(
+        "--camera-size",
+        type=_size,
+        metavar="WxH",
+        help="camera resolution for --import-opencv, when the file holds no S or imageSize",
+    )
     parser.add_argument(
         "--pixel-centre",
         type=float,
@@ -173,7 +181,9 @@ def _import_opencv(args: argparse.Namespace) -> int:
         raise ConfigError("--import-opencv needs --projector-size WxH (the FileStorage file does not record it)")
     output = args.output or Path("calibration")
     files.check_writable(output, ("calibration",), args.overwrite, OutputError)  # before reading anything
-    fields = import_opencv_calibration(args.import_opencv, args.projector_size, pixel_centre=args.pixel_centre)
+    fields = import_opencv_calibration(
+        args.import_opencv, args.projector_size, pixel_centre=args.pixel_centre, camera_size=args.camera_size
+    )
     fields.pop("model")
     with files.staged_directory(output, ("calibration",), args.overwrite, OutputError) as staging:
         write_calibration(staging, Calibration(model="stereo", extra=fields))
