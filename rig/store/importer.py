@@ -10,9 +10,9 @@ the patterns of a short description, the *pattern spec*: groups separated by ``;
     ``phase_rad``: a number, ``pi``, ``-pi``, ``pi/2``, ``90deg``), ``shifts`` (non-uniform or
     explicitly listed shifts, ``0/90/180/270deg`` or radians, ``/``-separated), ``axis`` (x|y).
 ``gray:bits=6``
-    Gray-code bit planes, most significant first (processing.patterns' convention);
-    ``inverted=after`` (all planes, then all inverted ones) or ``inverted=interleaved``
-    (plane, inverted plane, ...); ``axis``.
+    Gray-code bit planes, most significant first (processing.patterns' convention; ``order=lsb``
+    for planes stored least significant first); ``inverted=after`` (all planes, then all inverted
+    ones) or ``inverted=interleaved`` (plane, inverted plane, ...); ``axis``.
 ``flat:level=1`` (also ``white``, ``black``)
     Constant frames. ``skip:N`` ignores N files.
 
@@ -177,19 +177,24 @@ def _sinusoid_group(_kind: str, body: str, where: str) -> list[Pattern | None]:
 
 
 def _gray_group(_kind: str, body: str, where: str) -> list[Pattern | None]:
-    """``gray:bits=N[,inverted=after|interleaved,axis=..]``: Gray-code bit planes, most significant first."""
-    p = _params(body, where, ("bits", "inverted", "axis"))
+    """``gray:bits=N[,order=msb|lsb,inverted=after|interleaved,axis=..]``: Gray-code bit planes,
+    most significant first unless ``order=lsb``."""
+    p = _params(body, where, ("bits", "order", "inverted", "axis"))
     if "bits" not in p:
         raise ConfigError(f"{where}: expected bits=N")
     bits = _positive_int(p["bits"], f"{where}: bits")
     inverted = p.get("inverted", "none")
     if inverted not in ("none", "after", "interleaved"):
         raise ConfigError(f"{where}: inverted: expected none, after or interleaved, found {inverted!r}")
+    significance = p.get("order", "msb")
+    if significance not in ("msb", "lsb"):
+        raise ConfigError(f"{where}: order: expected msb (most significant plane first) or lsb, found {significance!r}")
     axis = _axis(p, where)
+    planes = range(bits) if significance == "msb" else range(bits - 1, -1, -1)  # bit 0: the most significant
     if inverted == "interleaved":  # each bit, then its inverse
-        order = [(b, inv) for b in range(bits) for inv in (False, True)]
+        order = [(b, inv) for b in planes for inv in (False, True)]
     else:  # every bit, then (after) every inverse
-        order = [(b, inv) for inv in ((False, True) if inverted == "after" else (False,)) for b in range(bits)]
+        order = [(b, inv) for inv in ((False, True) if inverted == "after" else (False,)) for b in planes]
     return [Gray(axis=axis, bit=b, bits=bits, inverted=inv) for b, inv in order]
 
 
