@@ -117,12 +117,15 @@ def add_processing_options(parser: argparse.ArgumentParser) -> None:
         dest="undistort",
         action="store_false",
         default=None,
-        help="keep lens distortion (default: removed when the calibration has camera_matrix and distortion)",
+        help="keep lens distortion (default: removed when the calibration has camera_matrix and distortion; "
+        "refused with a camera-projector calibration, whose triangulation models it)",
     )
 
 
 def processing_options(args: argparse.Namespace) -> ProcessOptions:
     """The :class:`ProcessOptions` of the options :func:`add_processing_options` added."""
+    if args.undistort is False and getattr(args, "calibration", None) is not None:
+        refuse_kept_distortion(args.calibration)
     return ProcessOptions(
         unwrap=args.unwrap,
         denoise=args.denoise,
@@ -133,6 +136,20 @@ def processing_options(args: argparse.Namespace) -> ProcessOptions:
         undistort=args.undistort,
         min_island_fraction=0.0 if args.keep_islands else args.min_island,
     )
+
+
+def refuse_kept_distortion(calibration: Path) -> None:
+    """``--no-undistort`` with a camera-projector (stereo) calibration: refused, because its
+    triangulation models the lens distortion of every camera and projector ray (the frames are never
+    undistorted, so there is nothing to keep)."""
+    from calibration.stereo import STEREO
+    from calibration.store import read_calibration
+
+    if read_calibration(calibration).model == STEREO:
+        raise ConfigError(
+            f"--no-undistort: {calibration} is a camera-projector (stereo) calibration, whose triangulation "
+            "models the lens distortion of every ray; leave --no-undistort out"
+        )
 
 
 def summary(report: dict, out: Path) -> dict:
