@@ -353,7 +353,7 @@ def test_rerun_without_calibration_leaves_no_stale_height(capsys, small_capture,
         == 0
     )
     assert (out / "height.npy").exists()
-    assert _run(capsys, "process", small_capture.capture, "-o", out, "-q")[0] == 0
+    assert _run(capsys, "process", small_capture.capture, "-o", out, "-q", "--overwrite")[0] == 0
     assert not (out / "height.npy").exists() and not (out / "points.ply").exists() and (out / "wrapped.npy").exists()
     code, _, err = _run(capsys, "process", small_capture.capture, "-o", small_capture.capture, "-q")
     _assert_one_line_error(code, err, "exists and is a capture directory")

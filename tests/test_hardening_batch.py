@@ -27,9 +27,8 @@ from rig.batch.tasks import CaptureTask, run_task
 from rig.cli import main
 from rig.errors import CaptureError, OutputError
 from rig.hardware.synthesis import write_simulated_archive
-from rig.pipeline import outputs
 from rig.pipeline.plan import ProcessOptions
-from rig.store import files
+from rig.store import files, result_files
 from rig.store.capture import CaptureWriter, read_capture
 
 REPO = Path(__file__).resolve().parents[1]
@@ -217,7 +216,7 @@ def test_a_full_disk_in_a_batch_task_is_a_disk_full_row(archive, tmp_path, monke
     def full(*_args: object, **_kwargs: object) -> None:
         raise NO_SPACE
 
-    monkeypatch.setattr(outputs, "write_preview", full)
+    monkeypatch.setattr(result_files, "write_preview", full)
     task = CaptureTask(
         name="part",
         capture=str(root / "scan-000" / "object"),

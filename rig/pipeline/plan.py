@@ -55,8 +55,8 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 TWO_PI = 2.0 * math.pi
-# The correction a user gets without asking (rig process, rig scan --process, rig demo): the best
-# measured. ProcessOptions() itself corrects nothing, so calibration fits see the measured phase.
+# The correction a user gets without asking (every front-end: ProcessOptions() uses it): the best
+# measured. The calibration session asks for "none", so its fits see the measured phase.
 DEFAULT_CORRECTION = "auto"
 UNWRAP_METHODS = ("auto", "two-frequency", "three-frequency", "hierarchical", "heterodyne", "gray", "spatial", "ftp")
 
@@ -66,7 +66,7 @@ UNWRAP_METHODS = ("auto", "two-frequency", "three-frequency", "hierarchical", "h
 
 @dataclass
 class ProcessOptions:
-    """What `rig process` was asked to do.
+    """What `rig process` was asked to do; the defaults are `rig process`'s defaults.
 
     ``params`` carries method-specific settings of plug-in stages (e.g. RPCA's tau) by name.
     """
@@ -74,7 +74,7 @@ class ProcessOptions:
     unwrap: str = "auto"
     undistort: bool | None = None  # None: when the calibration has camera_matrix + distortion
     denoise: str = "none"
-    correction: str = "none"
+    correction: str = DEFAULT_CORRECTION
     min_modulation_ratio: float = 0.2
     # valid regions smaller than this fraction of the largest are dropped (processing.islands); 0 keeps all
     min_island_fraction: float = 0.005
