@@ -16,11 +16,23 @@ from rig.commands._common import (
     print_json,
 )
 from rig.errors import ConfigError
-from rig.pipeline.plan import UNWRAP_METHODS, ProcessOptions
+from rig.pipeline.plan import ProcessOptions
 from rig.progress import Progress
 
 # The pipeline (numpy, OpenCV) is imported when a command runs, not to build the parser: `rig --help`
 # and commands that do not process stay quick. Choices and help naming its registries load lazily.
+
+
+def _unwrap_methods() -> list[str]:
+    from rig.pipeline.unwrapping import UNWRAP_METHODS
+
+    return list(UNWRAP_METHODS)
+
+
+def _unwrap_help() -> str:
+    from rig.pipeline.unwrapping import help_text
+
+    return f"phase unwrapping method (default auto); {help_text()}"
 
 
 def _denoisers() -> list[str]:
@@ -75,9 +87,9 @@ def add_processing_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--unwrap",
         default=defaults.unwrap,
-        choices=UNWRAP_METHODS,
-        help="phase unwrapping method (default auto: gray or spatial for one frequency, hierarchical when "
-        "frequency 1 is present, two-frequency for 2 coprime, heterodyne or three-frequency for 3)",
+        choices=LazyChoices(_unwrap_methods),
+        metavar="METHOD",
+        help=LazyHelp(_unwrap_help),  # type: ignore[arg-type]  # argparse calls str() on it
     )
     parser.add_argument(
         "--denoise",

@@ -38,7 +38,7 @@ import numpy as np
 
 from rig import __version__
 from rig.pipeline.plan import ProcessOptions
-from rig.pipeline.stages import SceneState, UnwrappedPhase
+from rig.pipeline.state import SceneState, UnwrappedPhase
 
 log = logging.getLogger(__name__)
 

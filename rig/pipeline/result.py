@@ -18,7 +18,7 @@ from calibration import models as calibration_models
 from calibration.store import Calibration
 from rig import __version__
 from rig.pipeline.plan import ProcessOptions
-from rig.pipeline.stages import SceneState
+from rig.pipeline.state import SceneState
 from rig.store import files as safe_files
 
 

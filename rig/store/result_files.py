@@ -17,7 +17,7 @@ import cv2
 import numpy as np
 
 if TYPE_CHECKING:
-    from rig.pipeline.stages import SceneState
+    from rig.pipeline.state import SceneState
 
 
 PREVIEW_BAR_PX = 90  # width of the scale bar panel at the right of the preview
