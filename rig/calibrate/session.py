@@ -421,10 +421,10 @@ def _planes(directory: Path) -> list[tuple[float, Path]]:
 
 
 def _copy_capture(source: Path, target: Path) -> None:
-    """Copy a capture directory atomically (an earlier capture at ``target`` is replaced)."""
+    """Copy a capture directory, verified when the calibration was computed, atomically (an earlier
+    capture at ``target`` is replaced)."""
     import shutil
 
-    read_capture(source)  # only a complete, verified capture is copied
     with files.staged_directory(target, ("capture",), True, CaptureError) as staging:
         shutil.copytree(source, staging, dirs_exist_ok=True)
 
@@ -438,7 +438,9 @@ class ComputedCalibration:
     lines: list[str]
     source: Path  # the session directory
     arrays: dict[str, np.ndarray] = field(default_factory=dict)  # file name -> array, saved beside calibration.json
-    reference: Path | None = None  # copied into an output other than ``source`` (references are relative, inside)
+    reference: Path | None = (
+        None  # verified; copied into an output other than ``source`` (references are relative, inside)
+    )
 
     def write(self, output: Path) -> CalibrationReport:
         """Write it all into ``output`` (calibration.json last) and return the summary."""
@@ -501,6 +503,7 @@ def compute_calibration(
         computed.arrays[COEFFICIENTS_FILE] = poly.coefficients
         extra.update({k: v for k, v in poly.fields(COEFFICIENTS_FILE).items() if k != "model"})
         computed.lines.append(f"polynomial degree {plan.degree}: residual RMS {poly.residual_rms_mm:.4f} mm")
+    read_capture(directory / REFERENCE_DIR)  # only a complete, verified capture is copied into another output
     computed.reference = directory / REFERENCE_DIR
     computed.calibration = Calibration(
         model=plan.model,
