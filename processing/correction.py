@@ -22,6 +22,7 @@ measured on the thesis' Table 4.1 protocol (see :func:`correct_auto`).
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -161,6 +162,112 @@ def default_decimation(shape: tuple[int, ...]) -> int:
     return DECIMATION if min(shape) >= DECIMATE_FROM else 1
 
 
+@dataclass(frozen=True)
+class _AutoMaps:
+    """What every step of :func:`correct_auto` reads: the validated maps and the solver settings."""
+
+    phase: np.ndarray  # measured absolute phase, finite wherever valid
+    wrapped: np.ndarray
+    valid: np.ndarray
+    sigma: float  # phase noise, blind to order errors
+    decimate: int
+    tau: float | None
+    svd: str
+    k_sigma: float
+
+    def low_rank_of(self, base: np.ndarray) -> tuple[np.ndarray, RPCAResult, np.ndarray]:
+        """Ch. 4 low-rank part of ``base`` stopped at the noise level (on block means when decimating) and
+        the pixels where a block solve blurred an edge (none at full resolution)."""
+        if self.decimate > 1:
+            return decimated_low_rank(base, self.valid, self.decimate, self.sigma, tau=self.tau, svd=self.svd)
+        low_rank, result = correct_phase_rpca(
+            base, self.valid, tau=self.tau, stable=True, svd=self.svd, noise_sigma=self.sigma
+        )
+        return low_rank, result, np.zeros(self.valid.shape, dtype=bool)
+
+
+@dataclass
+class _Candidates:
+    """Order maps ``auto`` ranks by their order breaks, and what ranking them needs."""
+
+    maps: dict[str, np.ndarray]
+    breaks: dict[str, int]
+    low_rank: np.ndarray
+    result: RPCAResult
+    rpca_input: str
+    rough: np.ndarray  # pixels where a block solve blurred an edge
+    misfit: np.ndarray
+    pooled_detail: np.ndarray | None = None  # step 5 on the pooled orders, computed alongside
+
+
+def _solve_low_rank(maps: _AutoMaps, pooled: np.ndarray, measured_breaks: int) -> _Candidates:
+    """Step 2: L of the pooled phase (far sparser errors), or of the measured phase where pooling left more
+    order breaks than it (ties keep the pooled phase, so pooled orders without a break always win).
+
+    L of the pooled phase is solved while its breaks are counted, and solved again on the measured
+    phase in that rare case.
+    """
+    solved, regions_breaks = side_by_side(lambda: maps.low_rank_of(pooled), lambda: order_breaks(pooled, maps.valid))
+    rpca_input = "regions" if regions_breaks <= measured_breaks else "measured"
+    low_rank, result, rough = solved if rpca_input == "regions" else maps.low_rank_of(maps.phase)
+    none = np.zeros(maps.valid.shape, dtype=bool)
+    return _Candidates({"regions": pooled}, {"regions": regions_breaks}, low_rank, result, rpca_input, rough, none)
+
+
+def _add_low_rank_orders(maps: _AutoMaps, found: _Candidates) -> np.ndarray:
+    """Step 3a: the pooled orders where L misfits the wrapped phase, L's re-derived orders elsewhere.
+
+    Returns L's re-derived orders everywhere (the guarded candidates of step 3b start from them).
+    Runs only where the pooled orders still break somewhere: without a break they cannot lose.
+    """
+    pooled, valid = found.maps["regions"], maps.valid
+    proposed, misfit = side_by_side(
+        lambda: reorder_from_low_rank(found.low_rank, maps.wrapped, valid),
+        lambda: low_rank_misfit(found.low_rank, maps.wrapped, valid) | (found.rough & valid),
+    )
+    found.misfit = misfit
+    candidate = found.maps["regions+low-rank"] = np.where(misfit, pooled, proposed)
+    found.pooled_detail, found.breaks["regions+low-rank"] = side_by_side(
+        lambda: keep_coherent_detail(found.low_rank, pooled, valid, maps.k_sigma, maps.sigma),
+        lambda: order_breaks(candidate, valid),
+    )
+    return proposed
+
+
+def _add_guarded_orders(maps: _AutoMaps, found: _Candidates, proposed: np.ndarray) -> None:
+    """Step 3b, where fringes are too dense to pool: L's orders, where L misfits changed only if the change
+    fits the neighbours of the measured phase (or of Ding's row vote), then settled from their neighbours."""
+    phase, wrapped, valid = maps.phase, maps.wrapped, maps.valid
+    for guard_name, guard in (("measured", phase), ("vote", vote_row_orders(phase, wrapped, valid))):
+        guarded = np.where(found.misfit, accept_if_consistent(proposed, guard, valid), proposed)
+        found.maps[guard_name] = settle_orders(guarded, wrapped, valid)
+        found.breaks[guard_name] = order_breaks(found.maps[guard_name], valid)
+
+
+def _candidate_orders(maps: _AutoMaps, pooled: np.ndarray, measured_breaks: int) -> _Candidates:
+    """Steps 2 - 3: L and the candidate order maps with their order breaks."""
+    found = _solve_low_rank(maps, pooled, measured_breaks)
+    proposed = None
+    if found.breaks["regions"] > 0:
+        proposed = _add_low_rank_orders(maps, found)
+    if proposed is not None and min(found.breaks.values()) > measured_breaks:
+        _add_guarded_orders(maps, found, proposed)
+    return found
+
+
+def _restore_detail(maps: _AutoMaps, found: _Candidates, chosen: str) -> tuple[np.ndarray, int]:
+    """Step 5: L except where the chosen orders depart from it coherently; and how many orders changed."""
+    reordered = found.maps[chosen]
+    return side_by_side(
+        lambda: (
+            found.pooled_detail
+            if chosen == "regions" and found.pooled_detail is not None
+            else keep_coherent_detail(found.low_rank, reordered, maps.valid, maps.k_sigma, maps.sigma)
+        ),
+        lambda: np.count_nonzero(maps.valid & (np.abs(reordered - maps.phase) > np.pi)),
+    )
+
+
 def correct_auto(
     absolute_phase: np.ndarray,
     wrapped_phase: np.ndarray,
@@ -201,81 +308,35 @@ def correct_auto(
     start = time.perf_counter()
     if not float(k_sigma) > 0:
         raise ValueError(f"k_sigma: expected > 0, found {k_sigma}")
-    k_sigma = float(k_sigma)
     phase, wrapped, valid = _inputs(absolute_phase, wrapped_phase, mask)
     pooled, (sigma, measured_breaks) = side_by_side(
         lambda: pool_region_orders(phase, wrapped, valid), lambda: phase_noise_and_breaks(phase, valid)
     )
     decimate = default_decimation(phase.shape) if decimate is None else int(decimate)
-
-    def low_rank_of(base: np.ndarray) -> tuple[np.ndarray, RPCAResult, np.ndarray]:
-        if decimate > 1:
-            return decimated_low_rank(base, valid, decimate, sigma, tau=tau, svd=svd)
-        low_rank, result = correct_phase_rpca(base, valid, tau=tau, stable=True, svd=svd, noise_sigma=sigma)
-        return low_rank, result, np.zeros(valid.shape, dtype=bool)
-
-    # RPCA on the pooled phase (far sparser errors) unless pooling left more order breaks than the
-    # measured phase (ties keep the pooled phase, so pooled orders without a break always win):
-    # solved while its breaks are counted, and solved again on the measured phase in that rare case.
-    solved, regions_breaks = side_by_side(lambda: low_rank_of(pooled), lambda: order_breaks(pooled, valid))
-    base_breaks = {"regions": regions_breaks, "measured": measured_breaks}
-    base_name = min(base_breaks, key=base_breaks.__getitem__)
-    low_rank, result, rough = solved if base_name == "regions" else low_rank_of(phase)
-    # Candidate order maps, the one with fewest order breaks kept: the pooled orders, alone and
-    # with L's orders where L fits the wrapped phase. Only where pooling left more order breaks
-    # than the measured phase (fringes too dense for regions) are L's orders also guarded (where
-    # L misfits, an order change must fit the neighbours of the measured phase or of the row
-    # vote) and settled, as the earlier auto did. Pooled orders without any break cannot lose
-    # (ties keep them), so then L only denoises.
-    candidates = {"regions": pooled}
-    breaks = {"regions": base_breaks["regions"]}
-    misfit = np.zeros(valid.shape, dtype=bool)
-    pooled_detail = None  # step 5 on the pooled orders, done while the other candidate's breaks are counted
-    if breaks["regions"] > 0:
-        proposed, misfit = side_by_side(
-            lambda: reorder_from_low_rank(low_rank, wrapped, valid),
-            lambda: low_rank_misfit(low_rank, wrapped, valid) | (rough & valid),
-        )
-        candidate = candidates["regions+low-rank"] = np.where(misfit, pooled, proposed)
-        pooled_detail, breaks["regions+low-rank"] = side_by_side(
-            lambda: keep_coherent_detail(low_rank, pooled, valid, k_sigma, sigma),
-            lambda: order_breaks(candidate, valid),
-        )
-    if min(breaks.values()) > base_breaks["measured"]:
-        for guard_name, guard in (("measured", phase), ("vote", vote_row_orders(phase, wrapped, valid))):
-            guarded = np.where(misfit, accept_if_consistent(proposed, guard, valid), proposed)
-            candidates[guard_name] = settle_orders(guarded, wrapped, valid)
-            breaks[guard_name] = order_breaks(candidates[guard_name], valid)
-    guard_name = min(breaks, key=breaks.__getitem__)  # ties: the first
-    reordered = candidates[guard_name]
-    out, changed = side_by_side(
-        lambda: (
-            pooled_detail
-            if guard_name == "regions" and pooled_detail is not None
-            else keep_coherent_detail(low_rank, reordered, valid, k_sigma, sigma)
-        ),
-        lambda: np.count_nonzero(valid & (np.abs(reordered - phase) > np.pi)),
-    )
+    maps = _AutoMaps(phase, wrapped, valid, sigma, decimate, tau, svd, float(k_sigma))
+    found = _candidate_orders(maps, pooled, measured_breaks)
+    chosen = min(found.breaks, key=found.breaks.__getitem__)  # ties: the first
+    out, changed = _restore_detail(maps, found, chosen)
     parameters = {
         "tau": tau if tau is not None else default_tau(phase.shape),
         "stable": True,
-        "k_sigma": k_sigma,
+        "k_sigma": maps.k_sigma,
         "svd": svd,
     }
+    steps = ["pool-region-orders", "rpca-phase", "reorder-if-consistent"]
+    steps += (["settle-orders"] if len(found.maps) > 2 else []) + ["restore-detail"]
     return out, _solver_info(
         "auto",
         parameters,
         start,
         frequency,
-        result,
-        steps=["pool-region-orders", "rpca-phase", "reorder-if-consistent"]
-        + (["settle-orders"] if len(candidates) > 2 else [])
-        + ["restore-detail"],
+        found.result,
+        steps=steps,
         orders_changed=int(changed),
-        misfit_pixels=int(np.count_nonzero(misfit)),
-        guard=guard_name,
-        order_breaks=breaks,
-        rpca_input=base_name,
+        misfit_pixels=int(np.count_nonzero(found.misfit)),
+        guard=chosen,
+        order_breaks=found.breaks,
+        rpca_input=found.rpca_input,
     )
 
 
