@@ -264,7 +264,7 @@ def _restore_detail(maps: _AutoMaps, found: _Candidates, chosen: str) -> tuple[n
             if chosen == "regions" and found.pooled_detail is not None
             else keep_coherent_detail(found.low_rank, reordered, maps.valid, maps.k_sigma, maps.sigma)
         ),
-        lambda: np.count_nonzero(maps.valid & (np.abs(reordered - maps.phase) > np.pi)),
+        lambda: int(np.count_nonzero(maps.valid & (np.abs(reordered - maps.phase) > np.pi))),
     )
 
 
