@@ -147,7 +147,7 @@ def _shape(
         angle = rng.uniform(0.0, np.pi)
         along = (x - cx) * np.cos(angle) + (y - cy) * np.sin(angle)
         inside = (np.abs(x - cx) < r) & (np.abs(y - cy) < r)
-        return np.where(inside, top * (along + r) / (2.0 * r), 0.0)
+        return np.where(inside, top * np.clip((along + r) / (2.0 * r), 0.0, 1.0), 0.0)
     # steps: a staircase of 2 - 5 treads along a random axis
     count = int(rng.integers(2, 6))
     along = x - cx if rng.random() < 0.5 else y - cy
