@@ -26,6 +26,8 @@ from processing.angles import wrap_to_pi
 SPATIAL_STEP_LIMIT_RAD = 0.8 * np.pi
 # Lag of the alias check: an order error moves the slope over this span by 2 pi / LAG_PX per order.
 LAG_PX = 32
+# The steps are taken on evenly spaced lines holding at most this many pixels.
+SAMPLE_PIXELS = 1 << 18
 
 
 def _pairs(mask: np.ndarray, axis: int, lag: int) -> tuple[tuple[slice, slice], tuple[slice, slice], np.ndarray]:
@@ -48,12 +50,23 @@ def _median_step(phase: np.ndarray, mask: np.ndarray, axis: int, lag: int, wrap:
     return float(np.median(steps)) / lag if steps.size else float("nan")
 
 
+def _sampled_lines(phase: np.ndarray, mask: np.ndarray, axis: int) -> tuple[np.ndarray, np.ndarray]:
+    """Every k-th line along ``axis`` (rows for axis 1), k chosen so that at most :data:`SAMPLE_PIXELS`
+    pixels remain: a median over a few hundred thousand steps is as good as over all of them."""
+    lines = phase.shape[1 - axis]
+    stride = max(1, -(-phase.size // SAMPLE_PIXELS))
+    stride = min(stride, max(lines // 16, 1))  # keep at least 16 lines
+    pick = (slice(None, None, stride), slice(None)) if axis == 1 else (slice(None), slice(None, None, stride))
+    return phase[pick], mask[pick]
+
+
 def fringe_step_rad(absolute_phase: np.ndarray, valid: np.ndarray, axis: int) -> float:
     """Phase step between valid neighbours along ``axis`` (radians per pixel), blind to fringe orders.
 
     The median of the neighbour differences wrapped into [-pi, pi) (the wrapped phase's steps; any
     2 pi representation of the phase gives the same), unless the absolute phase's median slope over
-    :data:`LAG_PX` pixels exceeds pi per pixel, where wrapped steps alias: then that slope.
+    :data:`LAG_PX` pixels exceeds pi per pixel, where wrapped steps alias: then that slope. Both
+    medians are taken on evenly spaced lines across the fringes (:data:`SAMPLE_PIXELS` at most).
 
     Parameters
     ----------
@@ -74,6 +87,7 @@ def fringe_step_rad(absolute_phase: np.ndarray, valid: np.ndarray, axis: int) ->
         raise ValueError(f"valid: expected the shape of absolute_phase {phase.shape}, found {mask.shape}")
     if axis not in (0, 1):
         raise ValueError(f"axis: expected 0 or 1, found {axis!r}")
+    phase, mask = _sampled_lines(phase, mask, axis)
     wrapped_step = _median_step(phase, mask, axis, 1, wrap=True)
     lag = min(LAG_PX, max(phase.shape[axis] // 4, 1))
     slope = _median_step(phase, mask, axis, lag, wrap=False)
