@@ -321,11 +321,11 @@ def correct_auto(
     temporal order at all (tall objects, large shadows) that made ``auto`` up to 34x worse than
     no correction (``benchmarks/bench_auto_family.py``).
 
-    Measured (rig study's cases at 1000 x 1000, seeds 0-2, NMSE_h; ``python -m rig.cli study``):
-    isolated objects, f = (18, 25), 18 dB, a quarter of the orders wrong: 3.4e-4 - 4.5e-4, 0.28 -
-    0.36x the true orders' 1.24e-3 (``rpca-phase`` 0.09 - 0.12, vote 0.09); sphere cap 10 dB
-    3.3e-5 (``rpca-phase`` 3.1e-3 - 3.8e-3); Table 4.1 2.2e-5, 0.5x ``rpca-phase`` (4.0e-5 -
-    4.7e-5); at 25 dB 3.4e-6 (``rpca-phase`` 6.9e-6). About 0.2 - 0.3 s of CPU per map there.
+    Measured (``rig study``, 1000 x 1000, seeds 0-2, NMSE_h): isolated objects, f = (18, 25), 18 dB, a
+    quarter of the orders wrong: 3.2e-4 - 4.3e-4, 0.26 - 0.34x the true orders' (``rpca-phase``
+    0.09 - 0.12); sphere cap 10 dB 3.3e-5 (``rpca-phase`` 3.1e-3 - 4.9e-3); Table 4.1 2.2e-5.
+    Drawn cases (``benchmarks/bench_auto_family.py``, docs/study/family.md): held-out median 0.06x
+    the oracle, within 2x on 54 of 64.
     """
     start = time.perf_counter()
     if not float(k_sigma) > 0:
