@@ -316,10 +316,8 @@ def correct_auto(
        (:func:`~processing.phase_correction.restore_detail`, ``k_sigma`` standard deviations
        of the 3 x 3 mean residual), and never where L lies a fringe or more from the kept orders.
 
-    Why step 5: the fewest breaks over the whole map (step 4) let pooling across a real height
-    step trade a few wrong orders for fewer breaks elsewhere; on drawn cases with no wrong
-    temporal order at all (tall objects, large shadows) that made ``auto`` up to 34x worse than
-    no correction (``benchmarks/bench_auto_family.py``).
+    Why step 5: the fewest breaks over the whole map let pooling across a real height step trade
+    a few wrong orders for fewer breaks elsewhere (up to 34x worse than no correction on drawn cases).
 
     Measured (``rig study``, 1000 x 1000, seeds 0-2, NMSE_h): isolated objects, f = (18, 25), 18 dB, a
     quarter of the orders wrong: 3.2e-4 - 4.3e-4, 0.26 - 0.34x the true orders' (``rpca-phase``
