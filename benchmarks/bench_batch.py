@@ -9,7 +9,7 @@ Rows, interleaved over ``--runs`` runs (median, min..max):
 - ``batch 1 worker`` / ``batch 2 workers``: :func:`rig.batch.run_batch` on a fresh output directory
   with a local cluster of that many single-threaded worker processes; end to end (cluster start
   included) and steady state (first task submitted to last result back);
-- ``in-process loop``: the functions `rig process` runs (process + write_outputs), one capture after
+- ``in-process loop``: the functions `rig process` runs (process + write_result), one capture after
   the other in this process: the per-capture work without Dask, the peer for Dask's overhead;
 - ``rig process loop``: the shell loop issue 14 replaces, one `rig process` subprocess per capture
   (on ``--loop-sample`` captures, timed once).
@@ -48,15 +48,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.dask_cluster import external_cluster, repo_env  # noqa: E402
 from benchmarks.measure import cpu_description, load_line  # noqa: E402
+from rig.api import process  # noqa: E402
 from rig.batch import BatchPlan, run_batch  # noqa: E402
 from rig.batch.discovery import INCOMPLETE_REASON  # noqa: E402
 from rig.batch.index import read_table  # noqa: E402
 from rig.events import Event, Reporter  # noqa: E402
 from rig.hardware.synthesis import write_simulated_archive  # noqa: E402
-from rig.pipeline.outputs import write_outputs  # noqa: E402
-from rig.pipeline.plan import DEFAULT_CORRECTION, ProcessOptions  # noqa: E402
-from rig.pipeline.run import process  # noqa: E402
+from rig.pipeline.plan import ProcessOptions  # noqa: E402
 from rig.store.files import INCOMPLETE_MARK, REPLACED_MARK  # noqa: E402
+from rig.store.results import write_result  # noqa: E402
 
 ARRAYS = ("height.npy", "phase.npy", "mask.npy")
 
@@ -101,7 +101,7 @@ def time_batch(archive: Path, calibration: Path, out: Path, workers: int | None,
             calibration=calibration,
             workers=workers,
             scheduler=scheduler,
-            options=ProcessOptions(correction=DEFAULT_CORRECTION),
+            options=ProcessOptions(),
         ),
         progress=Reporter("batch", sink=events.append),
     )
@@ -119,13 +119,13 @@ def time_batch(archive: Path, calibration: Path, out: Path, workers: int | None,
 
 
 def in_process_loop(archive: Path, calibration: Path, names: list[str], out: Path) -> float:
-    """process + write_outputs per capture in this process (what `rig process` runs); wall seconds."""
+    """process + write_result per capture in this process (what `rig process` runs); wall seconds."""
     shutil.rmtree(out, ignore_errors=True)
-    options = ProcessOptions(correction=DEFAULT_CORRECTION)
+    options = ProcessOptions()
     t0 = time.perf_counter()
     for name in names:
         with contextlib.suppress(Exception):
-            write_outputs(process(archive / name, calibration, options), out / name)
+            write_result(process(archive / name, calibration, options), out / name)
     return time.perf_counter() - t0
 
 
@@ -228,7 +228,7 @@ def kill_and_rerun(archive: Path, calibration: Path, out: Path, good: int, seed:
             output=out,
             calibration=calibration,
             workers=2,
-            options=ProcessOptions(correction=DEFAULT_CORRECTION),
+            options=ProcessOptions(),
         ),
         progress=Reporter("batch", sink=events.append),
     )

@@ -6,8 +6,8 @@ process`` then fills the calibration's reference cache, as the first scan after 
 does. Rows, each a fresh ``python -m rig.cli`` process of this checkout, timed in interleaved runs:
 
 - ``rig --help``;
-- ``rig process CAPTURE --calibration CAL -o OUT --correction none``;
-- ``rig process CAPTURE --calibration CAL -o OUT`` (the default correction, ``auto``);
+- ``rig process CAPTURE --calibration CAL -o OUT --overwrite --correction none``;
+- ``rig process CAPTURE --calibration CAL -o OUT --overwrite`` (the default correction, ``auto``);
 - the peer, ``python -c "import numpy, cv2"``: the start-up floor of any Python tool built on
   them, measured in the same runs.
 
@@ -122,7 +122,17 @@ def main(argv: list[str] | None = None) -> int:
         print(f"simulating a {width}x{height} capture (2 frequencies x 6 steps) ...", file=sys.stderr)
         capture, calibration = prepare(work, (width, height))
         rig = [sys.executable, "-m", "rig.cli"]
-        process = [*rig, "process", str(capture), "--calibration", str(calibration), "-o", str(work / "out"), "-q"]
+        process = [
+            *rig,
+            "process",
+            str(capture),
+            "--calibration",
+            str(calibration),
+            "-o",
+            str(work / "out"),
+            "-q",
+            "--overwrite",
+        ]
         rows = {"rig --help": [*rig, "--help"], "rig process --correction none": [*process, "--correction", "none"]}
         if not args.no_auto:
             rows["rig process (default correction)"] = process

@@ -21,6 +21,7 @@ from calibration.errors import CalibrationError
 from calibration.polynomial import POLYNOMIAL, load_polynomial
 from calibration.stereo import STEREO, StereoModel, triangulate
 from calibration.store import REFERENCE_PLANE
+from processing.height import phase_to_height
 
 MODELS = (REFERENCE_PLANE, POLYNOMIAL, STEREO)
 
@@ -125,8 +126,6 @@ def height_from_phase(
     """
     _check_model(calibration)
     if calibration.model == REFERENCE_PLANE:
-        from processing.height import phase_to_height
-
         delta = _delta(object_phase, reference_phase, calibration)
         assert calibration.l0_mm is not None and calibration.d0_mm is not None  # checked when read
         with np.errstate(invalid="ignore", divide="ignore"):

@@ -24,7 +24,10 @@ from typing import Any
 import cv2
 import numpy as np
 
+from calibration.camera import detect_board
 from calibration.errors import CalibrationError
+from processing.phase_shift import phase_shift
+from processing.temporal import unwrap_hierarchical
 
 STEREO = "stereo"
 
@@ -393,8 +396,6 @@ def hierarchical_phase(
 ) -> np.ndarray:
     """Absolute phase at the last frequency from ``steps``-step stacks at ``frequencies`` (1 first),
     NaN where the fringe modulation is below ``min_modulation_ratio`` of its 99th percentile."""
-    from processing.phase_shift import phase_shift
-    from processing.temporal import unwrap_hierarchical
 
     stack = np.asarray(frames)
     if stack.ndim != 3 or stack.shape[0] != steps * len(frequencies):
@@ -416,7 +417,6 @@ def board_phase_view(
 ) -> BoardPhaseView | None:
     """A :class:`BoardPhaseView` from a board image and vertical / horizontal fringe stacks on it
     (hierarchical frequencies, 1 first); None when the board is not found in the image."""
-    from calibration.camera import detect_board
 
     found = detect_board(board_image, board)
     if found is None:

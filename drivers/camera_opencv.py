@@ -18,6 +18,7 @@ import collections
 import logging
 from typing import Any
 
+import cv2
 import numpy as np
 
 from drivers.camera import Camera, Frame, TriggerMode, TriggerSource
@@ -73,7 +74,6 @@ class OpenCVCamera(Camera):
         return self._size
 
     def _open(self) -> None:
-        import cv2
 
         api = cv2.CAP_ANY if self.api_preference is None else self.api_preference
         cap = cv2.VideoCapture(self.source, api)
@@ -104,7 +104,6 @@ class OpenCVCamera(Camera):
         return ok
 
     def _set_exposure_us(self, value: float) -> float | None:
-        import cv2
 
         if self.is_device:
             self._set_property(cv2.CAP_PROP_AUTO_EXPOSURE, V4L2_MANUAL_EXPOSURE, "manual exposure")
@@ -113,7 +112,6 @@ class OpenCVCamera(Camera):
         return None
 
     def _set_gain(self, value: float) -> float | None:
-        import cv2
 
         if self._set_property(cv2.CAP_PROP_GAIN, value, "gain"):
             return float(self._cap.get(cv2.CAP_PROP_GAIN))
@@ -135,7 +133,6 @@ class OpenCVCamera(Camera):
         self._queue.clear()
 
     def _do_trigger(self) -> None:
-        import cv2
 
         count = self._burst_length if self._trigger_mode is TriggerMode.BURST else 1
         trigger_index = self.trigger_count - 1  # trigger() notes the trigger before this hook

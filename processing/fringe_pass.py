@@ -280,54 +280,36 @@ def fringe_pass(
     """
     stack = _validate.real_array(frames, "frames", ndim=3)
     count, height, width = stack.shape
-    lists = _check_groups(groups, count)
-    freqs = [
-        _validate.finite_float(f, f"frequencies[{i}]", minimum=0.0, strict=True) for i, f in enumerate(frequencies)
-    ]
-    if len(freqs) != len(lists):
-        raise ValueError(f"frequencies: expected {len(lists)} (one per group), found {len(freqs)}")
-    if shifts is not None and len(shifts) != len(lists):
-        raise ValueError(
-            f"shifts: expected {len(lists)} entries (one per group, None for uniform), found {len(shifts)}"
-        )
-    ratio = _validate.finite_float(min_ratio, "min_ratio", minimum=0.0, strict=True)
-    if ratio > 1.0:
-        raise ValueError(f"min_ratio: expected a fraction in (0, 1], found {min_ratio!r}")
+    lists, freqs, ratio = _checked_groups(groups, count, frequencies, shifts, min_ratio)
     threads = _validate.positive_int(threads, "threads")
     cv2 = _backend(opencv)
-    kernel: TurnKernel | None = None
-    used: list[int] = []
-    tables: _DingTables | None = None
-    if method is not None:
-        if method not in TEMPORAL_METHODS:
-            raise ValueError(f"method: expected one of {', '.join(TEMPORAL_METHODS)} or None, found {method!r}")
-        whole = [f for f in freqs if float(f).is_integer()]
-        if len(whole) != len(freqs):
-            raise ValueError(f"frequencies: temporal unwrapping needs whole fringe counts, found {freqs}")
-        kernel, used = turn_kernel(method, [int(f) for f in freqs], max_residual)
-        if method == "two-frequency" and cv2 is not None:
-            tables = _ding_tables([int(f) for f in freqs], used)
+    kernel, used, tables = _temporal_kernel(method, freqs, max_residual, cv2)
     specs = [
         _Group(_rows(g), shift_weights(len(g), None if shifts is None else shifts[k]).astype(np.float32))
         for k, g in enumerate(lists)
     ]
     flat = stack.reshape(count, -1)
-    pixels = flat.shape[1]
     thresholds = [
         max(ratio * _sampled_high(flat, spec, (height, width), cv2), float(np.finfo(np.float32).tiny)) for spec in specs
     ]
     kept = list(range(len(lists))) if keep_all else [len(lists) - 1]
-    out = _Outputs.allocate(pixels, len(kept), method is not None, orders, brightness)
+    out = _Outputs.allocate(flat.shape[1], len(kept), method is not None, orders, brightness)
     nonnegative = np.issubdtype(stack.dtype, np.unsignedinteger) and all((s.weights[0] >= 0).all() for s in specs)
     plan = _Plan(flat, specs, thresholds, ratio, kept, kernel, used, tables, cv2, nonnegative)
-    bounds = _thread_ranges(pixels, threads)
-    if len(bounds) == 1:
-        plan.run(out, *bounds[0])
-    else:
-        with ThreadPoolExecutor(len(bounds)) as pool:
-            for future in [pool.submit(plan.run, out, start, stop) for start, stop in bounds]:
-                future.result()
-    shape = (height, width)
+    _run_blocks(plan, out, flat.shape[1], threads)
+    return _result(out, freqs, method, kept, thresholds, used, (height, width))
+
+
+def _result(
+    out: _Outputs,
+    freqs: list[float],
+    method: str | None,
+    kept: list[int],
+    thresholds: list[float],
+    used: list[int],
+    shape: tuple[int, int],
+) -> FringePass:
+    """The pass's flat outputs as (H, W) maps."""
     return FringePass(
         frequencies=freqs,
         method=method,
@@ -343,6 +325,57 @@ def fringe_pass(
         phase_frequency=freqs[used[-1]] if used else freqs[-1],
         brightness=[m.reshape(shape) for m in out.brightness],
     )
+
+
+def _checked_groups(
+    groups: Sequence[Sequence[int]],
+    count: int,
+    frequencies: Sequence[float],
+    shifts: Sequence[np.ndarray | None] | None,
+    min_ratio: float,
+) -> tuple[list[list[int]], list[float], float]:
+    """:func:`fringe_pass`'s groups, frequencies, shifts and ratio checked: (groups, frequencies, ratio)."""
+    lists = _check_groups(groups, count)
+    freqs = [
+        _validate.finite_float(f, f"frequencies[{i}]", minimum=0.0, strict=True) for i, f in enumerate(frequencies)
+    ]
+    if len(freqs) != len(lists):
+        raise ValueError(f"frequencies: expected {len(lists)} (one per group), found {len(freqs)}")
+    if shifts is not None and len(shifts) != len(lists):
+        raise ValueError(
+            f"shifts: expected {len(lists)} entries (one per group, None for uniform), found {len(shifts)}"
+        )
+    ratio = _validate.finite_float(min_ratio, "min_ratio", minimum=0.0, strict=True)
+    if ratio > 1.0:
+        raise ValueError(f"min_ratio: expected a fraction in (0, 1], found {min_ratio!r}")
+    return lists, freqs, ratio
+
+
+def _temporal_kernel(
+    method: str | None, freqs: list[float], max_residual: float, cv2: Any | None
+) -> tuple[TurnKernel | None, list[int], _DingTables | None]:
+    """The method's kernel on turns, the indices of the frequencies it reads, and OpenCV's Ding tables."""
+    if method is None:
+        return None, [], None
+    if method not in TEMPORAL_METHODS:
+        raise ValueError(f"method: expected one of {', '.join(TEMPORAL_METHODS)} or None, found {method!r}")
+    whole = [f for f in freqs if float(f).is_integer()]
+    if len(whole) != len(freqs):
+        raise ValueError(f"frequencies: temporal unwrapping needs whole fringe counts, found {freqs}")
+    kernel, used = turn_kernel(method, [int(f) for f in freqs], max_residual)
+    tables = _ding_tables([int(f) for f in freqs], used) if method == "two-frequency" and cv2 is not None else None
+    return kernel, used, tables
+
+
+def _run_blocks(plan: _Plan, out: _Outputs, pixels: int, threads: int) -> None:
+    """The plan over every pixel, on ``threads`` threads sharing the blocks."""
+    bounds = _thread_ranges(pixels, threads)
+    if len(bounds) == 1:
+        plan.run(out, *bounds[0])
+        return
+    with ThreadPoolExecutor(len(bounds)) as pool:
+        for future in [pool.submit(plan.run, out, start, stop) for start, stop in bounds]:
+            future.result()
 
 
 def _sampled_high(flat: np.ndarray, spec: _Group, shape: tuple[int, int], cv2: Any | None) -> float:

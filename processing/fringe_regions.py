@@ -24,7 +24,9 @@ windows for the few re-voted pixels.
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 
 from processing.angles import wrap_to_pi
 
@@ -81,7 +83,6 @@ def _fringe_regions(
     steps: tuple[np.ndarray, np.ndarray], valid: np.ndarray, cut: float, bend: float
 ) -> tuple[np.ndarray, np.ndarray, int]:
     """:func:`fringe_regions` from the :func:`_steps` of the masked wrapped phase."""
-    import cv2  # lazily: only the commands that correct orders pay for it
 
     down, across = steps
     step = np.zeros(valid.shape, dtype=bool)
@@ -173,7 +174,6 @@ def _window_majority(
     the sorted windows are scanned with the window position as the leading axis, where
     numpy's running maximum and maximum are vectorised across pixels.
     """
-    from numpy.lib.stride_tricks import sliding_window_view
 
     side = 2 * radius + 1
     size = side * side

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 from scipy import fft as sfft
 
@@ -142,7 +143,6 @@ def fringe_background(fringe: np.ndarray, carrier: float, axis: int = 1) -> np.n
     axis : int
         1: fringes vary along x; 0: along y.
     """
-    import cv2
 
     axis = _check_axis(axis)
     period = max(int(round(1.0 / abs(carrier))), 1) if carrier else 1

@@ -22,6 +22,7 @@ the truth (see :func:`processing.correction.correct_auto`).
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
 from processing import _validate
@@ -366,7 +367,6 @@ def upsample_blocks(blocks: np.ndarray, factor: int, shape: tuple[int, int]) -> 
     extrapolated block on every side, so the pixels outside the outermost centres follow the
     slope rather than a constant. Returns (``shape``) float32.
     """
-    import cv2  # lazily: only auto's decimated solve needs it
 
     grid = np.asarray(blocks, dtype=np.float32)
     if grid.shape[0] > 1:

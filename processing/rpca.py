@@ -223,11 +223,46 @@ def rpca_ialm(
     RPCAResult
     """
     start = time.perf_counter()
+    d, tau, tol, rho = _ialm_arguments(D, tau, tol, max_iter, rho, svd, dtype)
+    m, n = d.shape
+    norm_fro = float(np.linalg.norm(d))
+    if norm_fro == 0.0:
+        zeros = np.zeros_like(d)
+        return RPCAResult(zeros, zeros.copy(), 0, 0, True, 0.0, time.perf_counter() - start)
+    y, mu = _ialm_start(d, tau)
+    stop_abs = tol * norm_fro
+    if stable:
+        sigma = robust_noise_sigma(d) if noise_sigma is None else float(noise_sigma)
+        if not (np.isfinite(sigma) and sigma >= 0):
+            raise ValueError(f"noise_sigma: expected a finite value >= 0, found {noise_sigma}")
+        stop_abs = max(stop_abs, np.sqrt(m * n) * sigma)
+    state = SubspaceState()
+    low_rank, sparse, iteration, rank, converged, residual = _ialm_iterate(
+        d, y, mu, rho, tau, stop_abs, norm_fro, int(max_iter), svd, state
+    )
+    seconds = time.perf_counter() - start
+    log.debug(
+        "rpca_ialm %dx%d: %d iterations, rank %d, residual %.2e, %.3f s (%d partial, %d full SVDs)",
+        m,
+        n,
+        iteration,
+        rank,
+        residual,
+        seconds,
+        state.partial_svds,
+        state.full_svds,
+    )
+    return RPCAResult(low_rank, sparse, iteration, rank, converged, residual, seconds)
+
+
+def _ialm_arguments(
+    D: np.ndarray, tau: float | None, tol: float, max_iter: int, rho: float, svd: str, dtype: np.dtype | type | None
+) -> tuple[np.ndarray, float, float, float]:
+    """:func:`rpca_ialm`'s arguments checked: (D in the working precision, tau, tol, rho)."""
     d_in = check_matrix(D)
     check_svd_method(svd)
     work = _working_dtype(d_in, dtype)
     d = d_in.astype(work, copy=False)
-    m, n = d.shape
     tau = default_tau(d.shape) if tau is None else _positive(tau, "tau")
     tol = _positive(tol, "tol")
     if work == np.float32:
@@ -237,24 +272,30 @@ def rpca_ialm(
         raise ValueError(f"rho: expected > 1, found {rho}")
     if int(max_iter) < 1:
         raise ValueError(f"max_iter: expected >= 1, found {max_iter}")
+    return d, tau, tol, rho
 
-    norm_fro = float(np.linalg.norm(d))
-    if norm_fro == 0.0:
-        zeros = np.zeros_like(d)
-        return RPCAResult(zeros, zeros.copy(), 0, 0, True, 0.0, time.perf_counter() - start)
+
+def _ialm_start(d: np.ndarray, tau: float) -> tuple[np.ndarray, float]:
+    """Y0 = D / max(||D||_2, ||D||_inf / tau) and mu0 = 1.25 / ||D||_2 (thesis eq. 4.3)."""
     norm_two = float(np.linalg.norm(d.astype(np.float64), 2)) if min(d.shape) <= 64 else _spectral_norm(d)
     norm_inf = float(np.max(np.abs(d))) / tau
-    y = d / max(norm_two, norm_inf)
-    mu = 1.25 / norm_two
-    mu_max = mu * 1e7
-    stop_abs = tol * norm_fro
-    if stable:
-        sigma = robust_noise_sigma(d) if noise_sigma is None else float(noise_sigma)
-        if not (np.isfinite(sigma) and sigma >= 0):
-            raise ValueError(f"noise_sigma: expected a finite value >= 0, found {noise_sigma}")
-        stop_abs = max(stop_abs, np.sqrt(m * n) * sigma)
+    return d / max(norm_two, norm_inf), 1.25 / norm_two
 
-    state = SubspaceState()
+
+def _ialm_iterate(
+    d: np.ndarray,
+    y: np.ndarray,
+    mu: float,
+    rho: float,
+    tau: float,
+    stop_abs: float,
+    norm_fro: float,
+    max_iter: int,
+    svd: str,
+    state: SubspaceState,
+) -> tuple[np.ndarray, np.ndarray, int, int, bool, float]:
+    """The inexact ALM iterations (eqs. 4.4-4.9): (L, S, iterations, rank, converged, relative residual)."""
+    mu_max = mu * 1e7
     sparse = np.zeros_like(d)
     low_rank = np.zeros_like(d)
     rank = 0
@@ -263,7 +304,7 @@ def rpca_ialm(
     iteration = 0
     target = np.empty_like(d)
     gap = np.empty_like(d)
-    for iteration in range(1, int(max_iter) + 1):  # noqa: B007  (reported after the loop)
+    for iteration in range(1, max_iter + 1):  # noqa: B007  (reported after the loop)
         inv_mu = 1.0 / mu
         np.multiply(y, inv_mu, out=target)
         target += d  # D + Y / mu, shared by both updates
@@ -279,19 +320,7 @@ def rpca_ialm(
             break
         y += mu * gap
         mu = min(mu * rho, mu_max)
-    seconds = time.perf_counter() - start
-    log.debug(
-        "rpca_ialm %dx%d: %d iterations, rank %d, residual %.2e, %.3f s (%d partial, %d full SVDs)",
-        m,
-        n,
-        iteration,
-        rank,
-        residual,
-        seconds,
-        state.partial_svds,
-        state.full_svds,
-    )
-    return RPCAResult(low_rank, sparse, iteration, rank, converged, residual, seconds)
+    return low_rank, sparse, iteration, rank, converged, residual
 
 
 def _spectral_norm(d: np.ndarray) -> float:

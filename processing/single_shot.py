@@ -35,12 +35,19 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import cv2
 import numpy as np
+from scipy import ndimage
 
 from processing import _validate
+from processing.ftp import detect_carrier, ftp_phase
+from processing.rpca import rpca_ialm
+from processing.spatial import unwrap_quality_guided
+from processing.voting import vote_row_orders
 
 log = logging.getLogger(__name__)
 
@@ -141,7 +148,6 @@ def separate_fringe_speckle(
     fringe, speckle : (H, W) float32
     result : RPCAResult
     """
-    from processing.rpca import rpca_ialm
 
     scale = float(np.max(np.abs(image))) or 1.0
     result = rpca_ialm(
@@ -207,8 +213,6 @@ def prepare_reference(
         absolute = None if absolute is None else absolute.T
     fringe, speckle, _ = _split(ref, tau, rpca_tol, separate, svd)
     if carrier is None:
-        from processing.ftp import detect_carrier
-
         carrier = detect_carrier(fringe, axis=1)
     wrapped, _ = _ftp_wrapped(fringe, carrier, bandwidth)
     if absolute is None:
@@ -265,7 +269,6 @@ def _split(image: np.ndarray, tau, rpca_tol, separate: bool, svd: str):
 
 def _ftp_wrapped(fringe: np.ndarray, carrier: float, bandwidth: float) -> tuple[np.ndarray, np.ndarray]:
     """FTP wrapped phase and amplitude of a fringe part (fringes along x)."""
-    from processing.ftp import ftp_phase
 
     phase, amplitude = ftp_phase(fringe, carrier=carrier, axis=1, bandwidth=bandwidth)
     return np.asarray(phase, dtype=np.float64), np.asarray(amplitude, dtype=np.float64)
@@ -330,7 +333,6 @@ def _consistent_unwrap(
     offset by whole periods towards the reference, interpolated back to full size, and every
     pixel's n taken as the whole number of periods nearest to it.
     """
-    from processing.spatial import unwrap_quality_guided
 
     rows, cols = wrapped_phase.shape
     valid = np.ones((rows, cols), dtype=bool) if mask is None else mask
@@ -409,49 +411,83 @@ def correlate_orders(
     if max_shift is not None:
         shift_lo, shift_hi = max(shift_lo, -int(max_shift)), min(shift_hi, int(max_shift))
 
-    inverse = _inverse_table(ref_abs)
-    row_lo = ref_abs[:, 0]
-    row_hi = ref_abs[:, -1]
-    map_y = np.broadcast_to(np.arange(rows, dtype=np.float32)[:, None], (rows, cols)).copy()
-    psi32 = psi.astype(np.float32)
-
     # Pixels outside the mask (shadows) carry no speckle: zero them in both images so that a
     # window straddling a shadow compares only what both sides can see.
     keep = np.ones((rows, cols), dtype=np.float32) if mask is None else mask.astype(np.float32)
     a = speckle.astype(np.float32) * keep
     mean_a = _box_mean(a, patch)
-    var_a = np.maximum(_box_mean(a * a, patch) - mean_a * mean_a, 0.0)
-    b_src = reference.speckle.astype(np.float32)
+    scorer = _ShiftScorer(
+        a=a,
+        mean_a=mean_a,
+        var_a=np.maximum(_box_mean(a * a, patch) - mean_a * mean_a, 0.0),
+        keep=keep,
+        b_src=reference.speckle.astype(np.float32),
+        psi32=psi.astype(np.float32),
+        map_y=np.broadcast_to(np.arange(rows, dtype=np.float32)[:, None], (rows, cols)).copy(),
+        row_lo=ref_abs[:, 0],
+        row_hi=ref_abs[:, -1],
+        inverse=_inverse_table(ref_abs),
+        base_order=base_order,
+        order_range=(order_lo, order_hi),
+        solve=np.ones((rows, cols), dtype=bool) if mask is None else mask,
+        patch=patch,
+    )
     best = np.full((rows, cols), _NO_SCORE, dtype=np.float32)
     best_order = np.full((rows, cols), -1, dtype=np.int64)
-    solve = np.ones((rows, cols), dtype=bool) if mask is None else mask
-    half = patch // 2
     for shift in range(shift_lo, shift_hi + 1):
-        order = base_order + shift
-        candidate = solve & (order >= order_lo) & (order <= order_hi)
+        scorer.update(shift, best, best_order)
+    if mask is not None:
+        best_order = np.where(mask, best_order, -1)
+    return best_order, best
+
+
+@dataclass
+class _ShiftScorer:
+    """What every tested order shift compares: the object's speckle and its window statistics, and
+    the reference speckle to warp onto it (:func:`correlate_orders`)."""
+
+    a: np.ndarray
+    mean_a: np.ndarray
+    var_a: np.ndarray
+    keep: np.ndarray
+    b_src: np.ndarray
+    psi32: np.ndarray
+    map_y: np.ndarray
+    row_lo: np.ndarray
+    row_hi: np.ndarray
+    inverse: _InverseTable
+    base_order: np.ndarray
+    order_range: tuple[int, int]
+    solve: np.ndarray
+    patch: int
+
+    def update(self, shift: int, best: np.ndarray, best_order: np.ndarray) -> None:
+        """NCC of the pixels for which ``base_order + shift`` is a candidate; keep it where it beats ``best``."""
+        order_lo, order_hi = self.order_range
+        patch, half, cols = self.patch, self.patch // 2, self.a.shape[1]
+        order = self.base_order + shift
+        candidate = self.solve & (order >= order_lo) & (order <= order_hi)
         # psi grows along the rows, so a shift is a candidate only in a band of columns: work on
         # that band (plus half a window, so its windows are whole) instead of the full image.
         columns = np.flatnonzero(candidate.any(axis=0))
         if columns.size == 0:
-            continue
+            return
         x0, x1 = max(int(columns[0]) - half, 0), min(int(columns[-1]) + half + 1, cols)
         band = slice(x0, x1)
-        target = psi32[:, band] + np.float32(TWO_PI * shift)
-        candidate = candidate[:, band] & (target >= row_lo[:, None]) & (target <= row_hi[:, None])
-        map_x = inverse.columns(target, map_y[:, band])
-        b = cv2.remap(b_src, map_x, map_y[:, band], interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
-        b *= keep[:, band]
-        a_band = np.ascontiguousarray(a[:, band])
+        target = self.psi32[:, band] + np.float32(TWO_PI * shift)
+        candidate = candidate[:, band] & (target >= self.row_lo[:, None]) & (target <= self.row_hi[:, None])
+        map_y = self.map_y[:, band]
+        map_x = self.inverse.columns(target, map_y)
+        b = cv2.remap(self.b_src, map_x, map_y, interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
+        b *= self.keep[:, band]
+        a_band = np.ascontiguousarray(self.a[:, band])
         mean_b = _box_mean(b, patch)
         var_b = np.maximum(_box_mean(b * b, patch) - mean_b * mean_b, 0.0)
-        cov = _box_mean(a_band * b, patch) - mean_a[:, band] * mean_b
-        ncc = cov / np.sqrt(np.maximum(var_a[:, band] * var_b, 1e-20))
+        cov = _box_mean(a_band * b, patch) - self.mean_a[:, band] * mean_b
+        ncc = cov / np.sqrt(np.maximum(self.var_a[:, band] * var_b, 1e-20))
         better = candidate & (ncc > best[:, band])
         best[:, band] = np.where(better, ncc, best[:, band])
         best_order[:, band] = np.where(better, order[:, band], best_order[:, band])
-    if mask is not None:
-        best_order = np.where(mask, best_order, -1)
-    return best_order, best
 
 
 def vote_fringe_segments(
@@ -485,7 +521,6 @@ def vote_fringe_segments(
     winners : (H, W) int64, the segment's order; -1 where no segment vote applies
     labels : (H, W) int32 labels of the voted segments (0 where ``winners`` is -1)
     """
-    from scipy import ndimage
 
     phi = np.where(valid, wrapped_phase, 0.0)
     jump = np.zeros(valid.shape, dtype=bool)
@@ -605,6 +640,46 @@ def single_shot_unwrap(
     SingleShotResult
     """
     start = time.perf_counter()
+    frequency, patch = _checked_settings(axis, frequency, patch, min_modulation)
+    img = _finite_image(image, "image")
+    ftp_rpca = {"carrier": carrier, "bandwidth": bandwidth, "tau": tau, "rpca_tol": rpca_tol, "separate": separate}
+    reference = _checked_reference(img, reference_image, reference_absolute_phase, frequency, axis, ftp_rpca, svd)
+    user_mask = _validate.bool_mask(mask, "mask", img.shape)
+    timings: dict[str, float] = {"reference": reference.seconds}
+    if axis == 0:
+        img = img.T
+        user_mask = None if user_mask is None else user_mask.T
+        reference = _transposed(reference)
+    fringe, speckle, rpca_result = _timed(timings, "rpca", _split, img, tau, rpca_tol, separate, svd)
+    wrapped, amplitude = _timed(timings, "ftp", _ftp_wrapped, fringe, reference.carrier, bandwidth)
+    valid = amplitude > min_modulation * float(np.median(amplitude)) if user_mask is None else user_mask.copy()
+    # positional: speckle, wrapped phase, reference, patch, mask, max_shift, quality
+    corr_orders, score = _timed(
+        timings, "correlation", correlate_orders, speckle, wrapped, reference, patch, valid, max_shift, amplitude
+    )
+    valid &= corr_orders >= 0
+    absolute, orders = _voted_orders(wrapped, valid, corr_orders, score, patch, vote, segment_vote, timings)
+    maps = [absolute, orders, wrapped, fringe, speckle, corr_orders, score, valid]
+    return _shot_result(maps, axis, timings, rpca_result, start)
+
+
+def _shot_result(
+    maps: list[np.ndarray], axis: int, timings: dict[str, float], rpca_result: Any, start: float
+) -> SingleShotResult:
+    """The result in the caller's orientation (``maps`` in :class:`SingleShotResult`'s field order)."""
+    if axis == 0:
+        maps = [np.ascontiguousarray(o.T) for o in maps]
+    timings["total"] = time.perf_counter() - start
+    rows, cols = maps[0].shape[::-1] if axis == 0 else maps[0].shape
+    log.info("single-shot unwrap %dx%d: %s", rows, cols, {k: round(v, 3) for k, v in timings.items()})
+    absolute, orders, wrapped, fringe, speckle, corr_orders, score, valid = maps
+    return SingleShotResult(
+        absolute, orders, wrapped, fringe, speckle, corr_orders, score, valid, timings=timings, rpca=rpca_result
+    )
+
+
+def _checked_settings(axis: int, frequency: float, patch: int, min_modulation: float) -> tuple[float, int]:
+    """:func:`single_shot_unwrap`'s axis, frequency, window and modulation threshold checked: (frequency, patch)."""
     _check_axis(axis)
     frequency = _validate.finite_float(frequency, "frequency", minimum=0.0, strict=True)
     patch = _validate.positive_int(patch, "patch", minimum=3)
@@ -612,62 +687,56 @@ def single_shot_unwrap(
         raise ValueError(f"patch: expected an odd window side, found {patch}")
     if not 0.0 <= float(min_modulation) < 1.0:
         raise ValueError(f"min_modulation: expected a value in [0, 1), found {min_modulation}")
-    img = _finite_image(image, "image")
+    return frequency, patch
+
+
+def _timed(timings: dict[str, float], step: str, function: Callable[..., Any], *args: Any) -> Any:
+    """``function(*args)``, its wall time recorded as ``timings[step]``."""
+    t0 = time.perf_counter()
+    result = function(*args)
+    timings[step] = time.perf_counter() - t0
+    return result
+
+
+def _checked_reference(
+    img: np.ndarray,
+    reference_image: np.ndarray | SingleShotReference,
+    reference_absolute_phase: np.ndarray | None,
+    frequency: float,
+    axis: int,
+    ftp_rpca: dict[str, Any],
+    svd: str,
+) -> SingleShotReference:
+    """The prepared reference :func:`single_shot_unwrap` was given, checked against the image, or prepared here."""
     if isinstance(reference_image, SingleShotReference):
         if reference_absolute_phase is not None:
             raise ValueError("reference_absolute_phase: must be None when reference_image is a prepared reference")
-        reference = reference_image
-        _validate.same_shape(np.empty(reference.shape), img.shape, "reference_image")
-        if reference.frequency != frequency:
-            raise ValueError(f"frequency: {frequency} differs from the prepared reference's {reference.frequency}")
-    else:
-        _finite_image(reference_image, "reference_image", img.shape)
-        if reference_absolute_phase is not None:
-            _validate.phase_map(reference_absolute_phase, "reference_absolute_phase", img.shape)
-        reference = prepare_reference(
-            reference_image,
-            reference_absolute_phase,
-            frequency,
-            axis=axis,
-            carrier=carrier,
-            bandwidth=bandwidth,
-            tau=tau,
-            rpca_tol=rpca_tol,
-            separate=separate,
-            svd=svd,
-        )
-    user_mask = _validate.bool_mask(mask, "mask", img.shape)
-    timings: dict[str, float] = {"reference": reference.seconds}
+        _validate.same_shape(np.empty(reference_image.shape), img.shape, "reference_image")
+        if reference_image.frequency != frequency:
+            raise ValueError(
+                f"frequency: {frequency} differs from the prepared reference's {reference_image.frequency}"
+            )
+        return reference_image
+    _finite_image(reference_image, "reference_image", img.shape)
+    if reference_absolute_phase is not None:
+        _validate.phase_map(reference_absolute_phase, "reference_absolute_phase", img.shape)
+    return prepare_reference(reference_image, reference_absolute_phase, frequency, axis=axis, svd=svd, **ftp_rpca)
 
-    if axis == 0:
-        img = img.T
-        user_mask = None if user_mask is None else user_mask.T
-        reference = _transposed(reference)
 
-    t0 = time.perf_counter()
-    fringe, speckle, rpca_result = _split(img, tau, rpca_tol, separate, svd)
-    timings["rpca"] = time.perf_counter() - t0
-
-    t0 = time.perf_counter()
-    wrapped, amplitude = _ftp_wrapped(fringe, reference.carrier, bandwidth)
-    timings["ftp"] = time.perf_counter() - t0
-    if user_mask is None:
-        valid = amplitude > min_modulation * float(np.median(amplitude))
-    else:
-        valid = user_mask.copy()
-
-    t0 = time.perf_counter()
-    corr_orders, score = correlate_orders(
-        speckle, wrapped, reference, patch=patch, mask=valid, max_shift=max_shift, quality=amplitude
-    )
-    valid &= corr_orders >= 0
-    timings["correlation"] = time.perf_counter() - t0
-
+def _voted_orders(
+    wrapped: np.ndarray,
+    valid: np.ndarray,
+    corr_orders: np.ndarray,
+    score: np.ndarray,
+    patch: int,
+    vote: bool,
+    segment_vote: bool,
+    timings: dict[str, float],
+) -> tuple[np.ndarray, np.ndarray]:
+    """(absolute phase, orders) after the row vote and the 2-D fringe-segment vote; their times go to ``timings``."""
     absolute = np.where(valid, wrapped + TWO_PI * corr_orders, np.nan)
     t0 = time.perf_counter()
     if vote and valid.any():
-        from processing.voting import vote_row_orders
-
         absolute = np.asarray(vote_row_orders(absolute, wrapped, mask=valid), dtype=np.float64)
         absolute = np.where(valid, absolute, np.nan)
     timings["voting"] = time.perf_counter() - t0
@@ -678,24 +747,7 @@ def single_shot_unwrap(
         orders = np.where(valid, fewer_breaks(wrapped, valid, labels, winners, orders), -1)
         absolute = np.where(valid, wrapped + TWO_PI * orders, np.nan)
     timings["segments"] = time.perf_counter() - t0
-
-    outputs = [absolute, orders, wrapped, fringe, speckle, corr_orders, score, valid]
-    if axis == 0:
-        outputs = [np.ascontiguousarray(o.T) for o in outputs]
-    timings["total"] = time.perf_counter() - start
-    log.info("single-shot unwrap %dx%d: %s", img.shape[0], img.shape[1], {k: round(v, 3) for k, v in timings.items()})
-    return SingleShotResult(
-        absolute_phase=outputs[0],
-        orders=outputs[1],
-        wrapped_phase=outputs[2],
-        fringe=outputs[3],
-        speckle=outputs[4],
-        correlation_orders=outputs[5],
-        correlation=outputs[6],
-        mask=outputs[7],
-        timings=timings,
-        rpca=rpca_result,
-    )
+    return absolute, orders
 
 
 def _transposed(reference: SingleShotReference) -> SingleShotReference:

@@ -24,6 +24,7 @@ from scipy.sparse.csgraph import breadth_first_order, connected_components, mini
 
 from processing import _validate
 from processing.angles import wrap_to_pi
+from processing.temporal import UnwrapResult
 
 TWO_PI = 2.0 * np.pi
 QUALITY_KINDS = ("variance",)
@@ -140,11 +141,24 @@ def unwrap_quality_guided(
     if not valid.any():
         return out
     qn = _normalised_quality(q, valid)
-    tree = _spanning_tree_edges(valid, qn)
-    n = p.size
+    parent = _tree_parents(valid, qn)
     flat_valid = valid.ravel()
-    flat_q = np.where(flat_valid, qn.ravel(), -1.0)
-    # One root per connected region (its best pixel), tied to a virtual node n for one traversal.
+    flat_phi = np.where(flat_valid, p.ravel(), 0.0)
+    result = flat_phi + TWO_PI * _wraps_to_root(flat_phi, parent)
+    out.ravel()[flat_valid] = result[flat_valid]
+    return out
+
+
+def _tree_parents(valid: np.ndarray, quality: np.ndarray) -> np.ndarray:
+    """Each pixel's parent (flat index) in the maximum-quality spanning forest; -1 or n for roots and outsiders.
+
+    One root per connected region (its best pixel), tied to a virtual node n = ``valid.size`` so
+    that one breadth-first traversal visits every region.
+    """
+    tree = _spanning_tree_edges(valid, quality)
+    n = valid.size
+    flat_valid = valid.ravel()
+    flat_q = np.where(flat_valid, quality.ravel(), -1.0)
     symmetric = coo_matrix((np.ones(tree.nnz), (tree.row, tree.col)), shape=(n + 1, n + 1))
     _, labels = connected_components(symmetric, directed=False)
     pixels = np.flatnonzero(flat_valid)
@@ -159,8 +173,12 @@ def unwrap_quality_guided(
         shape=(n + 1, n + 1),
     ).tocsr()
     _, parent = breadth_first_order(links, n, directed=False, return_predecessors=True)
-    parent = parent[:n].copy()
-    flat_phi = np.where(flat_valid, p.ravel(), 0.0)
+    return parent[:n].copy()
+
+
+def _wraps_to_root(flat_phi: np.ndarray, parent: np.ndarray) -> np.ndarray:
+    """Integer wrap count of each pixel relative to its region's root, summed along the tree (``parent`` is consumed)."""
+    n = flat_phi.size
     # Pixels outside the mask and roots point to themselves and carry no wrap count.
     own = (parent < 0) | (parent == n)
     parent[own] = np.flatnonzero(own)
@@ -173,9 +191,28 @@ def unwrap_quality_guided(
             break
         wraps += wraps[parent]
         parent = grand
-    result = flat_phi + TWO_PI * wraps
-    out.ravel()[flat_valid] = result[flat_valid]
-    return out
+    return wraps
+
+
+def unwrap_spatial(phi: np.ndarray, mask: np.ndarray | None = None) -> UnwrapResult:
+    """:func:`unwrap_quality_guided` as an :class:`~processing.temporal.UnwrapResult`, the type every
+    unwrapping method returns.
+
+    Parameters
+    ----------
+    phi : (H, W) array
+        Wrapped phase (any 2 pi representation); NaN pixels are excluded.
+    mask : (H, W) bool array, optional
+        Pixels to unwrap (True); default every finite pixel of ``phi``.
+
+    Returns
+    -------
+    UnwrapResult
+        ``phase`` continuous up to 2 pi k per connected region (NaN outside the mask), ``orders``
+        None, ``valid`` where ``phase`` is finite, ``absolute`` False.
+    """
+    phase = unwrap_quality_guided(phi, mask=mask)
+    return UnwrapResult(phase=phase, orders=None, valid=np.isfinite(phase), absolute=False)
 
 
 def remove_region_offsets(delta: np.ndarray) -> np.ndarray:

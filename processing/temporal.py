@@ -46,23 +46,28 @@ TurnKernel = Callable[[Sequence[np.ndarray]], tuple[np.ndarray, ...]]
 
 @dataclass
 class UnwrapResult:
-    """Absolute phase at the highest frequency.
+    """Unwrapped phase at the highest frequency: what every unwrapping method returns.
 
     Attributes
     ----------
     phase : (H, W) float64
         Absolute phase Phi = 2 pi f u / W of the highest frequency; NaN where an input was NaN.
-    orders : (H, W) int64
-        Fringe order k of that frequency: phase = (wrapped phase in [0, 2 pi)) + 2 pi k.
+    orders : (H, W) int64 or None
+        Fringe order k of that frequency: phase = (wrapped phase in [0, 2 pi)) + 2 pi k; None
+        from spatial unwrapping (:func:`processing.spatial.unwrap_spatial`), which has no orders.
     valid : (H, W) bool
         False where the inputs were NaN or the method detected an inconsistency (see each
         method: a look-up value no position inside the projector produces, a residual beyond
         tolerance).
+    absolute : bool
+        True for temporal methods; False for spatial unwrapping, whose phase is known only up to
+        2 pi k per connected region.
     """
 
     phase: np.ndarray
-    orders: np.ndarray
+    orders: np.ndarray | None
     valid: np.ndarray
+    absolute: bool = True
 
 
 # --------------------------------------------------------------------------- shared helpers

@@ -15,6 +15,7 @@ from rig.errors import USER_ERRORS
 COMMAND_MODULES: tuple[str, ...] = (
     "scan",
     "calibrate",
+    "verify",
     "devices",
     "simulate",
     "process",

@@ -393,10 +393,7 @@ def _check_consistency(config: RigConfig, where: str) -> None:
             f"{where}: [trigger] backend: expected 'software' or 'serial' with camera backend "
             f"{config.camera.backend!r} ('simulated-serial' pulses the simulated camera only), found 'simulated-serial'"
         )
-    if config.simulated:
-        from rig.hardware.scenes import check_scene_name  # the simulation's scenes are the hardware layer's
-
-        check_scene_name(config.simulation.scene, where)
+    if config.simulated:  # [simulation] scene is checked by the simulated rig (rig.hardware.scenes), which has them
         if config.trigger.backend == "serial":
             raise ConfigError(
                 f"{where}: [trigger] backend: expected 'simulated-serial' or 'software' with the simulated camera "

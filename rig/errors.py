@@ -24,6 +24,10 @@ class OutputError(RigError):
     """An output cannot be written where asked: unwritable, or it would replace something not ours."""
 
 
+class ResultExistsError(OutputError):
+    """A result directory exists and replacing it was not asked for (the console answers 409)."""
+
+
 class ProcessingError(RigError):
     """The data cannot be processed (for example every pixel is in shadow)."""
 

@@ -57,7 +57,7 @@ def simulated_rig_toml() -> Callable[..., str]:
     return _simulated_rig_toml
 
 
-@pytest.fixture
+@pytest.fixture(scope="session")
 def exact_calibration() -> Callable[[Path, Path], Path]:
     """``(config_path, directory)``: `rig scan` the reference plane into ``directory/reference`` and
     write the simulated rig's exact geometry as the calibration there (what `rig calibrate` estimates)."""

@@ -1,4 +1,4 @@
-"""Contract tests every projector and camera backend passes (real or simulated).
+"""Contract tests every projector, camera and trigger-box backend passes (real or simulated).
 
 Mix a contract into one test class per backend and give it a factory::
 
@@ -12,13 +12,16 @@ Real hardware is opt-in: ``pytest --device camera-opencv:0`` (see ``device_optio
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 import pytest
 
+from drivers import trigger_protocol as tp
 from drivers.camera import Camera, Frame, PixelFormat, TriggerMode, TriggerSource
 from drivers.errors import DeviceTimeoutError, IncompatibleStateError, UnsupportedFeatureError
 from drivers.projector import Projector, apply_gamma_lut
+from drivers.trigger_box import Polarity, TriggerBox
 from processing.patterns import pattern_image
 
 SIZE = (128, 96)
@@ -340,3 +343,93 @@ class CameraContract:
             assert [f.frame_id for f in frames] == [0, 1, 2]
             with pytest.raises(DeviceTimeoutError):
                 camera.fetch(timeout_s=0.2)
+
+
+class TriggerBoxContract:
+    """Behaviour every :class:`TriggerBox` backend shares, simulated or real.
+
+    ``make_box`` returns an unopened box (the serial driver on a fake box's pseudo-terminal, or on
+    a real board's port).
+    """
+
+    def make_box(self) -> TriggerBox:
+        raise NotImplementedError
+
+    def test_open_negotiates_our_version(self) -> None:
+        with self.make_box() as box:
+            assert box.is_open
+            assert box.hello() == tp.PROTOCOL_VERSION
+        assert not box.is_open
+
+    def test_configure_arm_fire_status(self) -> None:
+        with self.make_box() as box:
+            box.reset()
+            box.configure(pulse_width_us=150, delay_us=20, polarity=Polarity.ACTIVE_HIGH)
+            box.arm(2)
+            assert box.status().state == "ARMED"
+            assert [box.fire(), box.fire()] == [0, 1]
+            status = box.status()
+            assert (status.state, status.fired, status.pulse_width_us, status.delay_us) == ("DONE", 2, 150, 20)
+            with pytest.raises(IncompatibleStateError):
+                box.fire()
+            box.reset()
+            assert box.status().state == "IDLE"
+
+    def test_reset_disarms_and_restores_the_default_pulse(self) -> None:
+        with self.make_box() as box:
+            box.reset()
+            default = box.status()
+            box.configure(pulse_width_us=default.pulse_width_us + 7, delay_us=default.delay_us + 3)
+            box.arm(3)
+            box.reset()
+            status = box.status()
+            assert (status.state, status.fired) == ("IDLE", 0)
+            assert (status.pulse_width_us, status.delay_us) == (default.pulse_width_us, default.delay_us)
+            with pytest.raises(IncompatibleStateError):
+                box.fire()
+
+    @pytest.mark.parametrize(
+        ("call", "argument"),
+        [
+            (lambda box: box.configure(pulse_width_us=0), "pulse_width_us"),
+            (lambda box: box.configure(pulse_width_us=tp.MAX_PULSE_WIDTH_US + 1), "pulse_width_us"),
+            (lambda box: box.configure(pulse_width_us=100, delay_us=-1), "delay_us"),
+            (lambda box: box.configure(pulse_width_us=100, delay_us=tp.MAX_DELAY_US + 1), "delay_us"),
+            (lambda box: box.arm(0), "count"),
+            (lambda box: box.arm(tp.MAX_ARM_COUNT + 1), "count"),
+        ],
+    )
+    def test_bad_arguments_name_the_argument_and_change_nothing(self, call, argument: str) -> None:
+        with self.make_box() as box:
+            box.reset()
+            before = box.status()
+            with pytest.raises(ValueError, match=argument):
+                call(box)
+            assert box.status() == before
+
+    def test_arming_twice_is_refused(self) -> None:
+        with self.make_box() as box:
+            box.reset()
+            box.arm(1)
+            with pytest.raises(IncompatibleStateError):
+                box.arm(1)
+            box.reset()
+
+    def test_ping_measures_a_round_trip(self) -> None:
+        with self.make_box() as box:
+            assert 0 < box.ping() < 1.0
+
+    def test_reopening_reboots_cleanly_and_keeps_the_polarity(self) -> None:
+        with self.make_box() as box:
+            box.configure(pulse_width_us=100, polarity=Polarity.ACTIVE_LOW)
+        time.sleep(0.05)
+        with self.make_box() as box:  # an Uno reboots here; open waits for its banner
+            status = box.status()
+            assert (status.state, status.polarity, status.missed) == ("IDLE", Polarity.ACTIVE_LOW, 0)
+            box.configure(pulse_width_us=100, polarity=Polarity.ACTIVE_HIGH)
+
+    def test_closed_box_refuses_commands(self) -> None:
+        box = self.make_box()
+        for command in (box.status, box.ping, box.reset, box.fire, lambda: box.arm(1)):
+            with pytest.raises(IncompatibleStateError):
+                command()

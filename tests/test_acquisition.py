@@ -25,10 +25,11 @@ from mock_devices.camera import CameraFaults, SimulatedCamera
 from mock_devices.dlp_usb import Dlpc350Faults, FakeDlpc350Backend
 from mock_devices.trigger_box import TriggerFaults
 from processing.patterns import sinusoid_shift
-from rig.acquisition.loop import AcquisitionError, AcquisitionSettings, SoftwareTrigger, run_scan
+from rig.acquisition.loop import AcquisitionError, AcquisitionSettings, run_scan
 from rig.config import CameraConfig, ProjectorConfig, RigConfig, ScanConfig, SimulationConfig, TriggerConfig
 from rig.hardware.assembly import trigger_path
 from rig.hardware.simulated import SimulatedRig, appearance_from_config
+from rig.hardware.trigger_paths import SoftwareTrigger
 from rig.store.capture import INCOMPLETE_MARK, read_capture
 
 STEPS = 8

@@ -81,7 +81,7 @@ def test_simulate_takes_patterns_from_a_json_file(tmp_path):
     [
         (["--steps", "2"], "command line: [scan] steps: expected an integer 3..64, found 2"),
         (["--snr-db", "loud"], "--snr-db: expected a number in dB or 'none', found 'loud'"),
-        (["--scene", "teapot"], "command line: [simulation] scene: expected one of flat, sphere-cap"),
+        (["--scene", "teapot"], "rig config: [simulation] scene: expected one of flat, sphere-cap"),
         (["--patterns", "missing.json"], "missing.json: patterns file not found"),
     ],
 )

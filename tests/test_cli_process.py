@@ -83,7 +83,7 @@ def test_outputs_follow_the_format(capsys, small_capture, small_scan, tmp_path) 
     preview = cv2.imread(str(out / "preview.png"))
     assert preview.shape[0] == mask.shape[0] and preview.shape[1] > mask.shape[1]  # image + scale bar
     report = json.loads((out / "report.json").read_text())
-    for stage in ("load", "denoise", "wrapped", "unwrap", "correction"):
+    for stage in ("load", "undistort", "denoise", "phase", "correction"):
         assert report["timings_s"]["object"][stage] >= 0 and report["timings_s"]["reference"][stage] >= 0
     assert report["methods"]["unwrap"] == "hierarchical" and report["methods"]["frequencies"] == [1, 8, 64]
     assert report["valid_fraction"] == pytest.approx(mask.mean())
@@ -353,7 +353,7 @@ def test_rerun_without_calibration_leaves_no_stale_height(capsys, small_capture,
         == 0
     )
     assert (out / "height.npy").exists()
-    assert _run(capsys, "process", small_capture.capture, "-o", out, "-q")[0] == 0
+    assert _run(capsys, "process", small_capture.capture, "-o", out, "-q", "--overwrite")[0] == 0
     assert not (out / "height.npy").exists() and not (out / "points.ply").exists() and (out / "wrapped.npy").exists()
     code, _, err = _run(capsys, "process", small_capture.capture, "-o", small_capture.capture, "-q")
     _assert_one_line_error(code, err, "exists and is a capture directory")

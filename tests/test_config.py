@@ -9,6 +9,7 @@ import pytest
 
 from rig.config import RigConfig, load_config
 from rig.errors import ConfigError
+from rig.hardware.simulated import geometry_from_config, scene_height
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 
@@ -114,7 +115,6 @@ def test_gamma_lut_resolves_against_the_config_folder(tmp_path):
         ("[scan]\nretries = true\n", "[scan] retries: expected an integer 0..20, found True"),
         ('[scan]\naxis = "z"\n', "[scan] axis: expected one of 'x', 'y', found 'z'"),
         ("[scan]\nfetch_timeout_s = inf\n", "[scan] fetch_timeout_s: expected a positive number, found inf"),
-        ('[simulation]\nscene = "teapot"\n', "[simulation] scene: expected one of flat, sphere-cap"),
         ("[simulation]\nd0_mm = 0\n", "[simulation] d0_mm: expected a non-zero number, found 0"),
         ('[simulation]\nsnr_db = "loud"\n', "[simulation] snr_db: expected a number in dB or \"none\", found 'loud'"),
         ('[projector]\nbackend = "window"\n', "[projector] backend: expected 'gl-offscreen' with the simulated camera"),
@@ -135,6 +135,16 @@ def test_bad_field_is_one_clear_line(tmp_path, text, expected):
     assert "\n" not in message
     assert message.startswith(str(path))
     assert expected in message
+
+
+def test_unknown_scene_is_refused_by_the_simulated_rig_in_one_line(tmp_path):
+    """The scenes are the simulation's (rig.hardware): the config names one, the simulated rig checks it."""
+    path = write(tmp_path, '[simulation]\nscene = "teapot"\n')
+    config = load_config(path)
+    with pytest.raises(ConfigError) as info:
+        scene_height(config, "object", geometry_from_config(config))
+    message = str(info.value)
+    assert "\n" not in message and message.startswith(f"{path}: [simulation] scene: expected one of flat, sphere-cap")
 
 
 def test_missing_file_is_named(tmp_path):

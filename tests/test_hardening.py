@@ -117,7 +117,7 @@ def test_output_is_never_written_through_a_planted_link(capsys, tmp_path, small_
     victim = tmp_path / "victim.txt"
     victim.write_text("safe")
     (out / "report.json.tmp").symlink_to(victim)
-    assert run(capsys, "process", small_capture.capture, "-o", out, "-q")[0] == 0
+    assert run(capsys, "process", small_capture.capture, "-o", out, "-q", "--overwrite")[0] == 0
     assert victim.read_text() == "safe" and not (out / "report.json.tmp").exists()
 
 

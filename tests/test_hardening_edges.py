@@ -15,12 +15,13 @@ import numpy as np
 import pytest
 from cli_steps import assert_one_line, calibrate_on_plane, run
 
+from rig.api import process
 from rig.cli import main
 from rig.errors import OutputError
-from rig.pipeline import outputs
-from rig.pipeline.outputs import write_outputs, write_preview
-from rig.pipeline.run import process
 from rig.store import files
+from rig.store import result_files as outputs
+from rig.store.result_files import write_preview
+from rig.store.results import write_result
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -60,7 +61,7 @@ def test_outputs_of_a_degenerate_height_map_are_complete(tmp_path, small_capture
     with np.errstate(over="ignore"):  # 1e308 becomes an infinity in float32, as a height would
         height = DEGENERATE_MAPS[name](result.mask.shape).astype(np.float32)
     out = tmp_path / "out"
-    report = write_outputs(replace(result, height=height), out)
+    report = write_result(replace(result, height=height), out)
     on_disk = json.loads((out / "report.json").read_text(), parse_constant=lambda c: pytest.fail(c))
     assert on_disk["preview"] == report["preview"] and np.isfinite(report["preview"]["range"]).all()
     assert {p.name for p in out.iterdir()} == set(report["files"].values())
@@ -69,7 +70,7 @@ def test_outputs_of_a_degenerate_height_map_are_complete(tmp_path, small_capture
 def test_a_failing_preview_keeps_the_old_output(tmp_path, small_capture, monkeypatch) -> None:
     result = process(small_capture.capture, small_capture.calibration)
     out = tmp_path / "out"
-    write_outputs(result, out)
+    write_result(result, out)
     before = {p.name: p.read_bytes() for p in out.iterdir()}
 
     def broken(*_args, **_kwargs):
@@ -77,7 +78,7 @@ def test_a_failing_preview_keeps_the_old_output(tmp_path, small_capture, monkeyp
 
     monkeypatch.setattr(outputs, "write_preview", broken)
     with pytest.raises(OSError):
-        write_outputs(result, out)
+        write_result(result, out, overwrite=True)
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
     assert not list(tmp_path.glob("out.*"))  # no staging directory left behind
 

@@ -9,9 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from rig.api import process_to
 from rig.pipeline import reference_cache
 from rig.pipeline.plan import ProcessOptions
-from rig.pipeline.run import process, process_capture
+from rig.pipeline.run import process
 
 
 @pytest.fixture(autouse=True)
@@ -20,6 +21,11 @@ def _empty_memory(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
     reference_cache.forget()
     yield
     reference_cache.forget()
+
+
+def process_capture(capture: Path, calibration: Path, out: Path, options: ProcessOptions) -> dict:
+    """What `rig process` runs: processing (caching the reference on disk) then the outputs."""
+    return process_to(capture, out, calibration, options)
 
 
 def _cache() -> Path:

@@ -24,7 +24,7 @@ from drivers.trigger_box import (
     TriggerBoxRefusedError,
 )
 from mock_devices.trigger_box import FakeTriggerBox, TriggerFaults
-from tests.contracts import device_option
+from tests.contracts import TriggerBoxContract, device_option
 from tests.protocol import expected_protocol, expected_serial_protocol
 
 HELLO = (b"1 HELLO 2*41\n", b"1 OK 2 box-fw/2.1*6C\n")
@@ -353,62 +353,9 @@ def test_fake_box_answers_the_wire_format_exactly():
 # -- contract: every TriggerBox backend, simulated or real ------------------------------------
 
 
-class TriggerBoxContract:
-    """Mix into a class whose ``make_box()`` returns an unopened TriggerBox."""
-
-    def make_box(self) -> TriggerBox:
-        raise NotImplementedError
-
-    def test_open_negotiates_our_version(self):
-        with self.make_box() as box:
-            assert box.is_open
-            assert box.hello() == tp.PROTOCOL_VERSION
-        assert not box.is_open
-
-    def test_configure_arm_fire_status(self):
-        with self.make_box() as box:
-            box.reset()
-            box.configure(pulse_width_us=150, delay_us=20, polarity=Polarity.ACTIVE_HIGH)
-            box.arm(2)
-            assert box.status().state == "ARMED"
-            assert [box.fire(), box.fire()] == [0, 1]
-            status = box.status()
-            assert (status.state, status.fired, status.pulse_width_us, status.delay_us) == ("DONE", 2, 150, 20)
-            with pytest.raises(IncompatibleStateError):
-                box.fire()
-            box.reset()
-            assert box.status().state == "IDLE"
-
-    def test_bad_arguments_and_states_are_refused(self):
-        with self.make_box() as box:
-            box.reset()
-            with pytest.raises(ValueError):
-                box.configure(pulse_width_us=tp.MAX_PULSE_WIDTH_US + 1)
-            box.arm(1)
-            with pytest.raises(IncompatibleStateError):
-                box.arm(1)
-            box.reset()
-
-    def test_ping_measures_a_round_trip(self):
-        with self.make_box() as box:
-            assert 0 < box.ping() < 1.0
-
-    def test_reopening_reboots_cleanly_and_keeps_the_polarity(self):
-        with self.make_box() as box:
-            box.configure(pulse_width_us=100, polarity=Polarity.ACTIVE_LOW)
-        time.sleep(0.05)
-        with self.make_box() as box:  # an Uno reboots here; open waits for its banner
-            status = box.status()
-            assert (status.state, status.polarity, status.missed) == ("IDLE", Polarity.ACTIVE_LOW, 0)
-            box.configure(pulse_width_us=100, polarity=Polarity.ACTIVE_HIGH)
-
-    def test_closed_box_refuses_commands(self):
-        box = self.make_box()
-        with pytest.raises(IncompatibleStateError):
-            box.status()
-
-
 class TestFakeTriggerBox(TriggerBoxContract):
+    """The real serial driver against mock_devices' fake box on a pseudo-terminal."""
+
     @pytest.fixture(autouse=True)
     def _fake(self):
         with FakeTriggerBox() as fake:

@@ -32,7 +32,7 @@ import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
@@ -52,9 +52,9 @@ from drivers.errors import (
     WaitTimeoutError,
 )
 from drivers.projector import Projector
-from drivers.trigger_box import TriggerBox
 from rig.errors import CaptureError
 from rig.events import ProgressSink
+from rig.hardware.trigger_paths import TriggerPath
 from rig.store.capture import CaptureWriter
 
 log = logging.getLogger(__name__)
@@ -88,84 +88,6 @@ class AcquisitionSettings:
                 raise ValueError(f"{name}: expected > 0 s, found {getattr(self, name)}")
         if self.retries < 0:
             raise ValueError(f"retries: expected >= 0, found {self.retries}")
-
-
-# --------------------------------------------------------------------------- trigger paths
-
-
-class TriggerPath(Protocol):
-    """How an exposure is started: the camera's trigger source, and firing one trigger."""
-
-    source: TriggerSource
-    indices_restart_with_camera: bool  # trigger indices count from 0 again when the camera restarts
-
-    def prepare(self, count: int) -> None:
-        """Get ready for at most ``count`` triggers (the camera is already started)."""
-
-    def fire(self) -> int:
-        """Start one exposure; return the trigger index the resulting frame will carry."""
-
-    def keepalive(self) -> None:
-        """Called while waiting for a frame, at least every ``keepalive_s``."""
-
-    def finish(self) -> None:
-        """Leave the trigger hardware idle; called after the scan, whatever its outcome."""
-
-
-class SoftwareTrigger:
-    """The camera's own software trigger; indices count the camera's triggers since it started."""
-
-    source = TriggerSource.SOFTWARE
-    indices_restart_with_camera = True
-
-    def __init__(self, camera: Camera) -> None:
-        self.camera = camera
-
-    def prepare(self, count: int) -> None:
-        pass
-
-    def fire(self) -> int:
-        index = self.camera.trigger_count
-        self.camera.trigger()
-        return index
-
-    def keepalive(self) -> None:
-        pass
-
-    def finish(self) -> None:
-        pass
-
-
-class BoxTrigger:
-    """A trigger box pulsing the camera's hardware trigger line; indices are the box's pulse indices.
-
-    The box is reset and armed for the whole scan (retries included) before the first pattern,
-    pinged while the loop waits for a frame (its watchdog disarms it after a few silent seconds)
-    and reset again afterwards, so it never stays armed.
-    """
-
-    source = TriggerSource.HARDWARE_RISING
-    indices_restart_with_camera = False
-
-    def __init__(self, box: TriggerBox) -> None:
-        self.box = box
-
-    def prepare(self, count: int) -> None:
-        self.box.reset()
-        self.box.arm(count)
-
-    def fire(self) -> int:
-        return int(self.box.fire())
-
-    def keepalive(self) -> None:
-        """Heartbeat: an armed box disarms itself after a few seconds without a command."""
-        self.box.ping()
-
-    def finish(self) -> None:
-        try:
-            self.box.reset()
-        except DeviceError as exc:  # the box may be gone; the scan's own outcome matters more
-            log.warning("could not disarm the trigger box after the scan: %s", exc)
 
 
 # --------------------------------------------------------------------------- staging
@@ -473,6 +395,56 @@ def frame_metadata(frame: Frame, attempts: int) -> dict[str, Any]:
     return meta
 
 
+def _capture_writer(
+    path: str | Path,
+    patterns: Sequence[Mapping[str, Any]],
+    projector: Projector,
+    camera: Camera,
+    trigger: TriggerPath,
+    scene: str,
+    extra: Mapping[str, Any] | None,
+    overwrite: bool,
+) -> CaptureWriter:
+    """The capture's writer, its manifest naming the devices and the camera's staged settings."""
+    camera_info = {"width": camera.width, "height": camera.height, "bit_depth": camera.pixel_format.bit_depth}
+    projector_info = {"width": projector.width, "height": projector.height}
+    capture_extra = {"devices": {"projector": projector.name, "camera": camera.name, "trigger": type(trigger).__name__}}
+    capture_extra.update(extra or {})
+    return CaptureWriter(
+        path, camera_info, projector_info, patterns, scene=scene, extra=capture_extra, overwrite=overwrite
+    )
+
+
+def _acquire_all(
+    patterns: Sequence[Mapping[str, Any]],
+    projector: Projector,
+    camera: Camera,
+    trigger: TriggerPath,
+    settings: AcquisitionSettings,
+    times: StepTimes,
+    background: BackgroundWriter | InlineWriter,
+    records: list[dict[str, Any]],
+    progress: ProgressSink | None,
+) -> tuple[int, int]:
+    """One frame per pattern, handed to the writer in order; returns (attempts, discarded frames) in all."""
+    attempts_total = discarded_total = 0
+    triggers = _TriggerLog()
+    for index, pattern in enumerate(patterns):
+        frame, attempts, discarded = acquire_pattern(
+            index, pattern, len(patterns), projector, camera, trigger, settings, triggers, times
+        )
+        attempts_total += attempts
+        discarded_total += discarded
+        stored = time.perf_counter()
+        meta = frame_metadata(frame, attempts)
+        background.put(index, frame.image, meta)
+        records.append({"pattern": index, **meta})
+        times.store_s += time.perf_counter() - stored
+        if progress is not None:
+            progress.step(f"frame {index + 1}")
+    return attempts_total, discarded_total
+
+
 def run_scan(
     path: str | Path,
     patterns: Sequence[Mapping[str, Any]],
@@ -519,36 +491,16 @@ def run_scan(
     started = time.perf_counter()
     times = StepTimes()
     records: list[dict[str, Any]] = []
-    attempts_total = discarded_total = 0
-    triggers = _TriggerLog()
     with staged_camera(camera, trigger.source, TriggerMode.ONCE, exposure_us, gain):
-        camera_info = {"width": camera.width, "height": camera.height, "bit_depth": camera.pixel_format.bit_depth}
-        projector_info = {"width": projector.width, "height": projector.height}
-        capture_extra = {
-            "devices": {"projector": projector.name, "camera": camera.name, "trigger": type(trigger).__name__}
-        }
-        capture_extra.update(extra or {})
-        writer = CaptureWriter(
-            path, camera_info, projector_info, patterns, scene=scene, extra=capture_extra, overwrite=overwrite
-        )
+        writer = _capture_writer(path, patterns, projector, camera, trigger, scene, extra, overwrite)
         with writer:
             sink = BackgroundWriter(writer) if background_writer else InlineWriter(writer)
             with sink as background:
                 trigger.prepare(len(patterns) * (settings.retries + 1))
                 try:
-                    for index, pattern in enumerate(patterns):
-                        frame, attempts, discarded = acquire_pattern(
-                            index, pattern, len(patterns), projector, camera, trigger, settings, triggers, times
-                        )
-                        attempts_total += attempts
-                        discarded_total += discarded
-                        stored = time.perf_counter()
-                        meta = frame_metadata(frame, attempts)
-                        background.put(index, frame.image, meta)
-                        records.append({"pattern": index, **meta})
-                        times.store_s += time.perf_counter() - stored
-                        if progress is not None:
-                            progress.step(f"frame {index + 1}")
+                    attempts_total, discarded_total = _acquire_all(
+                        patterns, projector, camera, trigger, settings, times, background, records, progress
+                    )
                 finally:
                     trigger.finish()
                 finishing = time.perf_counter()

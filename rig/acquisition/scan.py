@@ -11,8 +11,10 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from rig.acquisition.loop import AcquisitionSettings, run_scan
 from rig.config import RigConfig
 from rig.errors import CaptureError
+from rig.hardware.assembly import open_rig
 from rig.store import files
 
 if TYPE_CHECKING:
@@ -44,7 +46,6 @@ def scan(
     stored frame; cancelling its token stops the scan at the next frame, leaving the capture
     visibly incomplete.
     """
-    from rig.hardware.assembly import open_rig
 
     # fail before opening any device: an existing non-capture is never replaced, an unwritable place never tried
     files.check_writable(
@@ -73,7 +74,6 @@ def scan_with(
     the operator (or the simulated world) put there. ``progress`` is stepped once per frame.
     ``exposure_us`` and ``gain`` override the config's camera settings (the console's controls).
     """
-    from rig.acquisition.loop import AcquisitionSettings, run_scan
 
     config = devices.config
     if output.exists() and not overwrite:

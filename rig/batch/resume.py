@@ -19,8 +19,11 @@ from pathlib import Path
 from typing import Any
 
 from rig import __version__
+from rig.errors import RigError
 from rig.pipeline.plan import ProcessOptions
+from rig.store import results
 from rig.store.files import INCOMPLETE_MARK, REPLACED_MARK
+from rig.store.results import DEFAULT_FORMATS
 
 BATCH_KEY = "batch"  # report.json key holding the batch's bookkeeping
 
@@ -59,11 +62,15 @@ def calibration_digest(calibration_dir: Path | None) -> str:
     return digest.hexdigest()
 
 
-def options_key(options: ProcessOptions, compare: Sequence[str]) -> str:
-    """The options and compared corrections as canonical text (part of every fingerprint)."""
-    return _canonical(
-        {"options": dataclasses.asdict(options), "compare": list(compare), "program": __version__}
-    ).decode()
+def options_key(options: ProcessOptions, compare: Sequence[str], formats: Sequence[str] = DEFAULT_FORMATS) -> str:
+    """The options, compared corrections and output formats as canonical text (part of every fingerprint).
+
+    The default formats are left out, so outputs of runs from before ``--format`` stay reusable.
+    """
+    key: dict[str, Any] = {"options": dataclasses.asdict(options), "compare": list(compare), "program": __version__}
+    if tuple(formats) != DEFAULT_FORMATS:
+        key["formats"] = list(formats)
+    return _canonical(key).decode()
 
 
 def fingerprint(capture_dir: Path, calibration: str, options: str) -> str | None:
@@ -76,18 +83,18 @@ def fingerprint(capture_dir: Path, calibration: str, options: str) -> str | None
 
 def reusable_report(out_dir: Path, expected: str | None) -> dict[str, Any] | None:
     """The report of a finished output whose fingerprint is ``expected`` and whose files all exist, else None."""
-    if expected is None:
+    if expected is None or not results.is_result(out_dir):
         return None
     try:
-        report = json.loads((out_dir / "report.json").read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        report = results.read_report(out_dir)
+    except RigError:
         return None
-    if not isinstance(report, dict) or not isinstance(report.get(BATCH_KEY), dict):
-        return None
-    if report[BATCH_KEY].get("fingerprint") != expected:
+    if not isinstance(report.get(BATCH_KEY), dict) or report[BATCH_KEY].get("fingerprint") != expected:
         return None
     files = report.get("files")
-    if not isinstance(files, dict) or not all(isinstance(f, str) and (out_dir / f).is_file() for f in files.values()):
+    if not isinstance(files, dict) or not all(
+        isinstance(f, str) and results.has_file(out_dir, f) for f in files.values()
+    ):
         return None
     return report
 

@@ -27,6 +27,7 @@ from rig.batch.tasks import CaptureTask, TaskOutcome, kept_outcome, run_task, wa
 from rig.errors import ConfigError
 from rig.events import Reporter
 from rig.pipeline.plan import ProcessOptions
+from rig.store.results import DEFAULT_FORMATS
 
 INDEX_FILE = "index.csv"
 COMPARE_FILE = "compare.csv"
@@ -43,6 +44,7 @@ class BatchPlan:
     calibration: Path | None = None
     options: ProcessOptions = field(default_factory=ProcessOptions)
     compare: tuple[str, ...] = ()
+    formats: tuple[str, ...] = DEFAULT_FORMATS  # output formats (rig.store.results.FORMATS)
     workers: int | None = None  # local cluster size (default: the CPUs this process may use)
     scheduler: str | None = None  # tcp://host:port of an existing cluster instead of a local one
 
@@ -145,7 +147,7 @@ def plan_tasks(plan: BatchPlan, found: list[FoundCapture]) -> tuple[list[Capture
     """Tasks for the captures to process, and the outcomes already known (skipped, kept from an earlier run)."""
     calibration = plan.calibration.resolve() if plan.calibration is not None else None
     cal_digest = calibration_digest(calibration)
-    key = options_key(plan.options, plan.compare)
+    key = options_key(plan.options, plan.compare, plan.formats)
     tasks: list[CaptureTask] = []
     known: list[TaskOutcome] = []
     for capture in found:
@@ -176,6 +178,7 @@ def plan_tasks(plan: BatchPlan, found: list[FoundCapture]) -> tuple[list[Capture
                 options=plan.options,
                 fingerprint=digest,
                 compare=plan.compare,
+                formats=plan.formats,
             )
         )
     return tasks, known

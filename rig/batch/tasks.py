@@ -1,8 +1,8 @@
 """The work of one capture, as a Dask worker runs it: paths in, a small row out.
 
 The task receives paths and options only (the scheduler never holds image data) and runs the same
-:func:`rig.pipeline.run.process` and :func:`rig.pipeline.outputs.write_outputs` as ``rig process``
-(which commits the output directory in one rename, through :mod:`rig.store.files`), with the
+:func:`rig.api.process` and :func:`rig.store.results.write_result` as ``rig process`` (which
+commits the output directory in one rename, through :mod:`rig.store.files`), with the
 input fingerprint added to report.json in that same commit. Every error a capture can cause becomes an
 ``error`` row carrying the line ``rig process`` would print; the batch goes on.
 """
@@ -21,6 +21,7 @@ from rig.batch.index import CompareRow, IndexRow, height_stats
 from rig.batch.resume import BATCH_KEY
 from rig.errors import USER_ERRORS
 from rig.pipeline.plan import ProcessOptions
+from rig.store.results import DEFAULT_FORMATS
 
 TRUTH_FILE = "truth-height.npy"  # what rig.hardware.synthesis writes beside a simulated capture
 BLAS_THREADS = 1  # per task: the worker's thread count, not BLAS, sets the parallelism
@@ -37,6 +38,7 @@ class CaptureTask:
     options: ProcessOptions
     fingerprint: str | None
     compare: tuple[str, ...] = ()
+    formats: tuple[str, ...] = DEFAULT_FORMATS  # output formats (rig.store.results.FORMATS)
 
 
 @dataclass
@@ -99,12 +101,12 @@ def compare_row(name: str, method: str, result: Any, seconds: float, truth: np.n
 
 def warm_up() -> None:
     """Import the pipeline in a worker before its first capture (a second or so), so that progress rates mean work."""
-    import rig.pipeline.outputs  # noqa: F401
-    import rig.pipeline.run  # noqa: F401
+    import rig.api  # noqa: F401
+    import rig.store.results  # noqa: F401  # the pipeline's stages and the result encoders
 
 
 def _process(task: CaptureTask, options: ProcessOptions) -> Any:
-    from rig.pipeline.run import process
+    from rig.api import process
 
     return process(task.capture, task.calibration, options)
 
@@ -160,7 +162,7 @@ def _single_threaded_worker() -> None:
 def run_task(task: CaptureTask) -> TaskOutcome:
     """Process one capture, commit its outputs and return its rows; never raises for a bad capture."""
     from rig.blas import blas_threads
-    from rig.pipeline.outputs import check_output_directory, write_outputs
+    from rig.store.results import check_target, write_result
 
     _single_threaded_worker()
     started = time.perf_counter()
@@ -170,7 +172,7 @@ def run_task(task: CaptureTask) -> TaskOutcome:
     main_seconds = 0.0
     with blas_threads(BLAS_THREADS):
         try:
-            check_output_directory(task.output)  # before the work: never replace what rig did not write
+            check_target(task.output, overwrite=True)  # before the work: never replace what rig did not write
             main = _process(task, task.options)
             main_seconds = time.perf_counter() - started
         except Exception as exc:  # noqa: BLE001 - isolate every failure to its capture
@@ -184,7 +186,7 @@ def run_task(task: CaptureTask) -> TaskOutcome:
                     "seconds": time.perf_counter() - started,
                     "compare": [dataclasses.asdict(r) for r in compare],
                 }
-                report = write_outputs(main, task.output, extra={BATCH_KEY: batch})
+                report = write_result(main, task.output, task.formats, overwrite=True, extra={BATCH_KEY: batch})
                 row.status, row.seconds = "ok", recorded_seconds(report)
                 row.valid_fraction = float(report["valid_fraction"])
                 row.message = "; ".join(report.get("notes", []))

@@ -341,9 +341,9 @@ class CalibrationReport:
 
 def _absolute_phase(path: Path) -> tuple[np.ndarray, float, str, list[dict[str, Any]]]:
     """Absolute phase (NaN invalid), its frequency, fringe axis and the patterns of a capture."""
-    from rig.pipeline.run import process
+    from rig.api import ProcessOptions, process
 
-    result = process(path)
+    result = process(path, options=ProcessOptions(correction="none"))  # the fits see the measured phase
     unwrapped = result.object.unwrapped
     if unwrapped is None or not unwrapped.absolute:
         raise CalibrationError(

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
 from rig.commands._common import add_command, add_report_options, print_json
-from rig.commands.process import add_processing_options, processing_options
+from rig.commands.process import add_format_option, add_processing_options, processing_options
 from rig.errors import ConfigError
 from rig.events import Event, Reporter
 from rig.progress import Progress
@@ -48,6 +48,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "-o", "--output", type=Path, required=True, metavar="OUT", help="output directory (created; reused on a rerun)"
     )
     add_processing_options(parser)
+    add_format_option(parser)
     where = parser.add_mutually_exclusive_group()
     where.add_argument(
         "--workers",
@@ -159,6 +160,7 @@ def quiet_dask_logs() -> None:
 
 def run(args: argparse.Namespace) -> int:
     from rig.batch import BatchPlan, run_batch
+    from rig.store.results import parse_formats
 
     if args.workers is not None and args.workers < 1:
         raise ConfigError(f"--workers: expected at least 1, found {args.workers}")
@@ -170,6 +172,7 @@ def run(args: argparse.Namespace) -> int:
         calibration=args.calibration,
         options=processing_options(args),
         compare=parse_methods(args.compare),
+        formats=parse_formats(args.formats),
         workers=args.workers,
         scheduler=args.scheduler,
     )

@@ -10,7 +10,6 @@ from typing import Any
 from rig.commands._common import LazyChoices, add_command, add_report_options, print_json, split_size
 from rig.errors import ConfigError, OutputError
 from rig.hardware.scenes import scene_names
-from rig.pipeline.plan import DEFAULT_CORRECTION, ProcessOptions
 from rig.progress import Progress
 
 
@@ -98,6 +97,7 @@ def _summary(
 
 def run(args: argparse.Namespace) -> int:
     # numpy, the synthesiser and the pipeline: imported when the demo runs, not for `rig --help`
+    from rig.api import process, process_steps
     from rig.hardware.synthesis import (
         demo_appearance,
         demo_geometry,
@@ -105,16 +105,15 @@ def run(args: argparse.Namespace) -> int:
         simulated_paths,
         write_simulated_scan,
     )
-    from rig.pipeline.outputs import write_outputs
-    from rig.pipeline.run import process, total_steps
     from rig.store import files
+    from rig.store.results import write_result
 
     width, height = parse_size(args.size)
     out: Path = args.output
     # the whole demo directory is built beside OUT and renamed into place; an earlier demo is replaced
     files.check_writable(out, DEMO_KINDS, True, OutputError)
     with (
-        Progress("demo", total=2 + total_steps(True) + 1, quiet=args.quiet) as progress,
+        Progress("demo", total=2 + process_steps(True) + 1, quiet=args.quiet) as progress,
         files.staged_directory(out, DEMO_KINDS, True, OutputError) as staging,
     ):
         scan = simulate_scan(
@@ -126,10 +125,8 @@ def run(args: argparse.Namespace) -> int:
         progress.step("synthesised")
         staged = write_simulated_scan(scan, staging / "scan")
         progress.step("captures written")
-        result = process(
-            staged.capture, staged.calibration, ProcessOptions(correction=DEFAULT_CORRECTION), progress=progress
-        )
-        report = write_outputs(result, staging / "processed", staged_inputs=(staging, out))  # names the final paths
+        result = process(staged.capture, staged.calibration, progress=progress)
+        report = write_result(result, staging / "processed", staged_inputs=(staging, out))  # names the final paths
         progress.step("outputs")
         paths = simulated_paths(out / "scan")
         summary = _summary(args, out, width, height, scan, result, report, paths)

@@ -16,11 +16,23 @@ from rig.commands._common import (
     print_json,
 )
 from rig.errors import ConfigError
-from rig.pipeline.plan import DEFAULT_CORRECTION, UNWRAP_METHODS, ProcessOptions
+from rig.pipeline.plan import ProcessOptions
 from rig.progress import Progress
 
 # The pipeline (numpy, OpenCV) is imported when a command runs, not to build the parser: `rig --help`
 # and commands that do not process stay quick. Choices and help naming its registries load lazily.
+
+
+def _unwrap_methods() -> list[str]:
+    from rig.pipeline.unwrapping import UNWRAP_METHODS
+
+    return list(UNWRAP_METHODS)
+
+
+def _unwrap_help() -> str:
+    from rig.pipeline.unwrapping import help_text
+
+    return f"phase unwrapping method (default auto); {help_text()}"
 
 
 def _denoisers() -> list[str]:
@@ -38,7 +50,7 @@ def _corrections() -> list[str]:
 def _correction_help() -> str:
     from rig.pipeline.corrections import help_text
 
-    return f"phase / fringe-order correction (default {DEFAULT_CORRECTION}); {help_text()}"
+    return f"phase / fringe-order correction (default {ProcessOptions().correction}); {help_text()}"
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -48,38 +60,47 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         run,
         help="turn a capture into absolute phase, a height map and a point cloud",
         description="Process a capture (and the reference-plane capture of its calibration) into "
-        "height.npy, phase.npy, mask.npy, points.ply, report.json and preview.png. Without "
-        "--calibration only the phase is computed (phase.npy, wrapped.npy, mask.npy, a phase preview).",
+        "height.npy, phase.npy, mask.npy, points.ply, report.json and preview.png (--format adds meshes "
+        "and E57). Without --calibration only the phase is computed (phase.npy, wrapped.npy, mask.npy, "
+        "a phase preview).",
     )
     add_capture_argument(parser)
     parser.add_argument("--calibration", type=Path, metavar="CAL", help="calibration directory (calibration.json)")
     parser.add_argument(
         "-o", "--output", type=Path, metavar="OUT", help="output directory (default: CAPTURE-processed)"
     )
+    parser.add_argument(
+        "--overwrite", action="store_true", help="replace an existing output directory (an earlier result only)"
+    )
     add_processing_options(parser)
+    add_format_option(parser)
     parser.add_argument("--salvage", action="store_true", help="accept an incomplete capture (interrupted scan)")
     add_report_options(parser)
 
 
 def add_processing_options(parser: argparse.ArgumentParser) -> None:
-    """The pipeline's options (--unwrap, --denoise, --correction, ...), shared by `rig process` and `rig batch`."""
+    """The pipeline's options (--unwrap, --denoise, --correction, ...), shared by `rig process` and `rig batch`.
+
+    Their defaults are :class:`ProcessOptions`' own, so the command and the API cannot drift apart.
+    """
+    defaults = ProcessOptions()
     parser.add_argument(
         "--unwrap",
-        default="auto",
-        choices=UNWRAP_METHODS,
-        help="phase unwrapping method (default auto: gray or spatial for one frequency, hierarchical when "
-        "frequency 1 is present, two-frequency for 2 coprime, heterodyne or three-frequency for 3)",
+        default=defaults.unwrap,
+        choices=LazyChoices(_unwrap_methods),
+        metavar="METHOD",
+        help=LazyHelp(_unwrap_help),  # type: ignore[arg-type]  # argparse calls str() on it
     )
     parser.add_argument(
         "--denoise",
-        default="none",
+        default=defaults.denoise,
         choices=LazyChoices(_denoisers),
         metavar="METHOD",
         help="fringe denoising before phase: %(choices)s (default none)",
     )
     parser.add_argument(
         "--correction",
-        default=DEFAULT_CORRECTION,
+        default=defaults.correction,
         choices=LazyChoices(_corrections),
         metavar="METHOD",
         help=LazyHelp(_correction_help),  # type: ignore[arg-type]  # argparse calls str() on it
@@ -87,14 +108,14 @@ def add_processing_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--min-modulation",
         type=float,
-        default=0.2,
+        default=defaults.min_modulation_ratio,
         metavar="RATIO",
         help="valid pixels need fringe modulation B >= RATIO x background and x the image's 99th percentile of B (default 0.2)",
     )
     parser.add_argument(
         "--min-island",
         type=float,
-        default=0.005,
+        default=defaults.min_island_fraction,
         metavar="FRACTION",
         dest="min_island",
         help="drop isolated valid regions smaller than FRACTION of the largest (background specks; default 0.005)",
@@ -118,6 +139,23 @@ def add_processing_options(parser: argparse.ArgumentParser) -> None:
         action="store_false",
         default=None,
         help="keep lens distortion (default: removed when the calibration has camera_matrix and distortion)",
+    )
+
+
+def _format_help() -> str:
+    from rig.store.results import DEFAULT_FORMATS, FORMATS
+
+    listed = "; ".join(f"{f.name}: {f.file} ({f.what})" for f in FORMATS.values())
+    return f"point and mesh files to write with a calibration, comma-separated (default {','.join(DEFAULT_FORMATS)}): {listed}"
+
+
+def add_format_option(parser: argparse.ArgumentParser) -> None:
+    """--format, shared by `rig process` and `rig batch` (the names of rig.store.results.FORMATS)."""
+    parser.add_argument(
+        "--format",
+        dest="formats",
+        metavar="NAMES",
+        help=LazyHelp(_format_help),  # type: ignore[arg-type]  # argparse calls str() on it
     )
 
 
@@ -162,15 +200,23 @@ def parse_params(items: list[str]) -> dict[str, object]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from rig.pipeline.outputs import check_output_directory
-    from rig.pipeline.run import process_capture, total_steps
+    from rig.api import process_steps, process_to
+    from rig.store.results import default_output
 
-    out = args.output or args.capture.with_name(args.capture.name + "-processed")
+    out = args.output or default_output(args.capture)
     options = processing_options(args)
-    check_output_directory(out)  # an unwritable output fails now, not after the computation
-    steps = total_steps(args.calibration is not None) + 1
+    steps = process_steps(args.calibration is not None) + 1
     with Progress(f"process {args.capture}", total=steps, quiet=args.quiet) as progress:
-        report = process_capture(args.capture, args.calibration, out, options, progress=progress, salvage=args.salvage)
+        report = process_to(
+            args.capture,
+            out,
+            args.calibration,
+            options,
+            progress,
+            formats=None if args.formats is None else args.formats.split(","),
+            overwrite=args.overwrite,
+            salvage=args.salvage,
+        )
         progress.step("outputs")
     if args.json:
         print_json(summary(report, out))

@@ -13,9 +13,13 @@ import argparse
 import logging
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from rig.errors import ConfigError
 from rig.progress import Progress
+
+if TYPE_CHECKING:
+    from rig.acquisition.loop import ScanResult
 
 log = logging.getLogger(__name__)
 
@@ -53,45 +57,44 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("--process needs --calibration CAL (the calibration to turn phase into height)")
     if args.calibration is not None and not args.process:
         raise ConfigError("--calibration is used only with --process")
-    from rig.config import load_config  # the pattern model (numpy): not for `rig --help`
+    from rig import api  # the pattern model, drivers and pipeline: not for `rig --help`
+    from rig.acquisition.scan import default_capture_path
+    from rig.store.results import default_output
 
-    config = load_config(args.config)
-    if args.process:  # a wrong calibration should stop us before the scan, not after it
-        from calibration.store import read_calibration
-
-        read_calibration(args.calibration)
-    from rig.acquisition.scan import (  # pulls in the drivers: not for `rig --help`
-        default_capture_path,
-        scan,
-    )
-
+    config = api.load_config(args.config)
     output = args.output or default_capture_path()
-    destination = args.process_output or output.with_name(output.name + "-processed")
-    if args.process:  # both outputs must be writable before the scan starts
-        from rig.pipeline.outputs import check_output_directory
+    frames = len(config.scan.patterns())
+    if not args.process:
+        with Progress(f"scan {output}", total=frames) as progress:
+            result = api.scan(output, config, scene=args.scene, overwrite=args.overwrite, progress=progress)
+        _print_scan(result)
+        return 0
+    from rig.commands.process import print_summary
 
-        check_output_directory(destination)
-    with Progress(f"scan {output}", total=len(config.scan.patterns())) as progress:
-        result = scan(config, output, scene=args.scene, overwrite=args.overwrite, progress=progress)
+    destination = args.process_output or default_output(output)
+    with Progress(f"scan and process {output}", total=frames + api.process_steps(with_reference=True)) as progress:
+        result, report = api.scan_then_process(
+            output,
+            args.calibration,
+            destination,
+            config,
+            scene=args.scene,
+            overwrite=args.overwrite,
+            scan_progress=progress,
+            process_progress=progress,
+        )
+    _print_scan(result)
+    print_summary(report, destination)
+    print(destination)
+    return 0
+
+
+def _print_scan(result: ScanResult) -> None:
+    """The scan's line on stderr and its capture directory on stdout (for scripts: the default name has the time)."""
+    retried = result.attempts - len(result.frames)
     print(
         f"{result.path}: {len(result.frames)} frames in {result.wall_s:.2f} s"
-        + (
-            f" ({result.attempts - len(result.frames)} retried, {result.discarded} discarded)"
-            if result.attempts > len(result.frames) or result.discarded
-            else ""
-        ),
+        + (f" ({retried} retried, {result.discarded} discarded)" if retried or result.discarded else ""),
         file=sys.stderr,
     )
-    print(result.path)  # stdout: the capture directory, for scripts (the default name has the time in it)
-    if args.process:
-        from rig.commands.process import print_summary
-        from rig.pipeline.plan import DEFAULT_CORRECTION, ProcessOptions
-        from rig.pipeline.run import process_capture, total_steps
-
-        with Progress(f"process {output}", total=total_steps(with_reference=True)) as progress:
-            report = process_capture(
-                output, args.calibration, destination, ProcessOptions(correction=DEFAULT_CORRECTION), progress=progress
-            )
-        print_summary(report, destination)
-        print(destination)
-    return 0
+    print(result.path)

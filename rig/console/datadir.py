@@ -16,10 +16,12 @@ from pathlib import Path
 from typing import Any
 
 from rig.errors import RigError
+from rig.store.results import REPORT, default_name, is_staging_name
 
 KINDS = ("captures", "results", "calibrations")
-MARKERS = {"captures": "capture.json", "results": "report.json", "calibrations": "calibration.json"}
-NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,99}")
+MARKERS = {"captures": "capture.json", "results": REPORT, "calibrations": "calibration.json"}
+NAME_LENGTH = 100
+NAME = re.compile(rf"[A-Za-z0-9][A-Za-z0-9._-]{{0,{NAME_LENGTH - 1}}}")
 
 
 class OutsideDataError(RigError):
@@ -46,6 +48,8 @@ class DataDir:
             raise OutsideDataError(
                 f"{kind} name: expected a plain name (letters, digits, '.', '_', '-'; no '/' or '..'), found {name!r}"
             )
+        if kind == "results" and is_staging_name(name):
+            raise OutsideDataError(f"{kind} name {name!r}: a staging name of an interrupted write, never a result")
         path = self.root / kind / name
         if not path.resolve().is_relative_to(self.root):
             raise OutsideDataError(f"{kind} name {name!r}: leads outside the data directory")
@@ -64,14 +68,23 @@ class DataDir:
         entries = []
         for child in folder.iterdir():
             marker = child / MARKERS[kind]
-            if NAME.fullmatch(child.name) and marker.is_file() and child.resolve().is_relative_to(self.root):
+            if (
+                NAME.fullmatch(child.name)
+                and not (kind == "results" and is_staging_name(child.name))
+                and marker.is_file()
+                and child.resolve().is_relative_to(self.root)
+            ):
                 entries.append((marker.stat().st_mtime, child.name))
         return [name for _, name in sorted(entries, reverse=True)]
 
     def new_name(self, kind: str, prefix: str) -> str:
-        """A name not yet used in ``kind``: ``prefix-YYYYmmdd-HHMMSS`` (``-2``, ``-3`` ... if taken)."""
+        """A name not yet used in ``kind``: ``prefix-YYYYmmdd-HHMMSS`` (``-2``, ``-3`` ... if taken).
+
+        A prefix too long for a name (a long capture's name) is cut short with a hash of it, so that
+        the name is always one :meth:`path` accepts.
+        """
         stamp = datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S")
-        base = f"{prefix}-{stamp}"
+        base = default_name(prefix, f"-{stamp}", limit=NAME_LENGTH - len("-999"))
         name, n = base, 1
         while any(p.name == name or p.name.startswith(name + ".incomplete") for p in (self.root / kind).iterdir()):
             n += 1

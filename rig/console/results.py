@@ -1,14 +1,13 @@
 """A processing result as the page shows it: colour-mapped map, raw values for the hover read-out,
 a down-sampled surface for the 3-D view, the report's key figures, and differences of two results.
 
-Built from an in-memory :class:`rig.pipeline.run.ProcessResult` right after a scan (so the result
-is on screen before its files are written) or from a results directory written by
-:func:`rig.pipeline.outputs.write_outputs`.
+Built from an in-memory :class:`rig.pipeline.result.ProcessResult` right after a scan (so the result
+is on screen before its files are written) or from a result directory read back through the result
+store (:func:`rig.store.results.read_result`: regular files inside the directory only).
 """
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -17,7 +16,8 @@ import cv2
 import numpy as np
 
 from rig.errors import RigError
-from rig.pipeline.outputs import colour_map, read_ply_points
+from rig.store import results as store
+from rig.store.result_files import colour_map
 
 SURFACE_MAX_SIDE = 160  # samples along the longer side of the 3-D surface
 
@@ -37,7 +37,7 @@ class ResultView:
 
     @classmethod
     def from_result(cls, name: str, result: Any) -> ResultView:
-        """From a :class:`rig.pipeline.run.ProcessResult` (in memory)."""
+        """From a :class:`rig.pipeline.result.ProcessResult` (in memory)."""
         if result.height is not None:
             values, unit, shows = result.height, "mm", "height"
         else:
@@ -46,21 +46,10 @@ class ResultView:
 
     @classmethod
     def from_directory(cls, name: str, path: Path) -> ResultView:
-        """From a results directory (report.json, height.npy or phase.npy, mask.npy, points.ply)."""
-        try:
-            report = json.loads((path / "report.json").read_text(encoding="utf-8"))
-            mask = np.load(path / "mask.npy", allow_pickle=False)
-            if (path / "height.npy").is_file():
-                values, unit, shows = np.load(path / "height.npy", allow_pickle=False), "mm", "height"
-            else:
-                values, unit, shows = np.load(path / "phase.npy", allow_pickle=False), "rad", "phase"
-            points = None
-            if (path / "points.ply").is_file():
-                points = np.full((*mask.shape, 3), np.nan, dtype=np.float32)
-                points[mask] = read_ply_points(path / "points.ply")
-        except (OSError, ValueError, KeyError) as exc:
-            raise RigError(f"results/{name}: cannot be read: {exc}") from None
-        return cls(name, np.asarray(values, dtype=np.float32), unit, shows, points, report, saved=True)
+        """From a result directory (report.json, height.npy or phase.npy, mask.npy, points.ply), read
+        through the result store: a FIFO, a device or a link out of the directory is refused, not followed."""
+        stored = store.read_result(path, where=f"results/{name}")
+        return cls(name, stored.values, stored.unit, stored.shows, stored.points, stored.report, saved=True)
 
     @property
     def shape(self) -> tuple[int, int]:

@@ -1,8 +1,9 @@
 """Builds the devices a rig config names, opens them together and closes them in reverse order.
 
-Backends are imported only when a config names them, so a lab PC without pypylon or libusb can
-still run the simulated rig, and the simulated rig never enters a real rig's code path except
-through the same driver interfaces.
+Every backend's module is importable without its optional library (pypylon, glfw) or device
+library (libusb): a backend loads them when a config names it and it is opened, so a lab PC
+without them still runs the simulated rig. The simulated rig never enters a real rig's code path
+except through the same driver interfaces.
 """
 
 from __future__ import annotations
@@ -15,11 +16,19 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from drivers.camera import Camera
+from drivers.camera import Camera, PixelFormat
+from drivers.camera_opencv import OpenCVCamera
+from drivers.camera_pylon import PylonCamera
+from drivers.dlp import LightCrafter4500
 from drivers.projector import Projector
-from rig.acquisition.loop import BoxTrigger, SoftwareTrigger
+from drivers.projector_dlp import DlpVideoProjector
+from drivers.projector_gl import GLProjector
+from drivers.projector_window import WindowProjector
+from drivers.trigger_box import SerialTriggerBox
 from rig.config import RigConfig
 from rig.errors import ConfigError
+from rig.hardware.simulated import SimulatedRig, WorldOperator, fault_arguments
+from rig.hardware.trigger_paths import BoxTrigger, SoftwareTrigger
 
 if TYPE_CHECKING:
     from calibration.camera import BoardSpec
@@ -61,18 +70,10 @@ def build_projector(config: RigConfig) -> Projector:
     backend = config.projector.backend
     size = config.projector.size
     if backend == "gl-offscreen":
-        from drivers.projector_gl import GLProjector
-
         return GLProjector(size)
     if backend == "window":
-        from drivers.projector_window import WindowProjector
-
         return WindowProjector(size, monitor=config.projector.monitor)
     if backend == "dlp4500":
-        from drivers.dlp import LightCrafter4500
-        from drivers.projector_dlp import DlpVideoProjector
-        from drivers.projector_window import WindowProjector
-
         return DlpVideoProjector(WindowProjector(size, monitor=config.projector.monitor), LightCrafter4500())
     raise ConfigError(f"[projector] backend: unknown {backend!r}")
 
@@ -81,19 +82,14 @@ def build_camera(config: RigConfig) -> Camera:
     """A real camera driver a config names (not opened); the simulated camera is built by the simulated rig."""
     backend = config.camera.backend
     if backend == "opencv":
-        from drivers.camera_opencv import OpenCVCamera
-
         return OpenCVCamera(config.camera.index)
     if backend == "pylon":
-        from drivers.camera_pylon import PylonCamera
-
         return PylonCamera(serial=config.camera.serial)
     raise ConfigError(f"[camera] backend: unknown {backend!r}")
 
 
 def _configure_camera(camera: Camera, config: RigConfig) -> None:
     """Pixel format and ROI (centred, of the configured size) before the scan starts."""
-    from drivers.camera import PixelFormat
 
     camera.pixel_format = PixelFormat[config.camera.pixel_format.upper()]
     sensor_w, sensor_h = camera.sensor_size
@@ -116,9 +112,17 @@ def world_operator(devices: RigDevices, board: BoardSpec | None = None) -> Any:
     """The operator that places calibration scenes by itself (simulated rig), or None on a real rig."""
     if devices.simulation is None:
         return None
-    from rig.hardware.simulated import WorldOperator
 
     return WorldOperator(devices.simulation, board)
+
+
+def artefact_world(devices: RigDevices, artefacts: Any) -> Any:
+    """The operator that places verification artefacts by itself (simulated rig), or None on a real rig."""
+    if devices.simulation is None:
+        return None
+    from rig.hardware.simulated import ArtefactWorld
+
+    return ArtefactWorld(devices.simulation, artefacts)
 
 
 @contextlib.contextmanager
@@ -132,8 +136,6 @@ def open_rig(config: RigConfig, scene: str = "object", fault: str | None = None)
         raise ConfigError(f"fault {fault!r}: faults can only be injected into the simulated rig")
     with contextlib.ExitStack() as stack:
         if config.simulated:
-            from rig.hardware.simulated import SimulatedRig, fault_arguments
-
             faults = fault_arguments(fault, config) if fault is not None else {}
             simulation = stack.enter_context(SimulatedRig(config, scene=scene, **faults))
             projector, camera, box = simulation.projector, simulation.camera, simulation.trigger_box
@@ -146,8 +148,6 @@ def open_rig(config: RigConfig, scene: str = "object", fault: str | None = None)
             _configure_camera(camera, config)
             box = None
             if config.trigger.backend == "serial":
-                from drivers.trigger_box import SerialTriggerBox
-
                 assert config.trigger.port is not None  # rig.config requires it for backend "serial"
                 box = SerialTriggerBox(
                     config.trigger.port, baudrate=config.trigger.baudrate, timeout_s=config.trigger.timeout_s

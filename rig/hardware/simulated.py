@@ -20,9 +20,15 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from mock_devices import scenes, synth
+from drivers.camera import PixelFormat
+from drivers.projector_gl import GLProjector
+from drivers.trigger_box import SerialTriggerBox
+from mock_devices import board_synth, scenes, synth
+from mock_devices.camera import CameraFaults, SimulatedCamera
+from mock_devices.trigger_box import FakeTriggerBox, TriggerFaults
 from rig.config import RigConfig
 from rig.errors import ConfigError
+from rig.hardware.scenes import check_scene_name
 
 if TYPE_CHECKING:
     from calibration.camera import BoardSpec
@@ -65,6 +71,7 @@ def scene_height(config: RigConfig, scene: str, geometry: synth.RigGeometry) -> 
     """
     h, w, pixel_mm = geometry.camera_height, geometry.camera_width, geometry.pixel_mm
     if scene == "object":
+        check_scene_name(config.simulation.scene, str(config.source) if config.source is not None else "rig config")
         return scenes.make_scene(config.simulation.scene, h, w, pixel_mm)
     if scene == "reference":
         return np.zeros((h, w))
@@ -92,8 +99,6 @@ FAULTS = {
 
 def fault_arguments(fault: str, config: RigConfig) -> dict[str, Any]:
     """:class:`SimulatedRig` arguments injecting the named fault of :data:`FAULTS`."""
-    from mock_devices.camera import CameraFaults
-    from mock_devices.trigger_box import TriggerFaults
 
     if fault == "camera-gone":
         return {"camera_faults": CameraFaults(disappear_after=3)}
@@ -149,9 +154,6 @@ class SimulatedRig:
         }
 
     def __enter__(self) -> SimulatedRig:
-        from drivers.camera import PixelFormat
-        from drivers.projector_gl import GLProjector
-        from mock_devices.camera import SimulatedCamera
 
         try:
             # GLProjector reads each frame back when it is shown, in the thread that owns its
@@ -196,8 +198,6 @@ class SimulatedRig:
         self.scene, self.height_mm = scene, height
 
     def _open_trigger_box(self) -> None:
-        from drivers.trigger_box import SerialTriggerBox
-        from mock_devices.trigger_box import FakeTriggerBox
 
         self.fake_box = self._stack.enter_context(
             FakeTriggerBox(on_pulse=self.camera.pulse, faults=self.trigger_faults, **self.fake_box_options)
@@ -218,7 +218,6 @@ def board_albedo(config: RigConfig, board: BoardSpec, index: int) -> np.ndarray:
     The simulated camera looks straight down at l0 with ``pixel_mm`` per pixel on the plane: a
     pinhole of focal l0 / pixel_mm without distortion. Poses are seeded by the config and index.
     """
-    from mock_devices import board_synth
 
     g = geometry_from_config(config)
     camera = board_synth.PinholeCamera.simple(g.camera_width, g.camera_height, g.l0_mm / g.pixel_mm)
@@ -278,3 +277,54 @@ class WorldOperator:
 
     def clear(self) -> None:
         self.rig.place("reference")
+
+
+def artefact_shapes(placement: Any, artefacts: Any) -> list[Any]:
+    """The ray-cast shapes of a verification placement (:class:`rig.verify.guideline.Placement`).
+
+    A sphere, two spheres joined by a bar a fifth of their diameter thick, or a flat plate, with
+    the calibrated sizes of ``artefacts`` (:class:`rig.verify.artefacts.Artefacts`).
+    """
+    from mock_devices import artefacts as shapes
+
+    if placement.kind == "sphere":
+        return [shapes.Sphere(placement.centres[0], artefacts.sphere_diameter_mm / 2)]
+    if placement.kind == "ball-bar":
+        radius = artefacts.ball_bar_sphere_diameter_mm / 2
+        first, second = placement.centres
+        bar = shapes.Cylinder(first, second, radius / 5)
+        return [shapes.Sphere(first, radius), shapes.Sphere(second, radius), bar]
+    if placement.kind == "plane":
+        return [
+            shapes.Plate(
+                placement.centres[0],
+                placement.along,
+                placement.across,
+                artefacts.plane_length_mm,
+                artefacts.plane_width_mm,
+            )
+        ]
+    raise ConfigError(f"placement: expected a sphere, ball-bar or plane, found {placement.kind!r}")
+
+
+class ArtefactWorld:
+    """The simulated rig's hands in a verification session: it puts each artefact where it is asked.
+
+    Implements :class:`rig.verify.operator.Operator`, so that `rig verify` runs unattended on
+    the simulated rig through the same acquisition code as with a person at a real rig.
+    """
+
+    def __init__(self, rig: SimulatedRig, artefacts: Any) -> None:
+        self.rig = rig
+        self.artefacts = artefacts
+
+    def place(self, placement: Any) -> None:
+        from mock_devices.artefacts import ray_cast_heights
+
+        g = self.rig.geometry
+        shapes = artefact_shapes(placement, self.artefacts)
+        height = ray_cast_heights(g.camera_height, g.camera_width, g.pixel_mm, g.l0_mm, shapes)
+        self.rig.camera.set_scene(height)
+        matte = appearance_from_config(self.rig.config).reflectivity
+        self.rig.camera.appearance = replace(self.rig.camera.appearance, reflectivity=matte)
+        self.rig.scene, self.rig.height_mm = placement.name, height

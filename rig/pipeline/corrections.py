@@ -10,22 +10,20 @@ it is missing.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from calibration.errors import CalibrationError
+from calibration.store import Calibration
 from processing.angles import wrap_to_pi
 from processing.correction import CORRECTIONS as NUMERIC_CORRECTIONS
 from processing.correction_method import CorrectionMethod
+from processing.sampling import fringe_step_rad, undersampled_for_spatial_methods
 from rig.errors import ProcessingError
 from rig.pipeline.gamma_correction import GAMMA_TABLE
-from rig.pipeline.plan import accepted_params
-
-if TYPE_CHECKING:
-    from calibration.store import Calibration
-    from rig.pipeline.plan import ProcessOptions
-    from rig.pipeline.stages import SceneState
+from rig.pipeline.plan import ProcessOptions, accepted_params
+from rig.pipeline.state import SceneState
 
 REGISTRY: dict[str, CorrectionMethod] = {**NUMERIC_CORRECTIONS, GAMMA_TABLE.name: GAMMA_TABLE}
 
@@ -118,8 +116,6 @@ def _note_unresolved(state: SceneState, info: dict[str, Any]) -> None:
 def _too_dense_for_spatial_methods(state: SceneState, name: str) -> bool:
     """Fringes below 2.5 px per period: ``auto`` is skipped (it would make the result worse); an
     explicitly requested method runs with a note saying why its result cannot be trusted."""
-    from processing.sampling import fringe_step_rad, undersampled_for_spatial_methods
-
     unwrapped = state.unwrapped
     assert unwrapped is not None
     if not unwrapped.absolute:

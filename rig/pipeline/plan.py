@@ -2,22 +2,26 @@
 
 Each capture (the object, and the calibration's reference plane) goes through the same stages::
 
-    load -> undistort -> denoise -> wrapped -> unwrap -> correction
+    load -> undistort -> denoise -> phase -> correction
 
 then the two meet in ``height`` (:mod:`calibration.models`: thesis eq. 1.15 on Phi_object -
 Phi_reference for the reference-plane model) and ``outputs``.
-Every stage is a plain function of a :class:`SceneState` and the :class:`ProcessOptions`; its
-wall-clock time goes into report.json. Methods plug in through registries, so a new denoiser or
-phase correction is one entry, not a new code path:
+Every stage is a plain function of a :class:`rig.pipeline.state.SceneState` and the
+:class:`ProcessOptions`; its wall-clock time goes into report.json. Methods plug in through
+registries, so a new method is one entry, not a new code path:
 
-- :data:`DENOISERS` ``name -> f(frames, groups, options) -> frames`` (``--denoise``);
+- :data:`rig.pipeline.unwrapping.REGISTRY` ``name -> UnwrapMethod`` (``--unwrap``): what each
+  needs of the pattern groups, and ``run(inputs) -> UnwrapResult``;
+- :data:`rig.pipeline.stages.DENOISERS` ``name -> Denoiser`` (``--denoise``);
 - :data:`rig.pipeline.corrections.REGISTRY` ``name -> CorrectionMethod`` (``--correction``):
   typed entries, ``f(absolute, wrapped, orders, mask, frequency, **params) -> (phase, info)``,
   with what each needs from the calibration (``needs``);
-- :data:`SINGLE_SHOT` ``pattern kind -> f(state, options) -> None`` filling ``state.unwrapped``
-  for single-shot patterns (``speckle-sinusoid``);
+- :data:`rig.pipeline.single_shot_phase.SINGLE_SHOT` ``pattern kind -> f(state, options) -> None``
+  filling ``state.wrapped`` and ``state.unwrapped`` for single-shot patterns (``speckle-sinusoid``);
 - heights and points come from :mod:`calibration.models` (reference-plane, polynomial, stereo),
   whatever the calibration's model; the reference plane is processed when the model needs it.
+
+:func:`rig.pipeline.registry.available_options` lists every choice for the front-ends.
 
 Automatic choice of the unwrapping method (``--unwrap auto``), from the sinusoid frequencies
 along the fringe axis (the axis of the first sinusoid pattern):
@@ -55,10 +59,22 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 TWO_PI = 2.0 * math.pi
-# The correction a user gets without asking (rig process, rig scan --process, rig demo): the best
-# measured. ProcessOptions() itself corrects nothing, so calibration fits see the measured phase.
+# The correction a user gets without asking (every front-end: ProcessOptions() uses it): the best
+# measured. The calibration session asks for "none", so its fits see the measured phase.
 DEFAULT_CORRECTION = "auto"
-UNWRAP_METHODS = ("auto", "two-frequency", "three-frequency", "hierarchical", "heterodyne", "gray", "spatial", "ftp")
+
+
+def __getattr__(name: str) -> Any:
+    """``UNWRAP_METHODS``: what ``--unwrap`` accepts, from :mod:`rig.pipeline.unwrapping`'s registry.
+
+    Loaded on first use: this module is imported to build the command line's parser, which must
+    not load numpy (``rig --help`` stays quick).
+    """
+    if name == "UNWRAP_METHODS":
+        from rig.pipeline.unwrapping import UNWRAP_METHODS
+
+        return UNWRAP_METHODS
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 # --------------------------------------------------------------------------- options and pattern groups
@@ -66,7 +82,7 @@ UNWRAP_METHODS = ("auto", "two-frequency", "three-frequency", "hierarchical", "h
 
 @dataclass
 class ProcessOptions:
-    """What `rig process` was asked to do.
+    """What `rig process` was asked to do; the defaults are `rig process`'s defaults.
 
     ``params`` carries method-specific settings of plug-in stages (e.g. RPCA's tau) by name.
     """
@@ -74,7 +90,7 @@ class ProcessOptions:
     unwrap: str = "auto"
     undistort: bool | None = None  # None: when the calibration has camera_matrix + distortion
     denoise: str = "none"
-    correction: str = "none"
+    correction: str = DEFAULT_CORRECTION
     min_modulation_ratio: float = 0.2
     # valid regions smaller than this fraction of the largest are dropped (processing.islands); 0 keeps all
     min_island_fraction: float = 0.005
@@ -223,7 +239,8 @@ def choose_unwrap(groups: PatternGroups, axis: str) -> str:
             return "heterodyne"
         if math.gcd(*ints) == 1:
             return "three-frequency"
+    from rig.pipeline.unwrapping import REGISTRY  # numpy: not for the parser
+
     raise ProcessingError(
-        f"frequencies {ints}: no automatic unwrapping method fits; choose one with --unwrap "
-        f"({', '.join(UNWRAP_METHODS[1:])})"
+        f"frequencies {ints}: no automatic unwrapping method fits; choose one with --unwrap ({', '.join(REGISTRY)})"
     )

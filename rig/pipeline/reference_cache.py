@@ -9,7 +9,7 @@ phase and mask are kept:
 - on disk, in the user's cache directory (``$RIG_CACHE_DIR``, else ``$XDG_CACHE_HOME/fpp-rig``,
   else ``~/.cache/fpp-rig``; ``RIG_CACHE_DIR=off`` disables it), as
   ``reference/reference-<source>-<options>.npz``, written atomically (temporary file, fsync,
-  rename) by ``rig process`` and ``rig scan --process`` (:func:`rig.pipeline.run.process_capture`)
+  rename) by ``rig process`` and ``rig scan --process`` (:func:`rig.api.process_to`)
   and read by every run. Nothing is written into the user's calibration or capture directories; a
   cache that cannot be written just goes without (a log line says so). In-memory processing
   (:func:`rig.api.process`) writes no file.
@@ -38,7 +38,7 @@ import numpy as np
 
 from rig import __version__
 from rig.pipeline.plan import ProcessOptions
-from rig.pipeline.stages import SceneState, UnwrappedPhase
+from rig.pipeline.state import SceneState, UnwrappedPhase
 
 log = logging.getLogger(__name__)
 

@@ -6,7 +6,6 @@ import contextlib
 import logging
 import time
 from collections import OrderedDict
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -20,13 +19,13 @@ from rig.errors import ProcessingError
 from rig.pipeline import reference_cache
 from rig.pipeline.corrections import REGISTRY as CORRECTIONS
 from rig.pipeline.fit import check_fit
-from rig.pipeline.outputs import write_outputs
 from rig.pipeline.plan import (
     UNWRAP_METHODS,
     PatternGroups,
     ProcessOptions,
     group_patterns,
 )
+from rig.pipeline.result import ProcessResult
 from rig.pipeline.stages import (
     DENOISERS,
     SCENE_STAGES,
@@ -53,50 +52,6 @@ def _solves_rpca(stage: str, state: SceneState, options: ProcessOptions) -> bool
 
 
 # --------------------------------------------------------------------------- the whole run
-
-
-@dataclass
-class ProcessResult:
-    """Everything `rig process` computed, ready to be written."""
-
-    object: SceneState
-    reference: SceneState | None
-    calibration: Calibration | None
-    options: ProcessOptions
-    height: np.ndarray | None
-    mask: np.ndarray
-    timings: dict[str, Any]
-    notes: list[str]
-    point_grid: np.ndarray | None = None  # (H, W, 3) mm from the stereo model; else built on demand
-
-    @property
-    def points(self) -> np.ndarray | None:
-        """Points (H, W, 3) in mm, NaN where invalid; None without a calibration."""
-        if self.point_grid is None and self.height is not None:
-            assert self.calibration is not None
-            grid = calibration_models.plane_points(self.calibration, self.height).reshape(*self.height.shape, 3)
-            grid[~self.mask] = np.nan
-            self.point_grid = grid
-        return self.point_grid
-
-    def valid_points(self) -> np.ndarray:
-        """Points (N, 3) in mm of the valid pixels, in C order of ``mask`` (what points.ply holds)."""
-        if self.point_grid is not None:
-            return self.point_grid[self.mask]
-        assert self.calibration is not None and self.height is not None
-        return calibration_models.plane_points(self.calibration, self.height, self.mask)
-
-    @property
-    def report(self) -> dict[str, Any]:
-        """report.json's content (without the files, which only :func:`write_outputs` knows)."""
-        from rig.pipeline.outputs import build_report
-
-        return build_report(self)
-
-    @property
-    def phase(self) -> np.ndarray:
-        assert self.object.unwrapped is not None
-        return self.object.unwrapped.phase
 
 
 def _fringe_axis(groups: PatternGroups, options: ProcessOptions, where: str) -> str:
@@ -180,7 +135,7 @@ def _calibration_and_reference(calibration_path: str | Path) -> tuple[Calibratio
 
 
 def process(
-    capture_path: str | Path,
+    capture: Capture | str | Path,
     calibration_path: str | Path | None = None,
     options: ProcessOptions | None = None,
     progress: Any = None,
@@ -190,6 +145,7 @@ def process(
 ) -> ProcessResult:
     """Run the stages on a capture and, with a calibration, on its reference plane; compute heights.
 
+    ``capture``: a capture directory, or a :class:`Capture` already read (not read again).
     ``progress`` (a :class:`rig.events.Reporter` or the CLI's :class:`rig.progress.Progress`) gets
     ``begin(total)`` and one ``step`` per stage; a cancelled reporter stops the run between stages.
     The processed reference plane is reused from :mod:`rig.pipeline.reference_cache` (memory, and
@@ -200,100 +156,139 @@ def process(
     options = ProcessOptions() if options is None else options
     _check_options(options)
     started = time.perf_counter()
-    capture = read_capture(capture_path, salvage=salvage, verify=False)  # the load stage checks every frame
-    calibration, reference_capture = (None, None)
-    obj = _scene("object", capture, options)
-    if calibration_path is not None:
-        calibration, reference_capture = load_calibration_for(capture, calibration_path, obj.axis)
+    if not isinstance(capture, Capture):
+        capture = read_capture(capture, salvage=salvage, verify=False)  # the load stage checks every frame
+    obj, ref, calibration = _scenes(capture, calibration_path, options)
     obj.frames = None if frames is None else np.asarray(frames)
-    ref = _scene("reference", reference_capture, options) if reference_capture is not None else None
-    for state in (obj, ref):
-        if state is not None:
-            state.calibration = calibration
-    if ref is not None:
-        ref.axis = obj.axis
-        obj.reference = ref
     if progress is not None:
         progress.begin(total_steps(ref is not None))
     for state in ([ref] if ref is not None else []) + [obj]:
-        key = None
-        if state is ref and reference_cache.cacheable(state):
-            t0 = time.perf_counter()
-            key = reference_cache.cache_key(state, options)
-            if reference_cache.load(state, key):
-                state.timings["cached"] = time.perf_counter() - t0
-                if progress is not None:
-                    for name, _ in SCENE_STAGES:
-                        progress.step(f"{state.name}: {name} (cached)")
-                continue
-        for name, stage in SCENE_STAGES:
-            t0 = time.perf_counter()
-            try:
-                with rpca_blas() if _solves_rpca(name, state, options) else contextlib.nullcontext():
-                    stage(state, options)
-            except ValueError as exc:  # the numeric kernels name the argument that does not fit
-                raise ProcessingError(f"{state.capture.manifest_path}: {name}: {exc}") from None
-            state.timings[name] = time.perf_counter() - t0
-            if progress is not None:
-                progress.step(f"{state.name}: {name}")
-        state.frames = None  # the frames are not needed any more; free them early
-        if key is not None:
-            reference_cache.store(state, key, to_disk=reference_cache_to_disk)
+        _run_scene(state, options, progress, to_disk=reference_cache_to_disk and state is ref)
     notes: list[str] = []
-    assert obj.unwrapped is not None
-    height = points = None
-    mask = obj.unwrapped.valid.copy()
     t0 = time.perf_counter()
-    if calibration is not None:
-        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):  # absurd calibrations: masked below
-            points, height = stage_height(obj, ref, calibration, notes)
-            # valid only where the stored (float32) height and point are finite: no infinity in any output
-            height32 = np.asarray(height).astype(np.float32, copy=False)  # stage_height's own array
-            finite = np.isfinite(height32)
-            if points is not None:
-                finite &= np.isfinite(np.asarray(points).astype(np.float32)).all(axis=-1)
-            else:  # plane models: points are made from the heights when written
-                finite = calibration_models.plane_points_finite(calibration, height32, finite)
-        if ref is not None:
-            assert ref.unwrapped is not None
-            mask &= ref.unwrapped.valid
-        mask &= finite
-        height = height32  # our own float32 array: masked in place
-        np.copyto(height, np.float32(np.nan), where=~mask)
-    else:
-        notes.append("no calibration: height, points and height preview skipped; phase, mask and wrapped phase written")
+    height, points, mask = _height(obj, ref, calibration, notes)
     height_time = time.perf_counter() - t0
     if progress is not None:
         progress.step("height")
-    if options.min_island_fraction > 0:
-        from processing.islands import island_mask
-
-        islands = island_mask(mask, options.min_island_fraction)
-        dropped = int(np.count_nonzero(islands))
-        obj.info["islands_dropped"] = dropped
-        if dropped:
-            mask &= ~islands
-            if height is not None:  # our own float32 array, already NaN outside the mask
-                np.copyto(height, np.float32(np.nan), where=islands)
-            notes.append(
-                f"{dropped} valid pixels in isolated islands (regions under {options.min_island_fraction:g} of the "
-                "largest) dropped as background specks; --keep-islands keeps them"
-            )
-    if not mask.any():
-        if calibration is not None and obj.unwrapped.valid.any():  # lit pixels, but the model gave no finite height
-            raise ProcessingError(
-                f"{calibration.where}: no pixel has a finite height with this calibration although "
-                f"{int(obj.unwrapped.valid.sum())} pixels have a phase (check its numbers and matrices)"
-            )
-        raise ProcessingError(
-            f"{capture.manifest_path}: no valid pixel (all in shadow or too little fringe modulation)"
-        )
+    _drop_islands(obj, mask, height, options.min_island_fraction, notes)
+    _check_some_valid(obj, calibration, mask)
     timings: dict[str, Any] = {"object": dict(obj.timings)}
     if ref is not None:
         timings["reference"] = dict(ref.timings)
     timings["height"] = height_time
     timings["total"] = time.perf_counter() - started
     return ProcessResult(obj, ref, calibration, options, height, mask, timings, notes + obj.notes, point_grid=points)
+
+
+def _scenes(
+    capture: Capture, calibration_path: str | Path | None, options: ProcessOptions
+) -> tuple[SceneState, SceneState | None, Calibration | None]:
+    """The object's scene and, with a calibration whose model needs one, its reference plane's."""
+    calibration, reference_capture = (None, None)
+    obj = _scene("object", capture, options)
+    if calibration_path is not None:
+        calibration, reference_capture = load_calibration_for(capture, calibration_path, obj.axis)
+    obj.calibration = calibration
+    if reference_capture is None:
+        return obj, None, calibration
+    ref = _scene("reference", reference_capture, options)
+    ref.calibration = calibration
+    ref.axis = obj.axis
+    obj.reference = ref
+    return obj, ref, calibration
+
+
+def _run_scene(state: SceneState, options: ProcessOptions, progress: Any, to_disk: bool) -> None:
+    """Every stage on one scene; a reference plane processed before (same options) comes from the cache."""
+    key = None
+    if state.name == "reference" and reference_cache.cacheable(state):
+        t0 = time.perf_counter()
+        key = reference_cache.cache_key(state, options)
+        if reference_cache.load(state, key):
+            state.timings["cached"] = time.perf_counter() - t0
+            if progress is not None:
+                for name, _ in SCENE_STAGES:
+                    progress.step(f"{state.name}: {name} (cached)")
+            return
+    for name, stage in SCENE_STAGES:
+        t0 = time.perf_counter()
+        try:
+            with rpca_blas() if _solves_rpca(name, state, options) else contextlib.nullcontext():
+                stage(state, options)
+        except ValueError as exc:  # the numeric kernels name the argument that does not fit
+            raise ProcessingError(f"{state.capture.manifest_path}: {name}: {exc}") from None
+        state.timings[name] = time.perf_counter() - t0
+        if progress is not None:
+            progress.step(f"{state.name}: {name}")
+    state.frames = None  # the frames are not needed any more; free them early
+    if key is not None:
+        reference_cache.store(state, key, to_disk=to_disk)
+
+
+def _height(
+    obj: SceneState, ref: SceneState | None, calibration: Calibration | None, notes: list[str]
+) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray]:
+    """Heights (float32, NaN outside the mask), the model's points (or None) and the valid mask.
+
+    Valid: a phase in the object (and the reference), and a finite stored height and point.
+    """
+    assert obj.unwrapped is not None
+    mask = obj.unwrapped.valid.copy()
+    if calibration is None:
+        notes.append("no calibration: height, points and height preview skipped; phase, mask and wrapped phase written")
+        return None, None, mask
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):  # absurd calibrations: masked below
+        points, height = stage_height(obj, ref, calibration, notes)
+        # valid only where the stored (float32) height and point are finite: no infinity in any output
+        height32 = np.asarray(height).astype(np.float32, copy=False)  # stage_height's own array
+        finite = np.isfinite(height32)
+        if points is not None:
+            finite &= np.isfinite(np.asarray(points).astype(np.float32)).all(axis=-1)
+        else:  # plane models: points are made from the heights when written
+            finite = calibration_models.plane_points_finite(calibration, height32, finite)
+    if ref is not None:
+        assert ref.unwrapped is not None
+        mask &= ref.unwrapped.valid
+    mask &= finite
+    np.copyto(height32, np.float32(np.nan), where=~mask)  # our own float32 array: masked in place
+    return height32, points, mask
+
+
+def _drop_islands(
+    obj: SceneState, mask: np.ndarray, height: np.ndarray | None, fraction: float, notes: list[str]
+) -> None:
+    """Drop (in place) valid regions under ``fraction`` of the largest: background specks."""
+    if fraction <= 0:
+        return
+    from processing.islands import island_mask
+
+    islands = island_mask(mask, fraction)
+    dropped = int(np.count_nonzero(islands))
+    obj.info["islands_dropped"] = dropped
+    if not dropped:
+        return
+    mask &= ~islands
+    if height is not None:  # our own float32 array, already NaN outside the mask
+        np.copyto(height, np.float32(np.nan), where=islands)
+    notes.append(
+        f"{dropped} valid pixels in isolated islands (regions under {fraction:g} of the "
+        "largest) dropped as background specks; --keep-islands keeps them"
+    )
+
+
+def _check_some_valid(obj: SceneState, calibration: Calibration | None, mask: np.ndarray) -> None:
+    """ProcessingError when no pixel is left, naming the likelier cause."""
+    if mask.any():
+        return
+    assert obj.unwrapped is not None
+    if calibration is not None and obj.unwrapped.valid.any():  # lit pixels, but the model gave no finite height
+        raise ProcessingError(
+            f"{calibration.where}: no pixel has a finite height with this calibration although "
+            f"{int(obj.unwrapped.valid.sum())} pixels have a phase (check its numbers and matrices)"
+        )
+    raise ProcessingError(
+        f"{obj.capture.manifest_path}: no valid pixel (all in shadow or too little fringe modulation)"
+    )
 
 
 def _check_options(options: ProcessOptions) -> None:
@@ -309,18 +304,3 @@ def _check_options(options: ProcessOptions) -> None:
         raise ProcessingError(f"--axis: expected x or y, found {options.axis!r}")
     if not 0 < options.min_modulation_ratio <= 1:
         raise ProcessingError(f"--min-modulation: expected a fraction in (0, 1], found {options.min_modulation_ratio}")
-
-
-def process_capture(
-    capture_path: str | Path,
-    calibration_path: str | Path | None,
-    out_dir: str | Path,
-    options: ProcessOptions | None = None,
-    progress: Any = None,
-    salvage: bool = False,
-) -> dict[str, Any]:
-    """:func:`process` (caching the processed reference in the calibration directory) then :func:`write_outputs`."""
-    result = process(
-        capture_path, calibration_path, options, progress=progress, salvage=salvage, reference_cache_to_disk=True
-    )
-    return write_outputs(result, out_dir)

@@ -1,84 +1,44 @@
-"""The stages each capture goes through (load, undistort, denoise, wrapped, unwrap, correction) and height."""
+"""The stages each capture goes through (load, undistort, denoise, phase, correction) and height.
+
+``phase`` turns the frames into the absolute phase: wrapped phase and unwrapping, fused in one pass
+where the capture allows it (:func:`stage_phase`). Unwrapping methods come from
+:mod:`rig.pipeline.unwrapping`, denoisers from :data:`DENOISERS`, corrections from
+:mod:`rig.pipeline.corrections`.
+"""
 
 from __future__ import annotations
 
-import dataclasses
+import functools
 import logging
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from calibration import models as calibration_models
+from calibration.camera import undistort_stack
 from calibration.errors import CalibrationError
 from calibration.store import Calibration
+from processing.convention import gray_offset, heterodyne_offset
+from processing.denoise import rpca_denoise_stack
+from processing.fringe_pass import FringePass, fringe_pass
+from processing.neighbour_rescue import rescue
+from processing.phase_shift import phase_shift, shadow_mask
+from rig.blas import rpca_blas
 from rig.errors import ProcessingError
+from rig.pipeline import convention_check
 from rig.pipeline.corrections import stage_correction
-from rig.pipeline.plan import (
-    TWO_PI,
-    UNWRAP_METHODS,
-    PatternGroups,
-    ProcessOptions,
-    _all_integers,
-    accepted_params,
-    choose_unwrap,
-)
-from rig.store.capture import Capture, dtype_for_bit_depth
+from rig.pipeline.plan import PatternGroups, ProcessOptions, _all_integers, accepted_params, choose_unwrap
+from rig.pipeline.state import SceneState, UnwrappedPhase, WrappedPhase
+from rig.pipeline.unwrapping import REGISTRY as UNWRAPPERS
+from rig.pipeline.unwrapping import UNWRAP_METHODS, GrayPlanes, UnwrapInputs, UnwrapMethod
+from rig.store.capture import dtype_for_bit_depth
+
+__all__ = ["DENOISERS", "SCENE_STAGES", "SceneState", "UnwrappedPhase", "WrappedPhase", "stage_height"]
 
 log = logging.getLogger(__name__)
-
-# --------------------------------------------------------------------------- per-capture state
-
-
-@dataclass
-class WrappedPhase:
-    """Wrapped phase per frequency (any 2 pi representation), with the modulation and background of each.
-
-    The fused pass keeps these maps only for the highest frequency (what height, texture and
-    corrections read) unless the capture has no calibration (wrapped.npy has them all); the
-    other entries are then None.
-    """
-
-    frequencies: list[float]
-    phase: list[np.ndarray | None]
-    modulation: list[np.ndarray | None]
-    background: list[np.ndarray | None]
-    valid: np.ndarray
-    # A + B per frequency instead of the two apart (the fused pass: the texture is all that reads them)
-    brightness: list[np.ndarray | None] | None = None
-
-
-@dataclass
-class UnwrappedPhase:
-    """Absolute phase 2 pi f u / W at ``frequency`` (NaN where invalid); ``absolute`` False for spatial."""
-
-    phase: np.ndarray
-    valid: np.ndarray
-    frequency: float
-    method: str
-    absolute: bool = True
-    orders: np.ndarray | None = None
-
-
-@dataclass
-class SceneState:
-    """One capture on its way through the stages."""
-
-    name: str
-    capture: Capture
-    groups: PatternGroups
-    axis: str
-    frames: np.ndarray | None = None
-    wrapped: WrappedPhase | None = None
-    unwrapped: UnwrappedPhase | None = None
-    reference: SceneState | None = None
-    timings: dict[str, float] = field(default_factory=dict)
-    notes: list[str] = field(default_factory=list)
-    info: dict[str, Any] = field(default_factory=dict)
-    calibration: Calibration | None = None
-    single_shot_reference: Any = None  # processing.single_shot.SingleShotReference of a reference capture
 
 
 def stage_load(state: SceneState, options: ProcessOptions) -> None:
@@ -117,8 +77,6 @@ def stage_undistort(state: SceneState, options: ProcessOptions) -> None:
         if options.undistort:
             raise CalibrationError(f"{cal.where}: camera_matrix / distortion: missing, cannot undistort")
         return
-    from calibration.camera import undistort_stack
-
     try:
         matrix_arr = np.asarray(matrix, dtype=np.float64).reshape(3, 3)
         dist_arr = np.asarray(distortion, dtype=np.float64).ravel()
@@ -139,8 +97,6 @@ def _denoise_rpca(
     frames: np.ndarray, groups: PatternGroups, options: ProcessOptions
 ) -> tuple[np.ndarray, dict[str, Any]]:
     """Thesis ch. 2.4: each frame's low-rank part (stable inexact ALM RPCA); returns frames and stage info."""
-    from processing.denoise import rpca_denoise_stack
-
     params = accepted_params(rpca_denoise_stack, options.params)
     start = time.perf_counter()
     try:
@@ -156,10 +112,32 @@ def _denoise_rpca(
     }
 
 
-# A denoiser returns the frames, or (frames, info) to record its parameters and effort.
-DENOISERS: dict[str, Callable[[np.ndarray, PatternGroups, ProcessOptions], Any]] = {
-    "none": _denoise_none,
-    "rpca": _denoise_rpca,
+@dataclass(frozen=True)
+class Denoiser:
+    """One registered fringe denoiser; calling it calls ``run``.
+
+    ``run``: ``f(frames, groups, options)`` returning the frames, or (frames, info) to record its
+    parameters and effort. ``description``: one line for ``--help``, the console and the docs.
+    """
+
+    name: str
+    run: Callable[[np.ndarray, PatternGroups, ProcessOptions], Any]
+    description: str
+
+    def __call__(self, frames: np.ndarray, groups: PatternGroups, options: ProcessOptions) -> Any:
+        return self.run(frames, groups, options)
+
+
+DENOISERS: dict[str, Denoiser] = {
+    entry.name: entry
+    for entry in (
+        Denoiser("none", _denoise_none, "the frames as captured"),
+        Denoiser(
+            "rpca",
+            _denoise_rpca,
+            "each frame's low-rank part by stable inexact-ALM RPCA, removing impulsive noise (thesis ch. 2.4)",
+        ),
+    )
 }
 
 
@@ -173,20 +151,43 @@ def stage_denoise(state: SceneState, options: ProcessOptions) -> None:
     state.info["denoise"] = detail if detail is not None else options.denoise
 
 
-def stage_wrapped(state: SceneState, options: ProcessOptions) -> None:
-    """Wrapped phase of every sinusoid group along the fringe axis, and the valid-pixel mask.
+def stage_phase(state: SceneState, options: ProcessOptions) -> None:
+    """Absolute (or, for spatial methods, relative) phase at the highest frequency, from the frames.
 
-    With phase-shifting groups only and a temporal unwrapping method (the default path), the
-    fused float32 pass (:mod:`processing.fringe_pass`) also unwraps, in the same visit of the
-    frames; the unwrap stage then has nothing left to do.
+    Three paths, each named in the report (``stage_info``):
+
+    - phase-shifting groups only and a temporal method the fused float32 pass can run
+      (:mod:`processing.fringe_pass`): wrapped phases, modulation mask and unwrapping in one visit
+      of the frames (``fused_pass``);
+    - otherwise the wrapped phase of every sinusoid group (phase shifting, or FTP for a single
+      frame), then the unwrapping method of :mod:`rig.pipeline.unwrapping` (``phase_steps_s``: the
+      seconds of each);
+    - single-shot patterns: :data:`rig.pipeline.single_shot_phase.SINGLE_SHOT`, whose RPCA runs
+      with single-threaded BLAS (``single_shot``).
     """
-    if state.groups.single_shot:
-        return  # the single-shot handler computes its own phase in the unwrap stage
     assert state.frames is not None
+    if state.groups.single_shot:
+        # RPCA, FTP and scipy: loaded for single-shot captures only (rig process starts ~0.3 s sooner)
+        from rig.pipeline.single_shot_phase import SINGLE_SHOT
+
+        with rpca_blas():
+            SINGLE_SHOT[state.groups.single_shot[0].kind](state, options)
+        return
     if _fused_pass(state, options):
         return
-    from processing.phase_shift import phase_shift, shadow_mask
+    start = time.perf_counter()
+    _wrapped_phases(state, options)
+    wrapped = time.perf_counter()
+    _unwrap(state, options)
+    state.info["phase_steps_s"] = {
+        "wrapped": round(wrapped - start, 4),
+        "unwrap": round(time.perf_counter() - wrapped, 4),
+    }
 
+
+def _wrapped_phases(state: SceneState, options: ProcessOptions) -> None:
+    """Wrapped phase of every sinusoid group along the fringe axis, and the valid-pixel mask."""
+    assert state.frames is not None
     frames = state.frames
     out = WrappedPhase([], [], [], [], np.ones(state.capture.shape, dtype=bool))
     for group in state.groups.along(state.axis):
@@ -210,38 +211,44 @@ def stage_wrapped(state: SceneState, options: ProcessOptions) -> None:
 
 
 def _note_other_axis(state: SceneState) -> None:
-    """Say which sinusoids along the other axis the wrapped stage left unused."""
+    """Say which sinusoids along the other axis the phase stage left unused."""
     other = sorted({g.frequency for g in state.groups.sinusoids if g.axis != state.axis})
     if other:
         state.notes.append(f"sinusoids along the other axis (frequencies {other}) not used; choose them with --axis")
 
 
-def _fused_pass(state: SceneState, options: ProcessOptions) -> bool:
-    """Wrapped phases, mask and temporal unwrapping in one pass, when the capture allows it; False if not."""
-    from processing.temporal import TEMPORAL_METHODS
-
+def _fusable_method(state: SceneState, options: ProcessOptions) -> UnwrapMethod | None:
+    """The unwrapping method when the fused pass can run it on this capture, else None."""
     along = state.groups.along(state.axis)
     if not along or any(group.steps < 3 for group in along):
-        return False
+        return None
     try:
-        method = options.unwrap if options.unwrap != "auto" else choose_unwrap(state.groups, state.axis)
+        name = options.unwrap if options.unwrap != "auto" else choose_unwrap(state.groups, state.axis)
     except ProcessingError:
-        return False  # the unwrap stage reports it
+        return None  # the stage-by-stage path reports it
+    method = UNWRAPPERS.get(name)
     freqs = [group.frequency for group in along]
-    if method not in TEMPORAL_METHODS or not _all_integers(freqs) or len(freqs) < _FREQUENCIES_NEEDED[method]:
-        return False
-    from processing.fringe_pass import fringe_pass
-    from rig.pipeline import convention_check
+    if method is None or not method.fused or not _all_integers(freqs) or len(freqs) < method.frequencies:
+        return None
+    return method
 
+
+def _fused_pass(state: SceneState, options: ProcessOptions) -> bool:
+    """Wrapped phases, mask and temporal unwrapping in one pass, when the capture allows it; False if not."""
+    method = _fusable_method(state, options)
+    if method is None:
+        return False
+    along = state.groups.along(state.axis)
+    freqs = [group.frequency for group in along]
     max_residual = float(options.params.get("max_residual", np.pi / 2))  # e.g. 3.14 for drifting beats
-    check = method == "heterodyne" and convention_check.enabled(options)
+    check = method.name == "heterodyne" and convention_check.enabled(options)
     assert state.frames is not None
     try:
         scan = fringe_pass(
             state.frames,
             [group.indices for group in along],
             freqs,
-            method,
+            method.name,
             shifts=[np.asarray(group.shifts) for group in along],
             min_ratio=options.min_modulation_ratio,
             max_residual=max_residual,
@@ -251,6 +258,16 @@ def _fused_pass(state: SceneState, options: ProcessOptions) -> bool:
         )
     except ValueError:
         return False  # e.g. frequencies the method refuses: the stage-by-stage path reports it as before
+    _keep_fused(state, options, scan, freqs, method.name, check)
+    state.info["fused_pass"] = "phase shifting, modulation mask and unwrapping in one float32 pass"
+    _note_other_axis(state)
+    return True
+
+
+def _keep_fused(
+    state: SceneState, options: ProcessOptions, scan: FringePass, freqs: list[float], method: str, check: bool
+) -> None:
+    """The fused pass's maps as the state's wrapped and unwrapped phase (rejected pixels rescued or NaN)."""
     maps = {index: slot for slot, index in enumerate(scan.kept)}
 
     def kept(values: list[np.ndarray]) -> list[np.ndarray | None]:
@@ -271,13 +288,6 @@ def _fused_pass(state: SceneState, options: ProcessOptions) -> bool:
     state.unwrapped = UnwrappedPhase(
         phase=phase, valid=mask, frequency=freqs[-1], method=method, absolute=True, orders=scan.orders
     )
-    state.info["fused_pass"] = "phase shifting, modulation mask and unwrapping in one float32 pass"
-    _note_other_axis(state)
-    return True
-
-
-# Frequencies each temporal method needs (it takes the highest when more are captured).
-_FREQUENCIES_NEEDED = {"two-frequency": 2, "three-frequency": 3, "heterodyne": 2, "hierarchical": 2}
 
 
 def _ftp_frame(image: np.ndarray, axis: str, shift: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -285,7 +295,7 @@ def _ftp_frame(image: np.ndarray, axis: str, shift: float) -> tuple[np.ndarray, 
 
     The background is the mean over one fringe period along the axis (the detected carrier).
     """
-    from processing.ftp import detect_carrier, fringe_background, ftp_phase
+    from processing.ftp import detect_carrier, fringe_background, ftp_phase  # scipy.fft: single frames only
 
     img = np.asarray(image, dtype=np.float64)
     along = 1 if axis == "x" else 0
@@ -293,170 +303,6 @@ def _ftp_frame(image: np.ndarray, axis: str, shift: float) -> tuple[np.ndarray, 
     phase = np.angle(np.exp(1j * (phase - shift)))
     background = fringe_background(img, detect_carrier(img, along), along)
     return phase, np.asarray(amplitude, dtype=np.float64), background
-
-
-# Arguments of processing.single_shot.single_shot_unwrap that the pipeline supplies itself.
-_SINGLE_SHOT_OWN = ("image", "reference_image", "reference_absolute_phase", "frequency", "axis", "mask")
-
-
-def _single_shot_parameters(options: ProcessOptions) -> tuple[dict[str, Any], dict[str, Any]]:
-    """(``--param`` entries single_shot_unwrap takes, all its settings with defaults) for the report."""
-    import inspect
-
-    from processing.single_shot import single_shot_unwrap
-
-    given = {k: v for k, v in accepted_params(single_shot_unwrap, options.params).items() if k not in _SINGLE_SHOT_OWN}
-    defaults = {
-        name: p.default
-        for name, p in inspect.signature(single_shot_unwrap).parameters.items()
-        if p.kind is inspect.Parameter.KEYWORD_ONLY and name not in _SINGLE_SHOT_OWN
-    }
-    return given, {**defaults, **given}
-
-
-def _speckle_single_shot(state: SceneState, options: ProcessOptions) -> None:
-    """``speckle-sinusoid`` captures (thesis ch. 2.3) through :mod:`processing.single_shot`.
-
-    The calibration's reference capture (same pattern, processed first) is separated by RPCA and
-    phased by FTP once (:func:`processing.single_shot.prepare_reference`); its absolute phase is
-    its FTP phase unwrapped along the rows with the smallest fringe order 0: a flat plane has no
-    discontinuity, and the projector column of the reference's first order is fixed only by the
-    rig's geometry, which the reference-plane and polynomial models do not need (they use object
-    minus reference). The object frame then gets its fringe orders from the reference speckle
-    (:func:`processing.single_shot.single_shot_unwrap`), so both phases share that offset. The
-    result fills ``state.wrapped`` / ``state.unwrapped`` for the correction and height stages;
-    method, parameters, RPCA iterations and rank and the time of each step go to the report.
-    """
-    from processing.ftp import ftp_fringe_parts
-    from processing.single_shot import (
-        prepare_reference,
-        separate_fringe_speckle,
-        single_shot_unwrap,
-    )
-
-    group = state.groups.single_shot[0]
-    where = str(state.capture.manifest_path)
-    assert state.frames is not None
-    image = state.frames[group.indices[0]].astype(np.float32)
-    if group.steps > 1 or len(group.indices) > 1:
-        state.notes.append(
-            f"single-shot: {len(group.indices)} speckle-sinusoid frames; used the first (pattern {group.indices[0]})"
-        )
-    if options.denoise != "none":
-        raise ProcessingError(
-            f"--denoise {options.denoise}: not for a speckle-sinusoid (single-shot) capture, whose speckle it would "
-            "remove; the single shot separates fringes and speckle by RPCA itself (leave --denoise none)"
-        )
-    if options.unwrap != "auto":
-        state.notes.append(
-            f"single-shot capture: --unwrap {options.unwrap} does not apply; fringe orders from the speckle"
-        )
-    axis = 1 if state.axis == "x" else 0
-    given, settings = _single_shot_parameters(options)
-    pattern = state.capture.patterns[group.indices[0]]  # read only
-    parameters: dict[str, Any] = {
-        "frequency": group.frequency,
-        "fringe_axis": state.axis,
-        **settings,
-        **{k: pattern[k] for k in ("seed", "dot_px", "speckle_gain") if k in pattern},
-    }
-    start = time.perf_counter()
-    try:
-        if state.reference is None:
-            if state.name != "reference":
-                raise ProcessingError(
-                    f"{where}: a speckle-sinusoid (single-shot) capture takes its fringe orders from a reference-plane "
-                    "capture under the same pattern: give a --calibration whose reference capture has it "
-                    "(rig calibrate itself needs phase-shifting patterns)"
-                )
-            prep = {k: v for k, v in given.items() if k in ("carrier", "bandwidth", "tau", "rpca_tol", "svd")}
-            rpca = None
-            if settings["separate"]:
-                # Separate here (not inside prepare_reference) to keep RPCA's iterations and rank for the report.
-                fringe, speckle, rpca = separate_fringe_speckle(
-                    image, tau=settings["tau"], tol=settings["rpca_tol"], svd=settings["svd"]
-                )
-                prepared = prepare_reference(
-                    fringe,
-                    None,
-                    group.frequency,
-                    axis=axis,
-                    separate=False,
-                    **{k: v for k, v in prep.items() if k in ("carrier", "bandwidth")},
-                )
-                prepared = dataclasses.replace(prepared, speckle=speckle)
-            else:
-                prepared = prepare_reference(
-                    image,
-                    None,
-                    group.frequency,
-                    axis=axis,
-                    separate=False,
-                    **{k: v for k, v in prep.items() if k in ("carrier", "bandwidth")},
-                )
-            prepared.seconds = time.perf_counter() - start
-            state.single_shot_reference = prepared
-            parts = ftp_fringe_parts(
-                prepared.fringe, prepared.carrier, axis, settings["bandwidth"], settings["min_modulation"]
-            )
-            wrapped, amplitude, background, valid = parts.phase, parts.amplitude, parts.background, parts.valid
-            absolute = prepared.absolute_phase
-            orders = np.where(valid, np.rint((absolute - prepared.wrapped_phase) / TWO_PI), -1).astype(np.int64)
-            timings = {"reference": prepared.seconds}
-        else:
-            prepared = state.reference.single_shot_reference
-            if prepared is None:
-                raise ProcessingError(
-                    f"{where}: the reference capture is not a speckle-sinusoid single shot like this capture"
-                )
-            result = single_shot_unwrap(image, prepared, None, group.frequency, axis=axis, **given)
-            rpca = result.rpca
-            parts = ftp_fringe_parts(
-                result.fringe, prepared.carrier, axis, settings["bandwidth"], settings["min_modulation"]
-            )
-            wrapped, amplitude, background = parts.phase, parts.amplitude, parts.background
-            valid = result.mask & np.isfinite(result.absolute_phase)
-            absolute, orders, timings = result.absolute_phase, result.orders, dict(result.timings)
-            timings.pop("reference", None)  # prepared with the reference capture, reported there
-            state.info["single_shot_correlation_median"] = (
-                float(np.median(result.correlation[valid])) if valid.any() else None
-            )
-    except ValueError as exc:
-        raise ProcessingError(f"{where}: single-shot: {exc}") from None
-    state.wrapped = WrappedPhase([group.frequency], [wrapped], [amplitude], [background], valid)
-    state.unwrapped = UnwrappedPhase(
-        phase=np.where(valid, absolute, np.nan),
-        valid=valid,
-        frequency=group.frequency,
-        method="single-shot",
-        absolute=True,
-        orders=orders,
-    )
-    state.info["valid_after_modulation"] = float(valid.mean())
-    state.info["single_shot"] = {
-        "method": "speckle-embedded single shot (RPCA fringe/speckle separation, FTP, speckle NCC fringe orders, row voting, 2-D fringe-segment vote)",
-        "role": "reference" if state.reference is None else "object",
-        "parameters": parameters,
-        "iterations": None if rpca is None else int(rpca.iterations),
-        "rank": None if rpca is None else int(rpca.rank),
-        "seconds": round(time.perf_counter() - start, 4),
-        "timings_s": {k: round(float(v), 4) for k, v in timings.items()},
-    }
-    if state.reference is not None:
-        state.notes.append(
-            "single-shot: the reference plane's absolute phase is its FTP phase unwrapped along the rows with "
-            "smallest fringe order 0; object phases share that offset, which object - reference cancels"
-        )
-
-
-SINGLE_SHOT: dict[str, Callable[[SceneState, ProcessOptions], None]] = {"speckle-sinusoid": _speckle_single_shot}
-
-
-def _as_unwrap_parts(result: Any) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
-    """(phase, orders, valid) of an UnwrapResult, or of a bare phase array."""
-    if isinstance(result, np.ndarray):
-        return result, None, None
-    return np.asarray(result.phase), getattr(result, "orders", None), getattr(result, "valid", None)
 
 
 def _gray_threshold(state: SceneState) -> np.ndarray | None:
@@ -468,6 +314,67 @@ def _gray_threshold(state: SceneState) -> np.ndarray | None:
     return None
 
 
+def _gray_planes(state: SceneState) -> GrayPlanes:
+    """The capture's Gray-code planes along the fringe axis (ProcessingError when it has none)."""
+    gray = state.groups.gray.get(state.axis)
+    if gray is None:
+        raise ProcessingError(f"--unwrap gray: the capture has no Gray-code planes along {state.axis}")
+    assert state.frames is not None
+    planes = state.frames[[gray.planes[b] for b in range(gray.bits)]]
+    inverted = state.frames[[gray.inverted[b] for b in range(gray.bits)]] if gray.inverted else None
+    threshold = None if inverted is not None else _gray_threshold(state)
+    return GrayPlanes(planes, inverted, threshold, gray.bits)
+
+
+def _unwrap_inputs(state: SceneState, options: ProcessOptions, method: UnwrapMethod) -> UnwrapInputs:
+    """What ``method`` declared it needs, from the wrapped phases and pattern groups (ProcessingError if missing)."""
+    wrapped = state.wrapped
+    assert wrapped is not None
+    freqs = wrapped.frequencies
+    phis = [p for p in wrapped.phase if p is not None]  # all of them: only the fused pass leaves some out
+    assert len(phis) == len(freqs)
+    need = method.frequencies
+    if len(freqs) < need:
+        raise ProcessingError(
+            f"--unwrap {method.name}: needs at least {need} sinusoid frequencies, the capture has {freqs}"
+        )
+    if method.whole and not _all_integers(freqs):
+        raise ProcessingError(f"--unwrap {method.name}: frequencies must be whole fringe counts, found {freqs}")
+    use = slice(None) if method.all_frequencies else slice(-need, None)
+    return UnwrapInputs(
+        phases=phis[use],
+        frequencies=[int(f) for f in freqs[use]] if method.whole else list(freqs[use]),
+        valid=wrapped.valid,
+        params=options.params,
+        check_convention=functools.partial(_check_convention, state, options),
+        gray=_gray_planes(state) if "gray" in method.needs else None,
+    )
+
+
+def _unwrap(state: SceneState, options: ProcessOptions) -> None:
+    """The state's wrapped phases unwrapped by the requested (or automatically chosen) method."""
+    wrapped = state.wrapped
+    assert wrapped is not None
+    name = options.unwrap if options.unwrap != "auto" else choose_unwrap(state.groups, state.axis)
+    method = UNWRAPPERS.get(name)
+    if method is None:
+        raise ProcessingError(f"--unwrap: expected one of {', '.join(UNWRAP_METHODS)}, found {name!r}")
+    result = method(_unwrap_inputs(state, options, method))
+    phase = np.asarray(result.phase)
+    mask = wrapped.valid & np.isfinite(phase)
+    mask &= np.asarray(result.valid, dtype=bool)
+    if method.rescue and options.params.get("neighbour_rescue", True) is not False:
+        mask = _rescue_rejected(state, phase, mask, wrapped.valid)
+    state.unwrapped = UnwrappedPhase(
+        phase=np.where(mask, phase, np.nan),
+        valid=mask,
+        frequency=wrapped.frequencies[-1],
+        method=method.name,
+        absolute=result.absolute,
+        orders=result.orders,
+    )
+
+
 def _rescue_rejected(
     state: SceneState, phase: np.ndarray, mask: np.ndarray, modulated: np.ndarray, rejected: bool | None = None
 ) -> np.ndarray:
@@ -475,8 +382,6 @@ def _rescue_rejected(
 
     ``rejected``: whether any modulated pixel is outside ``mask``, when the caller knows.
     """
-    from processing.neighbour_rescue import rescue
-
     if not (np.any(modulated > mask) if rejected is None else rejected):  # nothing to take back
         state.info["neighbour_rescue"] = {"readmitted": 0, "off": "--param neighbour_rescue=false"}
         return mask
@@ -498,9 +403,6 @@ def _check_convention(
     bits: int = 0,
 ) -> None:
     """Refuse images whose phase convention differs from the capture's (:mod:`rig.pipeline.convention_check`)."""
-    from processing.convention import gray_offset, heterodyne_offset
-    from rig.pipeline import convention_check
-
     if not convention_check.enabled(options):
         return
     assert state.wrapped is not None
@@ -515,93 +417,15 @@ def _check_convention(
     convention_check.check(estimate, text, state.capture, state.capture.patterns, str(state.capture.manifest_path))
 
 
-def stage_unwrap(state: SceneState, options: ProcessOptions) -> None:
-    """Absolute (or, for spatial methods, relative) phase at the highest frequency."""
-    if state.groups.single_shot:
-        SINGLE_SHOT[state.groups.single_shot[0].kind](state, options)
-        return
-    if state.unwrapped is not None:
-        return  # unwrapped by the fused pass of the wrapped stage
-    wrapped = state.wrapped
-    assert wrapped is not None
-    method = options.unwrap if options.unwrap != "auto" else choose_unwrap(state.groups, state.axis)
-    freqs = wrapped.frequencies
-    phis = [p for p in wrapped.phase if p is not None]  # all of them: only the fused pass leaves some out
-    assert len(phis) == len(freqs)
-    need = _FREQUENCIES_NEEDED.get(method, 1)
-    if len(freqs) < need:
-        raise ProcessingError(f"--unwrap {method}: needs at least {need} sinusoid frequencies, the capture has {freqs}")
-    absolute = True
-    result: Any  # an UnwrapResult, or a bare phase array from spatial unwrapping
-    if method in ("two-frequency", "three-frequency", "hierarchical", "heterodyne", "gray"):
-        from processing import temporal
-    if method in ("two-frequency", "three-frequency", "hierarchical", "heterodyne"):
-        if not _all_integers(freqs):
-            raise ProcessingError(f"--unwrap {method}: frequencies must be whole fringe counts, found {freqs}")
-        use = slice(-need, None) if method in ("two-frequency", "three-frequency") else slice(None)
-        ints, maps = [int(f) for f in freqs[use]], phis[use]
-        if method == "two-frequency":
-            result = temporal.unwrap_two_frequency(maps[0], maps[1], ints[0], ints[1])
-        elif method == "three-frequency":
-            result = temporal.unwrap_three_frequency(maps, ints)
-        else:
-            extra = {}
-            if "max_residual" in options.params:  # e.g. --param max_residual=3.14 for rendered data with drifting beats
-                extra["max_residual"] = float(options.params["max_residual"])
-            unwrap = temporal.unwrap_hierarchical if method == "hierarchical" else temporal.unwrap_heterodyne
-            if method == "heterodyne":
-                _check_convention(state, options, "heterodyne", maps, ints)
-            result = unwrap(maps, ints, **extra)
-    elif method == "gray":
-        gray = state.groups.gray.get(state.axis)
-        if gray is None:
-            raise ProcessingError(f"--unwrap gray: the capture has no Gray-code planes along {state.axis}")
-        assert state.frames is not None
-        planes = state.frames[[gray.planes[b] for b in range(gray.bits)]]
-        inverted = state.frames[[gray.inverted[b] for b in range(gray.bits)]] if gray.inverted else None
-        threshold = None if inverted is not None else _gray_threshold(state)
-        stripes = temporal.decode_gray(planes, inverted=inverted, threshold=threshold)
-        frequency = freqs[-1]
-        complementary = (1 << gray.bits) == 2 * int(frequency)
-        if not complementary and (1 << gray.bits) != int(frequency):
-            raise ProcessingError(
-                f"--unwrap gray: {gray.bits} Gray bits give {1 << gray.bits} stripes; expected the fringe count "
-                f"{frequency:g} (or twice it, complementary Gray code)"
-            )
-        _check_convention(state, options, "gray", [phis[-1]], [int(frequency)], stripes, gray.bits)
-        result = temporal.unwrap_gray(phis[-1], stripes, gray.bits, int(frequency), complementary=complementary)
-    elif method in ("spatial", "ftp"):
-        from processing import spatial
-
-        result = spatial.unwrap_quality_guided(phis[-1], mask=wrapped.valid)
-        absolute = False
-    else:
-        raise ProcessingError(f"--unwrap: expected one of {', '.join(UNWRAP_METHODS)}, found {method!r}")
-    phase, orders, valid = _as_unwrap_parts(result)
-    mask = wrapped.valid & np.isfinite(phase)
-    if valid is not None:
-        mask &= np.asarray(valid, dtype=bool)
-        if method != "gray" and options.params.get("neighbour_rescue", True) is not False:
-            mask = _rescue_rejected(state, phase, mask, wrapped.valid)
-    state.unwrapped = UnwrappedPhase(
-        phase=np.where(mask, phase, np.nan),
-        valid=mask,
-        frequency=freqs[-1],
-        method=method,
-        absolute=absolute,
-        orders=orders,
-    )
-
-
+# The stages of one capture, by what each does: decode the frames, remove lens distortion, denoise
+# the fringes, compute the (absolute) phase, correct it. run.process times each for report.json.
 SCENE_STAGES: list[tuple[str, Callable[[SceneState, ProcessOptions], None]]] = [
     ("load", stage_load),
     ("undistort", stage_undistort),
     ("denoise", stage_denoise),
-    ("wrapped", stage_wrapped),
-    ("unwrap", stage_unwrap),
+    ("phase", stage_phase),
     ("correction", stage_correction),
 ]
-
 
 # --------------------------------------------------------------------------- height
 
@@ -630,7 +454,7 @@ def stage_height(
                 f"{obj.capture.manifest_path}: spatial unwrapping gives phase only up to 2 pi k, and the "
                 f"{calibration.model!r} calibration has no reference plane to fix k; capture temporal patterns"
             )
-        from processing.spatial import remove_region_offsets
+        from processing.spatial import remove_region_offsets  # scipy: only spatial unwrapping pays for it
 
         obj_phase = ref_phase + remove_region_offsets(obj_phase - ref_phase)
         notes.append(

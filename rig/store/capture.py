@@ -32,6 +32,7 @@ import logging
 import os
 import time
 from collections.abc import Iterable, Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path, PurePosixPath
@@ -347,7 +348,6 @@ class Capture:
             for slot in range(len(indices)):
                 load(slot)
             return stack
-        from concurrent.futures import ThreadPoolExecutor
 
         with ThreadPoolExecutor(min(threads, len(indices))) as pool:
             futures = [pool.submit(load, slot) for slot in range(len(indices))]

@@ -363,6 +363,7 @@ KINDS: dict[str, tuple[str, str, tuple[str, ...]]] = {
     "calibration-session": ("session.json", "heights_mm", ()),
     "demo": ("demo.json", "scene", ()),
     "simulation": ("object/capture.json", "format", ("fpp-capture",)),
+    "verification": ("report.json", "format", ("fpp-verification",)),
 }
 
 
@@ -642,3 +643,32 @@ def staged_directory(
         if not keep_on_error:
             shutil.rmtree(staging, ignore_errors=True)
         raise
+
+
+def append_line(path: Path, line: str, error: ErrorType) -> None:
+    """Append one line of text to a regular file (created if missing) in a single write, then fsync.
+
+    The last component may not be a link; a file that is not regular is refused. Lines shorter
+    than the pipe buffer are written whole by one ``O_APPEND`` write, so concurrent appenders
+    never interleave inside a line.
+    """
+    path = Path(path)
+    check_path_text(str(path), str(path), error)
+    if "\n" in line:
+        raise error(f"{path}: expected one line, found a line break inside it")
+    flags = os.O_WRONLY | os.O_APPEND | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
+    try:
+        fd = os.open(path, flags, 0o666)
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise error(f"{path}: expected a regular file, found a symbolic link") from None
+        raise error(f"{path}: cannot append: {exc.strerror or exc}") from None
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise error(f"{path}: expected a regular file")
+        data = (line + "\n").encode("utf-8")
+        if os.write(fd, data) != len(data):
+            raise error(f"{path}: short write while appending (disk full?)")
+        os.fsync(fd)
+    finally:
+        os.close(fd)

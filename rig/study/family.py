@@ -221,6 +221,7 @@ def capture(case: FamilyCase, height_mm: np.ndarray, rng: np.random.Generator) -
     else:
         result = unwrap_heterodyne(phis, case.frequencies)
     top = max(case.frequencies)
+    assert result.orders is not None  # temporal methods always give orders
     wrapped = result.phase - TWO_PI * result.orders
     truth = synthesis.true_absolute_phase(mapping, geometry, top)
     lit = mapping.lit & np.isfinite(result.phase)
