@@ -192,7 +192,7 @@ def refuse_kept_distortion(calibration: Path) -> None:
 
 def summary(report: dict, out: Path) -> dict:
     """The short form of a report printed by --json."""
-    keys = ("valid_fraction", "height_mm", "points", "notes")
+    keys = ("valid_fraction", "unresolved_fraction", "height_mm", "points", "notes")
     return {
         "output": str(out),
         "unwrap": report["methods"]["unwrap"],
@@ -248,6 +248,8 @@ def print_summary(report: dict, out: Path) -> None:
     if report.get("height_mm"):  # None when no valid height is finite
         h = report["height_mm"]
         line += f", {report.get('quantity', 'height')} {h['min']:.2f} .. {h['max']:.2f} mm, {report['points']} points"
+    if report.get("unresolved_fraction"):
+        line += f", fringe orders unresolved on {report['unresolved_fraction']:.2%}"
     print(line, file=sys.stderr)
     for note in report["notes"]:
         print(f"note: {note}", file=sys.stderr)
