@@ -215,7 +215,7 @@ def test_grouping_uses_the_typed_patterns() -> None:
 
 def test_speckle_module_does_not_import_the_pattern_module() -> None:
     """processing.projection.speckle is the field; processing.projection.patterns uses it, not the other way round (no cycle)."""
-    tree = ast.parse((ROOT / "processing" / "speckle.py").read_text())
+    tree = ast.parse((ROOT / "processing" / "projection" / "speckle.py").read_text())
     imported = {node.module for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)}
     imported |= {alias.name for node in ast.walk(tree) if isinstance(node, ast.Import) for alias in node.names}
     assert "processing.projection.patterns" not in imported
