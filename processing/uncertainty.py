@@ -105,3 +105,28 @@ def summary(uncertainty: np.ndarray, mask: np.ndarray) -> dict[str, float] | Non
         return None
     median, p95 = np.percentile(values, [50, 95])
     return {"median": float(median), "p95": float(p95)}
+
+
+MIN_CORRECTION_GAIN = 0.3  # a correction is not trusted to have removed more than 91 % of the noise power
+
+
+def correction_gain(before: np.ndarray, after: np.ndarray, sigma_phi: np.ndarray, mask: np.ndarray) -> float:
+    """How much of the predicted phase noise a correction left: sqrt(1 - var((before - after) / sigma_phi))
+
+    (var: robust, from the median absolute deviation)..
+
+    A correction that smooths the phase (a projection on the fringe's low-rank or smooth part)
+    removes noise orthogonal to what it keeps, so the removed variance is the noise variance it
+    took away. Clipped to [:data:`MIN_CORRECTION_GAIN`, 1]: what it removed beyond noise (a
+    systematic ripple) must not make the prediction optimistic without bound.
+    """
+    keep = mask & np.isfinite(before) & np.isfinite(after) & np.isfinite(sigma_phi)
+    if not keep.any():
+        return 1.0
+    sigma = np.asarray(sigma_phi[keep], dtype=np.float64)
+    change = np.asarray(before[keep] - after[keep], dtype=np.float64)
+    change -= 2.0 * np.pi * np.rint(change / (2.0 * np.pi))  # fringe orders it changed are not noise it removed
+    removed = change / np.where(sigma > 0, sigma, np.inf)
+    spread = MAD_TO_SIGMA * float(np.median(np.abs(removed - np.median(removed))))  # order slips are not noise
+    share = spread * spread  # the removed noise power as a share of the predicted one, pixel by pixel
+    return float(np.sqrt(np.clip(1.0 - share, MIN_CORRECTION_GAIN**2, 1.0)))

@@ -293,7 +293,7 @@ def _keep_fused(
     maps = {index: slot for slot, index in enumerate(scan.kept)}
 
     def kept(values: list[np.ndarray]) -> list[np.ndarray | None]:
-        return [values[maps[i]] if i in maps else None for i in range(len(freqs))]
+        return [values[maps[i]] if i in maps and values else None for i in range(len(freqs))]
 
     state.wrapped = WrappedPhase(
         freqs, kept(scan.wrapped), kept(scan.modulation), kept(scan.background), scan.modulated, kept(scan.brightness)
