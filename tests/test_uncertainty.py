@@ -101,16 +101,30 @@ def test_predicted_height_sigma_matches_the_simulated_error(
 
 
 def test_max_sigma_keeps_the_pixels_under_the_bound(tmp_path: Path) -> None:
-    scan = _scan(20.0, 23)
+    """A dark band (reflectivity 0.12) that the 0.2 ratio drops is kept; a darker one (0.03) is too noisy."""
+    reflectivity = np.ones((240, 320))
+    reflectivity[:, 200:260] = 0.12
+    reflectivity[:, 260:] = 0.03
+    scan = simulate_scan(
+        "hemisphere",
+        geometry=demo_geometry(320, 240),
+        patterns=synth.sinusoid_patterns((1, 8, 64), 6),
+        appearance=synth.Appearance(reflectivity=reflectivity, ambient=0.1, gain=200.0, snr_db=40.0),
+        seed=25,
+    )
     paths = write_simulated_scan(scan, tmp_path / "scan")
     plain = process(paths.capture, paths.calibration, ProcessOptions(correction="none"))
-    bounded = process(paths.capture, paths.calibration, ProcessOptions(correction="none", max_sigma=0.5))
-    assert bounded.uncertainty is not None and plain.uncertainty is not None
-    assert np.all(bounded.uncertainty[bounded.mask] <= 0.5)
+    bounded = process(paths.capture, paths.calibration, ProcessOptions(correction="none", max_sigma=1.0))
+    assert bounded.uncertainty is not None and bounded.height is not None
+    assert np.all(bounded.uncertainty[bounded.mask] <= 1.0)
     assert np.all(np.isnan(bounded.height[~bounded.mask]))
-    # the noise rule takes pixels the 0.2 ratio dropped, and drops pixels it kept that are too noisy
-    assert np.count_nonzero(bounded.mask & ~plain.mask) > 0
+    dark, darker = scan.lit[:, 200:260], scan.lit[:, 260:]
+    assert plain.mask[:, 200:260][dark].mean() < 0.05  # the ratio rule drops the dark band
+    assert bounded.mask[:, 200:260][dark].mean() > 0.9  # the noise rule keeps it
+    assert bounded.mask[:, 260:][darker].mean() < 0.1
     assert bounded.object.info["above_max_sigma"] > 0
+    error = bounded.height[:, 200:260][bounded.mask[:, 200:260]] - scan.height_mm[:, 200:260][bounded.mask[:, 200:260]]
+    assert np.sqrt(np.mean(error**2)) < 1.0
 
 
 def test_outputs_carry_the_uncertainty(capsys, tmp_path: Path) -> None:
