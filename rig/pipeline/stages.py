@@ -329,12 +329,19 @@ def _ftp_frame(image: np.ndarray, axis: str, shift: float) -> tuple[np.ndarray, 
 
 
 def _gray_threshold(state: SceneState) -> np.ndarray | None:
-    """Threshold for Gray planes: mid of white and black flat frames if captured (else decode_gray's default)."""
+    """Per-pixel threshold for Gray planes: mid of white and black flat frames if captured, else the fringe mean A.
+
+    The sinusoid's mean A is the mid-level of a pixel lit by a full and a dark projector pixel,
+    whatever the pixel's reflectivity: it holds on dark surfaces, where one image-wide level
+    would read every bit as 0. None (decode_gray's own level) when neither is at hand.
+    """
     assert state.frames is not None
     levels = {level: index for index, level in state.groups.flats}
     if 1.0 in levels and 0.0 in levels:
         return (state.frames[levels[1.0]].astype(np.float64) + state.frames[levels[0.0]]) / 2.0
-    return None
+    wrapped = state.wrapped
+    background = wrapped.background[-1] if wrapped is not None and wrapped.background else None
+    return None if background is None else np.asarray(background, dtype=np.float64)
 
 
 def _gray_planes(state: SceneState) -> GrayPlanes:
