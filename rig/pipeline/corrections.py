@@ -19,8 +19,8 @@ from calibration.store import Calibration
 from processing.angles import wrap_to_pi
 from processing.correction import CORRECTIONS as NUMERIC_CORRECTIONS
 from processing.correction_method import CorrectionMethod
-from processing.uncertainty import correction_gain
 from processing.sampling import fringe_step_rad, undersampled_for_spatial_methods
+from processing.uncertainty import correction_gain
 from rig.errors import ProcessingError
 from rig.pipeline.gamma_correction import GAMMA_TABLE
 from rig.pipeline.plan import ProcessOptions, accepted_params

@@ -181,7 +181,16 @@ def process(
     timings["height"] = height_time
     timings["total"] = time.perf_counter() - started
     return ProcessResult(
-        obj, ref, calibration, options, height, mask, timings, notes + obj.notes, point_grid=points, uncertainty=uncertainty
+        obj,
+        ref,
+        calibration,
+        options,
+        height,
+        mask,
+        timings,
+        notes + obj.notes,
+        point_grid=points,
+        uncertainty=uncertainty,
     )
 
 

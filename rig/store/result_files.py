@@ -55,7 +55,7 @@ def write_ply(
         fields.append(("rgb", "u1", (3,)))
         header += ["property uchar red", "property uchar green", "property uchar blue"]
     if sigma is not None:
-        fields.append(("sigma", "<f4"))
+        fields.append(("sigma", "<f4", ()))
         header.append("property float sigma")
     if faces is not None:
         header += [f"element face {len(faces)}", "property list uchar int vertex_indices"]
