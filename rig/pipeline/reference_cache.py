@@ -192,7 +192,7 @@ def store(state: SceneState, key: str, to_disk: bool = True) -> None:
         log.info("reference cache not written in %s (%s); the reference is processed again next time", directory, exc)
 
 
-def _write_atomic(directory: Path, key: str, arrays: dict[str, np.ndarray], meta_text: str) -> None:
+def _write_atomic(directory: Path, key: str, arrays: dict[str, Any], meta_text: str) -> None:
     """Write the entry of ``key`` (temporary file, fsync, rename); drop stale entries and the oldest beyond a few."""
     if directory.is_symlink():
         raise OSError(f"{directory} is a link; not writing through it")
@@ -201,7 +201,7 @@ def _write_atomic(directory: Path, key: str, arrays: dict[str, np.ndarray], meta
     handle, temp = tempfile.mkstemp(prefix=".tmp-", suffix=".npz", dir=directory)
     try:
         with os.fdopen(handle, "wb") as out:
-            np.savez(out, **arrays, meta=np.array(meta_text))
+            np.savez(out, meta=np.array(meta_text), **arrays)
             out.flush()
             os.fsync(out.fileno())
         os.replace(temp, directory / name)
