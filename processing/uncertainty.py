@@ -78,23 +78,29 @@ def phase_sigma(modulation: np.ndarray, sigma_i: float, steps: int) -> np.ndarra
 
 
 def height_sigma(
-    height_of: Callable[[np.ndarray], np.ndarray], phase: np.ndarray, sigma_phi: np.ndarray, step: float = 1e-2
+    height_of: Callable[[np.ndarray], np.ndarray],
+    phase: np.ndarray,
+    sigma_phi: np.ndarray,
+    step: float = 1e-2,
+    base: np.ndarray | None = None,
 ) -> np.ndarray:
     """Height (or point) standard deviation per pixel: |d h / d Phi| sigma_phi, float32.
 
     ``height_of(phase)`` returns (H, W) heights or (H, W, 3) points in mm; its derivative is a
-    central difference of ``step`` radians (the models are smooth at that scale), the length of the
-    point displacement for points.
+    difference over ``step`` radians (the models are smooth at that scale): forward from
+    ``base`` = ``height_of(phase)`` when the caller has it (one model evaluation), else central;
+    the length of the point displacement for points.
     """
-    phase64 = np.asarray(phase, dtype=np.float64)
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        change = np.asarray(height_of(phase64 + step), dtype=np.float64) - np.asarray(
-            height_of(phase64 - step), dtype=np.float64
-        )
-        if change.ndim == phase64.ndim + 1:
-            change = np.sqrt(np.sum(change * change, axis=-1))
-        slope = np.abs(change) / (2.0 * step)
-        return (slope * np.asarray(sigma_phi, dtype=np.float64)).astype(np.float32)
+        ahead = np.asarray(height_of(phase + np.float32(step)))
+        behind = np.asarray(height_of(phase - np.float32(step))) if base is None else np.asarray(base)
+        change = np.subtract(ahead, behind, dtype=np.float32)
+        if change.ndim == np.ndim(phase) + 1:
+            change = np.sqrt(np.einsum("...k,...k->...", change, change))
+        np.abs(change, out=change)
+        change *= np.float32(1.0 / (step if base is not None else 2.0 * step))
+        change *= sigma_phi
+        return change
 
 
 def summary(uncertainty: np.ndarray, mask: np.ndarray) -> dict[str, float] | None:

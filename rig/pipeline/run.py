@@ -288,9 +288,12 @@ def _uncertainty(
     assert obj.unwrapped is not None
     sigma_phi = obj.phase_sigma
     if ref is not None and ref.phase_sigma is not None:
-        sigma_phi = np.hypot(sigma_phi, ref.phase_sigma)
+        sigma_phi = np.sqrt(np.square(sigma_phi) + np.square(ref.phase_sigma))
     height_of = functools.partial(_model_height, obj, ref, calibration)
-    uncertainty = height_sigma(height_of, obj.unwrapped.phase, sigma_phi)
+    # the heights themselves as the forward difference's base, unless points move (stereo) or the
+    # heights carry the spatial unwrapping's per-region offsets that the model call does not
+    forward = calibration.model != "stereo" and obj.unwrapped.absolute and (ref is None or _absolute(ref))
+    uncertainty = height_sigma(height_of, obj.unwrapped.phase, sigma_phi, base=height if forward else None)
     if max_sigma is not None:
         above = mask & ~(uncertainty <= np.float32(max_sigma))
         obj.info["above_max_sigma"] = int(np.count_nonzero(above))
@@ -298,6 +301,10 @@ def _uncertainty(
         np.copyto(height, np.float32(np.nan), where=above)
     np.copyto(uncertainty, np.float32(np.nan), where=~mask)
     return uncertainty
+
+
+def _absolute(state: SceneState) -> bool:
+    return state.unwrapped is not None and state.unwrapped.absolute
 
 
 def _model_height(obj: SceneState, ref: SceneState | None, calibration: Calibration, phase: np.ndarray) -> np.ndarray:

@@ -199,8 +199,10 @@ def _predict_phase_sigma(state: SceneState) -> None:
     modulation = wrapped.modulation[-1] if wrapped.modulation else None
     if modulation is None:
         return
+    # the highest frequency's fit residual alone: ~16k sampled pixels pin sigma_I within 1 %
+    fitted = [g for g in along if g.steps >= 4][-1:] or along
     sigma_i = noise_sigma(
-        state.frames, [g.indices for g in along], [np.asarray(g.shifts) for g in along], axis=state.axis
+        state.frames, [g.indices for g in fitted], [np.asarray(g.shifts) for g in fitted], axis=state.axis
     )
     state.info["noise_sigma_grey"] = round(sigma_i, 4)
     state.phase_sigma = phase_sigma(modulation, sigma_i, along[-1].steps)
