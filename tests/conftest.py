@@ -7,6 +7,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
+from console_client import console, console_rig_toml  # noqa: F401 - fixtures of the console tests
 
 from rig.hardware.synthesis import SimulatedPaths, SimulatedScan, demo_geometry, simulate_scan, write_simulated_scan
 

@@ -150,8 +150,7 @@ def _imports() -> dict[str, set[str]]:
 
 def test_only_rig_api_imports_the_pipeline_run() -> None:
     importers = {name for name, imported in _imports().items() if "rig.pipeline.run" in imported}
-    # the console's session is being moved onto rig.api in its own change
-    assert importers - {"rig.console.session"} == {"rig.api"}
+    assert importers == {"rig.api"}
 
 
 def test_the_run_its_result_and_the_result_store_import_no_circle() -> None:

@@ -9,53 +9,17 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+from console_client import BASE, HEIGHT, WIDTH, WS, wait_job, wait_saved
 from fastapi.testclient import TestClient
 
 from rig.config import load_config
 from rig.console.app import create_app
-
-WIDTH, HEIGHT = 320, 240
-
-
-@pytest.fixture
-def rig_toml(tmp_path: Path, simulated_rig_toml: Callable[..., str]) -> Path:
-    path = tmp_path / "rig.toml"
-    text = simulated_rig_toml((456, 570), (WIDTH, HEIGHT), 35.0)
-    path.write_text(text.replace("[scan]\n", "[scan]\nfetch_timeout_s = 0.5\nretries = 1\n"))
-    return path
-
-
-@pytest.fixture
-def console(tmp_path: Path, rig_toml: Path) -> Iterator[TestClient]:
-    app = create_app(load_config(rig_toml), tmp_path / "data", fault_injection=True)
-    with TestClient(app) as client:
-        yield client
-
-
-def wait_job(client: TestClient, job_id: str, timeout_s: float = 60.0) -> dict[str, Any]:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        job = client.get(f"/api/jobs/{job_id}").json()
-        if job["state"] != "running":
-            return job
-        time.sleep(0.05)
-    raise AssertionError(f"job {job_id} still running after {timeout_s} s")
-
-
-def wait_saved(client: TestClient, name: str, timeout_s: float = 60.0) -> dict[str, Any]:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        reply = client.get(f"/api/results/{name}")
-        if reply.status_code == 200 and reply.json()["saved"]:
-            return reply.json()
-        time.sleep(0.05)
-    raise AssertionError(f"result {name} not saved after {timeout_s} s")
 
 
 def live_frames(socket: Any, count: int) -> list[dict[str, Any]]:
@@ -143,11 +107,11 @@ def test_scan_gives_a_result_and_a_second_scan_is_refused_as_busy(console: TestC
 
 
 def test_scan_with_a_calibration_gives_heights(
-    tmp_path: Path, rig_toml: Path, exact_calibration: Callable[[Path, Path], Path]
+    tmp_path: Path, console_rig_toml: Path, exact_calibration: Callable[[Path, Path], Path]
 ) -> None:
     data = tmp_path / "data"
-    exact_calibration(rig_toml, data / "calibrations" / "cal")
-    with TestClient(create_app(load_config(rig_toml), data)) as client:
+    exact_calibration(console_rig_toml, data / "calibrations" / "cal")
+    with TestClient(create_app(load_config(console_rig_toml), data), base_url=BASE) as client:
         assert client.get("/api/calibrations").json() == {"calibrations": ["cal"], "active": "cal"}
         job = client.post("/api/scan", json={"name": "part", "options": {"correction": "none"}}).json()["job"]
         assert wait_job(client, job["id"])["state"] == "done"
@@ -155,7 +119,7 @@ def test_scan_with_a_calibration_gives_heights(
         heights = np.frombuffer(client.get("/api/results/part/values.f32").content, dtype="<f4").reshape(HEIGHT, WIDTH)
     from rig.hardware.simulated import geometry_from_config, scene_height
 
-    config = load_config(rig_toml)
+    config = load_config(console_rig_toml)
     truth = scene_height(config, "object", geometry_from_config(config))
     valid = np.isfinite(heights)
     assert summary["shows"] == "height" and valid.mean() > 0.9
@@ -164,14 +128,14 @@ def test_scan_with_a_calibration_gives_heights(
 
 
 def test_stop_cancels_the_scan_and_leaves_no_complete_capture(console: TestClient) -> None:
-    with console.websocket_connect("/api/events") as socket:
+    with console.websocket_connect(WS + "/api/events") as socket:
         socket.receive_text()  # hello
         job = console.post("/api/scan", json={"name": "stopped"}).json()["job"]
         while True:
             message = socket.receive()
             if message.get("text") and json.loads(message["text"]).get("type") == "progress":
                 break
-        assert console.post("/api/stop").json()["stopped"] == [job["id"]]
+        assert console.post("/api/stop", json={}).json()["stopped"] == [job["id"]]
     finished = wait_job(console, job["id"])
     assert finished["state"] == "cancelled" and "stopped" in finished["error"]
     root = console.app.state.session.data.root / "captures"
@@ -187,7 +151,7 @@ def test_stop_cancels_the_scan_and_leaves_no_complete_capture(console: TestClien
 
 def test_live_frames_follow_the_exposure(console: TestClient) -> None:
     assert console.put("/api/projector", json={"pattern": "white"}).status_code == 200
-    with console.websocket_connect("/api/events") as socket:
+    with console.websocket_connect(WS + "/api/events") as socket:
         socket.receive_text()
         socket.send_text(json.dumps({"live": True}))
         bright = live_frames(socket, 3)[-1]
@@ -230,20 +194,20 @@ def test_errors_are_one_readable_line(console: TestClient) -> None:
     assert reply.status_code == 404 and "captures/missing: not found" in reply.json()["error"]
 
 
-def test_token_is_required_when_set(tmp_path: Path, rig_toml: Path) -> None:
-    app = create_app(load_config(rig_toml), tmp_path / "data", token="s3cret")
-    with TestClient(app) as client:
+def test_token_is_required_when_set(tmp_path: Path, console_rig_toml: Path) -> None:
+    app = create_app(load_config(console_rig_toml), tmp_path / "data", token="s3cret-0123456789abcdef")
+    with TestClient(app, base_url=BASE) as client:
         assert client.get("/api/status").status_code == 401
         assert client.get("/api/status", headers={"Authorization": "Bearer wrong"}).status_code == 401
-        assert client.get("/api/status", headers={"Authorization": "Bearer s3cret"}).status_code == 200
-        page = client.get("/?token=s3cret")
-        assert page.status_code == 200 and "rig_console_token=s3cret" in page.headers["set-cookie"]
+        assert client.get("/api/status", headers={"Authorization": "Bearer s3cret-0123456789abcdef"}).status_code == 200
+        page = client.get("/?token=s3cret-0123456789abcdef")
+        assert page.status_code == 200 and "rig_console_token=s3cret-0123456789abcdef" in page.headers["set-cookie"]
         assert client.get("/api/status").status_code == 200  # the cookie now carries it
         client.cookies.clear()
         from starlette.websockets import WebSocketDisconnect
 
         with pytest.raises(WebSocketDisconnect):
-            with client.websocket_connect("/api/events") as socket:
+            with client.websocket_connect(WS + "/api/events") as socket:
                 socket.receive_text()
 
 
@@ -253,7 +217,7 @@ def test_requests_from_another_origin_are_refused(console: TestClient) -> None:
 
 
 def test_a_device_fault_is_reported_and_the_next_scan_works(console: TestClient) -> None:
-    with console.websocket_connect("/api/events") as socket:
+    with console.websocket_connect(WS + "/api/events") as socket:
         socket.receive_text()
         job, error = scan_into_fault(console, socket, "camera-gone", "faulty")
     assert "disappeared" in error
@@ -265,8 +229,8 @@ def test_a_device_fault_is_reported_and_the_next_scan_works(console: TestClient)
     assert console.get("/api/devices").json()["devices"][1]["state"] == "open"
 
 
-def test_fault_injection_is_off_unless_asked_for(tmp_path: Path, rig_toml: Path) -> None:
-    with TestClient(create_app(load_config(rig_toml), tmp_path / "data")) as client:
+def test_fault_injection_is_off_unless_asked_for(tmp_path: Path, console_rig_toml: Path) -> None:
+    with TestClient(create_app(load_config(console_rig_toml), tmp_path / "data"), base_url=BASE) as client:
         assert client.post("/api/simulation/fault", json={"fault": "camera-gone"}).status_code in (404, 405)
 
 
@@ -287,7 +251,7 @@ def test_reprocess_and_compare(console: TestClient) -> None:
 
 
 def test_calibration_wizard_runs_unattended_on_the_simulated_rig(console: TestClient) -> None:
-    with console.websocket_connect("/api/events") as socket:
+    with console.websocket_connect(WS + "/api/events") as socket:
         socket.receive_text()
         reply = console.post("/api/calibrate", json={"name": "cal", "heights_mm": [25, 50, 100], "board_views": 0})
         assert reply.status_code == 202
@@ -321,7 +285,7 @@ def test_the_alignment_grid_shows_in_the_live_frame(console: TestClient) -> None
         image = np.roll(pattern_image({"kind": "grid", "pitch_px": pitch}, config.projector.size), roll, axis=(0, 1))
         return sample_projector_image(image, mapping)[mapping.lit]
 
-    with console.websocket_connect("/api/events") as socket:
+    with console.websocket_connect(WS + "/api/events") as socket:
         socket.receive_text()
         socket.send_text(json.dumps({"live": True}))
         live_frames(socket, 2)  # frames taken before the pattern reached the camera are past
@@ -342,7 +306,7 @@ def test_the_alignment_grid_shows_in_the_live_frame(console: TestClient) -> None
 
 
 def test_a_trigger_timeout_is_reported_and_the_next_scan_works(console: TestClient) -> None:
-    with console.websocket_connect("/api/events") as socket:
+    with console.websocket_connect(WS + "/api/events") as socket:
         socket.receive_text()
         job, error = scan_into_fault(console, socket, "trigger-timeout", "stalled")
     print(f"trigger-timeout error: {error}")
@@ -366,7 +330,7 @@ def test_calibration_wizard_options_model_and_gamma(console: TestClient) -> None
     assert bad.status_code == 400 and bad.json()["error"].startswith("gamma_levels: expected")
     assert console.post("/api/calibrate", json={"model": "affine"}).status_code == 400
     assert not (console.app.state.session.data.root / "calibrations" / "st").exists()
-    with console.websocket_connect("/api/events") as socket:
+    with console.websocket_connect(WS + "/api/events") as socket:
         socket.receive_text()
         reply = console.post(
             "/api/calibrate",
@@ -398,7 +362,7 @@ def test_a_real_rig_prompt_waits_for_the_answer_from_the_page(console: TestClien
     from rig.events import Cancelled
 
     session = console.app.state.session
-    job = session._new_job("calibrate", "manual", None)
+    job = session.jobs.start("calibrate", "manual")
     operator = session.operator(job)
     done: list[str] = []
 
@@ -409,8 +373,8 @@ def test_a_real_rig_prompt_waits_for_the_answer_from_the_page(console: TestClien
         except Cancelled as exc:
             done.append(f"cancelled: {exc}")
 
-    assert console.post("/api/calibrate/answer").status_code == 400  # nothing asked yet
-    with console.websocket_connect("/api/events") as socket:
+    assert console.post("/api/calibrate/answer", json={}).status_code == 400  # nothing asked yet
+    with console.websocket_connect(WS + "/api/events") as socket:
         socket.receive_text()
         worker = threading.Thread(target=plane)
         worker.start()
@@ -423,15 +387,55 @@ def test_a_real_rig_prompt_waits_for_the_answer_from_the_page(console: TestClien
         assert console.get("/api/status").json()["prompt"]["text"] == "move the plane to 50 mm"
         time.sleep(0.3)
         assert worker.is_alive() and not done  # still waiting for the operator
-        assert console.post("/api/calibrate/answer").json() == {"answered": True}
+        assert console.post("/api/calibrate/answer", json={}).json() == {"answered": True}
         worker.join(timeout=10)
     assert done == ["answered"] and console.get("/api/status").json()["prompt"] is None
-    assert console.post("/api/calibrate/answer").status_code == 400  # answered once
+    assert console.post("/api/calibrate/answer", json={}).status_code == 400  # answered once
 
     worker = threading.Thread(target=plane)
     worker.start()
     while session.prompt is None:
         time.sleep(0.01)
-    assert console.post("/api/stop", params={"job": job.id}).json()["stopped"] == [job.id]
+    assert console.post("/api/stop", params={"job": job.id}, json={}).json()["stopped"] == [job.id]
     worker.join(timeout=10)
     assert done[-1].startswith("cancelled") and session.prompt is None
+
+
+def _interrupted_copy(console: TestClient, name: str) -> Path:
+    """A complete scan ``name`` copied to ``name.incomplete-k1ll`` marked incomplete: what a kill
+    after the last frame but before the commit leaves behind."""
+    import shutil
+
+    job = console.post("/api/scan", json={"name": name, "process": False}).json()["job"]
+    assert wait_job(console, job["id"])["state"] == "done"
+    captures = Path(console.get("/api/status").json()["data"]["root"]) / "captures"
+    staged = captures / f"{name}.incomplete-k1ll"
+    shutil.copytree(captures / name, staged)
+    manifest = json.loads((staged / "capture.json").read_text())
+    (staged / "capture.json").write_text(json.dumps({**manifest, "complete": False}))
+    return staged
+
+
+def test_an_interrupted_scan_is_listed_and_can_be_salvaged(console: TestClient) -> None:
+    staged = _interrupted_copy(console, "cut")
+    rows = {row["name"]: row for row in console.get("/api/captures").json()["captures"]}
+    assert rows[staged.name]["complete"] is False and "salvage or discard" in rows[staged.name]["error"]
+    assert console.post("/api/process", json={"capture": staged.name}).status_code == 400  # not a capture name
+    reply = console.post(f"/api/captures/{staged.name}/salvage", json={"options": {"correction": "none"}})
+    assert reply.status_code == 202
+    job = wait_job(console, reply.json()["job"]["id"])
+    assert job["state"] == "done" and job["name"].startswith("cut-salvaged-none")
+    assert wait_saved(console, job["name"])["shows"] == "phase"
+    assert staged.is_dir()  # salvaging reads, never moves or deletes
+
+
+def test_discarding_an_interrupted_scan_moves_it_to_the_trash(console: TestClient) -> None:
+    staged = _interrupted_copy(console, "cut")
+    files = sorted(p.relative_to(staged) for p in staged.rglob("*"))
+    reply = console.post(f"/api/captures/{staged.name}/discard", json={})
+    assert reply.status_code == 200 and reply.json()["moved_to"] == f"trash/captures/{staged.name}"
+    trash = staged.parent.parent / "trash" / "captures" / staged.name
+    assert not staged.exists() and sorted(p.relative_to(trash) for p in trash.rglob("*")) == files
+    assert staged.name not in [row["name"] for row in console.get("/api/captures").json()["captures"]]
+    assert console.post("/api/captures/cut/discard", json={}).status_code == 404  # only interrupted writes
+    assert (staged.parent / "cut" / "capture.json").is_file()

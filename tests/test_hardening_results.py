@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from cli_steps import assert_one_line, run
+from console_client import BASE
 from fastapi.testclient import TestClient
 
 from rig import api
@@ -42,7 +43,7 @@ def console_on(simulated_rig_toml: Callable[..., str], tmp_path: Path) -> Callab
     rig_toml.write_text(simulated_rig_toml((456, 570), (160, 120), 35.0))
 
     def open_console(data: Path) -> TestClient:
-        client = TestClient(create_app(load_config(rig_toml), data))
+        client = TestClient(create_app(load_config(rig_toml), data), base_url=BASE)
         clients.append(client.__enter__())
         return client
 

@@ -28,7 +28,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "its URL: live camera view with saturation, histogram, focus and fringe modulation; exposure and projector "
         "controls; scan with progress and Stop; the height map, 3-D view and report; captures to reprocess and "
         "compare; the calibration wizard; device status. The JSON API is described at /api/docs. "
-        "Binding beyond 127.0.0.1 requires an access token (one is generated and printed in the URL).",
+        "Binding beyond 127.0.0.1 requires an access token (one is generated and printed in the URL). "
+        "Requests must name the console in their Host header (loopback names, --host, --allowed-host).",
     )
     parser.add_argument(
         "--config", type=Path, metavar="RIG.toml", help="rig config file (default: the built-in simulated rig)"
@@ -46,8 +47,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--port", type=int, default=8765, help="port (default 8765; 0 picks a free one)")
     parser.add_argument(
         "--token",
-        help="access token required from browsers and scripts (default: none on 127.0.0.1, "
-        "a generated one on any other address)",
+        help="access token required from browsers and scripts, at least 16 characters (default: none on "
+        "127.0.0.1, a generated one on any other address)",
+    )
+    parser.add_argument(
+        "--allowed-host",
+        action="append",
+        default=[],
+        metavar="NAME",
+        help="another name browsers reach the console by (a reverse proxy's host name); repeatable",
     )
 
 
@@ -65,20 +73,21 @@ def run(args: argparse.Namespace) -> int:
     import uvicorn
 
     from rig.config import load_config
+    from rig.console.access import check_token
     from rig.console.app import create_app
+    from rig.console.server import server_config
 
     if not 0 <= args.port <= 65535:
         raise ConfigError(f"--port: expected 0 .. 65535, found {args.port}")
     if args.data.exists() and not args.data.is_dir():
         raise ConfigError(f"--data {args.data}: exists and is not a directory")
     token = args.token
+    check_token(token)
     if token is None and not is_loopback(args.host):
         token = secrets.token_urlsafe(16)
     config = load_config(args.config)
-    app = create_app(config, args.data, token=token)
-    server = uvicorn.Server(
-        uvicorn.Config(app, host=args.host, port=args.port, log_level="warning", ws="websockets-sansio")
-    )
+    app = create_app(config, args.data, token=token, host=args.host, allowed_hosts=args.allowed_host)
+    server = uvicorn.Server(server_config(app, args.host, args.port))
 
     async def announce() -> None:
         while not server.started:

@@ -6,6 +6,12 @@ Layout::
     DATA/captures/NAME/        captures (capture.json + frames), scans made from the console
     DATA/results/NAME/         outputs of processing a capture (report.json, height.npy, points.ply, ...)
     DATA/calibrations/NAME/    calibrations (calibration.json); scans are processed with the chosen one
+    DATA/trash/KIND/NAME/      what the operator discarded (an interrupted scan), kept until removed by hand
+
+Staging folders the file layer writes into (``NAME.incomplete-XXXX``, ``NAME.replaced-XXXX``) are
+never names: a kill between writing and renaming leaves one behind, and it must not pass for a
+capture, a result or a calibration. If the directory (or one of its folders) is removed while the
+console runs, the layout is made again on the next use; if that fails, the error says so.
 """
 
 from __future__ import annotations
@@ -16,9 +22,11 @@ from pathlib import Path
 from typing import Any
 
 from rig.errors import RigError
+from rig.store.files import INCOMPLETE_MARK, REPLACED_MARK
 from rig.store.results import REPORT, default_name, is_staging_name
 
 KINDS = ("captures", "results", "calibrations")
+TRASH = "trash"  # what the operator discarded, moved rather than deleted
 MARKERS = {"captures": "capture.json", "results": REPORT, "calibrations": "calibration.json"}
 NAME_LENGTH = 100
 NAME = re.compile(rf"[A-Za-z0-9][A-Za-z0-9._-]{{0,{NAME_LENGTH - 1}}}")
@@ -29,12 +37,22 @@ class OutsideDataError(RigError):
 
 
 class DataDir:
-    """The data directory of one console; created if missing."""
+    """The data directory of one console; created if missing (and again if removed meanwhile)."""
 
     def __init__(self, root: str | Path) -> None:
         self.root = Path(root).resolve()
+        self.ensure()
+
+    def ensure(self) -> None:
+        """Make DATA and its three folders if any is missing; a RigError naming the folder if it cannot."""
         for kind in KINDS:
-            (self.root / kind).mkdir(parents=True, exist_ok=True)
+            folder = self.root / kind
+            if folder.is_dir():
+                continue
+            try:
+                folder.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise RigError(f"data directory {folder}: cannot be made again: {exc.strerror or exc}") from None
 
     def path(self, kind: str, name: str) -> Path:
         """``DATA/kind/name``, refused unless ``name`` is a plain name that stays inside DATA.
@@ -48,8 +66,11 @@ class DataDir:
             raise OutsideDataError(
                 f"{kind} name: expected a plain name (letters, digits, '.', '_', '-'; no '/' or '..'), found {name!r}"
             )
-        if kind == "results" and is_staging_name(name):
-            raise OutsideDataError(f"{kind} name {name!r}: a staging name of an interrupted write, never a result")
+        if is_staging_name(name):
+            raise OutsideDataError(
+                f"{kind} name {name!r}: {INCOMPLETE_MARK!r} and {REPLACED_MARK!r} mark unfinished writes, not names"
+            )
+        self.ensure()
         path = self.root / kind / name
         if not path.resolve().is_relative_to(self.root):
             raise OutsideDataError(f"{kind} name {name!r}: leads outside the data directory")
@@ -64,16 +85,14 @@ class DataDir:
 
     def names(self, kind: str) -> list[str]:
         """Complete entries of ``kind``, newest first (by the marker file's modification time)."""
+        self.ensure()
         folder = self.root / kind
         entries = []
         for child in folder.iterdir():
             marker = child / MARKERS[kind]
-            if (
-                NAME.fullmatch(child.name)
-                and not (kind == "results" and is_staging_name(child.name))
-                and marker.is_file()
-                and child.resolve().is_relative_to(self.root)
-            ):
+            if not NAME.fullmatch(child.name) or is_staging_name(child.name):
+                continue
+            if marker.is_file() and child.resolve().is_relative_to(self.root):
                 entries.append((marker.stat().st_mtime, child.name))
         return [name for _, name in sorted(entries, reverse=True)]
 
@@ -83,6 +102,7 @@ class DataDir:
         A prefix too long for a name (a long capture's name) is cut short with a hash of it, so that
         the name is always one :meth:`path` accepts.
         """
+        self.ensure()
         stamp = datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S")
         base = default_name(prefix, f"-{stamp}", limit=NAME_LENGTH - len("-999"))
         name, n = base, 1
@@ -90,6 +110,40 @@ class DataDir:
             n += 1
             name = f"{base}-{n}"
         return name
+
+    def interrupted_names(self, kind: str) -> list[str]:
+        """Staging folders of ``kind`` left by an interrupted write (a stopped scan), newest first.
+
+        Listed so that the operator can salvage or discard them; :meth:`path` never accepts them.
+        """
+        self.ensure()
+        entries = []
+        for child in (self.root / kind).iterdir():
+            if INCOMPLETE_MARK in child.name and child.is_dir() and not child.is_symlink():
+                entries.append((child.stat().st_mtime, child.name))
+        return [name for _, name in sorted(entries, reverse=True)]
+
+    def interrupted(self, kind: str, name: str) -> Path:
+        """DATA/kind/NAME for an interrupted write's folder listed by :meth:`interrupted_names`."""
+        if not isinstance(name, str) or name not in self.interrupted_names(kind):
+            raise FileNotFoundError(f"{kind}/{name}: no interrupted write of that name in the data directory")
+        return self.root / kind / name
+
+    def to_trash(self, kind: str, name: str) -> str:
+        """Move the interrupted write ``kind``/``name`` to DATA/trash/kind/NAME (renamed, never deleted)."""
+        source = self.interrupted(kind, name)
+        trash = self.root / TRASH / kind
+        trash.mkdir(parents=True, exist_ok=True)
+        target = trash / name
+        if target.exists():
+            raise RigError(f"{TRASH}/{kind}/{name}: already in the trash; remove it there first")
+        source.rename(target)
+        return f"{TRASH}/{kind}/{name}"
+
+    def staged(self, kind: str, name: str) -> bool:
+        """Whether a write of ``kind``/``name`` is under way (a staging folder of that name exists)."""
+        folder = self.root / kind
+        return any(p.name.startswith(name + INCOMPLETE_MARK) for p in folder.iterdir())
 
     def describe(self) -> dict[str, Any]:
         return {"root": str(self.root), **{kind: len(self.names(kind)) for kind in KINDS}}

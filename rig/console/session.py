@@ -6,12 +6,15 @@
   (:mod:`rig.acquisition.live`). With no page watching the camera is stopped and the projector dark.
 - One acquisition at a time: a scan while another runs is refused with :class:`Busy`.
 - A scan goes through :func:`rig.acquisition.scan.scan_with` with the held devices; processing
-  (:func:`rig.pipeline.run.process`) runs on a processing thread so the rig is free again at once:
+  (:func:`rig.api.process`) runs on a processing thread so the rig is free again at once:
   first without fringe-order correction (on screen within a second), then with the requested
-  options, whose outputs are written (:func:`rig.pipeline.outputs.write_outputs`).
-- Progress comes from the services' :class:`rig.events.Reporter` events, published with every
-  state change through ``publish`` (the app fans them out to the websocket clients); each job
-  has a :class:`rig.events.CancelToken` (Stop button, closed page, shutdown).
+  options, whose outputs are written (:func:`rig.api.write_outputs`, which never replaces a result).
+- Scans, processing runs and calibrations are jobs of :class:`rig.jobs.Jobs` (thread-safe; every
+  job ends done, failed or cancelled, whatever it raises). Their progress comes from the services'
+  :class:`rig.events.Reporter` events, published through ``publish`` with the kind of what they
+  count (scan: frames, process: stages, calibrate: steps); each job has a
+  :class:`rig.events.CancelToken` (Stop button, shutdown). A page that closes stops nothing: jobs
+  belong to the console, and a page that opens is shown the running ones and the newest result.
 - A device error closes the rig and is published as a readable message; the next request (or live
   frame, after a short pause) opens the rig again.
 """
@@ -19,7 +22,6 @@
 from __future__ import annotations
 
 import contextlib
-import itertools
 import logging
 import math
 import queue
@@ -28,7 +30,7 @@ import time
 from collections import OrderedDict
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -41,10 +43,12 @@ from rig.config import RigConfig
 from rig.console.datadir import DataDir
 from rig.console.results import ResultView
 from rig.errors import RigError
-from rig.events import Cancelled, CancelToken, Event, Reporter
+from rig.events import Cancelled, Reporter
 from rig.hardware.assembly import RigDevices, open_rig
+from rig.jobs import Job, Jobs
 from rig.pipeline.outputs import colour_map
 from rig.pipeline.plan import DEFAULT_CORRECTION, ProcessOptions
+from rig.store.files import INCOMPLETE_MARK
 
 log = logging.getLogger(__name__)
 
@@ -53,46 +57,17 @@ PROJECTOR_PATTERNS = ("black", "white", "fringe", "grid")
 REOPEN_AFTER_S = 2.0  # pause before the live view opens a rig again after a device error
 RESULTS_KEPT = 8  # results held in memory (older ones are read back from disk)
 JPEG_QUALITY = 80
+GAMMA_LEVELS_MAX = 256  # projector gamma ramp levels (an 8-bit projector has no more)
+BOARD_VIEWS_MAX = 100
+HEIGHTS_MAX = 50
 
 
 class Busy(RigError):
     """The rig is already acquiring; the request would start a second acquisition."""
 
 
-@dataclass
-class Job:
-    """A scan, processing run or calibration the console started."""
-
-    id: str
-    kind: str
-    name: str
-    token: CancelToken = field(default_factory=CancelToken)
-    client: str | None = None
-    state: str = "running"  # running | done | failed | cancelled
-    stage: str = ""
-    done: int = 0
-    total: int = 0
-    error: str | None = None
-    result: str | None = None
-    started: float = field(default_factory=time.time)
-    finished: float | None = None
-    last_frame: float | None = None  # when a scan's last frame was stored (time.time)
-
-    def as_dict(self) -> dict[str, Any]:
-        return {
-            "id": self.id,
-            "kind": self.kind,
-            "name": self.name,
-            "state": self.state,
-            "stage": self.stage,
-            "done": self.done,
-            "total": self.total,
-            "error": self.error,
-            "result": self.result,
-            "started": self.started,
-            "finished": self.finished,
-            "last_frame": self.last_frame,
-        }
+class Conflict(RigError):
+    """The name a request gives is taken: nothing is replaced without being asked."""
 
 
 @dataclass
@@ -185,12 +160,13 @@ class ConsoleSession:
         if calibrations:
             self.calibration = calibrations[0]
         self.device_error: str | None = None
-        self.jobs: OrderedDict[str, Job] = OrderedDict()
+        self.jobs = Jobs(lambda message: publish(message, None))
         self.current: Job | None = None  # the acquisition running
         self.results: OrderedDict[str, ResultView] = OrderedDict()
+        self._results_lock = threading.Lock()
+        self.latest: dict[str, Any] | None = None  # the newest result shown: name, job, final
         self.fps = 0.0
         self.frames = 0
-        self._ids = itertools.count(1)
         self._watchers = 0
         self._tasks: queue.Queue[tuple[Callable[[], Any], Future[Any]]] = queue.Queue()
         self._acquiring = threading.Lock()
@@ -215,9 +191,7 @@ class ConsoleSession:
 
     def close(self) -> None:
         """Stop every job, close the devices, stop the threads (Ctrl-C, app shutdown)."""
-        for job in list(self.jobs.values()):
-            if job.state == "running":
-                job.token.cancel("the console is shutting down")
+        self.jobs.stop(reason="the console is shutting down")
         self._stopping.set()
         if self._worker.is_alive():
             self._worker.join(timeout=30)
@@ -379,12 +353,6 @@ class ConsoleSession:
         """A page starts (+1) or stops (-1) watching the live view."""
         self._watchers = max(0, self._watchers + delta)
 
-    def client_left(self, client: str) -> None:
-        """A page closed: stop what it started, so the rig is left idle."""
-        for job in list(self.jobs.values()):
-            if job.client == client and job.state == "running":
-                job.token.cancel("the page that started it was closed")
-
     # ------------------------------------------------------------------ settings
     def _refuse_while_acquiring(self, what: str) -> None:
         if self.current is not None:
@@ -462,102 +430,74 @@ class ConsoleSession:
         self.call(reopen)
 
     # ------------------------------------------------------------------ jobs
-    def _new_job(self, kind: str, name: str, client: str | None) -> Job:
-        job = Job(id=f"{kind}-{next(self._ids)}", kind=kind, name=name, client=client)
-        self.jobs[job.id] = job
-        while len(self.jobs) > 50:
-            self.jobs.popitem(last=False)
-        self._publish_job(job)
-        return job
+    def _job(self, kind: str, name: str, client: str | None) -> Job:
+        return self.jobs.start(kind, name, client)
 
-    def _publish_job(self, job: Job) -> None:
-        self.publish({"type": "job", "job": job.as_dict()}, None)
+    def _acquisition_slot(self) -> None:
+        """Take the one acquisition slot, or raise :class:`Busy` naming what holds it."""
+        if not self._acquiring.acquire(blocking=False):
+            running = self.current
+            what = f"{running.kind} {running.name}" if running else "an acquisition"
+            raise Busy(f"busy: {what} is running; one acquisition at a time")
 
-    def _sink(self, job: Job) -> Callable[[Event], None]:
-        def sink(event: Event) -> None:
-            job.stage, job.done, job.total = event.task, event.done, event.total
-            if job.kind == "scan" and event.kind == "step" and event.total and event.done >= event.total:
-                job.last_frame = job.last_frame or time.time()
-            self.publish({"type": "progress", "job": job.id, "kind": job.kind, "event": event.as_dict()}, None)
-
-        return sink
-
-    def _finish(self, job: Job, error: BaseException | None = None) -> None:
-        job.finished = time.time()
-        if error is None:
-            job.state = "done"
-        elif isinstance(error, Cancelled):
-            job.state, job.error = "cancelled", str(error)
-        else:
-            job.state, job.error = "failed", str(error)
-            self.publish(
-                {"type": "error", "source": job.kind, "job": job.id, "message": f"{job.kind} {job.name}: {error}"}, None
-            )
-        self._publish_job(job)
+    def _new_entry(self, kind: str, name: str | None, prefix: str) -> tuple[str, Path]:
+        """A free name and path in DATA/kind (``prefix-<time>`` by default); a taken name is refused."""
+        name = name or self.data.new_name(kind, prefix)
+        path = self.data.path(kind, name)
+        if path.exists() or self.data.staged(kind, name):
+            raise Conflict(f"{kind}/{name}: already exists; choose another name")
+        return name, path
 
     def scan(
         self,
         name: str | None = None,
-        scene: str = "object",
         process: bool = True,
         options: ProcessOptions | None = None,
         client: str | None = None,
     ) -> Job:
-        """Start a scan into DATA/captures/NAME (then process it); :class:`Busy` if one is running."""
-        if not self._acquiring.acquire(blocking=False):
-            running = self.current
-            raise Busy(
-                f"busy: {running.kind if running else 'an acquisition'} {running.name if running else ''} "
-                "is running; one acquisition at a time"
-            )
+        """Start a scan of what is in front of the rig into DATA/captures/NAME (then process it).
+
+        :class:`Busy` if an acquisition runs; the job runs to its end whatever the pages do.
+        """
+        self._acquisition_slot()
         try:
-            name = name or self.data.new_name("captures", "scan")
-            path = self.data.path("captures", name)
-            if path.exists():
-                raise RigError(f"captures/{name}: already exists; choose another name")
-            if scene != "object" and not self.config.simulated:
-                raise RigError("scene: only the simulated rig can be told what it looks at")
-            job = self._new_job("scan", name, client)
+            name, path = self._new_entry("captures", name, "scan")
+            job = self._job("scan", name, client)
             self.current = job
-            self._tasks.put((lambda: self._scan(job, path, scene, process, options), Future()))
+            self._tasks.put((lambda: self._scan(job, path, process, options), Future()))
         except BaseException:
             self._acquiring.release()
             raise
         self._publish_status()
         return job
 
-    def _scan(self, job: Job, path: Path, scene: str, process: bool, options: ProcessOptions | None) -> None:
+    def _scan(self, job: Job, path: Path, process: bool, options: ProcessOptions | None) -> None:
         """Worker thread: the acquisition itself, then hand the capture to processing."""
         from rig.acquisition.scan import scan_with
 
-        error: BaseException | None = None
-        try:
+        def acquire() -> None:
             devices = self._open()
             devices.camera.stop()  # the live view's software-trigger acquisition
             patterns = self.config.scan.patterns()
-            reporter = Reporter(f"scan {job.name}", sink=self._sink(job), cancel=job.token)
+            reporter = Reporter(f"scan {job.name}", sink=self.jobs.sink(job, "scan"), cancel=job.token)
             reporter.begin(len(patterns), f"scan {job.name}")
-            scan_with(
-                devices, path, patterns, scene=scene, progress=reporter, exposure_us=self.exposure_us, gain=self.gain
-            )
-            job.result = job.name
-        except (DeviceError, RigError, OSError) as exc:
-            error = exc
-            if not isinstance(exc, Cancelled) and self._devices is not None and _is_device_fault(exc):
-                self._device_failed(exc, f"scan {job.name}")
+            scan_with(devices, path, patterns, progress=reporter, exposure_us=self.exposure_us, gain=self.gain)
+
+        try:
+            error = self.jobs.run(job, acquire, then_finish=not process)
         finally:
             self.current = None
             self._acquiring.release()
         if error is not None:
-            self._finish(job, error)
+            if not isinstance(error, Cancelled) and self._devices is not None and _is_device_fault(error):
+                self._device_failed(error, f"scan {job.name}")
         else:
             self._restore_projector()
             if process:
-                job.stage = "processing"
-                self._publish_job(job)
-                self._processing.submit(self._process, job, path, job.name, options, True)
+                self.jobs.update(job, stage="processing", result=job.name)
+                self._queue_processing(job, path, job.name, options, True)
             else:
-                self._finish(job)
+                self.jobs.update(job, result=job.name)
         self._publish_status()
 
     def calibrate(
@@ -573,33 +513,15 @@ class ConsoleSession:
 
         The same steps, prompts and options as ``rig calibrate``: ``model`` (reference-plane,
         polynomial; stereo on a real rig only) and ``gamma_levels`` (a projector gamma ramp of that
-        many flat levels first, 0: none). Prompts reach the page as ``prompt`` messages and wait
-        for :meth:`answer`; the simulated rig sets up each step by itself.
+        many flat levels first, 0: none; at most :data:`GAMMA_LEVELS_MAX`, checked before anything
+        is allocated). Prompts reach the page as ``prompt`` messages and wait for :meth:`answer`;
+        the simulated rig sets up each step by itself.
         """
-        from rig.calibrate.session import MODELS, STEREO, CalibrationPlan
-        from rig.hardware.simulated import STEREO_REFUSAL
-
-        if model not in MODELS:
-            raise RigError(f"model: expected one of {', '.join(MODELS)}, found {model!r}")
-        if model == STEREO and self.config.simulated:
-            raise RigError(STEREO_REFUSAL)
-        if gamma_levels != 0 and gamma_levels < 5:
-            raise RigError(f"gamma_levels: expected 0 (no gamma ramp) or at least 5 levels, found {gamma_levels}")
-        plan = CalibrationPlan(
-            heights_mm=tuple(float(h) for h in heights_mm),
-            board_views=int(board_views),
-            model=model,
-            gamma_levels=int(gamma_levels),
-        )
-        plan.check()
-        if not self._acquiring.acquire(blocking=False):
-            raise Busy("busy: an acquisition is running; one acquisition at a time")
+        plan = self._calibration_plan(heights_mm, board_views, model, gamma_levels)
+        self._acquisition_slot()
         try:
-            name = name or self.data.new_name("calibrations", "cal")
-            path = self.data.path("calibrations", name)
-            if path.exists():
-                raise RigError(f"calibrations/{name}: already exists; choose another name")
-            job = self._new_job("calibrate", name, client)
+            name, path = self._new_entry("calibrations", name, "cal")
+            job = self._job("calibrate", name, client)
             self.current = job
             self._tasks.put((lambda: self._calibrate(job, path, plan), Future()))
         except BaseException:
@@ -608,14 +530,38 @@ class ConsoleSession:
         self._publish_status()
         return job
 
+    def _calibration_plan(self, heights_mm: tuple[float, ...], board_views: int, model: str, gamma_levels: int) -> Any:
+        """The checked plan of a console calibration (bounds first: nothing sized by a request before)."""
+        from rig.calibrate.session import MODELS, STEREO, CalibrationPlan
+        from rig.hardware.simulated import STEREO_REFUSAL
+
+        if model not in MODELS:
+            raise RigError(f"model: expected one of {', '.join(MODELS)}, found {model!r}")
+        if model == STEREO and self.config.simulated:
+            raise RigError(STEREO_REFUSAL)
+        if gamma_levels != 0 and not 5 <= gamma_levels <= GAMMA_LEVELS_MAX:
+            raise RigError(
+                f"gamma_levels: expected 0 (no gamma ramp) or 5 .. {GAMMA_LEVELS_MAX} levels, found {gamma_levels}"
+            )
+        if not 0 <= board_views <= BOARD_VIEWS_MAX:
+            raise RigError(f"board_views: expected 0 .. {BOARD_VIEWS_MAX} tilted views, found {board_views}")
+        if not 1 <= len(heights_mm) <= HEIGHTS_MAX or not all(math.isfinite(h) for h in heights_mm):
+            raise RigError(f"heights_mm: expected 1 .. {HEIGHTS_MAX} finite plane heights, found {list(heights_mm)}")
+        plan = CalibrationPlan(
+            heights_mm=tuple(float(h) for h in heights_mm),
+            board_views=int(board_views),
+            model=model,
+            gamma_levels=int(gamma_levels),
+        )
+        plan.check()
+        return plan
+
     def _calibrate(self, job: Job, path: Path, plan: Any) -> None:
         """Worker thread: the session opens the rig itself, so the console's rig is closed meanwhile."""
         from rig.calibrate.session import calibrate
 
-        error: BaseException | None = None
-        self._close_rig()
-        try:
-            reporter = Reporter(f"calibrate {job.name}", sink=self._sink(job), cancel=job.token)
+        def run() -> None:
+            reporter = Reporter(f"calibrate {job.name}", sink=self.jobs.sink(job, "calibrate"), cancel=job.token)
             operator = None if self.config.simulated else self.operator(job)
             report = calibrate(self.config, plan, path, operator, progress=reporter)  # committed only when computed
             cal = report.calibration
@@ -633,13 +579,14 @@ class ConsoleSession:
                 None,
             )
             self.calibration = job.name
-            job.result = job.name
-        except (DeviceError, RigError, OSError, ValueError) as exc:
-            error = exc
+            self.jobs.update(job, result=job.name)
+
+        self._close_rig()
+        try:
+            self.jobs.run(job, run)
         finally:
             self.current = None
             self._acquiring.release()
-        self._finish(job, error)
         self._publish_status()
 
     def operator(self, job: Job) -> Any:
@@ -682,61 +629,100 @@ class ConsoleSession:
                 self._device_failed(exc, "projector")
 
     def process(
-        self, capture: str, options: ProcessOptions | None = None, name: str | None = None, client: str | None = None
+        self,
+        capture: str,
+        options: ProcessOptions | None = None,
+        name: str | None = None,
+        client: str | None = None,
+        salvage: bool = False,
     ) -> Job:
-        """Reprocess DATA/captures/CAPTURE with ``options`` into DATA/results/NAME (queued)."""
-        path = self.data.existing("captures", capture)
+        """Reprocess DATA/captures/CAPTURE with ``options`` into DATA/results/NAME (queued).
+
+        A NAME already in DATA/results is refused with :class:`Conflict`: a result is never replaced.
+        ``salvage``: CAPTURE is an interrupted scan's folder (``NAME.incomplete-XXXX``); what it
+        holds is processed, which fails with one line if frames the processing needs are missing.
+        """
+        if salvage:
+            path = self.data.interrupted("captures", capture)
+            base = f"{capture.partition(INCOMPLETE_MARK)[0]}-salvaged"
+        else:
+            path = self.data.existing("captures", capture)
+            base = capture
         options = options or ProcessOptions(correction=DEFAULT_CORRECTION)
-        name = name or self.data.new_name("results", f"{capture}-{options.correction}")
-        self.data.path("results", name)
-        job = self._new_job("process", name, client)
-        self._processing.submit(self._process, job, path, name, options, False)
+        name, _ = self._new_entry("results", name, f"{base}-{options.correction}")
+        job = self._job("process", name, client)
+        self._queue_processing(job, path, name, options, False, salvage)
+        self._publish_status()
         return job
 
-    def _process(self, job: Job, capture: Path, name: str, options: ProcessOptions | None, quick_first: bool) -> None:
-        """Processing thread: the capture to a result on screen, then its files."""
-        from rig.pipeline.outputs import write_outputs
-        from rig.pipeline.run import process
+    def _queue_processing(self, job: Job, *args: Any) -> None:
+        """Hand ``job`` to the processing thread; if it is gone (shutting down), the job fails there and then."""
+        try:
+            self._processing.submit(self._process, job, *args)
+        except RuntimeError as exc:
+            self.jobs.finish(job, RigError(f"not processed: {exc}"))
+
+    def discard(self, capture: str) -> str:
+        """Move an interrupted scan's folder into DATA/trash (nothing is deleted); its new place."""
+        moved = self.data.to_trash("captures", capture)
+        self._publish_status()
+        return moved
+
+    def _process(
+        self,
+        job: Job,
+        capture: Path,
+        name: str,
+        options: ProcessOptions | None,
+        quick_first: bool,
+        salvage: bool = False,
+    ) -> None:
+        """Processing thread: the capture to a result on screen (a quick one first), then its files.
+
+        Through :func:`rig.api.process`, the processing entry of every front-end; the result store
+        refuses to replace an existing result (:class:`rig.errors.ResultExistsError`, HTTP 409).
+        """
+        from rig import api
 
         options = options or ProcessOptions(correction=DEFAULT_CORRECTION)
-        calibration = self.data.existing("calibrations", self.calibration) if self.calibration else None
-        try:
-            if quick_first and options.correction != "none":
-                reporter = Reporter(f"process {name} (quick)", sink=self._sink(job), cancel=job.token)
-                quick = process(capture, calibration, replace(options, correction="none"), progress=reporter)
-                self._show(ResultView.from_result(name, quick), job, final=False)
-            reporter = Reporter(f"process {name}", sink=self._sink(job), cancel=job.token)
-            result = process(capture, calibration, options, progress=reporter)
+        reporter = Reporter(f"process {name}", sink=self.jobs.sink(job, "process"), cancel=job.token)
+
+        def show_quick(first: Any) -> None:
+            self._show(ResultView.from_result(name, first), job, final=False)
+
+        def run() -> None:
+            calibration = self.data.existing("calibrations", self.calibration) if self.calibration else None
+            quick = show_quick if quick_first else None
+            result = api.process(capture, calibration, options, reporter, salvage=salvage, quick=quick)
             view = ResultView.from_result(name, result)
             self._show(view, job, final=True)
-            write_outputs(result, self.data.path("results", name))
+            api.write_outputs(result, self.data.path("results", name))
             view.saved = True
-            job.result = name
+            self.jobs.update(job, result=name)
             self.publish({"type": "saved", "name": name, "job": job.id}, None)
-        except (RigError, OSError, ValueError) as exc:
-            self._finish(job, exc)
-        except Exception as exc:  # a bug must reach the page, not die silently in a thread
-            log.exception("console: processing %s failed", name)
-            self._finish(job, exc)
-        else:
-            self._finish(job)
+
+        self.jobs.run(job, run)
         self._publish_status()
 
     def _keep(self, view: ResultView) -> None:
         """Hold ``view`` in memory as the newest result, dropping the oldest beyond RESULTS_KEPT."""
-        self.results[view.name] = view
-        self.results.move_to_end(view.name)
-        while len(self.results) > RESULTS_KEPT:
-            self.results.popitem(last=False)
+        with self._results_lock:
+            self.results[view.name] = view
+            self.results.move_to_end(view.name)
+            while len(self.results) > RESULTS_KEPT:
+                self.results.popitem(last=False)
 
     def _show(self, view: ResultView, job: Job, final: bool) -> None:
         self._keep(view)
-        since = time.time() - job.last_frame if job.last_frame else None
+        self.latest = {"name": view.name, "job": job.id, "final": final}
+        last_frame = (self.jobs.get(job.id) or {}).get("last_frame")
+        since = time.time() - last_frame if last_frame else None
         self.publish(
             {
                 "type": "result",
                 "name": view.name,
                 "job": job.id,
+                "client": job.client,
                 "final": final,
                 "since_last_frame_s": since,
                 "summary": view.summary(),
@@ -746,8 +732,10 @@ class ConsoleSession:
 
     def result(self, name: str) -> ResultView:
         """A result by name: in memory, or read back from DATA/results/NAME."""
-        if name in self.results:
-            return self.results[name]
+        with self._results_lock:
+            view = self.results.get(name)
+        if view is not None:
+            return view
         path = self.data.existing("results", name)
         view = ResultView.from_directory(name, path)
         self._keep(view)
@@ -755,14 +743,7 @@ class ConsoleSession:
 
     def stop(self, job_id: str | None = None) -> list[str]:
         """Cancel ``job_id`` (default: every running job); returns the ids asked to stop."""
-        stopped = []
-        for job in self.jobs.values():
-            if job.state == "running" and (job_id is None or job.id == job_id):
-                job.token.cancel("stopped from the console")
-                stopped.append(job.id)
-        if job_id is not None and not stopped:
-            raise RigError(f"job {job_id!r}: not running")
-        return stopped
+        return self.jobs.stop(job_id)
 
     # ------------------------------------------------------------------ state
     def devices(self) -> list[dict[str, Any]]:
@@ -797,9 +778,12 @@ class ConsoleSession:
         return rows
 
     def status(self) -> dict[str, Any]:
-        running = [job.as_dict() for job in self.jobs.values() if job.state == "running"]
-        if self.current is not None:
-            state = "scanning"
+        """What the rig does, its settings, the running jobs and the newest result (any thread)."""
+        current = self.current
+        running = self.jobs.running()
+        acquisition = self.jobs.get(current.id) if current is not None else None
+        if current is not None:
+            state = "calibrating" if current.kind == "calibrate" else "scanning"
         elif running:
             state = "processing"
         elif self.device_error and self._devices is None:
@@ -810,19 +794,19 @@ class ConsoleSession:
             state = "idle"
         return {
             "state": state,
-            "busy": self.current is not None,
-            "acquisition": self.current.as_dict() if self.current else None,
+            "busy": current is not None,
+            "acquisition": acquisition,
             "jobs": running,
+            "latest_result": self.latest,
             "device_error": self.device_error,
             "devices": self.devices(),
             "exposure_us": self.exposure_us,
             "gain": self.gain,
-            "projector": self.projector.__dict__,
+            "projector": dict(self.projector.__dict__),
             "live": {"watchers": self._watchers, "fps": round(self.fps, 1), **self.live.__dict__},
             "calibration": self.calibration,
             "prompt": self.prompt,
             "calibrations": self.data.names("calibrations"),
-            "process_options": process_choices(),
             "simulated": self.config.simulated,
             "fault_injection": self.fault_injection,
             "config": str(self.config.source) if self.config.source else "built-in simulated rig",
@@ -831,20 +815,6 @@ class ConsoleSession:
 
     def _publish_status(self) -> None:
         self.publish({"type": "status", "status": self.status()}, None)
-
-
-def process_choices() -> dict[str, Any]:
-    """The processing options a page can offer (the pipeline's own lists)."""
-    from rig.pipeline.corrections import REGISTRY as CORRECTIONS
-    from rig.pipeline.plan import UNWRAP_METHODS
-    from rig.pipeline.stages import DENOISERS
-
-    return {
-        "unwrap": list(UNWRAP_METHODS),
-        "denoise": list(DENOISERS),
-        "correction": list(CORRECTIONS),
-        "default_correction": DEFAULT_CORRECTION,
-    }
 
 
 def _is_device_fault(exc: BaseException) -> bool:

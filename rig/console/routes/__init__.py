@@ -1,0 +1,13 @@
+"""The console's HTTP and websocket routes, one router per area of the page.
+
+Each route is a few lines that translate a request into a call on the console session (or the
+jobs service) found in ``request.app.state``; no rig logic lives here.
+"""
+
+from __future__ import annotations
+
+from fastapi import APIRouter
+
+from rig.console.routes import calibration, data, live, scan, settings
+
+ROUTERS: tuple[APIRouter, ...] = (live.router, settings.router, scan.router, data.router, calibration.router)

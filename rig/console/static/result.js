@@ -1,0 +1,108 @@
+// The Result view: colour-mapped map, hover read-out, 3-D surface, key figures and downloads.
+// Any tab shows the newest result; only the tab whose job made it switches to this view.
+import { $, api, showView } from "./api.js";
+
+const shown = { summary: null, values: null };
+
+export async function showResult(name, summary, final, { focus = false, lastFrameAt = null } = {}) {
+  const started = performance.now();
+  shown.summary = summary;
+  $("result-title").textContent = `${name}: ${summary.shows} (${summary.unit})` + (final ? "" : " — quick result, refining");
+  const stamp = Date.now();
+  const base = `/api/results/${encodeURIComponent(name)}`;
+  const valuesReady = fetch(`${base}/values.f32?v=${stamp}`).then(async (r) => ({
+    data: new Float32Array(await r.arrayBuffer()), width: Number(r.headers.get("X-Width")), height: Number(r.headers.get("X-Height")),
+  }));
+  const surfaceReady = api("GET", `${base}/surface`);
+  const map = $("height-map");
+  const loaded = new Promise((resolve) => { map.onload = resolve; map.onerror = resolve; });
+  map.src = `${base}/map.png?v=${stamp}`;
+  $("scale-high").textContent = summary.range[1].toFixed(2) + " " + summary.unit;
+  $("scale-low").textContent = summary.range[0].toFixed(2) + " " + summary.unit;
+  renderFigures(summary);
+  renderDownloads();
+  if (focus) showView("result");
+  await loaded;
+  const mapShown = performance.now();
+  shown.values = { ...(await valuesReady), unit: summary.unit, name };
+  await drawSurface(await surfaceReady);
+  const done = performance.now();
+  const view = $("view-result");
+  view.dataset.result = name;
+  view.dataset.final = String(final);
+  view.dataset.mapMs = String(mapShown - started);
+  view.dataset.renderMs = String(done - started);
+  view.dataset.mapSinceLastFrameMs = lastFrameAt ? String(mapShown - lastFrameAt) : "";
+  view.dataset.sinceLastFrameMs = lastFrameAt ? String(done - lastFrameAt) : "";
+}
+
+export function resultSaved(name) {
+  if (shown.summary && shown.summary.name === name) { shown.summary.saved = true; renderDownloads(); }
+}
+
+export async function openResult(name, options = {}) {
+  showResult(name, await api("GET", `/api/results/${encodeURIComponent(name)}`), true, options);
+}
+
+async function drawSurface(surface) {
+  if (!window.Plotly) return;
+  const trace = {
+    type: "surface", x: surface.x, y: surface.y, z: surface.z, colorscale: "Turbo", showscale: true,
+    colorbar: { title: { text: surface.unit } },
+  };
+  const layout = {
+    margin: { l: 0, r: 0, t: 0, b: 0 },
+    scene: { aspectmode: "data", xaxis: { title: { text: "x (" + surface.axis_unit + ")" } },
+             yaxis: { title: { text: "y (" + surface.axis_unit + ")" } }, zaxis: { title: { text: surface.unit } } },
+  };
+  if (surface.axis_unit !== surface.unit) layout.scene.aspectmode = "cube";
+  await window.Plotly.react($("result-3d"), [trace], layout, { responsive: true, displaylogo: false });
+}
+
+function readout(event) {
+  const v = shown.values;
+  if (!v || !v.width) return;
+  const rect = event.target.getBoundingClientRect();
+  const x = Math.min(v.width - 1, Math.max(0, Math.floor((event.clientX - rect.left) * v.width / rect.width)));
+  const y = Math.min(v.height - 1, Math.max(0, Math.floor((event.clientY - rect.top) * v.height / rect.height)));
+  const value = v.data[y * v.width + x];
+  const el = $("height-readout");
+  el.dataset.x = x; el.dataset.y = y; el.dataset.value = Number.isNaN(value) ? "" : String(value);
+  el.textContent = `x ${x}, y ${y}: ` + (Number.isNaN(value) ? "no valid value" : `${value.toFixed(2)} ${v.unit}`);
+}
+
+function renderFigures(s) {
+  const rows = [
+    ["valid pixels", s.valid_fraction === null ? "-" : (100 * s.valid_fraction).toFixed(1) + " %"],
+    ["height (mm)", s.height_mm ? `min ${s.height_mm.min.toFixed(2)}, median ${s.height_mm.median.toFixed(2)}, max ${s.height_mm.max.toFixed(2)}` : "no calibration: phase only"],
+    ["wrapped phase", s.methods.wrapped_phase], ["unwrap", s.methods.unwrap], ["denoise", s.methods.denoise],
+    ["correction", s.methods.correction], ["frequencies", (s.methods.frequencies || []).join(", ")],
+    ["processing time", s.timings_s.total !== undefined ? s.timings_s.total.toFixed(2) + " s" : "-"],
+    ["capture", s.capture], ["calibration", s.calibration || "none"],
+  ];
+  const table = $("result-figures");
+  table.replaceChildren();
+  for (const [k, v] of rows) { const r = table.insertRow(); r.insertCell().textContent = k; r.insertCell().textContent = v; }
+}
+
+function renderDownloads() {
+  const s = shown.summary;
+  const box = $("downloads");
+  box.replaceChildren();
+  if (!s) return;
+  if (!s.saved) { box.textContent = "writing files ..."; return; }
+  const files = s.shows === "height" ? ["points.ply", "height.npy", "report.json", "preview.png"] : ["phase.npy", "report.json", "preview.png"];
+  for (const f of files) {
+    const a = document.createElement("a");
+    a.href = `/api/results/${encodeURIComponent(s.name)}/files/${f}`;
+    a.textContent = f; a.download = `${s.name}-${f}`; a.dataset.testid = "download-" + f;
+    box.appendChild(a);
+  }
+}
+
+export function bindResult() {
+  $("height-map").onmousemove = readout;
+  document.addEventListener("view", (event) => {
+    if (event.detail === "result" && window.Plotly && shown.summary) window.Plotly.Plots.resize($("result-3d"));
+  });
+}
