@@ -5,7 +5,8 @@ import { $, api, fillSelect } from "./api.js";
 
 const QUANTITIES = ["PF", "PS", "SD", "F"];
 const NAMES = { PF: "probing error form", PS: "probing error size", SD: "sphere-spacing error", F: "flatness error" };
-const mm = (v) => (v === null || v === undefined ? "-" : Number(v).toFixed(3));
+const SIGNED = new Set(["PS", "SD"]); // signed: measured minus calibrated
+const mm = (v, signed) => (v === null || v === undefined ? "-" : (signed && v >= 0 ? "+" : "") + Number(v).toFixed(3));
 
 export function showVerifyPrompt(prompt) {
   const box = $("verify-prompt");
@@ -45,7 +46,7 @@ function quantityTable(report) {
     const row = table.insertRow();
     row.dataset.quantity = q;
     row.className = entry.pass ? "pass" : "fault";
-    for (const text of [q, NAMES[q], mm(entry.worst_mm), mm(entry.mpe_mm), entry.pass ? "pass" : "FAIL"]) row.insertCell().textContent = text;
+    for (const text of [q, NAMES[q], mm(entry.worst_mm, SIGNED.has(q)), mm(entry.mpe_mm), entry.pass ? "pass" : "FAIL"]) row.insertCell().textContent = text;
   }
 }
 
@@ -58,7 +59,7 @@ function positionTable(report) {
     for (const p of report[q].positions) {
       const row = table.insertRow();
       row.className = p.pass ? "" : "fault";
-      for (const text of [p.position, p.where, q, p.value_mm === null ? (p.why || "not found") : mm(p.value_mm), p.pass ? "" : "FAIL"]) row.insertCell().textContent = text;
+      for (const text of [p.position, p.where, q, p.value_mm === null ? (p.why || "not found") : mm(p.value_mm, SIGNED.has(q)), p.pass ? "" : "FAIL"]) row.insertCell().textContent = text;
     }
   }
 }
@@ -97,8 +98,8 @@ export async function loadHistory(calibration) {
     name: q, mode: "lines+markers", type: "scatter",
     x: history.series[q].map((p) => p.created), y: history.series[q].map((p) => p.worst_mm),
   }));
-  const layout = { title: `verifications of ${calibration}: worst values`, margin: { l: 50, r: 10, t: 40, b: 40 },
-    yaxis: { title: "mm" }, height: 320 };
+  const layout = { title: { text: `verifications of ${calibration}: worst value of each quantity (mm)` }, margin: { l: 50, r: 10, t: 40, b: 40 },
+    yaxis: { title: { text: "mm" } }, height: 360 };
   await window.Plotly.react(plot, traces, layout, { responsive: true, displaylogo: false });
 }
 
