@@ -2,7 +2,8 @@
 
 Status and devices, a scan to a result, the busy refusal of a second acquisition, Stop, live
 frames and exposure, containment of every name in the data directory, the access token and the
-same-origin rule, readable errors, and recovery after an injected device fault.
+same-origin rule, readable errors, and recovery after an injected device fault; the Verify view's
+routes (issue 23) and result downloads from the result store (issue 19).
 """
 
 from __future__ import annotations

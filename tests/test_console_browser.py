@@ -4,7 +4,10 @@ The page loads and live frames update; lowering the exposure lowers the mean of 
 frame; the alignment grid darkens the frame to its lines; Scan produces a 3-D view and a height
 read-out that matches the simulated object's known height; a concurrent scan is refused with a
 message; an injected device fault appears in the page and the next scan works; a capture is
-reprocessed and compared; the calibration wizard runs to its last step, marked done.
+reprocessed and compared; the calibration wizard runs to its last step, marked done; a result's
+downloads are the files the result store lists (the mesh formats included); the Verify view runs
+a reduced verification on the simulated rig to PASS with its four figures, and its history shows
+both runs (issue 23).
 
 One server, one browser and one page serve the whole module (the tests follow one operator's
 session, as the README's screenshots do); each test starts from the live view with no error
