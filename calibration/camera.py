@@ -245,6 +245,51 @@ def calibrate_camera(
     shape = np.asarray(views[0]).shape
     if darks is not None and len(darks) != len(views):
         raise CalibrationError(f"camera views: {len(views)} views but {len(darks)} dark frames")
+    detections, used, notes = _detect_views(views, board, darks)
+    if len(detections) < min_views:
+        raise CalibrationError(
+            f"camera views: the {board.kind} was found in {len(detections)} of {len(views)} views, need at least {min_views}"
+        )
+    size = (int(shape[1]), int(shape[0]))
+    fit = _fit_without_outliers(detections, size, flags, min_views, len(views))
+    notes.extend(_outlier_notes(fit, used))
+    used = [used[i] for i in fit.views_in]
+    distortion_std = np.asarray(fit.std_intrinsics, dtype=np.float64).ravel()[4 : 4 + np.asarray(fit.distortion).size]
+    significant = True
+    if significance is not None:
+        free = distortion_std > 0  # fixed coefficients have no deviation
+        coefficients = np.asarray(fit.distortion, dtype=np.float64).ravel()
+        significant = bool(np.any(np.abs(coefficients[free]) > significance * distortion_std[free]))
+        if not significant:
+            _refit_without_distortion(fit, size, flags)
+    per_view = [
+        float(np.sqrt(np.mean(e**2)))
+        for e in _reprojection_errors(
+            fit.object_points, fit.image_points, fit.rvecs, fit.tvecs, fit.matrix, fit.distortion
+        )
+    ]
+    log.info("camera calibration: %d views, RMS reprojection error %.3f px", len(detections), fit.rms)
+    return CameraCalibration(
+        camera_matrix=np.asarray(fit.matrix, dtype=np.float64),
+        distortion=np.asarray(fit.distortion, dtype=np.float64).ravel(),
+        image_size=size,
+        rms_px=float(fit.rms),
+        per_view_rms_px=tuple(per_view),
+        views_used=tuple(used),
+        rvecs=tuple(np.asarray(r).ravel() for r in fit.rvecs),
+        tvecs=tuple(np.asarray(t).ravel() for t in fit.tvecs),
+        distortion_std=distortion_std,
+        distortion_significant=significant,
+        notes=tuple(notes),
+    )
+
+
+def _detect_views(
+    views: Sequence[np.ndarray], board: BoardSpec, darks: Sequence[np.ndarray | None] | None
+) -> tuple[list[BoardDetection], list[int], list[str]]:
+    """The board found in each view (its lit corners only, when ``darks`` are given): the
+    detections, the indices of the views they come from, and notes on the views skipped."""
+    shape = np.asarray(views[0]).shape
     detections, used, notes = [], [], []
     for index, view in enumerate(views):
         if np.asarray(view).shape != shape:
@@ -255,38 +300,69 @@ def calibrate_camera(
             notes.append(f"view {index}: {board.kind} not found, skipped")
             continue
         if darks is not None:
-            keep = lit_corners(found, view, darks[index])
-            if keep.sum() < MIN_CORNERS:
-                notes.append(
-                    f"view {index}: {int(keep.sum())} of {keep.size} corners lit by the projector "
-                    f"(need {MIN_CORNERS}), skipped"
-                )
+            found = _lit_part(found, view, darks[index], index, notes)
+            if found is None:
                 continue
-            if not keep.all():
-                notes.append(
-                    f"view {index}: {int((~keep).sum())} of {keep.size} corners near or beyond the "
-                    "projector's footprint left out"
-                )
-                found = BoardDetection(found.image_points[keep], found.object_points[keep])
         detections.append(found)
         used.append(index)
-    if len(detections) < min_views:
-        raise CalibrationError(
-            f"camera views: the {board.kind} was found in {len(detections)} of {len(views)} views, need at least {min_views}"
+    return detections, used, notes
+
+
+def _lit_part(
+    found: BoardDetection, view: np.ndarray, dark: np.ndarray | None, index: int, notes: list[str]
+) -> BoardDetection | None:
+    """The corners of ``found`` the projector lights (None when fewer than MIN_CORNERS), noted."""
+    keep = lit_corners(found, view, dark)
+    if keep.sum() < MIN_CORNERS:
+        notes.append(
+            f"view {index}: {int(keep.sum())} of {keep.size} corners lit by the projector (need {MIN_CORNERS}), skipped"
         )
-    size = (int(shape[1]), int(shape[0]))
+        return None
+    if not keep.all():
+        notes.append(
+            f"view {index}: {int((~keep).sum())} of {keep.size} corners near or beyond the "
+            "projector's footprint left out"
+        )
+        found = BoardDetection(found.image_points[keep], found.object_points[keep])
+    return found
+
+
+@dataclass
+class _RobustFit:
+    """The last ``cv2.calibrateCameraExtended`` fit of :func:`_fit_without_outliers`, on the corners
+    it kept (``inliers`` per detection, ``views_in`` the detections with enough of them)."""
+
+    inliers: list[np.ndarray]
+    views_in: list[int]
+    limit: float
+    object_points: list[np.ndarray]
+    image_points: list[np.ndarray]
+    rms: float
+    matrix: np.ndarray
+    distortion: np.ndarray
+    rvecs: Sequence[np.ndarray]
+    tvecs: Sequence[np.ndarray]
+    std_intrinsics: np.ndarray
+
+
+def _fit_without_outliers(
+    detections: list[BoardDetection], size: tuple[int, int], flags: int, min_views: int, total_views: int
+) -> _RobustFit:
+    """Fit, then keep the corners within OUTLIER_FACTOR of the median residual under that fit, and
+    refit until the set settles (at most 4 fits).
+
+    A corner snapped to a wrong edge pulls its neighbours' residuals up under the first fit, so
+    corners are judged again (and taken back) under each new one.
+    """
     all_objects = [d.object_points.astype(np.float32).reshape(-1, 1, 3) for d in detections]
     all_images = [d.image_points.astype(np.float32).reshape(-1, 1, 2) for d in detections]
-    # fit, then keep the corners within OUTLIER_FACTOR of the median residual under that fit, and
-    # refit until the set settles: a corner snapped to a wrong edge pulls its neighbours' residuals
-    # up under the first fit, so corners are judged again (and taken back) under each new one
     inliers = [np.ones(len(obj), bool) for obj in all_objects]
     for _ in range(4):
         enough = [int(keep.sum()) >= MIN_CORNERS for keep in inliers]
         views_in = [i for i, ok in enumerate(enough) if ok]
         if len(views_in) < min_views:
             raise CalibrationError(
-                f"camera views: {len(views_in)} of {len(views)} views fit one lens model, need at least {min_views}"
+                f"camera views: {len(views_in)} of {total_views} views fit one lens model, need at least {min_views}"
             )
         object_points = [all_objects[i][inliers[i]] for i in views_in]
         image_points = [all_images[i][inliers[i]] for i in views_in]
@@ -306,44 +382,31 @@ def calibrate_camera(
         inliers = [np.zeros(len(obj), bool) for obj in all_objects]
         for i, new in zip(views_in, settled):
             inliers[i] = new
-    for i, keep in enumerate(inliers):
-        if i not in views_in:
+    return _RobustFit(
+        inliers, views_in, limit, object_points, image_points, rms, matrix, distortion, rvecs, tvecs, std_intrinsics
+    )
+
+
+def _outlier_notes(fit: _RobustFit, used: list[int]) -> list[str]:
+    """Notes on the views and corners :func:`_fit_without_outliers` left out (``used``: view index per detection)."""
+    notes = []
+    for i, keep in enumerate(fit.inliers):
+        if i not in fit.views_in:
             notes.append(f"view {used[i]}: fewer than {MIN_CORNERS} corners fit the lens model, skipped")
         elif not keep.all():
             off = int((~keep).sum())
             notes.append(
-                f"view {used[i]}: {off} corner{'s' * (off != 1)} off the lens model by more than {limit:.2f} px left out"
+                f"view {used[i]}: {off} corner{'s' * (off != 1)} off the lens model by more than {fit.limit:.2f} px left out"
             )
-    used = [used[i] for i in views_in]
-    distortion_std = np.asarray(std_intrinsics, dtype=np.float64).ravel()[4 : 4 + np.asarray(distortion).size]
-    coefficients = np.asarray(distortion, dtype=np.float64).ravel()
-    significant = True
-    if significance is not None:
-        free = distortion_std > 0  # fixed coefficients have no deviation
-        significant = bool(np.any(np.abs(coefficients[free]) > significance * distortion_std[free]))
-        if not significant:
-            log.info("camera calibration: no distortion coefficient is significant; refitting without distortion")
-            no_distortion = cv2.CALIB_FIX_K1 | cv2.CALIB_FIX_K2 | cv2.CALIB_FIX_K3 | cv2.CALIB_ZERO_TANGENT_DIST
-            rms, matrix, distortion, rvecs, tvecs = cv2.calibrateCamera(
-                object_points, image_points, size, None, np.zeros(5), flags=flags | no_distortion
-            )
-    per_view = [
-        float(np.sqrt(np.mean(e**2)))
-        for e in _reprojection_errors(object_points, image_points, rvecs, tvecs, matrix, distortion)
-    ]
-    log.info("camera calibration: %d views, RMS reprojection error %.3f px", len(detections), rms)
-    return CameraCalibration(
-        camera_matrix=np.asarray(matrix, dtype=np.float64),
-        distortion=np.asarray(distortion, dtype=np.float64).ravel(),
-        image_size=size,
-        rms_px=float(rms),
-        per_view_rms_px=tuple(per_view),
-        views_used=tuple(used),
-        rvecs=tuple(np.asarray(r).ravel() for r in rvecs),
-        tvecs=tuple(np.asarray(t).ravel() for t in tvecs),
-        distortion_std=distortion_std,
-        distortion_significant=significant,
-        notes=tuple(notes),
+    return notes
+
+
+def _refit_without_distortion(fit: _RobustFit, size: tuple[int, int], flags: int) -> None:
+    """Refit ``fit``'s corners with every distortion coefficient held at 0 (updates ``fit``)."""
+    log.info("camera calibration: no distortion coefficient is significant; refitting without distortion")
+    no_distortion = cv2.CALIB_FIX_K1 | cv2.CALIB_FIX_K2 | cv2.CALIB_FIX_K3 | cv2.CALIB_ZERO_TANGENT_DIST
+    fit.rms, fit.matrix, fit.distortion, fit.rvecs, fit.tvecs = cv2.calibrateCamera(
+        fit.object_points, fit.image_points, size, None, np.zeros(5), flags=flags | no_distortion
     )
 
 

@@ -252,37 +252,11 @@ def fit_l0_d0(
     GeometryFit
     """
     heights = np.asarray(heights_mm, dtype=np.float64).ravel()
-    if len(delta_phases) != heights.size:
-        raise CalibrationError(f"plane heights: {heights.size} heights but {len(delta_phases)} phase maps")
-    if heights.size < MIN_HEIGHTS:
-        raise CalibrationError(
-            f"plane heights: need at least {MIN_HEIGHTS} known heights to fit l0 and d0 with a residual, found {heights.size}"
-        )
-    if not np.all(np.isfinite(heights)):
-        raise CalibrationError("plane heights: contain NaN or infinity")
-    if np.any(heights == 0):
-        raise CalibrationError("plane heights: 0 mm is the reference plane itself; use heights away from it")
-    if np.unique(heights).size < 2:
-        raise CalibrationError(f"plane heights: all equal ({heights[0]} mm), the fit is singular")
-    if not (np.isfinite(f0_per_mm) and f0_per_mm > 0):
-        raise CalibrationError(f"f0_per_mm: expected > 0, found {f0_per_mm}")
+    _check_heights(heights, len(delta_phases), f0_per_mm)
     masks = [None] * heights.size if masks is None else list(masks)
     if len(masks) != heights.size:
         raise CalibrationError(f"plane masks: {len(masks)} masks for {heights.size} heights")
-
-    means, maps = [], []
-    for h, dphi, mask in zip(heights, delta_phases, masks):
-        dphi = np.asarray(dphi, dtype=np.float64)
-        keep = _valid(dphi, mask, f"plane at {h:g} mm", EDGE_PX)
-        if not keep.any():
-            raise CalibrationError(f"plane at {h:g} mm: no valid pixel")
-        means.append(_trimmed_mean(dphi[keep]))
-        maps.append(np.where(keep, dphi, np.nan))
-    means_arr = np.asarray(means)
-    if np.any(np.abs(means_arr) < 1e-9):
-        bad = heights[np.abs(means_arr) < 1e-9][0]
-        raise CalibrationError(f"plane at {bad:g} mm: no phase change from the reference plane; was the plane moved?")
-
+    means_arr, maps = _plane_phases(heights, delta_phases, masks)
     x = 1.0 / heights
     y = 1.0 / means_arr
     design = np.column_stack((x, np.ones_like(x)))
@@ -303,27 +277,8 @@ def fit_l0_d0(
 
     predicted = l0 * means_arr / (means_arr - two_pi_f0_d0)
     residuals = predicted - heights
-    dof = heights.size - 2
-    sigma2 = float(np.sum((y - design @ np.array([a, b])) ** 2)) / dof
-    cov = sigma2 * np.linalg.inv(design.T @ design)
-    # l0 = -a/b; d0 = 1/(2 pi f0 b)
-    j_l0 = np.array([-1.0 / b, a / b**2])
-    j_d0 = np.array([0.0, -1.0 / (2.0 * np.pi * f0_per_mm * b**2)])
-    l0_std = math.sqrt(max(float(j_l0 @ cov @ j_l0), 0.0))
-    d0_var = float(j_d0 @ cov @ j_d0) + (d0 * f0_std_per_mm / f0_per_mm) ** 2
-    d0_std = math.sqrt(max(d0_var, 0.0))
-
-    flatness = []
-    for h, dphi in zip(heights, maps):
-        blocks = _block_medians(l0 * dphi / (dphi - two_pi_f0_d0))
-        spread = float(np.sqrt(np.mean((blocks - np.median(blocks)) ** 2)))
-        flatness.append(spread)
-        if flatness_tolerance_mm is not None and spread > flatness_tolerance_mm:
-            raise CalibrationError(
-                f"plane at {h:g} mm: heights spread {spread:.3g} mm RMS across the view (tolerance "
-                f"{flatness_tolerance_mm:g} mm): the plane is not flat or not level, or the rig does not "
-                "follow eq. 1.15 (use the 'polynomial' model)"
-            )
+    l0_std, d0_std = _l0_d0_std(design, y, a, b, d0, f0_per_mm, f0_std_per_mm)
+    flatness = _flatness(heights, maps, l0, two_pi_f0_d0, flatness_tolerance_mm)
     return GeometryFit(
         l0_mm=float(l0),
         d0_mm=float(d0),
@@ -336,3 +291,72 @@ def fit_l0_d0(
         residuals_mm=tuple(float(r) for r in residuals),
         flatness_rms_mm=tuple(flatness),
     )
+
+
+def _check_heights(heights: np.ndarray, maps: int, f0_per_mm: float) -> None:
+    """At least MIN_HEIGHTS finite, non-zero, not all equal heights, one phase map each, and a usable f0."""
+    if maps != heights.size:
+        raise CalibrationError(f"plane heights: {heights.size} heights but {maps} phase maps")
+    if heights.size < MIN_HEIGHTS:
+        raise CalibrationError(
+            f"plane heights: need at least {MIN_HEIGHTS} known heights to fit l0 and d0 with a residual, found {heights.size}"
+        )
+    if not np.all(np.isfinite(heights)):
+        raise CalibrationError("plane heights: contain NaN or infinity")
+    if np.any(heights == 0):
+        raise CalibrationError("plane heights: 0 mm is the reference plane itself; use heights away from it")
+    if np.unique(heights).size < 2:
+        raise CalibrationError(f"plane heights: all equal ({heights[0]} mm), the fit is singular")
+    if not (np.isfinite(f0_per_mm) and f0_per_mm > 0):
+        raise CalibrationError(f"f0_per_mm: expected > 0, found {f0_per_mm}")
+
+
+def _plane_phases(
+    heights: np.ndarray, delta_phases: Sequence[np.ndarray], masks: Sequence[np.ndarray | None]
+) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Each plane's trimmed mean phase difference, and its map (NaN outside the valid pixels)."""
+    means, maps = [], []
+    for h, dphi, mask in zip(heights, delta_phases, masks):
+        dphi = np.asarray(dphi, dtype=np.float64)
+        keep = _valid(dphi, mask, f"plane at {h:g} mm", EDGE_PX)
+        if not keep.any():
+            raise CalibrationError(f"plane at {h:g} mm: no valid pixel")
+        means.append(_trimmed_mean(dphi[keep]))
+        maps.append(np.where(keep, dphi, np.nan))
+    means_arr = np.asarray(means)
+    if np.any(np.abs(means_arr) < 1e-9):
+        bad = heights[np.abs(means_arr) < 1e-9][0]
+        raise CalibrationError(f"plane at {bad:g} mm: no phase change from the reference plane; was the plane moved?")
+    return means_arr, maps
+
+
+def _l0_d0_std(
+    design: np.ndarray, y: np.ndarray, a: float, b: float, d0: float, f0_per_mm: float, f0_std_per_mm: float
+) -> tuple[float, float]:
+    """Standard deviations of l0 = -a/b and d0 = 1/(2 pi f0 b) from the fit's covariance (and f0's)."""
+    dof = y.size - 2
+    sigma2 = float(np.sum((y - design @ np.array([a, b])) ** 2)) / dof
+    cov = sigma2 * np.linalg.inv(design.T @ design)
+    j_l0 = np.array([-1.0 / b, a / b**2])
+    j_d0 = np.array([0.0, -1.0 / (2.0 * np.pi * f0_per_mm * b**2)])
+    l0_std = math.sqrt(max(float(j_l0 @ cov @ j_l0), 0.0))
+    d0_var = float(j_d0 @ cov @ j_d0) + (d0 * f0_std_per_mm / f0_per_mm) ** 2
+    return l0_std, math.sqrt(max(d0_var, 0.0))
+
+
+def _flatness(
+    heights: np.ndarray, maps: list[np.ndarray], l0: float, two_pi_f0_d0: float, tolerance_mm: float | None
+) -> list[float]:
+    """Each plane's height spread (RMS of 8 x 8 tile medians) under the fit; CalibrationError past ``tolerance_mm``."""
+    flatness = []
+    for h, dphi in zip(heights, maps):
+        blocks = _block_medians(l0 * dphi / (dphi - two_pi_f0_d0))
+        spread = float(np.sqrt(np.mean((blocks - np.median(blocks)) ** 2)))
+        flatness.append(spread)
+        if tolerance_mm is not None and spread > tolerance_mm:
+            raise CalibrationError(
+                f"plane at {h:g} mm: heights spread {spread:.3g} mm RMS across the view (tolerance "
+                f"{tolerance_mm:g} mm): the plane is not flat or not level, or the rig does not "
+                "follow eq. 1.15 (use the 'polynomial' model)"
+            )
+    return flatness

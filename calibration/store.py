@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from calibration.errors import CalibrationError
-from calibration.jsonfile import read_json, write_json_atomic
+from calibration.jsonfile import check_committed_input, read_json, write_json_atomic
 
 FORMAT = "fpp-calibration"
 VERSION = 1
@@ -218,6 +218,7 @@ def read_calibration(path: str | os.PathLike[str]) -> Calibration:
         directory, file = path.parent, path
     else:
         directory, file = path, path / FILENAME
+    check_committed_input(directory, "calibration", CalibrationError)
     data = read_json(file, CalibrationError, "missing (not a calibration directory?)")
     return Calibration.from_dict(data, path=directory)
 

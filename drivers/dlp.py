@@ -200,18 +200,7 @@ def check_sequence(sequence: PatternSequence) -> None:
         raise DlpLimitError(f"patterns_to_display must be in 1..{dp.MAX_PATTERNS_TO_DISPLAY}, got {sequence.n_display}")
     per_image = 0
     for k, entry in enumerate(entries):
-        if entry.bit_depth not in dp.PATTERNS_PER_IMAGE:
-            raise DlpLimitError(f"entry {k}: bit_depth must be 1..8, got {entry.bit_depth}")
-        limit = dp.PATTERNS_PER_IMAGE[entry.bit_depth]
-        black_fill = entry.bit_depth == 1 and entry.pattern_number == dp.BLACK_FILL_PATTERN
-        if not (0 <= entry.pattern_number < limit or black_fill):
-            raise DlpLimitError(
-                f"entry {k}: pattern_number {entry.pattern_number} invalid for "
-                f"{entry.bit_depth}-bit patterns (a 24-bit image holds {limit}: 0..{limit - 1}"
-                + (f"; {dp.BLACK_FILL_PATTERN} is the black fill)" if entry.bit_depth == 1 else ")")
-            )
-        if entry.insert_black and entry.trigger_out_prev:
-            raise DlpLimitError(f"entry {k}: insert_black cannot be combined with trigger_out_prev")
+        _check_entry(k, entry)
         per_image = 1 if (entry.buffer_swap or k == 0) else per_image + 1
         if per_image > dp.MAX_PATTERNS_PER_IMAGE:
             raise DlpLimitError(
@@ -227,16 +216,37 @@ def check_sequence(sequence: PatternSequence) -> None:
             raise DlpLimitError(f"flash image indexes must be 0..255, got {list(sequence.image_indexes)}")
     check_exposure(sequence.exposure_us, sequence.frame_period_us, max(e.bit_depth for e in entries))
     if sequence.loads_flash_images:
-        dark_us = sequence.frame_period_us - sequence.exposure_us
-        if dark_us < dp.FLASH_IMAGE_LOAD_US:
-            raise ExposureError(
-                f"{len(sequence.image_indexes)} flash images do not fit the controller's "
-                f"{dp.FRAME_BUFFERS} frame buffers: each buffer swap must load an image from "
-                f"flash, so the frame period must exceed the exposure by at least "
-                f"{dp.FLASH_IMAGE_LOAD_US} us (got {dark_us} us); use a frame period of at "
-                f"least {sequence.exposure_us + dp.FLASH_IMAGE_LOAD_US} us or at most "
-                f"{dp.FRAME_BUFFERS} images"
-            )
+        _check_flash_loads(sequence)
+
+
+def _check_entry(k: int, entry: PatternEntry) -> None:
+    """One LUT entry: its bit depth, its pattern number within a 24-bit image, no black after trigger."""
+    if entry.bit_depth not in dp.PATTERNS_PER_IMAGE:
+        raise DlpLimitError(f"entry {k}: bit_depth must be 1..8, got {entry.bit_depth}")
+    limit = dp.PATTERNS_PER_IMAGE[entry.bit_depth]
+    black_fill = entry.bit_depth == 1 and entry.pattern_number == dp.BLACK_FILL_PATTERN
+    if not (0 <= entry.pattern_number < limit or black_fill):
+        raise DlpLimitError(
+            f"entry {k}: pattern_number {entry.pattern_number} invalid for "
+            f"{entry.bit_depth}-bit patterns (a 24-bit image holds {limit}: 0..{limit - 1}"
+            + (f"; {dp.BLACK_FILL_PATTERN} is the black fill)" if entry.bit_depth == 1 else ")")
+        )
+    if entry.insert_black and entry.trigger_out_prev:
+        raise DlpLimitError(f"entry {k}: insert_black cannot be combined with trigger_out_prev")
+
+
+def _check_flash_loads(sequence: PatternSequence) -> None:
+    """More flash images than frame buffers: every buffer swap loads one, in the dark part of the frame."""
+    dark_us = sequence.frame_period_us - sequence.exposure_us
+    if dark_us < dp.FLASH_IMAGE_LOAD_US:
+        raise ExposureError(
+            f"{len(sequence.image_indexes)} flash images do not fit the controller's "
+            f"{dp.FRAME_BUFFERS} frame buffers: each buffer swap must load an image from "
+            f"flash, so the frame period must exceed the exposure by at least "
+            f"{dp.FLASH_IMAGE_LOAD_US} us (got {dark_us} us); use a frame period of at "
+            f"least {sequence.exposure_us + dp.FLASH_IMAGE_LOAD_US} us or at most "
+            f"{dp.FRAME_BUFFERS} images"
+        )
 
 
 def check_exposure(exposure_us: int, frame_period_us: int, bit_depth: int) -> None:

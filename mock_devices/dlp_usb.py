@@ -440,63 +440,74 @@ class FakeDlpc350Backend(VirtualHidBackend):
         return b"", False
 
     def _write(self, command: Command, data: bytes) -> bool:
-        s = self.state
+        """Apply a write command as the controller does; False (a NACK) for what it refuses."""
         expected = _DATA_LENGTH.get(command)
         if expected is not None and len(data) != expected:
             return False
-        if command is Command.POWER_CONTROL:
-            if data[0] not in (0, 1):
-                return False
-            s.standby = bool(data[0])
-            if s.standby:
-                s.sequencer = "stopped"
-            return True
-        if command is Command.PATTERN_START_STOP:
-            return self._start_stop(data[0])
-        if command in (
-            Command.DISPLAY_MODE,
-            Command.PATTERN_SOURCE,
-            Command.PATTERN_TRIGGER_MODE,
-            Command.EXPOSURE_FRAME_PERIOD,
-            Command.LUT_CONTROL,
-        ):
-            if s.sequencer != "stopped":
-                return False  # the guide: stop the sequence before changing it
-            s.validated = False
-        if command is Command.DISPLAY_MODE:
-            if data[0] not in (0, 1):
-                return False
-            if s.display_mode == 0 and data[0] == 1:
-                self._ignore_next_start = True
-            self._after_busy(lambda: setattr(s, "display_mode", data[0]))
-        elif command is Command.PATTERN_SOURCE:
-            if data[0] not in (0, 3):
-                return False
-            s.pattern_source = data[0]
-        elif command is Command.PATTERN_TRIGGER_MODE:
-            if data[0] > 4:
-                return False
-            s.trigger_mode = data[0]
-        elif command is Command.EXPOSURE_FRAME_PERIOD:
-            s.exposure_us, s.frame_period_us = dp.unpack_exposure(data)
-        elif command is Command.LUT_CONTROL:
-            s.lut_control = dp.LutControl.unpack(data)
-        elif command is Command.MAILBOX_CONTROL:
-            if data[0] > 3:
-                return False
-            s.mailbox = data[0]
-        elif command is Command.MAILBOX_ADDRESS:
-            if data[0] >= dp.MAX_LUT_ENTRIES:
-                return False
-            s.mailbox_address = data[0]
-        elif command is Command.MAILBOX_DATA:
-            return self._mailbox_data(data)
-        elif command is Command.LUT_VALIDATE:
-            s.validation = self._validation_bits()
-            s.validated = not s.validation & dp.VALIDATION_ERRORS
-            self._busy_reads_left = self.faults.validation_busy_reads
-        else:
+        setter = _WRITES.get(command)
+        if setter is None:
             return False
+        if command in _SEQUENCE_SETTINGS:
+            if self.state.sequencer != "stopped":
+                return False  # the guide: stop the sequence before changing it
+            self.state.validated = False
+        return setter(self, data)
+
+    def _set_power(self, data: bytes) -> bool:
+        s = self.state
+        if data[0] not in (0, 1):
+            return False
+        s.standby = bool(data[0])
+        if s.standby:
+            s.sequencer = "stopped"
+        return True
+
+    def _set_display_mode(self, data: bytes) -> bool:
+        s = self.state
+        if data[0] not in (0, 1):
+            return False
+        if s.display_mode == 0 and data[0] == 1:
+            self._ignore_next_start = True
+        self._after_busy(lambda: setattr(s, "display_mode", data[0]))
+        return True
+
+    def _set_pattern_source(self, data: bytes) -> bool:
+        if data[0] not in (0, 3):
+            return False
+        self.state.pattern_source = data[0]
+        return True
+
+    def _set_trigger_mode(self, data: bytes) -> bool:
+        if data[0] > 4:
+            return False
+        self.state.trigger_mode = data[0]
+        return True
+
+    def _set_exposure(self, data: bytes) -> bool:
+        self.state.exposure_us, self.state.frame_period_us = dp.unpack_exposure(data)
+        return True
+
+    def _set_lut_control(self, data: bytes) -> bool:
+        self.state.lut_control = dp.LutControl.unpack(data)
+        return True
+
+    def _set_mailbox(self, data: bytes) -> bool:
+        if data[0] > 3:
+            return False
+        self.state.mailbox = data[0]
+        return True
+
+    def _set_mailbox_address(self, data: bytes) -> bool:
+        if data[0] >= dp.MAX_LUT_ENTRIES:
+            return False
+        self.state.mailbox_address = data[0]
+        return True
+
+    def _validate_lut(self, _data: bytes) -> bool:
+        s = self.state
+        s.validation = self._validation_bits()
+        s.validated = not s.validation & dp.VALIDATION_ERRORS
+        self._busy_reads_left = self.faults.validation_busy_reads
         return True
 
     def _mailbox_data(self, data: bytes) -> bool:
@@ -564,3 +575,29 @@ class FakeDlpc350Backend(VirtualHidBackend):
         if any(e.insert_black and e.trigger_out_prev for e in entries):
             bits |= dp.Validation.TRIGGER_OUT1_WARNING
         return int(bits)
+
+
+# Settings of the pattern sequence: refused while it runs, and they invalidate the LUT.
+_SEQUENCE_SETTINGS = frozenset(
+    {
+        Command.DISPLAY_MODE,
+        Command.PATTERN_SOURCE,
+        Command.PATTERN_TRIGGER_MODE,
+        Command.EXPOSURE_FRAME_PERIOD,
+        Command.LUT_CONTROL,
+    }
+)
+# What each write command does to the controller's state (True: acknowledged).
+_WRITES: dict[Command, Callable[[FakeDlpc350Backend, bytes], bool]] = {
+    Command.POWER_CONTROL: FakeDlpc350Backend._set_power,
+    Command.PATTERN_START_STOP: lambda fake, data: fake._start_stop(data[0]),
+    Command.DISPLAY_MODE: FakeDlpc350Backend._set_display_mode,
+    Command.PATTERN_SOURCE: FakeDlpc350Backend._set_pattern_source,
+    Command.PATTERN_TRIGGER_MODE: FakeDlpc350Backend._set_trigger_mode,
+    Command.EXPOSURE_FRAME_PERIOD: FakeDlpc350Backend._set_exposure,
+    Command.LUT_CONTROL: FakeDlpc350Backend._set_lut_control,
+    Command.MAILBOX_CONTROL: FakeDlpc350Backend._set_mailbox,
+    Command.MAILBOX_ADDRESS: FakeDlpc350Backend._set_mailbox_address,
+    Command.MAILBOX_DATA: FakeDlpc350Backend._mailbox_data,
+    Command.LUT_VALIDATE: FakeDlpc350Backend._validate_lut,
+}

@@ -426,41 +426,55 @@ class FakeTriggerBox:
             with self._lock:
                 if self._gone:
                     return
-                now = time.monotonic()
-                if self.reset_on_open:
-                    data = b""
-                    if ready:
-                        try:
-                            data = os.read(self._master, 1024)
-                        except OSError:  # EIO: no process holds the port open
-                            self._port_open = False
-                            buffer = b""
-                            self._stop.wait(0.005)
-                            continue
-                    if not self._port_open:  # opened since the last look: DTR resets the board
-                        self._port_open = True
-                        self._reboot(now)
-                    if self._booting_until is not None:
-                        if now < self._booting_until:
-                            continue  # the bootloader eats what arrives
-                        self._booting_until = None
-                        buffer = b""
-                        self._write(tp.encode_event("READY", self._protocol_version))
-                        continue
-                    buffer += data
-                elif ready:
-                    try:
-                        buffer += os.read(self._master, 1024)
-                    except OSError:
-                        pass  # no process holds the slave open (EIO); keep waiting
-                while b"\n" in buffer and not self._gone:
-                    line, buffer = buffer.split(b"\n", 1)
-                    self._handle(line + b"\n")
-                if len(buffer) > tp.MAX_LINE_BYTES:  # a line too long: answered as SYNTAX
-                    self._handle(buffer + b"\n")
-                    buffer = b""
-                if not self._gone:  # input first: a late thread must not fire the watchdog
-                    self._emit(self._firmware.tick(time.monotonic()))
+                buffer, answer = self._receive(bool(ready), buffer)
+                if answer:
+                    buffer = self._answer(buffer)
+
+    def _receive(self, ready: bool, buffer: bytes) -> tuple[bytes, bool]:
+        """Read what arrived into ``buffer``; returns it and whether its lines are answered now."""
+        if self.reset_on_open:
+            return self._receive_resetting(ready, buffer, time.monotonic())
+        if ready:
+            try:
+                buffer += os.read(self._master, 1024)
+            except OSError:
+                pass  # no process holds the slave open (EIO); keep waiting
+        return buffer, True
+
+    def _receive_resetting(self, ready: bool, buffer: bytes, now: float) -> tuple[bytes, bool]:
+        """As :meth:`_receive` for a board that opening the port resets: its bootloader eats what
+        arrives until it is up and says READY."""
+        data = b""
+        if ready:
+            try:
+                data = os.read(self._master, 1024)
+            except OSError:  # EIO: no process holds the port open
+                self._port_open = False
+                self._stop.wait(0.005)
+                return b"", False
+        if not self._port_open:  # opened since the last look: DTR resets the board
+            self._port_open = True
+            self._reboot(now)
+        if self._booting_until is not None:
+            if now < self._booting_until:
+                return buffer, False  # the bootloader eats what arrives
+            self._booting_until = None
+            self._write(tp.encode_event("READY", self._protocol_version))
+            return b"", False
+        return buffer + data, True
+
+    def _answer(self, buffer: bytes) -> bytes:
+        """Handle every whole line of ``buffer`` (and one too long), then let the firmware tick;
+        returns what is left of the buffer."""
+        while b"\n" in buffer and not self._gone:
+            line, buffer = buffer.split(b"\n", 1)
+            self._handle(line + b"\n")
+        if len(buffer) > tp.MAX_LINE_BYTES:  # a line too long: answered as SYNTAX
+            self._handle(buffer + b"\n")
+            buffer = b""
+        if not self._gone:  # input first: a late thread must not fire the watchdog
+            self._emit(self._firmware.tick(time.monotonic()))
+        return buffer
 
     def _handle(self, line: bytes) -> None:
         self.received.append(line)

@@ -9,7 +9,7 @@ import sys
 from collections.abc import Sequence
 
 from rig import __version__
-from rig.errors import USER_ERRORS
+from rig.errors import USER_ERRORS, os_error_line
 
 # Subcommand modules under rig/commands, in the order `rig --help` lists them.
 COMMAND_MODULES: tuple[str, ...] = (
@@ -60,8 +60,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"rig {args.command}: error: {one_line(str(exc))}", file=sys.stderr)
         return EXIT_USER_ERROR
     except OSError as exc:  # the environment refused (disk full, permissions, a vanished file): still one line
-        where = f"{exc.filename}: " if exc.filename else ""
-        print(f"rig {args.command}: error: {where}{one_line(exc.strerror or str(exc))}", file=sys.stderr)
+        print(f"rig {args.command}: error: {one_line(os_error_line(exc))}", file=sys.stderr)
         return EXIT_USER_ERROR
     except MemoryError:
         print(f"rig {args.command}: error: out of memory (see the size limits in docs/safety.md)", file=sys.stderr)

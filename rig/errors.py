@@ -34,3 +34,9 @@ class ProcessingError(RigError):
 
 # What the CLI reports as one line and a non-zero exit, never as a traceback.
 USER_ERRORS: tuple[type[Exception], ...] = (RigError, DeviceError, CalibrationError)
+
+
+def os_error_line(exc: OSError) -> str:
+    """What the operating system refused, as the one line a user reads: the file, then the reason."""
+    where = f"{exc.filename}: " if exc.filename else ""
+    return f"{where}{exc.strerror or exc}"

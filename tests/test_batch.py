@@ -335,11 +335,11 @@ def test_a_task_never_replaces_what_rig_did_not_write(archive, tmp_path) -> None
 
 def test_stale_leftovers_of_a_killed_run_are_removed(tmp_path) -> None:
     out = tmp_path / "out"
-    for name in (f"a/object{INCOMPLETE_MARK}x1", f"b/object{REPLACED_MARK}x2", "c/object"):
+    for name in (f"a/object{INCOMPLETE_MARK}x1y2z3w4", f"b/object{REPLACED_MARK}x2y3z4w5", "c/object"):
         (out / name).mkdir(parents=True)
-    (out / ".index.csv.abc.tmp").write_text("capture,sta")
+    (out / ".index.csv.abcdefgh.tmp").write_text("capture,sta")
     (out / "c" / "object" / "report.json").write_text("{}")
-    assert remove_stale(out) == 3
+    assert remove_stale(out, ["a/object", "b/object", "c/object"], ("index.csv",)) == 3
     assert sorted(str(p.relative_to(out)) for p in out.rglob("*")) == [
         "a",
         "b",

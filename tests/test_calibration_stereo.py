@@ -138,6 +138,60 @@ def test_bad_opencv_files_are_refused(tmp_path):
         import_opencv_calibration(partial, (1920, 1080))
 
 
+STEREO_CALIBRATE_NAMES = {  # calibration.json key -> node, per layout of cv2.stereoCalibrate's results
+    "K": ("K1", "D1", "K2", "D2", "R", "T"),
+    "M": ("M1", "D1", "M2", "D2", "R", "T"),
+    "arguments": ("cameraMatrix1", "distCoeffs1", "cameraMatrix2", "distCoeffs2", "R", "T"),
+}
+MODEL_KEYS = ("camera_matrix", "distortion", "projector_matrix", "projector_distortion", "rotation", "translation_mm")
+
+
+def _write_storage(path, nodes):
+    storage = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+    for name, value in nodes.items():
+        storage.write(name, np.asarray(value, dtype=np.float64))
+    storage.release()
+    return path
+
+
+@pytest.mark.parametrize("layout", sorted(STEREO_CALIBRATE_NAMES))
+def test_stereo_calibrate_layouts_import_the_same_model(simulated, tmp_path, layout):
+    """Issue 21: the names cv2.stereoCalibrate's results are saved under, camera first, projector second."""
+    rig, _, _, model = simulated
+    truth = calibration_fields(rig)
+    nodes = dict(zip(STEREO_CALIBRATE_NAMES[layout], (truth[k] for k in MODEL_KEYS)))
+    width, height = truth["camera_size"]
+    projector = tuple(truth["projector_size"])
+    with_size = _write_storage(tmp_path / "with-size.yml", {**nodes, "imageSize": [width, height]})
+    without = _write_storage(tmp_path / "without-size.yml", nodes)
+    for fields in (
+        import_opencv_calibration(with_size, projector),
+        import_opencv_calibration(without, projector, camera_size=(width, height)),
+    ):
+        imported = StereoModel.from_fields(fields)
+        for key in MODEL_KEYS:
+            assert np.allclose(np.asarray(fields[key]).ravel(), np.asarray(truth[key]).ravel(), rtol=0, atol=1e-12)
+        assert imported.camera_size == model.camera_size and imported.projector_size == model.projector_size
+        assert fields["imported_from"]["layout"] == "OpenCV FileStorage " + "/".join(STEREO_CALIBRATE_NAMES[layout])
+    with pytest.raises(CalibrationError, match=r"camera size: expected one of the keys S, imageSize"):
+        import_opencv_calibration(without, projector)
+    with pytest.raises(CalibrationError, match=r"differs from --camera-size"):
+        import_opencv_calibration(with_size, projector, camera_size=(width + 1, height))
+    partial = _write_storage(tmp_path / "partial.yml", {k: v for k, v in nodes.items() if k != "T"})
+    with pytest.raises(CalibrationError, match=r"partial.yml: T: missing \(expected keys .*; found .*R\)"):
+        import_opencv_calibration(partial, projector)
+
+
+def test_a_file_of_unknown_names_is_refused_naming_its_keys(tmp_path):
+    path = _write_storage(tmp_path / "other.yml", {"camera_K": np.eye(3), "proj_K": np.eye(3)})
+    with pytest.raises(
+        CalibrationError,
+        match=r"other.yml: expected the keys of one of the layouts .*K1 D1 K2 D2 R T.*"
+        r"; found camera_K, proj_K",
+    ):
+        import_opencv_calibration(path, (1920, 1080))
+
+
 @pytest.mark.skipif(not EYE.is_dir(), reason="shared real data not present")
 def test_real_eye_capture_becomes_a_point_cloud():
     # SLMaster's phase is 2 pi f k / W at projector column k: OpenCV's pixel centre, so pixel_centre 0

@@ -32,6 +32,11 @@ def test_default_correction_is_auto_and_is_recorded(small_capture, small_scan, t
         assert "tau" in info["parameters"]
         assert "correction" in report["timings_s"][scene]
     assert none["stage_info"]["object"].get("correction") is None
+    # how much of the map auto could not settle: in the report, matching the correction's own entry
+    unresolved = report["stage_info"]["object"]["correction"]["unresolved"]
+    assert report["unresolved_fraction"] == unresolved["fraction"]
+    assert 0 <= unresolved["fraction"] <= 1 and len(unresolved["regions"]) <= 20
+    assert "unresolved_fraction" not in none
     # auto never makes the heights worse than no correction (64 fringes over 160 px: steep phase).
     assert height_rms(tmp_path / "auto", small_scan) <= height_rms(tmp_path / "none", small_scan)
 
@@ -59,3 +64,23 @@ def test_rpca_denoising_stage_is_recorded_and_parameters_reach_it(small_capture,
     assert info["method"] == "rpca" and info["parameters"] == {"stable": True}
     assert len(info["iterations"]) == len(info["rank"]) == 12  # 3 frequencies x 4 steps
     assert height_rms(tmp_path / "den", small_scan) < 1.0
+
+
+def test_unresolved_orders_are_named_in_a_note_and_the_summary_line(capsys, tmp_path) -> None:
+    from types import SimpleNamespace
+
+    from rig.commands.process import print_summary
+    from rig.pipeline.corrections import _note_unresolved
+
+    state = SimpleNamespace(name="object", notes=[])
+    info = {"method": "auto", "unresolved": {"pixels": 300, "fraction": 0.0125, "regions": [[10, 20, 29, 39, 300]]}}
+    _note_unresolved(state, info)  # type: ignore[arg-type]
+    assert state.notes == [
+        "--correction auto: fringe orders unresolved on 1.25% of the object (300 pixels in 1 regions; largest at "
+        "rows 10..29, columns 20..39): the measured orders are kept there; see report.json stage_info"
+    ]
+    _note_unresolved(state, {"method": "auto", "unresolved": {"pixels": 0, "fraction": 0.0, "regions": []}})
+    assert len(state.notes) == 1
+    report = {"valid_fraction": 0.9, "methods": {"unwrap": "two-frequency"}, "notes": [], "unresolved_fraction": 0.0125}
+    print_summary(report, tmp_path / "out")
+    assert "fringe orders unresolved on 1.25%" in capsys.readouterr().err

@@ -360,3 +360,20 @@ def test_import_opencv_errors_are_one_line_under_other_opencv(tmp_path, site) ->
     assert version, f"no OpenCV importable from {site}"
     problems = _check_broken_filestorage(tmp_path, site)
     assert not any(problems.values()), (version, problems)
+
+
+# issue 21: --no-undistort with a camera-projector calibration, which undistorts rays itself ---------
+
+
+def test_no_undistort_is_refused_with_a_stereo_calibration(capsys, tmp_path, small_capture) -> None:
+    from calibration.store import Calibration, write_calibration
+    from mock_devices.stereo_synth import calibration_fields, demo_rig
+
+    fields = calibration_fields(demo_rig(160, 120))
+    write_calibration(tmp_path / "stereo", Calibration(model="stereo", extra=fields))
+    out = tmp_path / "out"
+    code, err = run(
+        capsys, "process", small_capture.capture, "--calibration", tmp_path / "stereo", "--no-undistort", "-o", out
+    )
+    assert_one_line(code, err, "--no-undistort", "camera-projector")
+    assert not out.exists()

@@ -131,6 +131,33 @@ def test_shift_sign_negates_the_phase(tmp_path) -> None:
     np.testing.assert_allclose(np.angle(np.exp(1j * (plus + minus))), 0.0, atol=1e-6)
 
 
+def test_gray_planes_stored_least_significant_first(tmp_path) -> None:
+    """Issue 21: ``gray:bits=N,order=lsb`` for a folder whose Gray planes run from the least
+    significant; the capture's absolute phase is the projector's, read in the wrong order it is not."""
+    from processing.patterns import pattern_image
+
+    width, height = 128, 16
+    patterns = parse_spec("sin:f=8,steps=4; gray:bits=3")
+    sinusoids, planes = patterns[:4], patterns[4:]
+    folder = tmp_path / "lsb-first"
+    folder.mkdir()
+    for i, pattern in enumerate(sinusoids + planes[::-1]):  # the planes stored least significant first
+        image = 30 + 200 * pattern_image(pattern, (width, height))
+        cv2.imwrite(str(folder / f"{i:02d}.png"), np.rint(image).astype(np.uint8))
+    lsb = import_folder(folder, "sin:f=8,steps=4; gray:bits=3,order=lsb", tmp_path / "lsb")
+    assert [p["bit"] for p in lsb.patterns[4:]] == [2, 1, 0]
+    msb = import_folder(folder, "sin:f=8,steps=4; gray:bits=3", tmp_path / "msb")
+    truth = 2 * np.pi * 8 * (np.arange(width) + 0.5) / width  # the phase at each pixel's centre
+    errors = {}
+    for name, capture in (("lsb", lsb), ("msb", msb)):
+        phase = process(capture.path).phase[height // 2]
+        ok = np.isfinite(phase)
+        errors[name] = float(np.max(np.abs(phase[ok] - truth[ok]))) if ok.sum() > width // 2 else np.inf
+    assert errors["lsb"] < 0.05 and errors["msb"] > 1.0, errors
+    with pytest.raises(ConfigError, match="order: expected msb"):
+        parse_spec("gray:bits=3,order=backwards")
+
+
 def test_pattern_file_with_explicit_files(tmp_path) -> None:
     folder = _fringe_folder(tmp_path)
     spec = tmp_path / "spec.json"

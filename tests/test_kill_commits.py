@@ -133,3 +133,19 @@ def test_killed_calibrate_overwrite_keeps_the_old_or_the_new_calibration(tmp_pat
     assert OLD_HEIGHTS in seen and seen <= {OLD_HEIGHTS, NEW_HEIGHTS}
     assert _start(*common, "--heights", NEW_HEIGHTS, "--overwrite", cwd=tmp_path).wait() == 0
     assert _complete_calibration(tmp_path / "cal") == NEW_HEIGHTS
+
+
+def test_killed_calibrate_from_leaves_no_empty_staging_folder(tmp_path) -> None:
+    """Issue 22: `rig calibrate --from DIR -o OTHER` used to create OTHER's staging folder before
+    computing, so every kill during the computation left an empty `OTHER.incomplete-*` behind."""
+    (tmp_path / "rig.toml").write_text(SMALL_RIG)
+    common = ("calibrate", "--config", "rig.toml", "-o", "cal", "--board", "none", "--pixel-mm", "1.6", "-q")
+    assert _start(*common, "--heights", OLD_HEIGHTS, cwd=tmp_path).wait() == 0
+    for n, delay in enumerate(_delays(14, 1.0, 2.5)):
+        _kill_after(_start("calibrate", "--from", "cal", "-o", f"other{n}", "-q", cwd=tmp_path), delay)
+        assert not [p.name for p in tmp_path.glob(f"other{n}.incomplete-*") if not any(p.iterdir())]
+        if (tmp_path / f"other{n}").exists():  # committed whole: the calibration and its reference
+            from calibration.store import read_calibration
+
+            calibration = read_calibration(tmp_path / f"other{n}")
+            assert calibration.reference_path is not None and read_capture(calibration.reference_path).complete

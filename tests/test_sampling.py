@@ -50,3 +50,24 @@ def test_auto_leaves_undersampled_fringes_alone(tmp_path) -> None:
     assert any("auto skipped" in note for note in auto.report["notes"])
     vote = api.process(paths.capture, paths.calibration, api.ProcessOptions(correction="vote"))
     assert any("unreliable" in note for note in vote.report["notes"])
+
+
+def test_step_ignores_wrong_orders_on_most_pixels() -> None:
+    """Fringes 36 px apart (the issue's case at frequency 25) with 60 % of the pixels carrying wrong
+    orders of 1 - 7 fringes either way (two-frequency look-up errors): the median step of the
+    unwrapped phase measured the errors (about 2 pi per pixel, "0.1 px apart") and switched
+    corrections off; the wrapped steps give the fringes' true step."""
+    rng = np.random.default_rng(20)
+    rows, cols = np.mgrid[0:300, 0:400].astype(np.float64)
+    period_px = 36.0
+    truth = 2 * np.pi * cols / period_px + 0.01 * rows
+    wrong = rng.random(truth.shape) < 0.6
+    errors = rng.integers(1, 8, truth.shape) * rng.choice([-1, 1], truth.shape)
+    phase = truth + 2 * np.pi * np.where(wrong, errors, 0) + rng.normal(0.0, 0.05, truth.shape)
+    valid = np.ones_like(phase, dtype=bool)
+    head, tail = phase[:, :-1], phase[:, 1:]
+    unwrapped_median = float(np.median(np.abs(tail - head)))
+    assert undersampled_for_spatial_methods(unwrapped_median)  # what the earlier guard saw
+    step = fringe_step_rad(phase, valid, axis=1)
+    assert step == pytest.approx(2 * np.pi / period_px, rel=0.05)
+    assert not undersampled_for_spatial_methods(step)

@@ -13,16 +13,18 @@ import dataclasses
 import hashlib
 import json
 import os
+import re
 import shutil
-from collections.abc import Sequence
+import stat
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
 from rig import __version__
 from rig.errors import RigError
 from rig.pipeline.plan import ProcessOptions
-from rig.store import results
-from rig.store.files import INCOMPLETE_MARK, REPLACED_MARK
+from rig.store import files, results
+from rig.store.files import INCOMPLETE_MARK, KINDS, REPLACED_MARK
 from rig.store.results import DEFAULT_FORMATS
 
 BATCH_KEY = "batch"  # report.json key holding the batch's bookkeeping
@@ -35,8 +37,8 @@ def _canonical(obj: Any) -> bytes:
 def manifest_digest(capture_dir: Path) -> str | None:
     """sha256 of a capture's manifest content (None when it cannot be read: such a capture is always processed)."""
     try:
-        manifest = json.loads((capture_dir / "capture.json").read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        manifest = files.read_json(capture_dir / "capture.json", files.FileLayerError)
+    except files.FileLayerError:
         return None
     return hashlib.sha256(_canonical(manifest)).hexdigest()
 
@@ -48,8 +50,8 @@ def calibration_digest(calibration_dir: Path | None) -> str:
     digest = hashlib.sha256()
     path = calibration_dir / "calibration.json"
     try:
-        data = path.read_bytes()
-    except OSError:
+        data = files.read_regular(path, str(path), files.FileLayerError, files.limits().max_manifest_bytes)
+    except files.FileLayerError:
         return "unreadable"  # processing reports the error itself
     digest.update(data)
     try:
@@ -91,31 +93,66 @@ def reusable_report(out_dir: Path, expected: str | None) -> dict[str, Any] | Non
         return None
     if not isinstance(report.get(BATCH_KEY), dict) or report[BATCH_KEY].get("fingerprint") != expected:
         return None
-    files = report.get("files")
-    if not isinstance(files, dict) or not all(
-        isinstance(f, str) and results.has_file(out_dir, f) for f in files.values()
+    listed = report.get("files")
+    if not isinstance(listed, dict) or not all(
+        isinstance(f, str) and results.has_file(out_dir, f) for f in listed.values()
     ):
         return None
     return report
 
 
-def remove_stale(root: Path) -> int:
-    """Remove what a killed run left under ``root``: staging (``NAME.incomplete-*``) and set-aside
-    (``NAME.replaced-*``) output directories, temporary report and table files; returns how many.
+# What a killed run can leave beside the outputs it writes, by exact name: the staging and set-aside
+# folders of an output's commit (the output's name, the mark, ``tempfile.mkdtemp``'s 8 characters)
+# and the temporaries of its tables (``.index.csv.XXXXXXXX.tmp``).
+_LEFTOVER = re.compile(rf"(.+)(?:{re.escape(INCOMPLETE_MARK)}|{re.escape(REPLACED_MARK)})[a-z0-9_]{{8}}")
+_TABLE_TEMPORARY = re.compile(r"\.(.+)\.[a-z0-9_]{8}\.tmp")
+# Marker files of what this program writes other than a processing output: never in an output's leftovers.
+_FOREIGN_MARKERS = frozenset(marker for kind, (marker, _, _) in KINDS.items() if kind != "output")
 
-    Only ever called on a batch's own output directory, where nothing else is written.
+
+def _is_output_leftover(path: Path) -> bool:
+    """Whether ``path`` is a flat folder of regular files holding no other kind's marker (what an
+    output's commit leaves); a capture kept for ``--salvage`` has frames/ and capture.json."""
+    try:
+        if not stat.S_ISDIR(os.lstat(path).st_mode):
+            return False
+        entries = list(os.scandir(path))
+    except OSError:
+        return False
+    return all(e.is_file(follow_symlinks=False) and e.name not in _FOREIGN_MARKERS for e in entries)
+
+
+def _entries(directory: Path) -> list[os.DirEntry[str]]:
+    try:
+        return list(os.scandir(directory))
+    except OSError:
+        return []
+
+
+def remove_stale(root: Path, outputs: Iterable[str], tables: Iterable[str]) -> int:
+    """Remove what a killed run left beside the ``outputs`` (names relative to ``root``) and the
+    ``tables`` (file names in ``root``) a batch writes; returns how many.
+
+    Only exact names are removed: ``NAME.incomplete-XXXXXXXX`` and ``NAME.replaced-XXXXXXXX``
+    beside an output ``NAME`` (and only when :func:`_is_output_leftover`), ``.TABLE.XXXXXXXX.tmp``
+    beside a table. Nothing is walked: an archive's interrupted capture or a user's folder that
+    lies under ``root`` is never touched.
     """
+    by_parent: dict[Path, set[str]] = {}
+    for name in outputs:
+        output = root / name
+        by_parent.setdefault(output.parent, set()).add(output.name)
     removed = 0
-    if not root.is_dir():
-        return 0
-    for here, dirs, files in os.walk(root):
-        for name in list(dirs):
-            if INCOMPLETE_MARK in name or REPLACED_MARK in name:
-                shutil.rmtree(Path(here) / name, ignore_errors=True)
-                dirs.remove(name)
+    for parent, names in by_parent.items():
+        for entry in _entries(parent):
+            match = _LEFTOVER.fullmatch(entry.name)
+            if match and match.group(1) in names and _is_output_leftover(Path(entry.path)):
+                shutil.rmtree(entry.path, ignore_errors=True)
                 removed += 1
-        for name in files:
-            if name.endswith(".tmp") and (name.startswith(".") or name == "report.json.tmp"):
-                (Path(here) / name).unlink(missing_ok=True)
-                removed += 1
+    table_names = set(tables)
+    for entry in _entries(root):
+        match = _TABLE_TEMPORARY.fullmatch(entry.name)
+        if match and match.group(1) in table_names and entry.is_file(follow_symlinks=False):
+            Path(entry.path).unlink(missing_ok=True)
+            removed += 1
     return removed

@@ -211,7 +211,7 @@ def run_batch(plan: BatchPlan, progress: Reporter | None = None) -> BatchResult:
     exclude = [plan.output] + ([plan.calibration] if plan.calibration is not None else [])
     found = discover(plan.archives, exclude=exclude)
     plan.output.mkdir(parents=True, exist_ok=True)
-    remove_stale(plan.output)
+    remove_stale(plan.output, [c.name for c in found], (INDEX_FILE, COMPARE_FILE))
     tasks, known = plan_tasks(plan, found)
     outcomes: list[TaskOutcome] = list(known)
     index_path = plan.output / INDEX_FILE

@@ -19,7 +19,7 @@ import numpy as np
 
 from rig.batch.index import CompareRow, IndexRow, height_stats
 from rig.batch.resume import BATCH_KEY
-from rig.errors import USER_ERRORS
+from rig.errors import USER_ERRORS, os_error_line
 from rig.pipeline.plan import ProcessOptions
 from rig.store.results import DEFAULT_FORMATS
 
@@ -60,9 +60,12 @@ def worker_name() -> str:
 
 
 def error_message(exc: BaseException) -> str:
-    """The one line ``rig process`` prints for a user error (after ``rig process: error:``); a bug is named as such."""
+    """The one line ``rig process`` prints for a user error or an operating-system refusal (after
+    ``rig process: error:``); a bug is named as such."""
     if isinstance(exc, USER_ERRORS):
         return str(exc)
+    if isinstance(exc, OSError):  # the environment refused (a full disk, permissions): as `rig process` says it
+        return os_error_line(exc)
     return f"internal error: {type(exc).__name__}: {exc}"
 
 

@@ -55,7 +55,7 @@ from calibration.gamma import (
     ripple_table_from_plane,
 )
 from calibration.geometry import MIN_HEIGHTS, fit_f0, fit_l0_d0, lit_interior, pixel_mm_from_corners
-from calibration.polynomial import POLYNOMIAL, fit_polynomial
+from calibration.polynomial import COEFFICIENTS_FILE, POLYNOMIAL, fit_polynomial
 from calibration.reference import REFERENCE_DIR, check_same_patterns
 from calibration.stereo import (
     STEREO,
@@ -421,12 +421,37 @@ def _planes(directory: Path) -> list[tuple[float, Path]]:
 
 
 def _copy_capture(source: Path, target: Path) -> None:
-    """Copy a capture directory atomically (an earlier capture at ``target`` is replaced)."""
+    """Copy a capture directory, verified when the calibration was computed, atomically (an earlier
+    capture at ``target`` is replaced)."""
     import shutil
 
-    read_capture(source)  # only a complete, verified capture is copied
     with files.staged_directory(target, ("capture",), True, CaptureError) as staging:
         shutil.copytree(source, staging, dirs_exist_ok=True)
+
+
+@dataclass
+class ComputedCalibration:
+    """A calibration computed from a session's captures and not yet written: calibration.json's
+    content, the summary lines, the arrays saved beside it and the reference capture it carries."""
+
+    calibration: Calibration
+    lines: list[str]
+    source: Path  # the session directory
+    arrays: dict[str, np.ndarray] = field(default_factory=dict)  # file name -> array, saved beside calibration.json
+    reference: Path | None = (
+        None  # verified; copied into an output other than ``source`` (references are relative, inside)
+    )
+
+    def write(self, output: Path) -> CalibrationReport:
+        """Write it all into ``output`` (calibration.json last) and return the summary."""
+        if self.arrays:
+            output.mkdir(parents=True, exist_ok=True)
+        for name, array in self.arrays.items():
+            np.save(output / name, array)
+        if self.reference is not None and not files.same_path(output, self.source):
+            _copy_capture(self.reference, output / REFERENCE_DIR)
+        write_calibration(output, self.calibration)
+        return CalibrationReport(self.calibration, self.lines)
 
 
 def compute(
@@ -440,72 +465,145 @@ def compute(
     ``plan`` overrides the stored session (e.g. another model); ``output`` writes the calibration
     elsewhere (the reference capture is then copied into it: references are relative and inside).
     """
+    return compute_calibration(directory, plan, progress).write(output or directory)
+
+
+def compute_calibration(
+    directory: Path, plan: CalibrationPlan | None = None, progress: Reporter | None = None
+) -> ComputedCalibration:
+    """The calibration the captures in ``directory`` give, computed without writing anything (so
+    that a command writing it elsewhere creates its output only once there is something to write)."""
 
     def note(message: str) -> None:
         if progress is not None:
             progress.message(message)
 
-    session = directory / SESSION_FILE
     if plan is None:
-        plan = CalibrationPlan.load(session)
-    output = output or directory
-    lines: list[str] = []
-    extra: dict[str, Any] = {}
-
-    # projector gamma
+        plan = CalibrationPlan.load(directory / SESSION_FILE)
+    computed = ComputedCalibration(Calibration(model=plan.model), [], directory)
     if (directory / GAMMA_DIR).is_dir():
-        gamma, lut = _gamma_from(directory / GAMMA_DIR)
-        output.mkdir(parents=True, exist_ok=True)
-        np.save(output / GAMMA_LUT_FILE, lut)
-        extra["gamma"] = gamma.as_fields()
-        extra["gamma_lut"] = GAMMA_LUT_FILE
-        lines.append(f"projector gamma {gamma.gamma:.3f} (fit RMS {gamma.residual_rms:.2f} DN); LUT {GAMMA_LUT_FILE}")
-
+        _projector_gamma(directory, computed)
     if plan.model == STEREO:
-        return _compute_stereo(directory, plan, output, lines, extra, note)
+        _compute_stereo(directory, plan, computed, note)
+        return computed
+    camera, pixel_mm = _camera_and_pixel_size(directory, plan, computed)
+    fit, f0, frequency, axis, heights, deltas = _fit_planes(directory, plan, camera, pixel_mm, computed, note)
+    extra = computed.calibration.extra
+    computed.lines.append(
+        f"l0 = {fit.l0_mm:.3f} +- {fit.l0_std_mm:.3f} mm, d0 = {fit.d0_mm:.3f} +- {fit.d0_std_mm:.3f} mm"
+    )
+    computed.lines.append(
+        "residuals " + ", ".join(f"{h:g}: {r:+.4f}" for h, r in zip(fit.heights_mm, fit.residuals_mm)) + " mm"
+    )
+    extra.update({k: v for k, v in fit.as_fields().items() if k not in ("l0_mm", "d0_mm", "f0_per_mm")})
+    extra["uncertainty"]["f0_per_mm"] = f0.f0_std_per_mm
+    extra["fringe_axis"] = axis
+    if plan.model == POLYNOMIAL:
+        poly = fit_polynomial(heights, deltas, frequency, degree=plan.degree)
+        computed.arrays[COEFFICIENTS_FILE] = poly.coefficients
+        extra.update({k: v for k, v in poly.fields(COEFFICIENTS_FILE).items() if k != "model"})
+        computed.lines.append(f"polynomial degree {plan.degree}: residual RMS {poly.residual_rms_mm:.4f} mm")
+    read_capture(directory / REFERENCE_DIR)  # only a complete, verified capture is copied into another output
+    computed.reference = directory / REFERENCE_DIR
+    computed.calibration = Calibration(
+        model=plan.model,
+        l0_mm=fit.l0_mm,
+        d0_mm=fit.d0_mm,
+        f0_per_mm=f0.f0_per_mm,
+        f0_frequency=frequency,
+        pixel_mm=pixel_mm,
+        reference=REFERENCE_DIR,
+        extra=extra,
+    )
+    return computed
 
-    # camera and pixel size
+
+def _projector_gamma(directory: Path, computed: ComputedCalibration) -> None:
+    """The projector's gamma from the session's gray levels: its fields, and the LUT saved beside."""
+    gamma, lut = _gamma_from(directory / GAMMA_DIR)
+    computed.arrays[GAMMA_LUT_FILE] = lut
+    computed.calibration.extra["gamma"] = gamma.as_fields()
+    computed.calibration.extra["gamma_lut"] = GAMMA_LUT_FILE
+    computed.lines.append(
+        f"projector gamma {gamma.gamma:.3f} (fit RMS {gamma.residual_rms:.2f} DN); LUT {GAMMA_LUT_FILE}"
+    )
+
+
+def _camera_and_pixel_size(
+    directory: Path, plan: CalibrationPlan, computed: ComputedCalibration
+) -> tuple[CameraCalibration | None, float]:
+    """The camera (from the board views, when there are at least two) and the pixel size on the plane."""
     camera: CameraCalibration | None = None
     pixel_mm = plan.pixel_mm
     if plan.board is not None:
         on_plane, views = _board_images(directory / BOARD_DIR)
-        all_views = ([on_plane] if on_plane is not None else []) + views
         if len(views) >= 2:
-            # k3 stays 0: a few views of a narrow-angle lens cannot tell it from k1, k2
-            camera = calibrate_camera(
-                [v.white for v in all_views], plan.board, flags=cv2.CALIB_FIX_K3, darks=[v.dark for v in all_views]
-            )
-            extra.update(camera.as_fields())
-            lines.append(
-                f"camera: {len(camera.views_used)} views, reprojection RMS {camera.rms_px:.3f} px"
-                + ("" if camera.distortion_significant else ", no significant lens distortion")
-            )
-            first = 0 if on_plane is not None else 1  # calibrate_camera's view 0 is the board on the plane
-            lines.extend("  " + _board_note(note, first) for note in camera.notes)
+            camera = _camera_from_board(plan.board, on_plane, views, computed)
         if pixel_mm is None:
-            if on_plane is None:
-                raise CalibrationError(
-                    f"{directory / BOARD_DIR / 'plane'}: missing (the board lying on the reference plane)"
-                )
-            if plan.board.kind != "chessboard":
-                raise CalibrationError("pixel size: measure it with a chessboard (or give --pixel-mm)")
-            found = detect_board(on_plane.white, plan.board, name="board on the reference plane")
-            if found is None:
-                raise CalibrationError(f"{directory / BOARD_DIR / 'plane'}: the {plan.board.kind} was not found")
-            lit = lit_corners(found, on_plane.white, on_plane.dark)
-            if lit.sum() < MIN_CORNERS:
-                raise CalibrationError(
-                    f"{directory / BOARD_DIR / 'plane'}: {int(lit.sum())} of {lit.size} board corners lit by the projector, "
-                    f"need {MIN_CORNERS}; lay the board inside the projected area"
-                )
-            corners = found.image_points
-            if camera is not None and camera.distortion_significant:
-                corners = undistort_pixels(corners, camera.camera_matrix, camera.distortion)
-            pixel_mm = pixel_mm_from_corners(corners, plan.board.inner_corners, plan.board.square_mm, keep=lit)
-            used = "" if lit.all() else f", {int(lit.sum())} of {lit.size} corners lit by the projector"
-            lines.append(f"pixel size on the plane {pixel_mm:.5f} mm (from the {plan.board.kind}{used})")
+            pixel_mm = _pixel_mm_on_plane(directory, plan.board, on_plane, camera, computed)
     if pixel_mm is None:
         raise CalibrationError("pixel size: no board on the plane and no --pixel-mm")
+    return camera, pixel_mm
+
+
+def _camera_from_board(
+    board: BoardSpec, on_plane: Any, views: list[Any], computed: ComputedCalibration
+) -> CameraCalibration:
+    """The camera's intrinsics from the board on the plane (if any) and the board views."""
+    all_views = ([on_plane] if on_plane is not None else []) + views
+    # k3 stays 0: a few views of a narrow-angle lens cannot tell it from k1, k2
+    camera = calibrate_camera(
+        [v.white for v in all_views], board, flags=cv2.CALIB_FIX_K3, darks=[v.dark for v in all_views]
+    )
+    computed.calibration.extra.update(camera.as_fields())
+    computed.lines.append(
+        f"camera: {len(camera.views_used)} views, reprojection RMS {camera.rms_px:.3f} px"
+        + ("" if camera.distortion_significant else ", no significant lens distortion")
+    )
+    first = 0 if on_plane is not None else 1  # calibrate_camera's view 0 is the board on the plane
+    computed.lines.extend("  " + _board_note(note, first) for note in camera.notes)
+    return camera
+
+
+def _pixel_mm_on_plane(
+    directory: Path, board: BoardSpec, on_plane: Any, camera: CameraCalibration | None, computed: ComputedCalibration
+) -> float:
+    """The pixel size on the reference plane, from the chessboard lying on it (its lit corners)."""
+    where = directory / BOARD_DIR / "plane"
+    if on_plane is None:
+        raise CalibrationError(f"{where}: missing (the board lying on the reference plane)")
+    if board.kind != "chessboard":
+        raise CalibrationError("pixel size: measure it with a chessboard (or give --pixel-mm)")
+    found = detect_board(on_plane.white, board, name="board on the reference plane")
+    if found is None:
+        raise CalibrationError(f"{where}: the {board.kind} was not found")
+    lit = lit_corners(found, on_plane.white, on_plane.dark)
+    if lit.sum() < MIN_CORNERS:
+        raise CalibrationError(
+            f"{where}: {int(lit.sum())} of {lit.size} board corners lit by the projector, "
+            f"need {MIN_CORNERS}; lay the board inside the projected area"
+        )
+    corners = found.image_points
+    if camera is not None and camera.distortion_significant:
+        corners = undistort_pixels(corners, camera.camera_matrix, camera.distortion)
+    pixel_mm = pixel_mm_from_corners(corners, board.inner_corners, board.square_mm, keep=lit)
+    used = "" if lit.all() else f", {int(lit.sum())} of {lit.size} corners lit by the projector"
+    computed.lines.append(f"pixel size on the plane {pixel_mm:.5f} mm (from the {board.kind}{used})")
+    return pixel_mm
+
+
+def _fit_planes(
+    directory: Path,
+    plan: CalibrationPlan,
+    camera: CameraCalibration | None,
+    pixel_mm: float,
+    computed: ComputedCalibration,
+    note: Callable[[str], None],
+) -> tuple[Any, Any, float, str, list[float], list[np.ndarray]]:
+    """f0 on the reference plane, then l0 and d0 from the planes' phase differences to it.
+
+    Returns the l0/d0 fit, the f0 fit, the fringe frequency and axis, the heights and the phase differences.
+    """
     # `rig process` undistorts the frames of scans and reference alike: fit on the same geometry
     undistort = camera is not None and camera.distortion_significant
 
@@ -517,7 +615,6 @@ def compute(
             phase = undistort_map(phase, camera.camera_matrix, camera.distortion)
         return phase, frequency, axis, patterns
 
-    # reference and planes
     note("calibrate: reference plane")
     reference, frequency, axis, patterns = phase_of(directory / REFERENCE_DIR)
     planes = _planes(directory)
@@ -526,18 +623,9 @@ def compute(
             f"{directory / PLANES_DIR}: {len(planes)} plane captures, need at least {MIN_HEIGHTS} heights"
         )
     f0 = fit_f0(reference, pixel_mm)
-    # the reference plane's phase ripple (projector gamma), for `rig process --correction gamma-table`;
-    # a strong one is taken out of the calibration planes too, or it would read as planes not flat
-    table, ripple_rms = ripple_table_from_plane(reference)
-    extra["phase_error"] = {**table.as_fields(), "frequency": frequency, "ripple_rms_rad": ripple_rms}
-    lines.append(f"phase ripple on the reference plane {ripple_rms:.4f} rad RMS (table for --correction gamma-table)")
-    compensate = ripple_rms > RIPPLE_COMPENSATION_RAD
+    table, compensate = _ripple(reference, frequency, computed)
     if compensate:
         reference = compensate_phase(reference, table)
-        extra["planes_ripple_compensated"] = True
-        lines.append(
-            "  strong ripple: the planes were fitted with it compensated; pre-correct the projector (--gamma) or process with --correction gamma-table"
-        )
     heights, deltas = [], []
     for height, path in planes:
         note(f"calibrate: plane at {height:g} mm")
@@ -552,31 +640,26 @@ def compute(
         f0_std_per_mm=f0.f0_std_per_mm,
         flatness_tolerance_mm=plan.flatness_tolerance_mm if plan.model == REFERENCE_PLANE else None,
     )
-    lines.append(f"l0 = {fit.l0_mm:.3f} +- {fit.l0_std_mm:.3f} mm, d0 = {fit.d0_mm:.3f} +- {fit.d0_std_mm:.3f} mm")
-    lines.append("residuals " + ", ".join(f"{h:g}: {r:+.4f}" for h, r in zip(fit.heights_mm, fit.residuals_mm)) + " mm")
-    extra.update({k: v for k, v in fit.as_fields().items() if k not in ("l0_mm", "d0_mm", "f0_per_mm")})
-    extra["uncertainty"]["f0_per_mm"] = f0.f0_std_per_mm
-    extra["fringe_axis"] = axis
-    if plan.model == POLYNOMIAL:
-        output.mkdir(parents=True, exist_ok=True)
-        poly = fit_polynomial(heights, deltas, frequency, degree=plan.degree)
-        extra.update({k: v for k, v in poly.save(output).items() if k != "model"})
-        lines.append(f"polynomial degree {plan.degree}: residual RMS {poly.residual_rms_mm:.4f} mm")
+    return fit, f0, frequency, axis, heights, deltas
 
-    if not files.same_path(output, directory):  # a calibration carries its reference inside it (a relative path)
-        _copy_capture(directory / REFERENCE_DIR, output / REFERENCE_DIR)
-    calibration = Calibration(
-        model=plan.model,
-        l0_mm=fit.l0_mm,
-        d0_mm=fit.d0_mm,
-        f0_per_mm=f0.f0_per_mm,
-        f0_frequency=frequency,
-        pixel_mm=pixel_mm,
-        reference=REFERENCE_DIR,
-        extra=extra,
+
+def _ripple(reference: np.ndarray, frequency: float, computed: ComputedCalibration) -> tuple[Any, bool]:
+    """The reference plane's phase ripple (projector gamma), for `rig process --correction gamma-table`,
+    and whether it is strong enough to be taken out of the calibration planes too (or it would read
+    as planes not flat)."""
+    table, ripple_rms = ripple_table_from_plane(reference)
+    extra = computed.calibration.extra
+    extra["phase_error"] = {**table.as_fields(), "frequency": frequency, "ripple_rms_rad": ripple_rms}
+    computed.lines.append(
+        f"phase ripple on the reference plane {ripple_rms:.4f} rad RMS (table for --correction gamma-table)"
     )
-    write_calibration(output, calibration)
-    return CalibrationReport(calibration, lines)
+    compensate = ripple_rms > RIPPLE_COMPENSATION_RAD
+    if compensate:
+        extra["planes_ripple_compensated"] = True
+        computed.lines.append(
+            "  strong ripple: the planes were fitted with it compensated; pre-correct the projector (--gamma) or process with --correction gamma-table"
+        )
+    return table, compensate
 
 
 def _pose_view(path: Path, board: BoardSpec) -> Any:
@@ -606,13 +689,9 @@ def _pose_view(path: Path, board: BoardSpec) -> Any:
 
 
 def _compute_stereo(
-    directory: Path,
-    plan: CalibrationPlan,
-    output: Path,
-    lines: list[str],
-    extra: dict[str, Any],
-    note: Callable[[str], None],
-) -> CalibrationReport:
+    directory: Path, plan: CalibrationPlan, computed: ComputedCalibration, note: Callable[[str], None]
+) -> None:
+    """A camera-projector model from the stored board poses, and the reference plane's pose when stored."""
     poses = sorted(p for p in (directory / STEREO_DIR).glob("pose-*") if (p / "capture.json").is_file())
     if len(poses) < 3:
         raise CalibrationError(f"{directory / STEREO_DIR}: {len(poses)} board poses, need at least 3")
@@ -626,6 +705,7 @@ def _compute_stereo(
     projector_size = tuple(int(v) for v in capture.projector_size)
     result = calibrate_stereo(views, camera_size, projector_size, flags=cv2.CALIB_FIX_K3)  # type: ignore[arg-type]
     fields = result.model.as_fields()
+    lines, extra = computed.lines, computed.calibration.extra
     lines.append(
         f"stereo: {result.views_used} poses, reprojection RMS {result.rms_px:.3f} px (camera {result.camera_rms_px:.3f}, "
         f"projector {result.projector_rms_px:.3f}), baseline {result.model.baseline_mm:.2f} mm"
@@ -642,6 +722,4 @@ def _compute_stereo(
         lines.append(
             f"reference plane {plane[3]:.2f} mm from the camera, flat to {np.nanstd(heights):.3f} mm RMS: heights are above it"
         )
-    calibration = Calibration(model=STEREO, extra=extra)
-    write_calibration(output, calibration)
-    return CalibrationReport(calibration, lines)
+    computed.calibration = Calibration(model=STEREO, extra=extra)

@@ -69,6 +69,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "l0, d0, f0 (reference-plane model) or a per-pixel polynomial; or recompute from a stored "
         "session (--from), or import an OpenCV projector-camera calibration (--import-opencv).",
     )
+    _source_options(parser)
+    _session_options(parser)
+    _device_and_import_options(parser)
+    parser.add_argument("--overwrite", action="store_true", help="replace an existing calibration directory")
+    add_report_options(parser, json_help="print calibration.json on stdout")
+
+
+def _source_options(parser: argparse.ArgumentParser) -> None:
+    """Where the calibration goes and where its captures come from."""
     parser.add_argument(
         "-o", "--output", type=Path, metavar="CAL", help="calibration directory to create (default: calibration)"
     )
@@ -78,6 +87,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--from", dest="from_dir", type=Path, metavar="DIR", help="recompute from the captures of a stored session"
     )
+
+
+def _session_options(parser: argparse.ArgumentParser) -> None:
+    """What the session captures and which model it fits."""
     parser.add_argument(
         "--heights",
         type=_heights,
@@ -124,6 +137,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="MM",
         help="largest RMS height spread of a calibration plane (default 1 mm)",
     )
+
+
+def _device_and_import_options(parser: argparse.ArgumentParser) -> None:
+    """A motorised stage, and the import of an OpenCV projector-camera calibration."""
     parser.add_argument(
         "--stage-command",
         metavar="CMD",
@@ -133,9 +150,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--import-opencv",
         type=Path,
         metavar="FILE.yml",
-        help="write a 'stereo' calibration from an OpenCV FileStorage file (M1 D1 M4 D4 Rlp Tlp S)",
+        help="write a 'stereo' calibration from an OpenCV FileStorage file (SLMaster's M1 D1 M4 D4 Rlp Tlp S, "
+        "or stereoCalibrate's results as K1 D1 K2 D2 R T, M1 D1 M2 D2 R T or cameraMatrix1 distCoeffs1 "
+        "cameraMatrix2 distCoeffs2 R T; camera first, projector second)",
     )
     parser.add_argument("--projector-size", type=_size, metavar="WxH", help="projector resolution for --import-opencv")
+    parser.add_argument(
+        "--camera-size",
+        type=_size,
+        metavar="WxH",
+        help="camera resolution for --import-opencv, when the file holds no S or imageSize",
+    )
     parser.add_argument(
         "--pixel-centre",
         type=float,
@@ -144,8 +169,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="for --import-opencv: where projector pixel k sits in the phase convention "
         "(0.5: this product's patterns; 0: phase 2 pi f k / W at column k, as SLMaster)",
     )
-    parser.add_argument("--overwrite", action="store_true", help="replace an existing calibration directory")
-    add_report_options(parser, json_help="print calibration.json on stdout")
 
 
 def _import_opencv(args: argparse.Namespace) -> int:
@@ -158,7 +181,9 @@ def _import_opencv(args: argparse.Namespace) -> int:
         raise ConfigError("--import-opencv needs --projector-size WxH (the FileStorage file does not record it)")
     output = args.output or Path("calibration")
     files.check_writable(output, ("calibration",), args.overwrite, OutputError)  # before reading anything
-    fields = import_opencv_calibration(args.import_opencv, args.projector_size, pixel_centre=args.pixel_centre)
+    fields = import_opencv_calibration(
+        args.import_opencv, args.projector_size, pixel_centre=args.pixel_centre, camera_size=args.camera_size
+    )
     fields.pop("model")
     with files.staged_directory(output, ("calibration",), args.overwrite, OutputError) as staging:
         write_calibration(staging, Calibration(model="stereo", extra=fields))
@@ -191,7 +216,7 @@ def _plan(args: argparse.Namespace, base=None):
 
 def run(args: argparse.Namespace) -> int:
     from rig.calibrate.operator import ConsoleOperator, StageCommand
-    from rig.calibrate.session import CALIBRATION_KINDS, CalibrationPlan, calibrate, compute
+    from rig.calibrate.session import CALIBRATION_KINDS, CalibrationPlan, calibrate, compute, compute_calibration
     from rig.progress import Progress
 
     if args.import_opencv is not None:
@@ -218,8 +243,10 @@ def run(args: argparse.Namespace) -> int:
             if in_place:
                 report = compute(args.from_dir, plan, progress=bar.reporter())
             else:  # a new calibration directory (with a copy of the reference), committed as a whole
+                computed = compute_calibration(args.from_dir, plan, progress=bar.reporter())
+                # staged only now: a kill while computing leaves no staging folder behind
                 with files.staged_directory(args.output, CALIBRATION_KINDS, args.overwrite, OutputError) as staging:
-                    report = compute(args.from_dir, plan, output=staging, progress=bar.reporter())
+                    report = computed.write(staging)
                 report.calibration.path = args.output
     else:
         from rig.config import load_config

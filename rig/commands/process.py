@@ -138,7 +138,8 @@ def add_processing_options(parser: argparse.ArgumentParser) -> None:
         dest="undistort",
         action="store_false",
         default=None,
-        help="keep lens distortion (default: removed when the calibration has camera_matrix and distortion)",
+        help="keep lens distortion (default: removed when the calibration has camera_matrix and distortion; "
+        "refused with a camera-projector calibration, whose triangulation models it)",
     )
 
 
@@ -161,6 +162,8 @@ def add_format_option(parser: argparse.ArgumentParser) -> None:
 
 def processing_options(args: argparse.Namespace) -> ProcessOptions:
     """The :class:`ProcessOptions` of the options :func:`add_processing_options` added."""
+    if args.undistort is False and getattr(args, "calibration", None) is not None:
+        refuse_kept_distortion(args.calibration)
     return ProcessOptions(
         unwrap=args.unwrap,
         denoise=args.denoise,
@@ -173,9 +176,23 @@ def processing_options(args: argparse.Namespace) -> ProcessOptions:
     )
 
 
+def refuse_kept_distortion(calibration: Path) -> None:
+    """``--no-undistort`` with a camera-projector (stereo) calibration: refused, because its
+    triangulation models the lens distortion of every camera and projector ray (the frames are never
+    undistorted, so there is nothing to keep)."""
+    from calibration.stereo import STEREO
+    from calibration.store import read_calibration
+
+    if read_calibration(calibration).model == STEREO:
+        raise ConfigError(
+            f"--no-undistort: {calibration} is a camera-projector (stereo) calibration, whose triangulation "
+            "models the lens distortion of every ray; leave --no-undistort out"
+        )
+
+
 def summary(report: dict, out: Path) -> dict:
     """The short form of a report printed by --json."""
-    keys = ("valid_fraction", "height_mm", "points", "notes")
+    keys = ("valid_fraction", "unresolved_fraction", "height_mm", "points", "notes")
     return {
         "output": str(out),
         "unwrap": report["methods"]["unwrap"],
@@ -231,6 +248,8 @@ def print_summary(report: dict, out: Path) -> None:
     if report.get("height_mm"):  # None when no valid height is finite
         h = report["height_mm"]
         line += f", {report.get('quantity', 'height')} {h['min']:.2f} .. {h['max']:.2f} mm, {report['points']} points"
+    if report.get("unresolved_fraction"):
+        line += f", fringe orders unresolved on {report['unresolved_fraction']:.2%}"
     print(line, file=sys.stderr)
     for note in report["notes"]:
         print(f"note: {note}", file=sys.stderr)

@@ -92,6 +92,25 @@ def stage_correction(state: SceneState, options: ProcessOptions) -> None:
         orders = np.rint((np.nan_to_num(phase) - np.mod(wrapped, 2.0 * np.pi)) / (2.0 * np.pi))
         unwrapped.orders = np.where(unwrapped.valid, orders, unwrapped.orders).astype(unwrapped.orders.dtype)
     state.info["correction"] = info
+    _note_unresolved(state, info)
+
+
+def _note_unresolved(state: SceneState, info: dict[str, Any]) -> None:
+    """A note naming how much of the map has fringe orders no evidence could settle (``info["unresolved"]``)."""
+    unresolved = info.get("unresolved")
+    if not unresolved or not unresolved.get("pixels"):
+        return
+    regions = unresolved.get("regions") or []
+    where = (
+        f"; largest at rows {regions[0][0]}..{regions[0][2]}, columns {regions[0][1]}..{regions[0][3]}"
+        if regions
+        else ""
+    )
+    state.notes.append(
+        f"--correction {info.get('method')}: fringe orders unresolved on {unresolved['fraction']:.2%} of the "
+        f"{state.name} ({unresolved['pixels']} pixels in {len(regions)}{'+' if len(regions) >= 20 else ''} regions{where}): "
+        "the measured orders are kept there; see report.json stage_info"
+    )
 
 
 def _too_dense_for_spatial_methods(state: SceneState, name: str) -> bool:

@@ -129,6 +129,8 @@ def build_report(result: ProcessResult, staged_inputs: tuple[Path, Path] | None 
         "valid_fraction": float(result.mask.mean()),
         "notes": list(result.notes),
     }
+    if "unresolved" in obj.info.get("correction", {}):  # share of the valid pixels whose orders nothing settled
+        report["unresolved_fraction"] = obj.info["correction"]["unresolved"]["fraction"]
     if result.height is None:
         report["wrapped_frequencies"] = obj.wrapped.frequencies
     else:

@@ -40,7 +40,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from calibration.jsonfile import write_json_atomic
+from calibration.jsonfile import write_bytes_durable, write_json_atomic
 from processing.patterns import (
     CAPTURE_KINDS,
     PROJECTION_KEYS,
@@ -161,6 +161,31 @@ def validate_manifest(manifest: Any, where: str) -> list[Pattern]:
     """
     if not isinstance(manifest, Mapping):
         raise _fail(where, "top level", "a JSON object", type(manifest).__name__)
+    _check_header(manifest, where)
+    patterns = manifest.get("patterns")
+    if not isinstance(patterns, list) or not patterns:
+        raise _fail(where, "patterns", "a non-empty list", patterns)
+    max_frames = files.limits().max_frames
+    if len(patterns) > max_frames:
+        raise _fail(where, "patterns", f"at most {max_frames} entries (RIG_MAX_FRAMES)", len(patterns))
+    models = [validate_pattern(where, i, pattern) for i, pattern in enumerate(patterns)]
+    frames = manifest.get("frames")
+    if not isinstance(frames, list):
+        raise _fail(where, "frames", "a list", frames)
+    owner = _check_frames(frames, len(patterns), where)
+    if manifest["complete"]:
+        missing = [i for i in range(len(patterns)) if i not in owner]
+        if missing:
+            listed = ", ".join(str(i) for i in missing[:8]) + (" ..." if len(missing) > 8 else "")
+            raise CaptureError(
+                f"{where}: frames: expected one frame for each of {len(patterns)} patterns, "
+                f"found {len(frames)}; no frame for pattern(s) {listed}"
+            )
+    return models
+
+
+def _check_header(manifest: Mapping[str, Any], where: str) -> None:
+    """The manifest's format, version, scene, completeness flag, camera and projector."""
     if manifest.get("format") != FORMAT:
         raise _fail(where, "format", repr(FORMAT), manifest.get("format"))
     if manifest.get("version") != VERSION:
@@ -174,16 +199,11 @@ def validate_manifest(manifest: Any, where: str) -> list[Pattern]:
     if not (depth <= 16 or depth == 32):
         raise _fail(where, "camera.bit_depth", "1..16 or 32", depth)
     _sized(where, manifest, "projector")
-    patterns = manifest.get("patterns")
-    if not isinstance(patterns, list) or not patterns:
-        raise _fail(where, "patterns", "a non-empty list", patterns)
-    max_frames = files.limits().max_frames
-    if len(patterns) > max_frames:
-        raise _fail(where, "patterns", f"at most {max_frames} entries (RIG_MAX_FRAMES)", len(patterns))
-    models = [validate_pattern(where, i, pattern) for i, pattern in enumerate(patterns)]
-    frames = manifest.get("frames")
-    if not isinstance(frames, list):
-        raise _fail(where, "frames", "a list", frames)
+
+
+def _check_frames(frames: list[Any], count: int, where: str) -> dict[int, int]:
+    """Each frame entry names one of ``count`` patterns (at most one frame each), a file used once and
+    its sha256; returns which frame index holds each pattern."""
     owner: dict[int, int] = {}
     names: dict[str, int] = {}
     for i, frame in enumerate(frames):
@@ -191,8 +211,8 @@ def validate_manifest(manifest: Any, where: str) -> list[Pattern]:
         if not isinstance(frame, Mapping):
             raise _fail(where, field, "an object", frame)
         pattern = _int(where, frame, "pattern", f"{field}.pattern", minimum=0)
-        if pattern >= len(patterns):
-            raise _fail(where, f"{field}.pattern", f"an index 0 .. {len(patterns) - 1} into patterns", pattern)
+        if pattern >= count:
+            raise _fail(where, f"{field}.pattern", f"an index 0 .. {count - 1} into patterns", pattern)
         if pattern in owner:
             raise CaptureError(
                 f"{where}: {field}: extra frame for pattern {pattern} (frames[{owner[pattern]}] already has it); "
@@ -206,15 +226,7 @@ def validate_manifest(manifest: Any, where: str) -> list[Pattern]:
         digest = frame.get("sha256")
         if not isinstance(digest, str) or len(digest) != 64 or not _HEX_DIGITS.issuperset(digest.lower()):
             raise _fail(where, f"{field}.sha256", "a 64-digit hex sha256 digest", digest)
-    if manifest["complete"]:
-        missing = [i for i in range(len(patterns)) if i not in owner]
-        if missing:
-            listed = ", ".join(str(i) for i in missing[:8]) + (" ..." if len(missing) > 8 else "")
-            raise CaptureError(
-                f"{where}: frames: expected one frame for each of {len(patterns)} patterns, "
-                f"found {len(frames)}; no frame for pattern(s) {listed}"
-            )
-    return models
+    return owner
 
 
 # --------------------------------------------------------------------------- reading
@@ -391,11 +403,8 @@ def read_capture(path: str | os.PathLike[str], salvage: bool = False, verify: bo
             f"{manifest_path}: complete: expected true, found false (interrupted or still being written; "
             "salvage it explicitly to read what is there)"
         )
-    if not salvage and INCOMPLETE_MARK in path.resolve().name:
-        raise CaptureError(
-            f"{path}: never committed (its name says the write did not finish, whatever its capture.json says); "
-            "salvage it explicitly to read what is there"
-        )
+    if not salvage:
+        files.check_committed_input(path, "capture", CaptureError, "salvage it explicitly to read what is there")
     if verify:
         capture.verify_checksums()
     return capture
@@ -435,14 +444,6 @@ def check_same_patterns(reference: Capture, capture: Capture) -> None:
 
 
 # --------------------------------------------------------------------------- writing
-
-
-def write_bytes_durable(path: Path, data: bytes) -> None:
-    """Write a file and fsync it."""
-    with open(path, "wb") as handle:
-        handle.write(data)
-        handle.flush()
-        os.fsync(handle.fileno())
 
 
 def encode_image(image: np.ndarray, bit_depth: int) -> tuple[bytes, str]:

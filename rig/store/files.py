@@ -42,8 +42,17 @@ from typing import Any
 
 import numpy as np
 
-INCOMPLETE_MARK = ".incomplete-"
-REPLACED_MARK = ".replaced-"
+from calibration.jsonfile import (
+    INCOMPLETE_MARK,
+    REPLACED_MARK,
+    RESERVED_MARKS,
+    naming_errors,
+    staging_mark,
+)
+from calibration.jsonfile import (
+    check_committed_input as check_committed_input,  # the store's rules for staging names
+)
+
 MAX_NAME_BYTES = 255  # one path component (Linux NAME_MAX)
 MAX_PATH_BYTES = 4096  # a whole path (Linux PATH_MAX)
 
@@ -401,6 +410,7 @@ def _either(kinds: tuple[str, ...]) -> str:
 def check_target(target: Path, kinds: tuple[str, ...], replace: bool, error: ErrorType, hint: str = "") -> None:
     """Refuse a target that exists unless replacing is asked and it is ``kinds`` (or an empty directory)."""
     check_path_text(str(target), str(target), error)
+    check_not_reserved(target, error)
     try:
         info = os.lstat(target)
     except FileNotFoundError:
@@ -420,6 +430,16 @@ def check_target(target: Path, kinds: tuple[str, ...], replace: bool, error: Err
         what = f"{_either((found,))} directory" if found else "not written by this program"
         raise error(
             f"{target}: exists and is {what}; only {_either(kinds)} directory is ever replaced (choose another output)"
+        )
+
+
+def check_not_reserved(target: Path, error: ErrorType) -> None:
+    """Refuse an output name holding a staging mark: every reader would take it for an unfinished write."""
+    mark = staging_mark(Path(target).name)
+    if mark is not None:
+        raise error(
+            f"{target}: names containing {' or '.join(map(repr, RESERVED_MARKS))} are reserved for unfinished "
+            f"writes (found {mark!r}); choose another name"
         )
 
 
@@ -637,8 +657,9 @@ def staged_directory(
     check_target(target, kinds, replace, error)
     staging = make_staging(target, error)
     try:
-        yield staging
-        commit_directory(staging, target, kinds, replace, error, kept=keep_on_error)
+        with naming_errors(target):  # a full disk while writing a file of the output names the output
+            yield staging
+            commit_directory(staging, target, kinds, replace, error, kept=keep_on_error)
     except BaseException:
         if not keep_on_error:
             shutil.rmtree(staging, ignore_errors=True)

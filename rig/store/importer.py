@@ -10,9 +10,9 @@ the patterns of a short description, the *pattern spec*: groups separated by ``;
     ``phase_rad``: a number, ``pi``, ``-pi``, ``pi/2``, ``90deg``), ``shifts`` (non-uniform or
     explicitly listed shifts, ``0/90/180/270deg`` or radians, ``/``-separated), ``axis`` (x|y).
 ``gray:bits=6``
-    Gray-code bit planes, most significant first (processing.patterns' convention);
-    ``inverted=after`` (all planes, then all inverted ones) or ``inverted=interleaved``
-    (plane, inverted plane, ...); ``axis``.
+    Gray-code bit planes, most significant first (processing.patterns' convention; ``order=lsb``
+    for planes stored least significant first); ``inverted=after`` (all planes, then all inverted
+    ones) or ``inverted=interleaved`` (plane, inverted plane, ...); ``axis``.
 ``flat:level=1`` (also ``white``, ``black``)
     Constant frames. ``skip:N`` ignores N files.
 
@@ -31,7 +31,7 @@ import hashlib
 import math
 import os
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -142,60 +142,90 @@ def parse_spec(spec: str) -> list[Pattern | None]:
         kind, _, body = group.partition(":")
         kind = kind.strip().lower()
         where = f"--patterns group {number} ({group!r})"
-        if kind in ("sin", "sinusoid"):
-            p = _params(body, where, ("f", "frequency", "steps", "phase", "shifts", "axis"))
-            freq_text = p.get("f", p.get("frequency"))
-            if freq_text is None or "steps" not in p and "shifts" not in p:
-                raise ConfigError(f"{where}: expected f=FRINGES and steps=N (or shifts=...)")
-            frequencies = [_positive_number(f, f"{where}: f") for f in freq_text.split("/")]
-            shifts = _angle_list(p["shifts"], f"{where}: shifts") if "shifts" in p else None
-            steps = _positive_int(p["steps"], f"{where}: steps") if "steps" in p else len(shifts or [])
-            if shifts is not None and len(shifts) != steps:
-                raise ConfigError(f"{where}: shifts: expected {steps} values (steps), found {len(shifts)}")
-            phase = parse_angle(p["phase"], f"{where}: phase") if "phase" in p else None
-            axis = _axis(p, where)
-            for frequency in frequencies:
-                for j in range(steps):
-                    out.append(
-                        Sinusoid(
-                            axis=axis,
-                            frequency=frequency,
-                            steps=steps,
-                            step=j,
-                            phase_rad=0.0 if phase is None else phase,
-                            shift_rad=None if shifts is None else shifts[j],
-                        )
-                    )
-        elif kind == "gray":
-            p = _params(body, where, ("bits", "inverted", "axis"))
-            if "bits" not in p:
-                raise ConfigError(f"{where}: expected bits=N")
-            bits = _positive_int(p["bits"], f"{where}: bits")
-            inverted = p.get("inverted", "none")
-            if inverted not in ("none", "after", "interleaved"):
-                raise ConfigError(f"{where}: inverted: expected none, after or interleaved, found {inverted!r}")
-            axis = _axis(p, where)
-            if inverted == "interleaved":  # each bit, then its inverse
-                order = [(b, inv) for b in range(bits) for inv in (False, True)]
-            else:  # every bit, then (after) every inverse
-                order = [(b, inv) for inv in ((False, True) if inverted == "after" else (False,)) for b in range(bits)]
-            out.extend(Gray(axis=axis, bit=b, bits=bits, inverted=inv) for b, inv in order)
-        elif kind in ("flat", "white", "black"):
-            p = _params(body, where, ("level",))
-            level = {"white": "1", "black": "0"}.get(kind, p.get("level"))
-            try:
-                value = float(level) if level is not None else float("nan")
-            except ValueError:
-                value = float("nan")
-            if not 0.0 <= value <= 1.0:
-                raise ConfigError(f"{where}: level: expected a number in 0..1, found {level!r}")
-            out.append(Flat(level=value))
-        elif kind == "skip":
-            p = _params(body, where, ("n",))
-            out.extend([None] * _positive_int(p.get("n", "1"), f"{where}: n"))
-        else:
+        parser = _GROUP_PARSERS.get(kind)
+        if parser is None:
             raise ConfigError(f"{where}: unknown kind {kind!r}; expected sin, gray, flat, white, black or skip")
+        out.extend(parser(kind, body, where))
     return out
+
+
+def _sinusoid_group(_kind: str, body: str, where: str) -> list[Pattern | None]:
+    """``sin:f=F[/F2...],steps=N[,phase=..,shifts=..,axis=..]``: N shifted sinusoids per frequency."""
+    p = _params(body, where, ("f", "frequency", "steps", "phase", "shifts", "axis"))
+    freq_text = p.get("f", p.get("frequency"))
+    if freq_text is None or "steps" not in p and "shifts" not in p:
+        raise ConfigError(f"{where}: expected f=FRINGES and steps=N (or shifts=...)")
+    frequencies = [_positive_number(f, f"{where}: f") for f in freq_text.split("/")]
+    shifts = _angle_list(p["shifts"], f"{where}: shifts") if "shifts" in p else None
+    steps = _positive_int(p["steps"], f"{where}: steps") if "steps" in p else len(shifts or [])
+    if shifts is not None and len(shifts) != steps:
+        raise ConfigError(f"{where}: shifts: expected {steps} values (steps), found {len(shifts)}")
+    phase = parse_angle(p["phase"], f"{where}: phase") if "phase" in p else None
+    axis = _axis(p, where)
+    return [
+        Sinusoid(
+            axis=axis,
+            frequency=frequency,
+            steps=steps,
+            step=j,
+            phase_rad=0.0 if phase is None else phase,
+            shift_rad=None if shifts is None else shifts[j],
+        )
+        for frequency in frequencies
+        for j in range(steps)
+    ]
+
+
+def _gray_group(_kind: str, body: str, where: str) -> list[Pattern | None]:
+    """``gray:bits=N[,order=msb|lsb,inverted=after|interleaved,axis=..]``: Gray-code bit planes,
+    most significant first unless ``order=lsb``."""
+    p = _params(body, where, ("bits", "order", "inverted", "axis"))
+    if "bits" not in p:
+        raise ConfigError(f"{where}: expected bits=N")
+    bits = _positive_int(p["bits"], f"{where}: bits")
+    inverted = p.get("inverted", "none")
+    if inverted not in ("none", "after", "interleaved"):
+        raise ConfigError(f"{where}: inverted: expected none, after or interleaved, found {inverted!r}")
+    significance = p.get("order", "msb")
+    if significance not in ("msb", "lsb"):
+        raise ConfigError(f"{where}: order: expected msb (most significant plane first) or lsb, found {significance!r}")
+    axis = _axis(p, where)
+    planes = range(bits) if significance == "msb" else range(bits - 1, -1, -1)  # bit 0: the most significant
+    if inverted == "interleaved":  # each bit, then its inverse
+        order = [(b, inv) for b in planes for inv in (False, True)]
+    else:  # every bit, then (after) every inverse
+        order = [(b, inv) for inv in ((False, True) if inverted == "after" else (False,)) for b in planes]
+    return [Gray(axis=axis, bit=b, bits=bits, inverted=inv) for b, inv in order]
+
+
+def _flat_group(kind: str, body: str, where: str) -> list[Pattern | None]:
+    """``flat:level=L`` (0..1), ``white``, ``black``: one constant frame."""
+    p = _params(body, where, ("level",))
+    level = {"white": "1", "black": "0"}.get(kind, p.get("level"))
+    try:
+        value = float(level) if level is not None else float("nan")
+    except ValueError:
+        value = float("nan")
+    if not 0.0 <= value <= 1.0:
+        raise ConfigError(f"{where}: level: expected a number in 0..1, found {level!r}")
+    return [Flat(level=value)]
+
+
+def _skip_group(_kind: str, body: str, where: str) -> list[Pattern | None]:
+    """``skip:N``: N files that are not patterns."""
+    p = _params(body, where, ("n",))
+    return [None] * _positive_int(p.get("n", "1"), f"{where}: n")
+
+
+_GROUP_PARSERS: dict[str, Callable[[str, str, str], list[Pattern | None]]] = {
+    "sin": _sinusoid_group,
+    "sinusoid": _sinusoid_group,
+    "gray": _gray_group,
+    "flat": _flat_group,
+    "white": _flat_group,
+    "black": _flat_group,
+    "skip": _skip_group,
+}
 
 
 def load_spec(text: str) -> tuple[list[Pattern | Mapping[str, Any] | None], list[str] | None]:
@@ -332,26 +362,7 @@ def import_folder(
     if options.downsample < 1:
         raise ConfigError(f"--downsample: expected an integer >= 1, found {options.downsample}")
     entries, listed = load_spec(spec)
-    if listed is not None:
-        # names relative to the folder, inside it once links are resolved (never /abs or ../..)
-        files = [
-            folder / files_layer.relative_path(name, f"{spec}", f"files[{i}]", ConfigError)
-            for i, name in enumerate(listed)
-        ]
-        for i, name in enumerate(listed):
-            files_layer.contained(folder, name, spec, f"files[{i}]", ConfigError)
-        missing = [f.name for f in files if not f.is_file()]
-        if missing:
-            raise ConfigError(f"{folder}: files listed in the pattern file are missing: {', '.join(missing[:5])}")
-    else:
-        files = list_images(folder, options.glob, options.order)
-    if not files and listed is None:
-        matching = f" matching {options.glob!r}" if options.glob else ""
-        subfolders = image_subfolders(folder, options.glob)
-        raise ConfigError(
-            f"{folder}: found no images{matching} ({', '.join(IMAGE_SUFFIXES)})"
-            + (f"; its subfolders hold images: {subfolders}; import one of them" if subfolders else "")
-        )
+    files = _source_files(folder, spec, listed, options)
     if len(files) != len(entries):
         kept = sum(e is not None for e in entries)
         raise ConfigError(
@@ -360,25 +371,8 @@ def import_folder(
             + (f" ({files[0].name} .. {files[-1].name})" if files else "")
         )
     pairs = [(pattern, path) for pattern, path in zip(entries, files) if pattern is not None]
-    patterns: list[Pattern] = []
-    for i, (entry, _) in enumerate(pairs):
-        pattern = validate_pattern(f"--patterns ({spec})", i, entry)
-        if isinstance(pattern, Sinusoid) and options.shift_sign == -1:
-            pattern = pattern.replace(shift_rad=-pattern.shift)  # the rig shifted the other way
-        patterns.append(pattern)
-    images: list[np.ndarray] = []
-    digests: list[str] = []
-    notes: set[str] = set()
-    for _, path in pairs:
-        image, image_notes, digest = read_source_image(path, options)
-        notes.update(image_notes)
-        if images and (image.shape != images[0].shape or image.dtype != images[0].dtype):
-            raise CaptureError(
-                f"{path}: expected {images[0].shape[1]}x{images[0].shape[0]} {images[0].dtype} like {pairs[0][1].name}, "
-                f"found {image.shape[1]}x{image.shape[0]} {image.dtype}"
-            )
-        images.append(image)
-        digests.append(digest)
+    patterns = _typed_patterns([entry for entry, _ in pairs], spec, options)
+    images, digests, notes = _read_images([path for _, path in pairs], options)
     height, width = images[0].shape
     projector = {
         "width": int(options.projector_width or width),
@@ -409,3 +403,59 @@ def import_folder(
         for i, ((_, path), image, digest) in enumerate(zip(pairs, images, digests)):
             writer.add_frame(i, image, source_file=path.name, source_sha256=digest)
     return read_capture(output)
+
+
+def _source_files(folder: Path, spec: str, listed: list[str] | None, options: ImportOptions) -> list[Path]:
+    """The files to import: those a pattern file lists (inside ``folder``), else the folder's images in order."""
+    if listed is not None:
+        # names relative to the folder, inside it once links are resolved (never /abs or ../..)
+        files = [
+            folder / files_layer.relative_path(name, f"{spec}", f"files[{i}]", ConfigError)
+            for i, name in enumerate(listed)
+        ]
+        for i, name in enumerate(listed):
+            files_layer.contained(folder, name, spec, f"files[{i}]", ConfigError)
+        missing = [f.name for f in files if not f.is_file()]
+        if missing:
+            raise ConfigError(f"{folder}: files listed in the pattern file are missing: {', '.join(missing[:5])}")
+        return files
+    files = list_images(folder, options.glob, options.order)
+    if not files:
+        matching = f" matching {options.glob!r}" if options.glob else ""
+        subfolders = image_subfolders(folder, options.glob)
+        raise ConfigError(
+            f"{folder}: found no images{matching} ({', '.join(IMAGE_SUFFIXES)})"
+            + (f"; its subfolders hold images: {subfolders}; import one of them" if subfolders else "")
+        )
+    return files
+
+
+def _typed_patterns(
+    entries: Sequence[Pattern | Mapping[str, Any] | None], spec: str, options: ImportOptions
+) -> list[Pattern]:
+    """Each entry validated as a pattern; with ``shift_sign=-1`` every sinusoid's shift negated."""
+    patterns: list[Pattern] = []
+    for i, entry in enumerate(entries):
+        pattern = validate_pattern(f"--patterns ({spec})", i, entry)
+        if isinstance(pattern, Sinusoid) and options.shift_sign == -1:
+            pattern = pattern.replace(shift_rad=-pattern.shift)  # the rig shifted the other way
+        patterns.append(pattern)
+    return patterns
+
+
+def _read_images(paths: Sequence[Path], options: ImportOptions) -> tuple[list[np.ndarray], list[str], set[str]]:
+    """The source images, converted (all of one size and type), their sha256 and the conversions made."""
+    images: list[np.ndarray] = []
+    digests: list[str] = []
+    notes: set[str] = set()
+    for path in paths:
+        image, image_notes, digest = read_source_image(path, options)
+        notes.update(image_notes)
+        if images and (image.shape != images[0].shape or image.dtype != images[0].dtype):
+            raise CaptureError(
+                f"{path}: expected {images[0].shape[1]}x{images[0].shape[0]} {images[0].dtype} like {paths[0].name}, "
+                f"found {image.shape[1]}x{image.shape[0]} {image.dtype}"
+            )
+        images.append(image)
+        digests.append(digest)
+    return images, digests, notes

@@ -178,7 +178,7 @@ MEDIA_TYPES: dict[str, str] = {
 
 def is_staging_name(name: str) -> bool:
     """Whether ``name`` is a staging or set-aside name of the file layer (never a result, never an input)."""
-    return files.INCOMPLETE_MARK in name or files.REPLACED_MARK in name
+    return files.staging_mark(name) is not None
 
 
 # The longest default name: its staging sibling (NAME.incomplete-XXXXXXXX) must fit in one file name too.

@@ -856,9 +856,13 @@ def write_report(out: Path, config: StudyConfig, rows: Rows, figures: list[tuple
         "about 40x cheaper, with L's orders not used near blocks where L bends sharply); the pooled orders, "
         "alone and with L's re-derived orders k = round((L - phi) / 2 pi) where L fits the wrapped phase, are "
         "ranked by order breaks (second differences beyond pi; no ground truth), with the earlier guarded "
-        "re-derivation as a fallback where pooling leaves more breaks than the measured phase; finally L, except "
+        "re-derivation as a fallback where pooling leaves more breaks than the measured phase; each blob of "
+        "pixels whose order the winner changes keeps the change only if it leaves fewer order breaks on the "
+        "blob's edges than the measured orders (as many either way: the measured orders stay and the blob is "
+        "reported unresolved); finally L, except "
         "where the result departs from it coherently beyond the noise (3 x 3 mean residual above 4 of its "
-        "standard deviations), where the measured phase with its corrected order is kept. Why: ch. 4 alone "
+        "standard deviations) or lies a fringe or more from the kept orders, where the measured phase with its "
+        "corrected order is kept. Why: ch. 4 alone "
         "removes order errors and noise on smooth scenes, but a low-rank model fails when errors are dense "
         "(isolated objects); one pixel's temporal order is unreliable there, a region's majority is not. The "
         "oracle column (true orders, measured wrapped phase) is the best any order-only correction (ch. 3, "
@@ -1099,6 +1103,16 @@ def write_report(out: Path, config: StudyConfig, rows: Rows, figures: list[tuple
             "smaller ones, and squared height errors weigh the large offset heavily. No vote over that "
             "evidence can settle such a region."
         )
+    add("")
+
+    add("## Beyond these cases: a drawn family")
+    add("")
+    add(
+        "The experiments above fix one rig and a few scenes. How the corrections generalise is measured on "
+        "a family of cases drawn from ranges (scene kind, size, frequency set, steps, SNR, bit depth, l0, "
+        "signed d0, field of view, seeds), developed on one set of seeds and reported on a held-out set: "
+        "[family.md](family.md), from `benchmarks/bench_auto_family.py` (rig.study.family)."
+    )
     add("")
 
     add("## Figures")

@@ -1,0 +1,108 @@
+"""Whether the neighbours support a change of fringe orders, blob by blob, and where nothing decides.
+
+A spatial correction proposes new orders for some pixels; temporal unwrapping measured others.
+Both are evidence, neither is the truth. Where the proposal differs from the measurement, the
+pixels that changed form blobs (8-connected). Each blob is judged on its own by the order breaks
+(4-neighbour steps beyond pi) on the edges that touch it, counted once with the proposed and
+once with the measured orders:
+
+- fewer breaks with the proposal: the change makes the blob agree with its surroundings (a wrong
+  temporal order, the case corrections are for) and is kept;
+- fewer with the measurement: the proposal broke a surface the measurement had right (a region
+  pooled across a real height step, a low-rank estimate off at an edge) and the measured orders
+  stay;
+- as many either way: the neighbours cannot tell the two apart (an object whose border steps by a
+  whole number of fringes, a region too small to carry evidence). The measured orders stay and
+  the blob is reported as unresolved rather than guessed.
+
+A change must earn its place, so a wrong proposal can never win by a tie.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+# The largest unresolved blobs listed in a report, by size.
+LISTED_REGIONS = 20
+
+
+def _label_blobs(mask: np.ndarray) -> tuple[int, np.ndarray]:
+    """8-connected blobs of ``mask``: (count including the background label 0, int32 labels)."""
+    import cv2  # lazily: only auto needs it
+
+    count, labels = cv2.connectedComponents(mask.view(np.uint8), connectivity=8, ltype=cv2.CV_32S)
+    return int(count), labels
+
+
+def breaks_per_blob(phase: np.ndarray, valid: np.ndarray, labels: np.ndarray, count: int) -> np.ndarray:
+    """Order breaks (|step| > pi between valid 4-neighbours) on the edges touching each blob of ``labels``.
+
+    An edge between two blobs counts for both; an edge inside a blob once. Label 0 (no blob) is
+    counted too and is meaningless.
+    """
+    out = np.zeros(count, dtype=np.int64)
+    for first, second in (
+        ((slice(None), slice(None, -1)), (slice(None), slice(1, None))),
+        ((slice(None, -1), slice(None)), (slice(1, None), slice(None))),
+    ):
+        with np.errstate(invalid="ignore"):
+            broken = valid[first] & valid[second] & (np.abs(phase[second] - phase[first]) > np.pi)
+        head, tail = labels[first][broken], labels[second][broken]
+        out += np.bincount(head, minlength=count)
+        out += np.bincount(tail[tail != head], minlength=count)
+    return out
+
+
+def keep_supported_changes(
+    proposed: np.ndarray, measured: np.ndarray, valid: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """``proposed`` where its neighbours support it better than ``measured``; the unresolved pixels.
+
+    Parameters
+    ----------
+    proposed, measured : (H, W) absolute phases with the same wrapped phase (orders differ)
+    valid : (H, W) bool
+
+    Returns
+    -------
+    phase : (H, W) ``proposed``, with each changed blob that does not have fewer order breaks
+        than with the measured orders set back to ``measured``
+    unresolved : (H, W) bool, the pixels of blobs with as many breaks either way
+    """
+    with np.errstate(invalid="ignore"):
+        changed = valid & (np.abs(proposed - measured) > np.pi)
+    if not changed.any():
+        return proposed, changed
+    count, labels = _label_blobs(changed)
+    with_proposal = breaks_per_blob(proposed, valid, labels, count)
+    with_measured = breaks_per_blob(measured, valid, labels, count)
+    back = with_measured <= with_proposal
+    tie = with_measured == with_proposal
+    back[0] = tie[0] = False
+    if not back.any():
+        return proposed, np.zeros(valid.shape, dtype=bool)
+    return np.where(back[labels], measured, proposed), tie[labels]
+
+
+def unresolved_summary(unresolved: np.ndarray, valid: np.ndarray) -> dict[str, Any]:
+    """Report entry of an unresolved mask: pixels, fraction of the valid pixels, and where.
+
+    ``regions`` lists the :data:`LISTED_REGIONS` largest blobs, largest first, as
+    ``[top, left, bottom, right, pixels]`` (rows and columns inclusive).
+    """
+    pixels = int(np.count_nonzero(unresolved))
+    total = max(int(np.count_nonzero(valid)), 1)
+    regions: list[list[int]] = []
+    if pixels:
+        import cv2
+
+        count, _labels, stats, _centres = cv2.connectedComponentsWithStats(
+            unresolved.view(np.uint8), connectivity=8, ltype=cv2.CV_32S
+        )
+        order = np.argsort(-stats[1:, cv2.CC_STAT_AREA], kind="stable")[:LISTED_REGIONS] + 1
+        for label in order:
+            left, top, width, height, area = (int(v) for v in stats[label])
+            regions.append([top, left, top + height - 1, left + width - 1, area])
+    return {"pixels": pixels, "fraction": round(pixels / total, 6), "regions": regions}

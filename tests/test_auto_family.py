@@ -1,0 +1,48 @@
+"""The drawn family of correction cases (rig.study.family): its draw, its split, and auto on a fixed subset.
+
+The whole family runs in ``benchmarks/bench_auto_family.py`` (results in docs/study/family.md);
+here three small develop cases keep auto honest against the oracle and against no correction.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rig.study import family
+
+# Small develop cases (400 - 560 px) of different kinds: isolated objects at 13/17 with 28 dB,
+# objects leaving the view under a hierarchical 1/8/64 set, caps under a heterodyne triple.
+SUBSET = (6, 12, 34)
+
+
+def test_draw_is_reproducible_within_the_ranges_and_the_sets_are_disjoint() -> None:
+    develop = family.draw_family(family.FAMILY_SIZE)
+    held_out = family.draw_family(family.FAMILY_SIZE, held_out=True)
+    assert develop == family.draw_family(family.FAMILY_SIZE)
+    assert not {c.seed for c in develop} & {c.seed for c in held_out}
+    for case in develop + held_out:
+        assert 400 <= case.width <= 1200 and 400 <= case.height <= 1200
+        assert 3 <= case.steps <= 12 and 12.0 <= case.snr_db <= 30.0 and case.bits in (8, 12, 16)
+        assert 700.0 <= case.l0_mm <= 1500.0 and 600.0 <= abs(case.d0_mm) <= 1500.0
+        assert (case.unwrap, case.frequencies) in family.FREQUENCY_SETS
+    drawn = develop + held_out
+    assert {c.scene for c in drawn} == set(family.SCENE_KINDS)
+    assert {c.d0_mm > 0 for c in drawn} == {True, False}
+
+
+def test_scene_heights_stay_below_the_drawn_limit() -> None:
+    for case in family.draw_family(8):
+        heights = family.scene_heights(case)
+        assert heights.shape == (case.height, case.width)
+        limit = (0.12 if case.scene == "shadows" else 0.06) * case.l0_mm
+        assert 0.0 <= heights.min() and heights.max() <= limit + 1e-9
+
+
+@pytest.mark.parametrize("index", SUBSET)
+def test_auto_within_twice_the_oracle_and_never_worse_than_none(index: int) -> None:
+    result = family.evaluate(family.draw_case(index), methods=("none", "auto"))
+    scores = result["nmse"]
+    assert np.isfinite(scores["oracle"]) and scores["oracle"] > 0
+    assert scores["auto"] <= 2.0 * scores["oracle"], result["description"]
+    assert scores["auto"] <= scores["none"] * (1 + 1e-9), result["description"]

@@ -1,0 +1,76 @@
+"""Changes of fringe orders judged blob by blob against the measured orders (processing.order_evidence)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from processing.order_evidence import breaks_per_blob, keep_supported_changes, unresolved_summary
+
+TWO_PI = 2.0 * np.pi
+
+
+def _ramp(shape: tuple[int, int] = (60, 80), period_px: float = 20.0) -> np.ndarray:
+    rows, cols = np.mgrid[0 : shape[0], 0 : shape[1]].astype(np.float64)
+    return TWO_PI * cols / period_px + 0.02 * rows
+
+
+def test_a_change_that_removes_breaks_is_kept() -> None:
+    truth = _ramp()
+    valid = np.ones(truth.shape, dtype=bool)
+    measured = truth.copy()
+    measured[10:13, 20:23] += TWO_PI  # a blob of wrong temporal orders
+    measured[40, 50] -= 2 * TWO_PI  # and a lone one
+    phase, unresolved = keep_supported_changes(truth, measured, valid)
+    np.testing.assert_array_equal(phase, truth)
+    assert not unresolved.any()
+
+
+def test_a_change_that_adds_breaks_is_undone() -> None:
+    """A proposal wrong by one fringe on a patch the measurement had right (pooling across a step)."""
+    truth = _ramp()
+    valid = np.ones(truth.shape, dtype=bool)
+    proposed = truth.copy()
+    proposed[30:40, 10:25] -= TWO_PI
+    proposed[5, 5] += TWO_PI  # beside a right change elsewhere
+    measured = truth.copy()
+    measured[5, 5] += TWO_PI
+    measured[50, 60] += TWO_PI  # a wrong order the proposal fixed
+    proposed[50, 60] = truth[50, 60]
+    phase, unresolved = keep_supported_changes(proposed, measured, valid)
+    np.testing.assert_array_equal(phase[30:40, 10:25], truth[30:40, 10:25])
+    assert phase[50, 60] == truth[50, 60]
+    assert not unresolved.any()
+
+
+def test_an_island_no_edge_can_judge_is_unresolved_and_kept_as_measured() -> None:
+    """A patch cut off by invalid pixels: one fringe up or down leaves no break either way."""
+    truth = _ramp()
+    valid = np.ones(truth.shape, dtype=bool)
+    valid[18:42, 28:52] = False
+    valid[22:38, 32:48] = True  # the island, a ring of invalid pixels around it
+    proposed = truth.copy()
+    proposed[22:38, 32:48] += TWO_PI
+    phase, unresolved = keep_supported_changes(proposed, truth, valid)
+    np.testing.assert_array_equal(phase, truth)
+    assert unresolved.sum() == 16 * 16 and unresolved[22:38, 32:48].all()
+    summary = unresolved_summary(unresolved, valid)
+    assert summary["pixels"] == 256
+    assert summary["fraction"] == round(256 / valid.sum(), 6)
+    assert summary["regions"] == [[22, 32, 37, 47, 256]]
+
+
+def test_breaks_count_each_edge_of_a_blob_once() -> None:
+    phase = np.zeros((5, 5))
+    phase[2, 2] = TWO_PI
+    labels = np.zeros((5, 5), dtype=np.int32)
+    labels[2, 2] = 1
+    counts = breaks_per_blob(phase, np.ones((5, 5), dtype=bool), labels, 2)
+    assert counts[1] == 4
+
+
+def test_nothing_changed_nothing_unresolved() -> None:
+    truth = _ramp()
+    valid = np.ones(truth.shape, dtype=bool)
+    phase, unresolved = keep_supported_changes(truth, truth.copy(), valid)
+    assert phase is truth and not unresolved.any()
+    assert unresolved_summary(unresolved, valid) == {"pixels": 0, "fraction": 0.0, "regions": []}
