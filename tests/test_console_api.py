@@ -540,3 +540,26 @@ def test_result_downloads_come_from_the_result_store(verifiable: TestClient) -> 
     assert console.get("/api/results/meshy/files/mesh.stl").content[80:84] != b""
     assert console.get("/api/results/meshy/files/points.e57").status_code == 404
     assert console.get("/api/results/meshy/files/calibration.json").status_code == 404
+
+
+def test_a_verify_prompt_on_a_real_rig_is_answered_from_the_page(console: TestClient) -> None:
+    """On a real rig each placement is a prompt in the page; /api/verify/answer lets the session go on."""
+    import threading
+
+    from rig.verify.guideline import Placement
+    from rig.verify.operator import PromptOperator
+
+    session = console.app.state.session
+    job = session.jobs.start("verify", "manual")
+    operator = PromptOperator(lambda text: session.ask_operator(job, text))
+    spot = Placement("ball-bar", 3, 7, "space diagonal", ())
+    worker = threading.Thread(target=operator.place, args=(spot,))
+    worker.start()
+    while session.prompt is None:
+        time.sleep(0.01)
+    prompt = console.get("/api/status").json()["prompt"]
+    assert prompt["job"] == job.id and prompt["text"].startswith("ball bar, position 3 of 7: space diagonal")
+    assert not prompt["text"].endswith("press Enter")
+    assert console.post("/api/verify/answer", json={}).json() == {"answered": True}
+    worker.join(timeout=10)
+    assert not worker.is_alive() and console.get("/api/status").json()["prompt"] is None
