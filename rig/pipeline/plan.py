@@ -64,19 +64,6 @@ TWO_PI = 2.0 * math.pi
 DEFAULT_CORRECTION = "auto"
 
 
-def __getattr__(name: str) -> Any:
-    """``UNWRAP_METHODS``: what ``--unwrap`` accepts, from :mod:`rig.pipeline.unwrapping`'s registry.
-
-    Loaded on first use: this module is imported to build the command line's parser, which must
-    not load numpy (``rig --help`` stays quick).
-    """
-    if name == "UNWRAP_METHODS":
-        from rig.pipeline.unwrapping import UNWRAP_METHODS
-
-        return UNWRAP_METHODS
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
 # --------------------------------------------------------------------------- options and pattern groups
 
 

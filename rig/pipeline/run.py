@@ -20,7 +20,6 @@ from rig.pipeline import reference_cache
 from rig.pipeline.corrections import REGISTRY as CORRECTIONS
 from rig.pipeline.fit import check_fit
 from rig.pipeline.plan import (
-    UNWRAP_METHODS,
     PatternGroups,
     ProcessOptions,
     group_patterns,
@@ -32,23 +31,24 @@ from rig.pipeline.stages import (
     SceneState,
     stage_height,
 )
+from rig.pipeline.unwrapping import UNWRAP_METHODS
 from rig.store import files
 from rig.store.capture import Capture, read_capture
 
 log = logging.getLogger(__name__)
 
-# Stages that may solve RPCA problems (denoising, the single shot's separation, the corrections):
-# they run with single-threaded BLAS (rig.blas); the others keep the process's BLAS threads.
-RPCA_STAGES = frozenset({"denoise", "unwrap", "correction"})
 
+def _solves_rpca(stage: str, options: ProcessOptions) -> bool:
+    """Whether ``stage`` may solve RPCA problems in this run, so runs with single-threaded BLAS (rig.blas).
 
-def _solves_rpca(stage: str, state: SceneState, options: ProcessOptions) -> bool:
-    """Whether ``stage`` may solve RPCA problems in this run (setting the BLAS limit costs a few ms)."""
+    Denoising and the corrections; the phase stage limits BLAS itself around the single shot's
+    separation. Setting the limit costs a few ms, so it is set only where a solve may run.
+    """
     if stage == "denoise":
         return options.denoise != "none"
     if stage == "correction":
         return options.correction != "none"
-    return stage in RPCA_STAGES and bool(state.groups.single_shot)  # unwrap: the single shot's separation
+    return False
 
 
 # --------------------------------------------------------------------------- the whole run
@@ -213,7 +213,7 @@ def _run_scene(state: SceneState, options: ProcessOptions, progress: Any, to_dis
     for name, stage in SCENE_STAGES:
         t0 = time.perf_counter()
         try:
-            with rpca_blas() if _solves_rpca(name, state, options) else contextlib.nullcontext():
+            with rpca_blas() if _solves_rpca(name, options) else contextlib.nullcontext():
                 stage(state, options)
         except ValueError as exc:  # the numeric kernels name the argument that does not fit
             raise ProcessingError(f"{state.capture.manifest_path}: {name}: {exc}") from None
