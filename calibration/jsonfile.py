@@ -105,14 +105,21 @@ def write_text_atomic(path: Path, text: str, durable: bool = True, newline: str 
     or the new file, never a partial one; ``durable`` fsyncs it first, ``newline`` is :func:`open`'s.
     An error names ``path``."""
     with naming_errors(path):
-        _write_text_atomic(path, text, durable, newline)
+        _write_atomic(path, "w", text, durable, encoding="utf-8", newline=newline)
 
 
-def _write_text_atomic(path: Path, text: str, durable: bool, newline: str | None) -> None:
+def write_bytes_atomic(path: Path, data: bytes, durable: bool = True) -> None:
+    """:func:`write_text_atomic` for bytes: readers see the old or the new file, never a partial one."""
+    with naming_errors(path):
+        _write_atomic(path, "wb", data, durable)
+
+
+def _write_atomic(path: Path, mode: str, data: str | bytes, durable: bool, **open_args: Any) -> None:
+    """Write ``data`` to a temporary sibling (fsynced when ``durable``) and rename it onto ``path``."""
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline=newline) as handle:
-            handle.write(text)
+        with os.fdopen(fd, mode, **open_args) as handle:
+            handle.write(data)
             if durable:
                 handle.flush()
                 os.fsync(handle.fileno())

@@ -10,7 +10,8 @@ Every change is made under one lock, and every reader gets copies taken under it
 thread can start and list jobs while worker threads update them. Each change is published as a
 message (``{"type": "job" | "progress", ...}``) through the ``publish`` callable given, from the
 thread that made it; progress messages carry the ``kind`` of what they measure: ``scan`` (frames
-stored), ``process`` (processing stages) or ``calibrate`` (calibration steps).
+stored), ``process`` (processing stages), ``calibrate`` (calibration steps) or ``verify``
+(verification frames, then one step per artefact position).
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ from rig.events import Cancelled, CancelToken, Event, EventSink
 log = logging.getLogger(__name__)
 
 JOBS_KEPT = 50  # finished jobs remembered for /api/jobs/ID (running ones are never dropped)
-PROGRESS_KINDS = ("scan", "process", "calibrate")
+PROGRESS_KINDS = ("scan", "process", "calibrate", "verify")
 FINAL_STATES = ("done", "failed", "cancelled")
 
 
@@ -44,7 +45,7 @@ class Job:
     client: str | None = None
     state: str = "running"  # running | done | failed | cancelled
     stage: str = ""
-    progress_kind: str = ""  # what done/total count: scan (frames), process (stages), calibrate (steps)
+    progress_kind: str = ""  # what done/total count: scan, process, calibrate, verify (:data:`PROGRESS_KINDS`)
     done: int = 0
     total: int = 0
     error: str | None = None
@@ -119,7 +120,7 @@ class Jobs:
         self._publish(message)
 
     def sink(self, job: Job, kind: str) -> EventSink:
-        """A Reporter sink recording ``kind`` progress (scan, process, calibrate) on ``job``."""
+        """A Reporter sink recording ``kind`` progress (scan, process, calibrate, verify) on ``job``."""
         if kind not in PROGRESS_KINDS:
             raise ValueError(f"progress kind: expected one of {', '.join(PROGRESS_KINDS)}, found {kind!r}")
 

@@ -2,7 +2,8 @@
 
 Status and devices, a scan to a result, the busy refusal of a second acquisition, Stop, live
 frames and exposure, containment of every name in the data directory, the access token and the
-same-origin rule, readable errors, and recovery after an injected device fault.
+same-origin rule, readable errors, and recovery after an injected device fault; the Verify view's
+routes (issue 23) and result downloads from the result store (issue 19).
 """
 
 from __future__ import annotations
@@ -439,3 +440,126 @@ def test_discarding_an_interrupted_scan_moves_it_to_the_trash(console: TestClien
     assert staged.name not in [row["name"] for row in console.get("/api/captures").json()["captures"]]
     assert console.post("/api/captures/cut/discard", json={}).status_code == 404  # only interrupted writes
     assert (staged.parent / "cut" / "capture.json").is_file()
+
+
+# --------------------------------------------------------------------------- Verify view (issue 23)
+
+VERIFY_ARTEFACTS = (
+    Path(__file__).parent.parent / "examples" / "artefacts.toml"
+).read_text() + "[volume]\ndepth_mm = 150.0\n"
+VERIFY_MPE = {"PF": 1.5, "PS": 0.4, "SD": 0.4, "F": 1.5}  # what the 320x240 camera meets (pixels of ~1.4 mm)
+REDUCED = {"spheres": 1, "ball_bars": 1, "planes": 1}
+
+
+def verification_messages(socket: Any) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """The verify progress events on ``socket`` up to the verification message, and that message."""
+    events: list[dict[str, Any]] = []
+    while True:
+        message = socket.receive()
+        if message.get("text"):
+            data = json.loads(message["text"])
+            if data["type"] == "progress" and data["kind"] == "verify":
+                events.append(data["event"])
+            elif data["type"] == "verification":
+                return events, data
+            elif data["type"] == "error":
+                raise AssertionError(data["message"])
+
+
+@pytest.fixture
+def verifiable(console: TestClient, console_rig_toml: Path, exact_calibration: Callable[..., Path]) -> TestClient:
+    """The console with an exact calibration ``vcal`` of its rig and DATA/artefacts.toml."""
+    root = console.app.state.session.data.root
+    exact_calibration(console_rig_toml, root / "calibrations" / "vcal")
+    (root / "artefacts.toml").write_text(VERIFY_ARTEFACTS)
+    return console
+
+
+def test_verify_runs_unattended_and_reports_the_four_quantities(verifiable: TestClient) -> None:
+    console = verifiable
+    body = {"name": "v1", "calibration": "vcal", **REDUCED, "mpe_mm": VERIFY_MPE}
+    with console.websocket_connect(WS + "/api/events") as socket:
+        socket.receive_text()
+        reply = console.post("/api/verify", json=body)
+        assert reply.status_code == 202 and reply.json()["job"]["kind"] == "verify"
+        assert console.post("/api/scan", json={}).status_code == 409  # one acquisition at a time
+        assert console.post("/api/verify", json={**body, "name": "v2"}).status_code == 409
+        events, done = verification_messages(socket)
+    assert wait_job(console, reply.json()["job"]["id"])["state"] == "done"
+    notes = [e["note"] for e in events if e["kind"] == "message"]
+    assert any(n.startswith("sphere, position 1 of 1") for n in notes), notes
+    assert done["pass"] is True and done["calibration"] == "vcal" and done["summary"].startswith("PASS")
+    stored = console.get("/api/verifications/v1").json()
+    report = stored["report"]
+    for q in ("PF", "PS", "SD", "F"):
+        assert report[q]["pass"] and report[q]["mpe_mm"] == VERIFY_MPE[q] and len(report[q]["positions"]) == 1
+    assert {"residuals-sphere.png", "residuals-ball-bar.png", "residuals-plane.png"} <= set(stored["figures"])
+    assert console.get("/api/verifications/v1/figures/residuals-sphere.png").content[:4] == b"\x89PNG"
+    assert console.get("/api/verifications/v1/figures/..%2Freport.json").status_code == 404
+    assert console.get("/api/verifications").json() == {"verifications": ["v1"]}
+    history = console.get("/api/calibrations/vcal/verifications").json()
+    assert len(history["entries"]) == 1
+    assert history["series"]["SD"][0]["worst_mm"] == report["SD"]["worst_mm"]
+
+
+def test_verify_requests_are_checked(verifiable: TestClient) -> None:
+    console = verifiable
+    assert console.post("/api/verify", json={"calibration": "vcal", "spheres": 0}).status_code == 400
+    assert console.post("/api/verify", json={"calibration": "vcal", "planes": 7}).status_code == 400
+    bad_mpe = console.post("/api/verify", json={"calibration": "vcal", "mpe_mm": {"PF": 1.0}})
+    assert bad_mpe.status_code == 400 and "mpe_mm" in bad_mpe.json()["error"]
+    assert console.post("/api/verify", json={"calibration": "nothing"}).status_code == 404
+    assert console.post("/api/verify", json={"calibration": "vcal", "colour": 1}).status_code == 422
+    # the access rule: a request that changes something needs a JSON body or the client header
+    assert console.post("/api/verify", content=b"calibration=vcal").status_code in (403, 415)
+    assert console.post("/api/verify/answer", json={}).status_code == 400  # nothing asked
+    assert console.get("/api/verifications").json() == {"verifications": []}
+
+
+def test_result_downloads_come_from_the_result_store(verifiable: TestClient) -> None:
+    """Every file a result holds is listed with its media type and can be downloaded, the new
+    formats (mesh.ply, mesh.stl, mesh.obj) included; a name outside the store's is refused."""
+    from rig import api
+    from rig.store.results import MEDIA_TYPES
+
+    console = verifiable
+    data = console.app.state.session.data
+    job = console.post("/api/scan", json={"name": "meshy", "process": False}).json()["job"]
+    wait_job(console, job["id"])
+    result = api.process(data.path("captures", "meshy"), calibration=data.path("calibrations", "vcal"))
+    api.write_outputs(result, data.path("results", "meshy"), formats=["ply", "mesh-ply", "stl", "obj"])
+    listed = console.get("/api/results/meshy/files").json()["files"]
+    names = [f["name"] for f in listed]
+    assert {"points.ply", "mesh.ply", "mesh.stl", "mesh.obj", "height.npy", "report.json"} <= set(names)
+    assert "points.e57" not in names  # not written: not offered
+    for f in listed:
+        assert f["media_type"] == MEDIA_TYPES[f["name"]]
+        reply = console.get(f"/api/results/meshy/files/{f['name']}")
+        assert reply.status_code == 200 and reply.headers["content-type"].startswith(f["media_type"])
+        assert reply.content == (data.path("results", "meshy") / f["name"]).read_bytes()
+    assert console.get("/api/results/meshy/files/mesh.stl").content[80:84] != b""
+    assert console.get("/api/results/meshy/files/points.e57").status_code == 404
+    assert console.get("/api/results/meshy/files/calibration.json").status_code == 404
+
+
+def test_a_verify_prompt_on_a_real_rig_is_answered_from_the_page(console: TestClient) -> None:
+    """On a real rig each placement is a prompt in the page; /api/verify/answer lets the session go on."""
+    import threading
+
+    from rig.verify.guideline import Placement
+    from rig.verify.operator import PromptOperator
+
+    session = console.app.state.session
+    job = session.jobs.start("verify", "manual")
+    operator = PromptOperator(lambda text: session.ask_operator(job, text))
+    spot = Placement("ball-bar", 3, 7, "space diagonal", ())
+    worker = threading.Thread(target=operator.place, args=(spot,))
+    worker.start()
+    while session.prompt is None:
+        time.sleep(0.01)
+    prompt = console.get("/api/status").json()["prompt"]
+    assert prompt["job"] == job.id and prompt["text"].startswith("ball bar, position 3 of 7: space diagonal")
+    assert not prompt["text"].endswith("press Enter")
+    assert console.post("/api/verify/answer", json={}).json() == {"answered": True}
+    worker.join(timeout=10)
+    assert not worker.is_alive() and console.get("/api/status").json()["prompt"] is None

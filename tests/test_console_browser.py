@@ -4,7 +4,10 @@ The page loads and live frames update; lowering the exposure lowers the mean of 
 frame; the alignment grid darkens the frame to its lines; Scan produces a 3-D view and a height
 read-out that matches the simulated object's known height; a concurrent scan is refused with a
 message; an injected device fault appears in the page and the next scan works; a capture is
-reprocessed and compared; the calibration wizard runs to its last step, marked done.
+reprocessed and compared; the calibration wizard runs to its last step, marked done; a result's
+downloads are the files the result store lists (the mesh formats included); the Verify view runs
+a reduced verification on the simulated rig to PASS with its four figures, and its history shows
+both runs (issue 23).
 
 One server, one browser and one page serve the whole module (the tests follow one operator's
 session, as the README's screenshots do); each test starts from the live view with no error
@@ -54,6 +57,10 @@ scene = "hemisphere"
 """
 
 
+VOLUME = "[volume]\ndepth_mm = 150.0\n"  # the exact calibration records no plane heights
+VERIFY_MPE = "1.5,0.4,0.4,1.5"  # PF,PS,SD,F in mm: what the 320x240 camera (pixels of ~1.4 mm) meets
+
+
 @pytest.fixture(scope="module")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]]:
     """The console on the simulated rig (640x480, with an exact calibration) served by uvicorn."""
@@ -69,6 +76,8 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]]
     cal = root / "data" / "calibrations" / "cal"
     scan(config, cal / "reference", scene="reference")
     write_calibration(cal, exact_calibration(geometry_from_config(config)))
+    examples = Path(__file__).resolve().parent.parent / "examples"
+    (root / "data" / "artefacts.toml").write_text((examples / "artefacts.toml").read_text() + VOLUME)
     app = create_app(config, root / "data", fault_injection=True)
     with served(app) as port:
         yield {"url": f"http://127.0.0.1:{port}/", "config": config, "app": app}
@@ -220,6 +229,65 @@ def test_scan_shows_3d_and_a_height_readout_matching_the_object(page: Any, serve
     page.get_by_test_id("downloads").locator("a").first.wait_for(timeout=30_000)
     assert page.get_by_test_id("downloads").locator("a", has_text="points.ply").count() == 1
     shot(page, "result")
+
+
+def test_downloads_list_what_the_result_holds(page: Any, server: dict[str, Any]) -> None:
+    """A result written with the mesh formats offers them for download, as the result store lists them."""
+    from rig import api
+
+    data = server["app"].state.session.data
+    capture = data.names("captures")[0]
+    result = api.process(data.path("captures", capture), calibration=data.path("calibrations", "cal"))
+    api.write_outputs(result, data.path("results", "meshes"), formats=["ply", "mesh-ply", "stl", "obj"])
+    page.locator("nav button[data-view=captures]").click()
+    page.locator(f"#capture-list li[data-name='{capture}']").click()
+    page.locator("#capture-results li", has_text="meshes").click()
+    page.wait_for_function(
+        "(document.querySelector('[data-testid=downloads]').dataset.files || '').includes('mesh.stl')"
+    )
+    links = page.get_by_test_id("downloads").locator("a")
+    names = links.evaluate_all("items => items.map((a) => a.textContent)")
+    assert {"points.ply", "mesh.ply", "mesh.stl", "mesh.obj", "height.npy", "report.json"} <= set(names)
+    assert "points.e57" not in names
+    stl = page.request.get(server["url"].rstrip("/") + links.filter(has_text="mesh.stl").get_attribute("href"))
+    assert stl.ok and stl.body() == (data.path("results", "meshes") / "mesh.stl").read_bytes()
+
+
+def verify_once(page: Any, name: str) -> None:
+    """Run a reduced verification of the exact calibration ``cal`` from the Verify view, to its report."""
+    page.get_by_test_id("verify-calibration").select_option("cal")
+    page.get_by_test_id("verify-name").fill(name)
+    for field in ("verify-spheres", "verify-bars", "verify-planes"):
+        page.get_by_test_id(field).fill("1")
+    page.get_by_test_id("verify-mpe").fill(VERIFY_MPE)
+    page.get_by_test_id("verify-start").click()
+    page.wait_for_function(
+        f"document.querySelector('[data-testid=verify-verdict]').dataset.name === '{name}'", timeout=120_000
+    )
+
+
+def test_verify_view_runs_unattended_and_plots_the_history(page: Any) -> None:
+    wait_frames(page, 1)
+    page.locator("nav button[data-view=verify]").click()
+    page.wait_for_function("document.querySelector('[data-testid=verify-calibration]').options.length > 0")
+    verify_once(page, "check-1")
+    verdict = page.get_by_test_id("verify-verdict")
+    assert verdict.get_attribute("data-verdict") == "PASS", page.get_by_test_id("verify-report").inner_text()
+    rows = page.get_by_test_id("verify-quantities").locator("tr[data-quantity]")
+    assert rows.evaluate_all("rs => rs.map((r) => [r.dataset.quantity, r.className])") == [
+        [q, "pass"] for q in ("PF", "PS", "SD", "F")
+    ]
+    figures = page.get_by_test_id("verify-figures").locator("img")
+    assert figures.count() == 4  # where the artefacts stood, and the residual map on each of the three
+    page.wait_for_function(
+        "[...document.querySelectorAll('[data-testid=verify-figure]')].every((i) => i.complete && i.naturalWidth > 0)"
+    )
+    assert page.get_by_test_id("verify-positions").locator("tr").count() == 1 + 4  # one position per quantity
+    verify_once(page, "check-2")
+    page.wait_for_function("document.querySelector('[data-testid=verify-history]').dataset.runs === '2'")
+    points = page.eval_on_selector("[data-testid=verify-history]", "p => p.data.map((t) => t.x.length)")
+    assert points == [2, 2, 2, 2]
+    shot(page, "verify")
 
 
 def test_a_concurrent_scan_is_refused_with_a_message(page: Any, browser: Any, server: dict[str, Any]) -> None:

@@ -236,7 +236,7 @@ def test_a_removed_data_directory_is_made_again(console: TestClient) -> None:
     root = Path(console.get("/api/status").json()["data"]["root"])
     shutil.rmtree(root)
     assert console.get("/api/status").status_code == 200
-    assert sorted(p.name for p in root.iterdir()) == ["calibrations", "captures", "results"]
+    assert sorted(p.name for p in root.iterdir()) == ["calibrations", "captures", "results", "verifications"]
     shutil.rmtree(root)
     reply = console.post("/api/scan", json={"name": "after", "process": False})
     assert reply.status_code == 202

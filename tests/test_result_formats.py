@@ -112,5 +112,13 @@ def test_default_formats_write_what_rig_process_always_wrote(capsys, small_captu
         == 0
     )
     assert sorted(p.name for p in out.iterdir()) == sorted(
-        [results.REPORT, results.PHASE, results.MASK, results.PREVIEW, results.HEIGHT, results.POINTS]
+        [
+            results.REPORT,
+            results.PHASE,
+            results.MASK,
+            results.PREVIEW,
+            results.HEIGHT,
+            results.UNCERTAINTY,
+            results.POINTS,
+        ]
     )

@@ -113,6 +113,14 @@ def add_processing_options(parser: argparse.ArgumentParser) -> None:
         help="valid pixels need fringe modulation B >= RATIO x background and x the image's 99th percentile of B (default 0.2)",
     )
     parser.add_argument(
+        "--max-sigma",
+        type=float,
+        default=defaults.max_sigma,
+        metavar="MM",
+        help="keep pixels whose predicted height sigma is at most MM (the noise decides validity; the modulation "
+        "ratio drops to a 0.02 floor unless --min-modulation is lower); default: the modulation ratio alone",
+    )
+    parser.add_argument(
         "--min-island",
         type=float,
         default=defaults.min_island_fraction,
@@ -169,6 +177,7 @@ def processing_options(args: argparse.Namespace) -> ProcessOptions:
         denoise=args.denoise,
         correction=args.correction,
         min_modulation_ratio=args.min_modulation,
+        max_sigma=args.max_sigma,
         axis=args.axis,
         params=parse_params(args.param),
         undistort=args.undistort,

@@ -6,6 +6,8 @@ Layout::
     DATA/captures/NAME/        captures (capture.json + frames), scans made from the console
     DATA/results/NAME/         outputs of processing a capture (report.json, height.npy, points.ply, ...)
     DATA/calibrations/NAME/    calibrations (calibration.json); scans are processed with the chosen one
+    DATA/verifications/NAME/   verifications of a calibration (report.json, report.md, figures/, captures/)
+    DATA/artefacts.toml        the calibrated artefacts a verification uses (default: the simulated rig's)
     DATA/trash/KIND/NAME/      what the operator discarded (an interrupted scan), kept until removed by hand
 
 Staging folders the file layer writes into (``NAME.incomplete-XXXX``, ``NAME.replaced-XXXX``) are
@@ -25,9 +27,14 @@ from rig.errors import RigError
 from rig.store.files import INCOMPLETE_MARK, REPLACED_MARK
 from rig.store.results import REPORT, default_name, is_staging_name
 
-KINDS = ("captures", "results", "calibrations")
+KINDS = ("captures", "results", "calibrations", "verifications")
 TRASH = "trash"  # what the operator discarded, moved rather than deleted
-MARKERS = {"captures": "capture.json", "results": REPORT, "calibrations": "calibration.json"}
+MARKERS = {
+    "captures": "capture.json",
+    "results": REPORT,
+    "calibrations": "calibration.json",
+    "verifications": REPORT,
+}
 NAME_LENGTH = 100
 NAME = re.compile(rf"[A-Za-z0-9][A-Za-z0-9._-]{{0,{NAME_LENGTH - 1}}}")
 
@@ -44,7 +51,7 @@ class DataDir:
         self.ensure()
 
     def ensure(self) -> None:
-        """Make DATA and its three folders if any is missing; a RigError naming the folder if it cannot."""
+        """Make DATA and its folders if any is missing; a RigError naming the folder if it cannot."""
         for kind in KINDS:
             folder = self.root / kind
             if folder.is_dir():

@@ -9,10 +9,10 @@
   (:func:`rig.api.process`) runs on a processing thread so the rig is free again at once:
   first without fringe-order correction (on screen within a second), then with the requested
   options, whose outputs are written (:func:`rig.api.write_outputs`, which never replaces a result).
-- Scans, processing runs and calibrations are jobs of :class:`rig.jobs.Jobs` (thread-safe; every
+- Scans, processing runs, calibrations and verifications are jobs of :class:`rig.jobs.Jobs` (thread-safe; every
   job ends done, failed or cancelled, whatever it raises). Their progress comes from the services'
   :class:`rig.events.Reporter` events, published through ``publish`` with the kind of what they
-  count (scan: frames, process: stages, calibrate: steps); each job has a
+  count (scan: frames, process: stages, calibrate: steps, verify: frames then positions); each job has a
   :class:`rig.events.CancelToken` (Stop button, shutdown). A page that closes stops nothing: jobs
   belong to the console, and a page that opens is shown the running ones and the newest result.
 - A device error closes the rig and is published as a readable message; the next request (or live
@@ -518,17 +518,41 @@ class ConsoleSession:
         the simulated rig sets up each step by itself.
         """
         plan = self._calibration_plan(heights_mm, board_views, model, gamma_levels)
+        return self._start_session(
+            "calibrate", "calibrations", name, "cal", client, lambda job, path: self._calibrate(job, path, plan)
+        )
+
+    def _start_session(
+        self,
+        kind: str,
+        folder: str,
+        name: str | None,
+        prefix: str,
+        client: str | None,
+        work: Callable[[Job, Path], None],
+    ) -> Job:
+        """Take the acquisition slot and queue ``work(job, DATA/folder/NAME)`` (a calibration, a verification)."""
         self._acquisition_slot()
         try:
-            name, path = self._new_entry("calibrations", name, "cal")
-            job = self._job("calibrate", name, client)
+            name, path = self._new_entry(folder, name, prefix)
+            job = self._job(kind, name, client)
             self.current = job
-            self._tasks.put((lambda: self._calibrate(job, path, plan), Future()))
+            self._tasks.put((lambda: work(job, path), Future()))
         except BaseException:
             self._acquiring.release()
             raise
         self._publish_status()
         return job
+
+    def _run_session(self, job: Job, run: Callable[[], None]) -> None:
+        """Worker thread: a session that opens the rig itself, so the console's rig is closed meanwhile."""
+        self._close_rig()
+        try:
+            self.jobs.run(job, run)
+        finally:
+            self.current = None
+            self._acquiring.release()
+        self._publish_status()
 
     def _calibration_plan(self, heights_mm: tuple[float, ...], board_views: int, model: str, gamma_levels: int) -> Any:
         """The checked plan of a console calibration (bounds first: nothing sized by a request before)."""
@@ -581,13 +605,46 @@ class ConsoleSession:
             self.calibration = job.name
             self.jobs.update(job, result=job.name)
 
-        self._close_rig()
-        try:
-            self.jobs.run(job, run)
-        finally:
-            self.current = None
-            self._acquiring.release()
-        self._publish_status()
+        self._run_session(job, run)
+
+    def verify(
+        self,
+        name: str | None = None,
+        calibration: str | None = None,
+        counts: tuple[int, int, int] = (10, 7, 6),
+        mpe_mm: dict[str, float] | None = None,
+        client: str | None = None,
+    ) -> Job:
+        """Verify ``calibration`` (default: the chosen one) into DATA/verifications/NAME, as ``rig verify``.
+
+        ``counts``: sphere, ball-bar and plane positions (fewer than the guideline's: a reduced
+        procedure, said so in the report). An acquisition (:class:`Busy` if one runs); on a real rig
+        each placement is a ``prompt`` message answered with :meth:`answer`.
+        """
+        from rig.console.verification import VERIFICATIONS, verification_plan
+
+        chosen = calibration or self.calibration
+        if not chosen:
+            raise RigError("calibration: none chosen; choose a calibration (or make one) to verify")
+        calibration_dir = self.data.existing("calibrations", chosen)
+        plan = verification_plan(self.config, *counts, mpe_mm=mpe_mm)
+        return self._start_session(
+            "verify", VERIFICATIONS, name, f"verify-{chosen}", client,
+            lambda job, path: self._verify(job, path, calibration_dir, chosen, plan),
+        )  # fmt: skip
+
+    def _verify(self, job: Job, path: Path, calibration_dir: Path, calibration: str, plan: Any) -> None:
+        from rig.console.verification import run_verification
+
+        def run() -> None:
+            reporter = Reporter(f"verify {job.name}", sink=self.jobs.sink(job, "verify"), cancel=job.token)
+            ask = lambda text: self.ask_operator(job, text)  # noqa: E731 - a real rig's prompt, in the page
+            report = run_verification(self.config, self.data, plan, calibration_dir, path, reporter, ask)
+            message = {"type": "verification", "name": job.name, "job": job.id, "calibration": calibration}
+            self.publish({**message, "pass": report["pass"], "summary": report["summary"]}, None)
+            self.jobs.update(job, result=job.name)
+
+        self._run_session(job, run)
 
     def operator(self, job: Job) -> Any:
         """The calibration operator of a real rig: each prompt goes to the page and waits for Done."""
@@ -596,7 +653,7 @@ class ConsoleSession:
         return ConsoleOperator(ask=lambda text: self.ask_operator(job, text))
 
     def ask_operator(self, job: Job, text: str) -> str:
-        """Show a calibration prompt in the page and wait for :meth:`answer` (Stop cancels the job).
+        """Show an operator prompt (calibration, verification) in the page and wait for :meth:`answer`; Stop cancels.
 
         The terminal's "press Enter" becomes the page's Done button. The prompt waiting is part of
         the status, so a page opened meanwhile shows it too.
@@ -615,10 +672,10 @@ class ConsoleSession:
         return ""
 
     def answer(self) -> None:
-        """The operator has done what the current calibration prompt asked."""
+        """The operator has done what the current prompt (calibration, verification) asked."""
         answer = self._answer
         if answer is None or answer.is_set() or self.prompt is None:
-            raise RigError("no calibration prompt is waiting for an answer")
+            raise RigError("no operator prompt is waiting for an answer")
         answer.set()
 
     def _restore_projector(self) -> None:

@@ -20,6 +20,7 @@ from processing.angles import wrap_to_pi
 from processing.correction.method import CorrectionMethod
 from processing.correction.registry import CORRECTIONS as NUMERIC_CORRECTIONS
 from processing.correction.sampling import fringe_step_rad, undersampled_for_spatial_methods
+from processing.geometry.uncertainty import correction_gain
 from rig.errors import ProcessingError
 from rig.pipeline.gamma_correction import GAMMA_TABLE
 from rig.pipeline.plan import ProcessOptions, accepted_params
@@ -87,6 +88,10 @@ def stage_correction(state: SceneState, options: ProcessOptions) -> None:
         raise CalibrationError(f"{where}: {exc}") from None
     except ValueError as exc:
         raise ProcessingError(f"--correction {method.name}: {exc}") from None
+    if state.phase_sigma is not None:  # the noise the correction took away no longer counts
+        gain = correction_gain(unwrapped.phase, phase, state.phase_sigma, unwrapped.valid)
+        state.phase_sigma = state.phase_sigma * np.float32(gain)
+        state.info["correction_noise_gain"] = round(gain, 4)
     unwrapped.phase = phase
     if unwrapped.orders is not None:
         orders = np.rint((np.nan_to_num(phase) - np.mod(wrapped, 2.0 * np.pi)) / (2.0 * np.pi))

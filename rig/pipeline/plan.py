@@ -64,20 +64,10 @@ TWO_PI = 2.0 * math.pi
 DEFAULT_CORRECTION = "auto"
 
 
-def __getattr__(name: str) -> Any:
-    """``UNWRAP_METHODS``: what ``--unwrap`` accepts, from :mod:`rig.pipeline.unwrapping`'s registry.
-
-    Loaded on first use: this module is imported to build the command line's parser, which must
-    not load numpy (``rig --help`` stays quick).
-    """
-    if name == "UNWRAP_METHODS":
-        from rig.pipeline.unwrapping import UNWRAP_METHODS
-
-        return UNWRAP_METHODS
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
 # --------------------------------------------------------------------------- options and pattern groups
+
+
+NOISE_RULE_RATIO = 0.02  # with --max-sigma: only pixels under 2 % of the brightest's modulation are shadow outright
 
 
 @dataclass
@@ -92,10 +82,19 @@ class ProcessOptions:
     denoise: str = "none"
     correction: str = DEFAULT_CORRECTION
     min_modulation_ratio: float = 0.2
+    # keep pixels whose predicted height sigma (mm) is under this; None: the modulation ratio alone decides
+    max_sigma: float | None = None
     # valid regions smaller than this fraction of the largest are dropped (processing.correction.islands); 0 keeps all
     min_island_fraction: float = 0.005
     axis: str | None = None
     params: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def modulation_ratio(self) -> float:
+        """The modulation mask's ratio: ``min_modulation_ratio``, or a floor when the noise decides (``max_sigma``)."""
+        if self.max_sigma is None:
+            return self.min_modulation_ratio
+        return min(self.min_modulation_ratio, NOISE_RULE_RATIO)
 
 
 def accepted_params(function: Callable[..., Any], params: Mapping[str, Any]) -> dict[str, Any]:

@@ -3,7 +3,7 @@
 A reference-plane or polynomial calibration subtracts the reference capture's absolute phase from
 each object's. That capture never changes between scans, yet every ``rig process`` used to load,
 phase, unwrap and correct it again (1.5 s of 3.5 s with the ``auto`` correction). Its processed
-phase and mask are kept:
+phase, mask and predicted phase sigma are kept:
 
 - in memory, for a long-running process (the console, a batch worker): the last few entries;
 - on disk, in the user's cache directory (``$RIG_CACHE_DIR``, else ``$XDG_CACHE_HOME/fpp-rig``,
@@ -42,7 +42,7 @@ from rig.pipeline.state import SceneState, UnwrappedPhase
 
 log = logging.getLogger(__name__)
 
-FORMAT = 1
+FORMAT = 2  # 2: entries keep the predicted phase sigma (processing.geometry.uncertainty)
 DIRECTORY = "reference"  # below the cache root
 PREFIX = "reference-"
 CACHE_ENV = "RIG_CACHE_DIR"
@@ -131,6 +131,7 @@ def load(state: SceneState, key: str) -> bool:
         absolute=meta["absolute"],
         orders=None,
     )
+    state.phase_sigma = entry.get("phase_sigma")  # the predicted phase noise, as when processed
     state.info = dict(meta["info"])  # the same report as when processed; timings say "cached"
     state.notes = list(meta["notes"])
     state.timings = {"cached": 0.0}
@@ -146,11 +147,14 @@ def _read(path: Path, key: str) -> dict[str, Any] | None:
             if meta.get("key") != key:
                 return None
             entry = {"phase": data["phase"], "valid": data["valid"], "meta": meta}
+            if "phase_sigma" in data.files:
+                entry["phase_sigma"] = data["phase_sigma"]
     except (OSError, ValueError, KeyError) as exc:
         log.info("reference cache %s unreadable (%s); processing the reference again", path, exc)
         return None
-    for name in ("phase", "valid"):
-        entry[name].flags.writeable = False  # shared between runs: nobody may change it in place
+    for name in ("phase", "valid", "phase_sigma"):
+        if name in entry:
+            entry[name].flags.writeable = False  # shared between runs: nobody may change it in place
     return entry
 
 
@@ -171,21 +175,24 @@ def store(state: SceneState, key: str, to_disk: bool = True) -> None:
     except TypeError:
         return  # a stage recorded something JSON cannot hold: do not cache what we could not reload
     phase, valid = np.array(unwrapped.phase), np.array(unwrapped.valid, dtype=bool)
-    for arr in (phase, valid):
+    arrays = {"phase": phase, "valid": valid}
+    if state.phase_sigma is not None:
+        arrays["phase_sigma"] = np.array(state.phase_sigma, dtype=np.float32)
+    for arr in arrays.values():
         arr.flags.writeable = False
-    _remember(key, {"phase": phase, "valid": valid, "meta": json.loads(meta_text)})
+    _remember(key, {**arrays, "meta": json.loads(meta_text)})
     if not to_disk:
         return
     directory = _cache_dir()
     if directory is None:
         return
     try:
-        _write_atomic(directory, key, phase, valid, meta_text)
+        _write_atomic(directory, key, arrays, meta_text)
     except OSError as exc:
         log.info("reference cache not written in %s (%s); the reference is processed again next time", directory, exc)
 
 
-def _write_atomic(directory: Path, key: str, phase: np.ndarray, valid: np.ndarray, meta_text: str) -> None:
+def _write_atomic(directory: Path, key: str, arrays: dict[str, Any], meta_text: str) -> None:
     """Write the entry of ``key`` (temporary file, fsync, rename); drop stale entries and the oldest beyond a few."""
     if directory.is_symlink():
         raise OSError(f"{directory} is a link; not writing through it")
@@ -194,7 +201,7 @@ def _write_atomic(directory: Path, key: str, phase: np.ndarray, valid: np.ndarra
     handle, temp = tempfile.mkstemp(prefix=".tmp-", suffix=".npz", dir=directory)
     try:
         with os.fdopen(handle, "wb") as out:
-            np.savez(out, phase=phase, valid=valid, meta=np.array(meta_text))
+            np.savez(out, meta=np.array(meta_text), **arrays)
             out.flush()
             os.fsync(out.fileno())
         os.replace(temp, directory / name)

@@ -16,6 +16,7 @@ import numpy as np
 
 from calibration import models as calibration_models
 from calibration.store import Calibration
+from processing.geometry.uncertainty import summary as uncertainty_summary
 from rig import __version__
 from rig.pipeline.plan import ProcessOptions
 from rig.pipeline.state import SceneState
@@ -35,6 +36,11 @@ class ProcessResult:
     timings: dict[str, Any]
     notes: list[str]
     point_grid: np.ndarray | None = None  # (H, W, 3) mm from the stereo model; else built on demand
+    uncertainty: np.ndarray | None = None  # predicted height sigma (mm) per pixel, NaN where invalid
+
+    def valid_sigma(self) -> np.ndarray | None:
+        """Predicted sigma (N,) in mm of the valid pixels, in the order of :meth:`valid_points`; None if unknown."""
+        return None if self.uncertainty is None else self.uncertainty[self.mask]
 
     @property
     def points(self) -> np.ndarray | None:
@@ -79,7 +85,8 @@ def _methods(result: ProcessResult) -> dict[str, Any]:
         "fringe_axis": obj.axis,
         "frequencies": obj.wrapped.frequencies,
         "phase_frequency": obj.unwrapped.frequency,
-        "min_modulation_ratio": options.min_modulation_ratio,
+        "min_modulation_ratio": options.modulation_ratio,
+        "max_sigma_mm": options.max_sigma,
         "min_island_fraction": options.min_island_fraction,
         "params": options.params,
     }
@@ -97,8 +104,10 @@ def _height_figures(result: ProcessResult) -> dict[str, Any]:
     )
     # stereo without a plane gives distance from the camera, not height above a plane
     depth = result.calibration.model == "stereo" and result.calibration.to_dict().get("plane") is None
+    sigma = None if result.uncertainty is None else uncertainty_summary(result.uncertainty, result.mask)
     return {
         "height_mm": height_mm,
+        "uncertainty_mm": sigma,
         "points": int(np.count_nonzero(result.mask)),
         "calibration_model": result.calibration.model,
         "quantity": "depth" if depth else "height",

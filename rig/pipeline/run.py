@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import functools
 import logging
 import time
 from collections import OrderedDict
@@ -14,13 +15,13 @@ import numpy as np
 from calibration import models as calibration_models
 from calibration.errors import CalibrationError
 from calibration.store import Calibration, read_calibration
+from processing.geometry.uncertainty import height_sigma
 from rig.blas import rpca_blas
 from rig.errors import ProcessingError
 from rig.pipeline import reference_cache
 from rig.pipeline.corrections import REGISTRY as CORRECTIONS
 from rig.pipeline.fit import check_fit
 from rig.pipeline.plan import (
-    UNWRAP_METHODS,
     PatternGroups,
     ProcessOptions,
     group_patterns,
@@ -32,23 +33,24 @@ from rig.pipeline.stages import (
     SceneState,
     stage_height,
 )
+from rig.pipeline.unwrapping import UNWRAP_METHODS
 from rig.store import files
 from rig.store.capture import Capture, read_capture
 
 log = logging.getLogger(__name__)
 
-# Stages that may solve RPCA problems (denoising, the single shot's separation, the corrections):
-# they run with single-threaded BLAS (rig.blas); the others keep the process's BLAS threads.
-RPCA_STAGES = frozenset({"denoise", "unwrap", "correction"})
 
+def _solves_rpca(stage: str, options: ProcessOptions) -> bool:
+    """Whether ``stage`` may solve RPCA problems in this run, so runs with single-threaded BLAS (rig.blas).
 
-def _solves_rpca(stage: str, state: SceneState, options: ProcessOptions) -> bool:
-    """Whether ``stage`` may solve RPCA problems in this run (setting the BLAS limit costs a few ms)."""
+    Denoising and the corrections; the phase stage limits BLAS itself around the single shot's
+    separation. Setting the limit costs a few ms, so it is set only where a solve may run.
+    """
     if stage == "denoise":
         return options.denoise != "none"
     if stage == "correction":
         return options.correction != "none"
-    return stage in RPCA_STAGES and bool(state.groups.single_shot)  # unwrap: the single shot's separation
+    return False
 
 
 # --------------------------------------------------------------------------- the whole run
@@ -167,6 +169,7 @@ def process(
     notes: list[str] = []
     t0 = time.perf_counter()
     height, points, mask = _height(obj, ref, calibration, notes)
+    uncertainty = _uncertainty(obj, ref, calibration, mask, height, options.max_sigma, notes)
     height_time = time.perf_counter() - t0
     if progress is not None:
         progress.step("height")
@@ -177,7 +180,18 @@ def process(
         timings["reference"] = dict(ref.timings)
     timings["height"] = height_time
     timings["total"] = time.perf_counter() - started
-    return ProcessResult(obj, ref, calibration, options, height, mask, timings, notes + obj.notes, point_grid=points)
+    return ProcessResult(
+        obj,
+        ref,
+        calibration,
+        options,
+        height,
+        mask,
+        timings,
+        notes + obj.notes,
+        point_grid=points,
+        uncertainty=uncertainty,
+    )
 
 
 def _scenes(
@@ -213,7 +227,7 @@ def _run_scene(state: SceneState, options: ProcessOptions, progress: Any, to_dis
     for name, stage in SCENE_STAGES:
         t0 = time.perf_counter()
         try:
-            with rpca_blas() if _solves_rpca(name, state, options) else contextlib.nullcontext():
+            with rpca_blas() if _solves_rpca(name, options) else contextlib.nullcontext():
                 stage(state, options)
         except ValueError as exc:  # the numeric kernels name the argument that does not fit
             raise ProcessingError(f"{state.capture.manifest_path}: {name}: {exc}") from None
@@ -252,6 +266,60 @@ def _height(
     mask &= finite
     np.copyto(height32, np.float32(np.nan), where=~mask)  # our own float32 array: masked in place
     return height32, points, mask
+
+
+def _uncertainty(
+    obj: SceneState,
+    ref: SceneState | None,
+    calibration: Calibration | None,
+    mask: np.ndarray,
+    height: np.ndarray | None,
+    max_sigma: float | None,
+    notes: list[str],
+) -> np.ndarray | None:
+    """Predicted height sigma (mm, NaN where invalid); with ``max_sigma`` the pixels above it leave the mask.
+
+    The object's and the reference's phase sigma add in quadrature (docs/uncertainty.md).
+    """
+    if calibration is None or height is None or obj.phase_sigma is None:
+        if max_sigma is not None:
+            notes.append("--max-sigma: no uncertainty predicted for this capture (phase-shifted fringes needed)")
+        return None
+    assert obj.unwrapped is not None
+    sigma_phi = obj.phase_sigma
+    if ref is not None and ref.phase_sigma is not None:
+        sigma_phi = np.sqrt(np.square(sigma_phi) + np.square(ref.phase_sigma))
+    height_of = functools.partial(_model_height, obj, ref, calibration)
+    # the heights themselves as the forward difference's base, unless points move (stereo) or the
+    # heights carry the spatial unwrapping's per-region offsets that the model call does not
+    forward = calibration.model != "stereo" and obj.unwrapped.absolute and (ref is None or _absolute(ref))
+    uncertainty = height_sigma(height_of, obj.unwrapped.phase, sigma_phi, base=height if forward else None)
+    if max_sigma is not None:
+        above = mask & ~(uncertainty <= np.float32(max_sigma))
+        obj.info["above_max_sigma"] = int(np.count_nonzero(above))
+        mask &= ~above
+        np.copyto(height, np.float32(np.nan), where=above)
+    np.copyto(uncertainty, np.float32(np.nan), where=~mask)
+    return uncertainty
+
+
+def _absolute(state: SceneState) -> bool:
+    return state.unwrapped is not None and state.unwrapped.absolute
+
+
+def _model_height(obj: SceneState, ref: SceneState | None, calibration: Calibration, phase: np.ndarray) -> np.ndarray:
+    """The calibration model's heights (or stereo points) of an object phase, for the uncertainty's derivative."""
+    assert obj.unwrapped is not None
+    ref_phase = None if ref is None or ref.unwrapped is None else ref.unwrapped.phase
+    width, height = obj.capture.projector_size
+    extent = float(width if obj.axis == "x" else height)
+    if calibration.model == "stereo":
+        return calibration_models.points_from_phase(
+            calibration, phase, ref_phase, obj.unwrapped.frequency, axis=obj.axis, extent=extent
+        )[0]
+    return calibration_models.height_from_phase(
+        calibration, phase, ref_phase, obj.unwrapped.frequency, axis=obj.axis, extent=extent
+    )
 
 
 def _drop_islands(
@@ -302,5 +370,7 @@ def _check_options(options: ProcessOptions) -> None:
         raise ProcessingError(f"--min-island: expected a fraction in [0, 1], found {options.min_island_fraction}")
     if options.axis not in (None, "x", "y"):
         raise ProcessingError(f"--axis: expected x or y, found {options.axis!r}")
+    if options.max_sigma is not None and not options.max_sigma > 0:
+        raise ProcessingError(f"--max-sigma: expected a positive number of mm, found {options.max_sigma}")
     if not 0 < options.min_modulation_ratio <= 1:
         raise ProcessingError(f"--min-modulation: expected a fraction in (0, 1], found {options.min_modulation_ratio}")

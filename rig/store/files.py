@@ -52,6 +52,9 @@ from calibration.jsonfile import (
 from calibration.jsonfile import (
     check_committed_input as check_committed_input,  # the store's rules for staging names
 )
+from calibration.jsonfile import (
+    write_bytes_atomic as write_bytes_atomic,  # report files rewritten in place (verification)
+)
 
 MAX_NAME_BYTES = 255  # one path component (Linux NAME_MAX)
 MAX_PATH_BYTES = 4096  # a whole path (Linux PATH_MAX)

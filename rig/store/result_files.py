@@ -30,10 +30,15 @@ def write_array(path: Path, array: np.ndarray) -> Path:
 
 
 def write_ply(
-    path: Path, points: np.ndarray, colors: np.ndarray | None = None, faces: np.ndarray | None = None
+    path: Path,
+    points: np.ndarray,
+    colors: np.ndarray | None = None,
+    faces: np.ndarray | None = None,
+    sigma: np.ndarray | None = None,
 ) -> Path:
     """Binary little-endian PLY of (N, 3) points in mm (float32), optional (N, 3) uint8 colours (or (N,)
-    grey) and optional (M, 3) triangles (vertex indices, each face a ``uchar`` count and three ``int``)."""
+    grey), an optional (N,) float ``sigma`` (predicted standard deviation, mm) and optional (M, 3)
+    triangles (vertex indices, each face a ``uchar`` count and three ``int``)."""
     pts = np.asarray(points).reshape(-1, 3)
     fields: list[tuple[str, str, tuple[int, ...]]] = [("xyz", "<f4", (3,))]
     kind = "point cloud" if faces is None else "triangle mesh"
@@ -49,6 +54,9 @@ def write_ply(
     if colors is not None:
         fields.append(("rgb", "u1", (3,)))
         header += ["property uchar red", "property uchar green", "property uchar blue"]
+    if sigma is not None:
+        fields.append(("sigma", "<f4", ()))
+        header.append("property float sigma")
     if faces is not None:
         header += [f"element face {len(faces)}", "property list uchar int vertex_indices"]
     header.append("end_header")
@@ -57,6 +65,8 @@ def write_ply(
     if colors is not None:
         rgb = np.asarray(colors, dtype=np.uint8)
         record["rgb"] = rgb[:, None] if rgb.ndim == 1 else rgb.reshape(-1, 3)
+    if sigma is not None:
+        record["sigma"] = np.asarray(sigma, dtype=np.float32).ravel()
     with open(path, "wb") as handle:
         handle.write(("\n".join(header) + "\n").encode("ascii"))
         handle.write(record.tobytes())
@@ -75,7 +85,7 @@ def parse_ply_points(data: bytes) -> np.ndarray:
     header = data[:end].decode("ascii").splitlines()
     count = next(int(line.split()[2]) for line in header if line.startswith("element vertex"))
     names = [line.split()[2] for line in header if line.startswith("property") and "list" not in line]
-    fields = [(name, "<f4" if name in "xyz" else "u1") for name in names]
+    fields = [(name, "<f4" if name in ("x", "y", "z", "sigma") else "u1") for name in names]
     record = np.frombuffer(data[end:], dtype=fields, count=count)
     return np.column_stack([record["x"], record["y"], record["z"]]).astype(np.float64)
 

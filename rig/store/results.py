@@ -9,6 +9,7 @@ A result directory (``rig process -o OUT``, the console's ``DATA/results/NAME``,
     preview.png    colour-mapped height, or phase without a calibration (always)
     wrapped.npy    wrapped phase per frequency (without a calibration)
     height.npy     heights in mm, NaN where invalid (with a calibration)
+    uncertainty.npy  predicted height sigma in mm, NaN where invalid (with a calibration, phase shifting)
     + one file per output format asked for (with a calibration): :data:`FORMATS`
 
 A new output format is one :class:`OutputFormat` entry in :data:`FORMATS` (copy ``"stl"``): its
@@ -51,6 +52,7 @@ MASK = "mask.npy"
 PREVIEW = "preview.png"
 WRAPPED = "wrapped.npy"
 HEIGHT = "height.npy"
+UNCERTAINTY = "uncertainty.npy"
 POINTS = "points.ply"
 MESH_PLY = "mesh.ply"
 MESH_STL = "mesh.stl"
@@ -102,7 +104,9 @@ def _mesh(result: ProcessResult) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _write_points_ply(result: ProcessResult, path: Path) -> None:
-    encode.write_ply(path, result.valid_points(), encode.texture(result.object, result.mask))
+    encode.write_ply(
+        path, result.valid_points(), encode.texture(result.object, result.mask), sigma=result.valid_sigma()
+    )
 
 
 def _write_mesh_ply(result: ProcessResult, path: Path) -> None:
@@ -164,6 +168,7 @@ def parse_formats(text: str | Iterable[str] | None) -> tuple[str, ...]:
 MEDIA_TYPES: dict[str, str] = {
     POINTS: OCTET,
     HEIGHT: OCTET,
+    UNCERTAINTY: OCTET,
     PHASE: OCTET,
     MASK: OCTET,
     WRAPPED: OCTET,
@@ -272,6 +277,8 @@ def _write_files(
             written["wrapped"] = encode.write_array(out / WRAPPED, encode.wrapped_maps(obj)).name
         else:
             written["height"] = encode.write_array(out / HEIGHT, np.asarray(result.height, dtype=np.float32)).name
+            if result.uncertainty is not None:
+                written["uncertainty"] = encode.write_array(out / UNCERTAINTY, result.uncertainty).name
             for name in formats:
                 entry = FORMATS[name]
                 entry.write(result, out / entry.file)

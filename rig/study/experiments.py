@@ -606,7 +606,7 @@ def write_csv(rows: Rows, path: Path) -> None:
             writer.writerow(r)
 
 
-def _figures(
+def _figures(  # noqa: C901  the study report: one section after another
     out: Path,
     config: StudyConfig,
     rows: Rows,
@@ -762,7 +762,7 @@ def _figures(
     return written
 
 
-def write_report(out: Path, config: StudyConfig, rows: Rows, figures: list[tuple[str, str]], seconds: float) -> Path:
+def write_report(out: Path, config: StudyConfig, rows: Rows, figures: list[tuple[str, str]], seconds: float) -> Path:  # noqa: C901  the study report: one section after another
     """The Markdown report with the thesis' numbers beside ours."""
     g = RIG
     lines: list[str] = []

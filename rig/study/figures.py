@@ -115,7 +115,7 @@ def _format(value: float, log: bool) -> str:
     return f"{value:g}"
 
 
-def line_plot(
+def line_plot(  # noqa: C901  the study report: one section after another
     series: Sequence[tuple[str, Sequence[float] | np.ndarray, Sequence[float] | np.ndarray]],
     title: str,
     xlabel: str,

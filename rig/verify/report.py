@@ -11,8 +11,6 @@ from __future__ import annotations
 import datetime as _dt
 import hashlib
 import json
-import os
-import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -89,20 +87,6 @@ def build_report(
     return report
 
 
-def _atomic_bytes(path: Path, data: bytes) -> None:
-    """Write ``path`` whole or not at all (temporary sibling, fsync, rename)."""
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            handle.write(data)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def _png(image: Any) -> bytes:
     ok, encoded = cv2.imencode(".png", image)
     if not ok:
@@ -124,9 +108,11 @@ def _write_outputs(
             figures[f"residuals-{kind}.png"] = image
     figures["history.png"] = history_plot([*history, history_entry(report)])
     for name, image in figures.items():
-        _atomic_bytes(directory / FIGURES_DIR / name, _png(image))
-    _atomic_bytes(directory / MARKDOWN_FILE, markdown(report, history, sorted(figures)).encode("utf-8"))
-    _atomic_bytes(directory / REPORT_FILE, (json.dumps(report, indent=2) + "\n").encode("utf-8"))  # last: the marker
+        files.write_bytes_atomic(directory / FIGURES_DIR / name, _png(image))
+    files.write_bytes_atomic(directory / MARKDOWN_FILE, markdown(report, history, sorted(figures)).encode("utf-8"))
+    files.write_bytes_atomic(
+        directory / REPORT_FILE, (json.dumps(report, indent=2) + "\n").encode("utf-8")
+    )  # last: the marker
 
 
 def _complete(

@@ -8,6 +8,13 @@ from __future__ import annotations
 
 from fastapi import APIRouter
 
-from rig.console.routes import calibration, data, live, scan, settings
+from rig.console.routes import calibration, data, live, scan, settings, verify
 
-ROUTERS: tuple[APIRouter, ...] = (live.router, settings.router, scan.router, data.router, calibration.router)
+ROUTERS: tuple[APIRouter, ...] = (
+    live.router,
+    settings.router,
+    scan.router,
+    data.router,
+    calibration.router,
+    verify.router,
+)

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import json
-from pathlib import Path
 from typing import Any
 
 from fastapi import APIRouter, Depends, HTTPException, Query
@@ -14,16 +12,10 @@ from rig.console.datadir import DataDir
 from rig.console.results import ResultView, colour_bar_png, difference, difference_png
 from rig.console.routes._common import session_of
 from rig.console.session import ConsoleSession
-from rig.errors import RigError
+from rig.errors import OutputError, RigError
+from rig.store import results as store
 
 router = APIRouter(prefix="/api", tags=["data"])
-DOWNLOADS = {
-    "points.ply": "application/octet-stream",
-    "height.npy": "application/octet-stream",
-    "phase.npy": "application/octet-stream",
-    "report.json": "application/json",
-    "preview.png": "image/png",
-}
 
 
 @router.get("/captures")
@@ -103,16 +95,24 @@ async def result_surface(name: str, session: ConsoleSession = Depends(session_of
     return await run_in_threadpool(view.surface)
 
 
-@router.get("/results/{name}/files/{file}", summary="download a result file (points.ply, height.npy, ...)")
+@router.get("/results/{name}/files", summary="the files a result holds (what the page offers for download)")
+async def result_files(name: str, session: ConsoleSession = Depends(session_of)) -> dict[str, Any]:
+    path = session.data.existing("results", name)
+    return {"files": (await run_in_threadpool(store.describe_result, path))["files"]}
+
+
+@router.get("/results/{name}/files/{file}", summary="download a result file (points.ply, mesh.stl, height.npy, ...)")
 async def result_file(name: str, file: str, session: ConsoleSession = Depends(session_of)) -> FileResponse:
-    if file not in DOWNLOADS:
-        raise HTTPException(404, f"file: expected one of {', '.join(DOWNLOADS)}, found {file!r}")
-    path = session.data.existing("results", name) / file
-    if not path.is_file():  # also refuses a FIFO or a device
-        raise HTTPException(404, f"results/{name}/{file}: not written (yet)")
-    if path.is_symlink() or not path.resolve().is_relative_to(session.data.root):
+    if file not in store.MEDIA_TYPES:
+        raise HTTPException(404, f"file: expected one of {', '.join(store.MEDIA_TYPES)}, found {file!r}")
+    directory = session.data.existing("results", name)
+    if (directory / file).is_symlink() or not (directory / file).resolve().is_relative_to(session.data.root):
         raise HTTPException(404, f"results/{name}/{file}: not a file of this result (a link)")
-    return FileResponse(path, media_type=DOWNLOADS[file], filename=f"{name}-{file}")
+    try:
+        path = store.result_file(directory, file)  # also refuses a FIFO or a device
+    except OutputError:
+        raise HTTPException(404, f"results/{name}/{file}: not written (yet)") from None
+    return FileResponse(path, media_type=store.MEDIA_TYPES[file], filename=f"{name}-{file}")
 
 
 @router.get("/compare", summary="difference of two results (a - b)")
@@ -140,8 +140,7 @@ async def colour_bar() -> Response:
 def result_capture(data: DataDir, name: str) -> str | None:
     """Name of the capture a result was made from (from its report), if it lies in DATA/captures."""
     try:
-        report = json.loads((data.path("results", name) / "report.json").read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+        report = store.read_report(data.path("results", name))
+    except (RigError, OSError):
         return None
-    capture = Path(str(report.get("capture") or ""))
-    return capture.name if capture.parent.name == "captures" else None
+    return store.capture_name(report)

@@ -6,24 +6,34 @@ import { bindCaptures, captureJob, captureProgress, loadOptions } from "./captur
 import { buildWizard, calibrationJob, calibrationProgress, calibrationResult, showPrompt } from "./calibration.js";
 import { bindSettings, drawFrame, showSettings } from "./live.js";
 import { bindResult, openResult, resultSaved, showResult } from "./result.js";
+import { buildVerify, showVerifyPrompt, verificationDone, verifyJob, verifyProgress } from "./verify.js";
 
 const ownJobs = new Set(); // jobs this page started: only their results move it to the Result view
 let lastFrameAt = null;
+
+// One operator prompt at a time: a verification's shows in the Verify view, a calibration's in the wizard.
+function showPrompts(prompt) {
+  const verifying = Boolean(prompt) && String(prompt.job).startsWith("verify-");
+  showPrompt(verifying ? null : prompt);
+  showVerifyPrompt(verifying ? prompt : null);
+}
 
 function updateStatus(status) {
   $("state").textContent = status.state + (status.device_error ? " (device error)" : "");
   $("state").className = "state " + status.state;
   $("scan-button").disabled = status.busy;
   $("cal-start").disabled = status.busy;
+  $("verify-start").disabled = status.busy;
   $("stop-button").disabled = !(status.busy || status.jobs.length);
   showSettings(status);
-  showPrompt(status.prompt);
+  showPrompts(status.prompt);
 }
 
 // What a page that just opened shows: the running acquisition's progress and the newest result.
 function catchUp(status) {
   for (const job of status.jobs) {
     if (job.kind === "calibrate") calibrationJob(job);
+    else if (job.kind === "verify") verifyJob(job);
     else if (job.progress_kind === "scan") scanProgress({ job: job.id, event: { task: job.stage, kind: "step", done: job.done, total: job.total, note: "" } });
     else noteJob(job);
   }
@@ -50,19 +60,20 @@ function processProgress(message) {
 function noteJob(job) {
   const text = { cancelled: `${job.kind} ${job.name} stopped: ${job.error}`, failed: `${job.kind} ${job.name} failed`,
     done: `${job.kind} ${job.name} done` }[job.state] || (job.stage === "processing" ? `processing ${job.name}` : null);
-  if (text && job.kind !== "calibrate") $("scan-note").textContent = text;
+  if (text && job.kind !== "calibrate" && job.kind !== "verify") $("scan-note").textContent = text;
 }
 
 const handlers = {
   hello: (m) => { updateStatus(m.status); catchUp(m.status); },
   status: (m) => updateStatus(m.status),
-  progress: (m) => ({ scan: scanProgress, process: processProgress, calibrate: calibrationProgress })[m.kind]?.(m),
-  job: (m) => { noteJob(m.job); calibrationJob(m.job); captureJob(m.job); },
+  progress: (m) => ({ scan: scanProgress, process: processProgress, calibrate: calibrationProgress, verify: verifyProgress })[m.kind]?.(m),
+  job: (m) => { noteJob(m.job); calibrationJob(m.job); captureJob(m.job); verifyJob(m.job); },
   result: (m) => showResult(m.name, m.summary, m.final, { focus: ownJobs.has(m.job), lastFrameAt: ownJobs.has(m.job) ? lastFrameAt : null }),
   saved: (m) => resultSaved(m.name),
   error: (m) => showError(m.message),
-  prompt: (m) => showPrompt(m),
+  prompt: (m) => showPrompts(m),
   calibration: (m) => calibrationResult(m),
+  verification: (m) => verificationDone(m).catch(() => {}),
 };
 
 function connect() {
@@ -98,6 +109,7 @@ function bind() {
   bindResult();
   bindCaptures();
   buildWizard();
+  buildVerify();
 }
 
 dropTokenFromAddress();

@@ -85,19 +85,24 @@ function renderFigures(s) {
   for (const [k, v] of rows) { const r = table.insertRow(); r.insertCell().textContent = k; r.insertCell().textContent = v; }
 }
 
-function renderDownloads() {
+// The files the saved result holds, as the server lists them (its result store names every file once).
+async function renderDownloads() {
   const s = shown.summary;
   const box = $("downloads");
   box.replaceChildren();
   if (!s) return;
   if (!s.saved) { box.textContent = "writing files ..."; return; }
-  const files = s.shows === "height" ? ["points.ply", "height.npy", "report.json", "preview.png"] : ["phase.npy", "report.json", "preview.png"];
-  for (const f of files) {
+  const name = s.name;
+  const reply = await api("GET", `/api/results/${encodeURIComponent(name)}/files`).catch(() => null);
+  if (!reply || shown.summary?.name !== name) return;
+  box.replaceChildren(...reply.files.map((f) => {
     const a = document.createElement("a");
-    a.href = `/api/results/${encodeURIComponent(s.name)}/files/${f}`;
-    a.textContent = f; a.download = `${s.name}-${f}`; a.dataset.testid = "download-" + f;
-    box.appendChild(a);
-  }
+    a.href = `/api/results/${encodeURIComponent(name)}/files/${encodeURIComponent(f.name)}`;
+    a.textContent = f.name; a.download = `${name}-${f.name}`; a.dataset.testid = "download-" + f.name;
+    a.type = f.media_type;
+    return a;
+  }));
+  box.dataset.files = reply.files.map((f) => f.name).join(",");
 }
 
 export function bindResult() {
