@@ -5,6 +5,8 @@ Main entry points:
 - :func:`phase_to_height` and :func:`height_to_phase` (``height``): the reference-plane phase-height
   model; :func:`point_cloud` turns a height map into points.
 - :func:`grid_triangles` (``mesh``): triangles over the valid pixel grid, without bridging jumps.
+- :func:`phase_sigma` and :func:`height_sigma` (``uncertainty``): each pixel's predicted standard
+  deviation from the capture's own noise (:func:`noise_sigma`).
 """
 
 from __future__ import annotations
@@ -16,14 +18,26 @@ from processing._lazy import lazy_exports
 if TYPE_CHECKING:
     from processing.geometry.height import height_to_phase, phase_to_height, point_cloud
     from processing.geometry.mesh import grid_triangles
+    from processing.geometry.uncertainty import height_sigma, noise_sigma, phase_sigma
 
 _SOURCES = {
     "height_to_phase": "height",
     "phase_to_height": "height",
     "point_cloud": "height",
     "grid_triangles": "mesh",
+    "height_sigma": "uncertainty",
+    "noise_sigma": "uncertainty",
+    "phase_sigma": "uncertainty",
 }
 
-__all__ = ["grid_triangles", "height_to_phase", "phase_to_height", "point_cloud"]
+__all__ = [
+    "grid_triangles",
+    "height_sigma",
+    "height_to_phase",
+    "noise_sigma",
+    "phase_sigma",
+    "phase_to_height",
+    "point_cloud",
+]
 
 __getattr__, __dir__ = lazy_exports(__name__, _SOURCES)
