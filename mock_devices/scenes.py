@@ -87,6 +87,60 @@ def gauge_block(height: int, width: int, pixel_mm: float, height_mm: float = 25.
     return np.where(inside, float(height_mm), 0.0)
 
 
+# The "shiny-and-dark" scene: a polished dome, a matte dome and a black rubber block on a matte plane.
+SHINY_DOME = {"centre_mm": (-120.0, 10.0), "radius_mm": 110.0, "height_mm": 35.0, "albedo": 0.45}
+MATTE_DOME = {"centre_mm": (20.0, -40.0), "radius_mm": 90.0, "height_mm": 30.0, "albedo": 0.8}
+DARK_BLOCK = {"centre_mm": (120.0, 30.0), "half_size_mm": (45.0, 60.0), "height_mm": 20.0, "albedo": 0.02}
+PLANE_ALBEDO = 0.7
+SPECULAR_PEAK = 6.0  # the specular lobe's reflectance on the polished dome, where its normal halves L and V
+SPECULAR_EXPONENT = 60.0  # Blinn-Phong exponent: the lobe halves 8.7 degrees off the half vector
+
+
+def _parts(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Heights of the shiny dome, the matte dome and the dark block of ``shiny_and_dark``."""
+    (sx, sy), (mx, my), (bx, by) = SHINY_DOME["centre_mm"], MATTE_DOME["centre_mm"], DARK_BLOCK["centre_mm"]
+    shiny = _cap(x, y, sx, sy, SHINY_DOME["radius_mm"], SHINY_DOME["height_mm"])
+    matte = _cap(x, y, mx, my, MATTE_DOME["radius_mm"], MATTE_DOME["height_mm"])
+    hx, hy = DARK_BLOCK["half_size_mm"]
+    block = np.where((np.abs(x - bx) < hx) & (np.abs(y - by) < hy), DARK_BLOCK["height_mm"], 0.0)
+    return shiny, matte, block
+
+
+def shiny_and_dark(height: int, width: int, pixel_mm: float) -> np.ndarray:
+    """Parts that need several exposures: a polished dome (a specular highlight), a matte dome and a
+    black block (20 mm) on the plane; :func:`shiny_and_dark_reflectance` is how each reflects."""
+    x, y = _grid_mm(height, width, pixel_mm)
+    shiny, matte, block = _parts(x, y)
+    return np.maximum(np.maximum(shiny, matte), block)
+
+
+def shiny_and_dark_reflectance(height_mm: np.ndarray, pixel_mm: float, l0_mm: float, d0_mm: float) -> np.ndarray:
+    """Reflectance of ``shiny_and_dark`` towards the camera: albedo, plus a specular lobe on the polished dome.
+
+    The camera looks down from ``l0_mm`` above the view's centre, the projector sits ``d0_mm`` beside it;
+    the lobe is Blinn-Phong, ``SPECULAR_PEAK (n . h)^SPECULAR_EXPONENT`` with h halving the directions to
+    the projector and to the camera: it saturates the camera at an exposure that suits the matte parts.
+    """
+    rows, cols = height_mm.shape
+    x, y = _grid_mm(rows, cols, pixel_mm)
+    shiny, matte, block = _parts(x, y)
+    albedo = np.full(height_mm.shape, PLANE_ALBEDO)
+    albedo[matte > 0] = MATTE_DOME["albedo"]
+    albedo[block > 0] = DARK_BLOCK["albedo"]
+    on_dome = (shiny > 0) & (shiny >= np.maximum(matte, block))
+    albedo[on_dome] = SHINY_DOME["albedo"]
+    dh_dy, dh_dx = np.gradient(height_mm, pixel_mm)
+    normal = np.stack([-dh_dx, -dh_dy, np.ones_like(dh_dx)])
+    normal /= np.linalg.norm(normal, axis=0)
+    up = l0_mm - height_mm
+    to_camera = np.stack([-x, -y, up])
+    to_projector = np.stack([d0_mm - x, -y, up])
+    half = to_camera / np.linalg.norm(to_camera, axis=0) + to_projector / np.linalg.norm(to_projector, axis=0)
+    half /= np.linalg.norm(half, axis=0)
+    cosine = np.clip(np.einsum("khw,khw->hw", normal, half), 0.0, 1.0)
+    return albedo + np.where(on_dome, SPECULAR_PEAK * cosine**SPECULAR_EXPONENT, 0.0)
+
+
 SCENES: dict[str, Callable[..., np.ndarray]] = {
     "flat": flat,
     "sphere-cap": sphere_cap,
@@ -95,7 +149,19 @@ SCENES: dict[str, Callable[..., np.ndarray]] = {
     "steps": steps,
     "isolated": isolated_objects,
     "gauge-block": gauge_block,
+    "shiny-and-dark": shiny_and_dark,
 }
+
+# Scenes whose surfaces are not uniformly matte: ``f(height_mm, pixel_mm, l0_mm, d0_mm) -> reflectance``.
+REFLECTANCES: dict[str, Callable[..., np.ndarray]] = {"shiny-and-dark": shiny_and_dark_reflectance}
+
+
+def scene_reflectance(
+    name: str, height_mm: np.ndarray, pixel_mm: float, l0_mm: float, d0_mm: float
+) -> np.ndarray | None:
+    """Reflectance map of a named scene seen by the rig, or None for a uniformly matte one."""
+    factory = REFLECTANCES.get(name)
+    return None if factory is None else factory(np.asarray(height_mm, dtype=np.float64), pixel_mm, l0_mm, d0_mm)
 
 
 def make_scene(name: str, height: int, width: int, pixel_mm: float, **params: float) -> np.ndarray:

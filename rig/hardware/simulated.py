@@ -57,9 +57,31 @@ def geometry_from_config(config: RigConfig) -> synth.RigGeometry:
 
 
 def appearance_from_config(config: RigConfig) -> synth.Appearance:
-    """Photometry of ``[simulation]``: ambient light, projector gamma, camera gain and noise, 8 bit."""
+    """Photometry of ``[simulation]``: ambient light, projector gamma, camera gain and noise, 8 bit.
+
+    With ``full_well_e`` the noise is the sensor's shot and read noise (:class:`mock_devices.synth.Sensor`).
+    """
     sim = config.simulation
-    return synth.Appearance(ambient=sim.ambient, gamma=sim.gamma, gain=sim.camera_gain, snr_db=sim.snr_db, bit_depth=8)
+    sensor = None
+    if sim.full_well_e is not None:
+        try:
+            sensor = synth.Sensor(full_well_e=sim.full_well_e, read_noise_e=sim.read_noise_e)
+        except ValueError as exc:
+            raise ConfigError(f"{config.source or 'rig config'}: [simulation] {exc}") from None
+    return synth.Appearance(
+        ambient=sim.ambient, gamma=sim.gamma, gain=sim.camera_gain, snr_db=sim.snr_db, bit_depth=8, sensor=sensor
+    )
+
+
+def scene_reflectance(config: RigConfig, scene: str, geometry: synth.RigGeometry, height_mm: np.ndarray) -> Any:
+    """Reflectance the simulated camera sees for a capture's ``scene`` label (1.0: uniformly matte).
+
+    ``"object"`` is the configured scene; a scene of :data:`mock_devices.scenes.REFLECTANCES` (such as
+    ``shiny-and-dark``) brings its own map, any other scene is matte.
+    """
+    name = config.simulation.scene if scene == "object" else scene
+    reflectance = scenes.scene_reflectance(name, height_mm, geometry.pixel_mm, geometry.l0_mm, geometry.d0_mm)
+    return appearance_from_config(config).reflectivity if reflectance is None else reflectance
 
 
 def scene_height(config: RigConfig, scene: str, geometry: synth.RigGeometry) -> np.ndarray:
@@ -159,11 +181,15 @@ class SimulatedRig:
             # GLProjector reads each frame back when it is shown, in the thread that owns its
             # OpenGL context: the camera, exposed from the trigger box's thread, never touches GL.
             self.projector = self._stack.enter_context(GLProjector(self.config.projector.size, name="GLProjector"))
+            appearance = replace(
+                appearance_from_config(self.config),
+                reflectivity=scene_reflectance(self.config, self.scene, self.geometry, self.height_mm),
+            )
             self.camera = SimulatedCamera(
                 self.projector,
                 self.geometry,
                 self.height_mm,
-                appearance_from_config(self.config),
+                appearance,
                 reference_exposure_us=self.config.camera.exposure_us,
                 faults=self.camera_faults,
                 rng=np.random.default_rng([self.config.simulation.seed, zlib.crc32(self.scene.encode())]),
@@ -193,6 +219,7 @@ class SimulatedRig:
             reflectivity = board_albedo(self.config, board, int(match.group(1) or 0))
         else:
             height = scene_height(self.config, scene, self.geometry)
+            reflectivity = scene_reflectance(self.config, scene, self.geometry, height)
         self.camera.set_scene(height)
         self.camera.appearance = replace(self.camera.appearance, reflectivity=reflectivity)
         self.scene, self.height_mm = scene, height

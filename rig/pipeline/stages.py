@@ -31,6 +31,7 @@ from rig.blas import rpca_blas
 from rig.errors import ProcessingError
 from rig.pipeline import convention_check
 from rig.pipeline.corrections import stage_correction
+from rig.pipeline.exposures import fuse_state_exposures
 from rig.pipeline.plan import PatternGroups, ProcessOptions, _all_integers, accepted_params, choose_unwrap
 from rig.pipeline.state import SceneState, UnwrappedPhase, WrappedPhase
 from rig.pipeline.unwrapping import REGISTRY as UNWRAPPERS
@@ -46,10 +47,13 @@ def stage_load(state: SceneState, options: ProcessOptions) -> None:
     """Decode every frame (checksums, size and bit depth checked) into an (N, H, W) stack.
 
     Frames given in memory (:func:`rig.pipeline.run.process`'s ``frames``) are checked against the
-    manifest instead: one per pattern, the camera's size and the bit depth's dtype.
+    manifest instead: one per pattern, the camera's size and the bit depth's dtype. A capture taken
+    at several exposures leaves this stage as one fused stack of its base patterns
+    (:mod:`rig.pipeline.exposures`).
     """
     if state.frames is None:
         state.frames = state.capture.load_frames()
+        fuse_state_exposures(state)
         return
     capture, frames = state.capture, state.frames
     expected = (len(capture.patterns), *capture.shape)
@@ -62,6 +66,7 @@ def stage_load(state: SceneState, options: ProcessOptions) -> None:
         raise ProcessingError(
             f"frames: expected dtype {dtype} for camera.bit_depth {capture.bit_depth}, found {frames.dtype}"
         )
+    fuse_state_exposures(state)
 
 
 def stage_undistort(state: SceneState, options: ProcessOptions) -> None:
@@ -201,8 +206,13 @@ def _predict_phase_sigma(state: SceneState) -> None:
         return
     # the highest frequency's fit residual alone: ~16k sampled pixels pin sigma_I within 1 %
     fitted = [g for g in along if g.steps >= 4][-1:] or along
-    sigma_i = noise_sigma(
-        state.frames, [g.indices for g in fitted], [np.asarray(g.shifts) for g in fitted], axis=state.axis
+    fused = state.info.get("exposures")  # fused exposures: unit noise at every pixel by construction
+    sigma_i = (
+        float(fused["noise_sigma_grey"])
+        if fused
+        else noise_sigma(
+            state.frames, [g.indices for g in fitted], [np.asarray(g.shifts) for g in fitted], axis=state.axis
+        )
     )
     state.info["noise_sigma_grey"] = round(sigma_i, 4)
     state.phase_sigma = phase_sigma(modulation, sigma_i, along[-1].steps)
