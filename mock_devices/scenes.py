@@ -7,6 +7,7 @@ the reference plane (0 where the plane shows). Coordinates are in mm from the im
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -87,10 +88,22 @@ def gauge_block(height: int, width: int, pixel_mm: float, height_mm: float = 25.
     return np.where(inside, float(height_mm), 0.0)
 
 
+@dataclass(frozen=True)
+class Part:
+    """One part of a scene: where it sits (mm from the view's centre), its size, height and albedo."""
+
+    cx: float
+    cy: float
+    size_x: float  # a dome's sphere radius, a block's half width
+    size_y: float  # a block's half depth (unused for a dome)
+    height_mm: float
+    albedo: float
+
+
 # The "shiny-and-dark" scene: a polished dome, a matte dome and a black rubber block on a matte plane.
-SHINY_DOME = {"centre_mm": (-120.0, 10.0), "radius_mm": 110.0, "height_mm": 35.0, "albedo": 0.45}
-MATTE_DOME = {"centre_mm": (20.0, -40.0), "radius_mm": 90.0, "height_mm": 30.0, "albedo": 0.8}
-DARK_BLOCK = {"centre_mm": (120.0, 30.0), "half_size_mm": (45.0, 60.0), "height_mm": 20.0, "albedo": 0.02}
+SHINY_DOME = Part(-120.0, 10.0, 110.0, 110.0, 35.0, 0.45)
+MATTE_DOME = Part(20.0, -40.0, 90.0, 90.0, 30.0, 0.8)
+DARK_BLOCK = Part(120.0, 30.0, 45.0, 60.0, 20.0, 0.02)
 PLANE_ALBEDO = 0.7
 SPECULAR_PEAK = 6.0  # the specular lobe's reflectance on the polished dome, where its normal halves L and V
 SPECULAR_EXPONENT = 60.0  # Blinn-Phong exponent: the lobe halves 8.7 degrees off the half vector
@@ -98,11 +111,10 @@ SPECULAR_EXPONENT = 60.0  # Blinn-Phong exponent: the lobe halves 8.7 degrees of
 
 def _parts(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Heights of the shiny dome, the matte dome and the dark block of ``shiny_and_dark``."""
-    (sx, sy), (mx, my), (bx, by) = SHINY_DOME["centre_mm"], MATTE_DOME["centre_mm"], DARK_BLOCK["centre_mm"]
-    shiny = _cap(x, y, sx, sy, SHINY_DOME["radius_mm"], SHINY_DOME["height_mm"])
-    matte = _cap(x, y, mx, my, MATTE_DOME["radius_mm"], MATTE_DOME["height_mm"])
-    hx, hy = DARK_BLOCK["half_size_mm"]
-    block = np.where((np.abs(x - bx) < hx) & (np.abs(y - by) < hy), DARK_BLOCK["height_mm"], 0.0)
+    s, m, b = SHINY_DOME, MATTE_DOME, DARK_BLOCK
+    shiny = _cap(x, y, s.cx, s.cy, s.size_x, s.height_mm)
+    matte = _cap(x, y, m.cx, m.cy, m.size_x, m.height_mm)
+    block = np.where((np.abs(x - b.cx) < b.size_x) & (np.abs(y - b.cy) < b.size_y), b.height_mm, 0.0)
     return shiny, matte, block
 
 
@@ -125,10 +137,10 @@ def shiny_and_dark_reflectance(height_mm: np.ndarray, pixel_mm: float, l0_mm: fl
     x, y = _grid_mm(rows, cols, pixel_mm)
     shiny, matte, block = _parts(x, y)
     albedo = np.full(height_mm.shape, PLANE_ALBEDO)
-    albedo[matte > 0] = MATTE_DOME["albedo"]
-    albedo[block > 0] = DARK_BLOCK["albedo"]
+    albedo[matte > 0] = MATTE_DOME.albedo
+    albedo[block > 0] = DARK_BLOCK.albedo
     on_dome = (shiny > 0) & (shiny >= np.maximum(matte, block))
-    albedo[on_dome] = SHINY_DOME["albedo"]
+    albedo[on_dome] = SHINY_DOME.albedo
     dh_dy, dh_dx = np.gradient(height_mm, pixel_mm)
     normal = np.stack([-dh_dx, -dh_dy, np.ones_like(dh_dx)])
     normal /= np.linalg.norm(normal, axis=0)

@@ -56,6 +56,7 @@ from rig.errors import CaptureError
 from rig.events import ProgressSink
 from rig.hardware.trigger_paths import TriggerPath
 from rig.store.capture import CaptureWriter
+from rig.store.exposures import EXPOSURE_KEY
 
 log = logging.getLogger(__name__)
 
@@ -231,6 +232,7 @@ class ScanResult:
     wall_s: float
     times: StepTimes = field(default_factory=StepTimes)
     writer_busy_s: float = 0.0
+    exposure_plan: Any = None  # rig.acquisition.exposure_plan.ExposurePlan when the assistant chose the exposures
 
 
 def _pattern_label(index: int, total: int, pattern: Mapping[str, Any]) -> str:
@@ -395,6 +397,21 @@ def frame_metadata(frame: Frame, attempts: int) -> dict[str, Any]:
     return meta
 
 
+def _change_exposure(camera: Camera, trigger: TriggerPath, triggers: _TriggerLog, exposure_us: float) -> None:
+    """Between two exposures' sequences: stop the camera, set the next exposure, start it again.
+
+    Once per exposure, not per frame: many cameras accept a new exposure only while stopped, and a
+    hardware-triggered sequence (trigger box, DLP pattern sequence) runs at one exposure throughout.
+    """
+    log.info("%s: exposure %g us for the next sequence", camera.name, exposure_us)
+    camera.stop()
+    camera.exposure_us = exposure_us
+    camera.start()
+    triggers.fired = 0
+    if trigger.indices_restart_with_camera:
+        triggers.next_index = 0
+
+
 def _capture_writer(
     path: str | Path,
     patterns: Sequence[Mapping[str, Any]],
@@ -430,6 +447,9 @@ def _acquire_all(
     attempts_total = discarded_total = 0
     triggers = _TriggerLog()
     for index, pattern in enumerate(patterns):
+        planned = pattern.get(EXPOSURE_KEY)
+        if planned is not None and float(planned) != camera.exposure_us:
+            _change_exposure(camera, trigger, triggers, float(planned))
         frame, attempts, discarded = acquire_pattern(
             index, pattern, len(patterns), projector, camera, trigger, settings, triggers, times
         )
@@ -467,7 +487,8 @@ def run_scan(
     path : path
         The capture directory to create (must not exist unless ``overwrite``).
     patterns : sequence of capture-format pattern dicts
-        Projected in order.
+        Projected in order. Patterns carrying ``exposure_us`` (a scan at several exposures,
+        :func:`rig.store.exposures.with_exposures`) set the camera's exposure for their sequence.
     projector, camera : opened devices
     trigger : TriggerPath
         How exposures are started (:class:`SoftwareTrigger`, :class:`BoxTrigger`); the camera's
@@ -488,6 +509,8 @@ def run_scan(
     """
     if not patterns:
         raise ValueError("patterns: expected at least one pattern to scan")
+    if patterns[0].get(EXPOSURE_KEY) is not None:  # several exposures: staged from the first, restored after
+        exposure_us = float(patterns[0][EXPOSURE_KEY])
     started = time.perf_counter()
     times = StepTimes()
     records: list[dict[str, Any]] = []

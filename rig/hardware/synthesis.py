@@ -206,7 +206,7 @@ def simulate_scan(
         object_frames, object_map = render_scene(height, geometry, pattern_list, seen, rng)
         object_patterns = pattern_list
     reference_frames, reference_map = render_scene(np.zeros_like(height), geometry, pattern_list, appearance, rng)
-    description = {
+    description: dict[str, Any] = {
         "scene": name,
         "scene_params": dict(scene_params or {}),
         "seed": seed,

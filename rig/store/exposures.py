@@ -92,7 +92,7 @@ def exposure_sets(patterns: Sequence[Pattern | Mapping[str, Any]], where: str = 
     for k in range(1, len(order)):
         for i in range(count):
             index = k * count + i
-            if float(planned[index]) != order[k] or not same_projection(models[index], base[i]):
+            if planned[index] != order[k] or not same_projection(models[index], base[i]):
                 raise CaptureError(
                     f"{where}: patterns[{index}]: expected base pattern {i} at exposure {order[k]:g} us "
                     "(each exposure's full sequence in the same order)"
