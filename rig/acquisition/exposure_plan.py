@@ -18,8 +18,9 @@ fringe is strong enough to trust its phase::
 (top: the camera's largest grey level). The candidate exposures are a ladder of factors of
 sqrt(2) from the configured one (two significant digits), inside the camera's exposure limits and
 under half the frame deadline, and those limits themselves. The plan is the fewest candidates (at most :data:`MAX_EXPOSURES`) whose union of usable
-pixels covers ``TARGET_COVERAGE`` of the lit pixels; between plans of as many exposures, the one
-covering most; if no plan reaches the target, the best of the largest size, and the plan says so.
+pixels covers ``TARGET_COVERAGE`` of the lit pixels and whose shortest exposure leaves at most
+``SATURATED_ALLOWANCE`` of them saturated (a saturated pixel has no phase; a dark one a noisier
+phase); between plans of as many exposures, the one covering most; if no plan reaches the target, the best of the largest size, and the plan says so.
 """
 
 from __future__ import annotations
@@ -45,6 +46,7 @@ TARGET_COVERAGE = 0.98
 MAX_EXPOSURES = 3
 SATURATION_MARGIN = 0.9  # the brightest frame under 90 % of the top grey level: noise does not clip it
 MIN_MODULATION = 0.1  # fringe amplitude B of at least a tenth of the range: well above the modulation mask
+SATURATED_ALLOWANCE = 0.001  # lit pixels the shortest exposure may leave saturated (hot pixels, glints)
 LIT_GREY = 3.0  # white - black at the longer probe: below this a pixel is not lit by the projector
 PROBE_FACTORS = (0.125, 2.0)  # the probe exposures, times the configured exposure
 LADDER_STEP = math.sqrt(2.0)
@@ -167,22 +169,32 @@ def _two_digits(value: float) -> float:
 def choose_exposures(
     reflectance: Reflectance, candidates: Sequence[float], top: float, default_us: float
 ) -> tuple[tuple[float, ...], float, bool]:
-    """The fewest candidates covering the target share of the lit pixels: (exposures, coverage, reached)."""
+    """The fewest candidates (ascending) covering the target share of the lit pixels: (exposures, coverage, reached).
+
+    A plan must also keep all but :data:`SATURATED_ALLOWANCE` of the lit pixels unsaturated at its
+    shortest exposure (unless that is the shortest candidate): a saturated pixel has no phase at
+    all, a dark one only a noisier phase.
+    """
     lit = reflectance.lit
     total = max(int(np.count_nonzero(lit)), 1)
     table = np.stack([usable(reflectance, e, top) for e in candidates])[:, lit]  # (C, lit pixels)
+    unsaturated = [
+        np.count_nonzero(reflectance.white_rate[lit] * e <= SATURATION_MARGIN * top) / total for e in candidates
+    ]
     distance = [abs(math.log(e / default_us)) for e in candidates]
     best: tuple[float, float, tuple[int, ...]] = (-1.0, 0.0, ())
     for size in range(1, MAX_EXPOSURES + 1):
         best = (-1.0, 0.0, ())
         for combo in itertools.combinations(range(len(candidates)), size):
+            if combo[0] > 0 and unsaturated[combo[0]] < 1.0 - SATURATED_ALLOWANCE:
+                continue
             covered = np.count_nonzero(np.any(table[list(combo)], axis=0)) / total
             closeness = -sum(distance[i] for i in combo)  # ties: exposures nearest the configured one
             if (covered, closeness) > best[:2]:
                 best = (covered, closeness, combo)
         if best[0] >= TARGET_COVERAGE:
             break
-    chosen = tuple(sorted(candidates[i] for i in best[2]))
+    chosen = tuple(candidates[i] for i in best[2])
     return chosen, float(best[0]), bool(best[0] >= TARGET_COVERAGE)
 
 
