@@ -18,7 +18,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from processing.projection.patterns import Pattern, as_pattern, same_projection
+from processing.projection.patterns import Pattern, as_pattern, parse_pattern, same_projection
 from rig.errors import CaptureError
 
 EXPOSURE_KEY = "exposure_us"
@@ -29,7 +29,7 @@ class ExposureSets:
     """The exposures of a capture and where each (exposure, base pattern) frame sits."""
 
     exposures_us: tuple[float, ...]  # in capture order; one entry for a single-exposure capture
-    base: list[Pattern]  # the sequence projected at each exposure
+    base: list[Pattern]  # the sequence projected at each exposure (without the exposure key)
     indices: tuple[tuple[int, ...], ...]  # indices[k][i]: pattern index of base pattern i at exposure k
 
     @property
@@ -98,7 +98,8 @@ def exposure_sets(patterns: Sequence[Pattern | Mapping[str, Any]], where: str = 
                     "(each exposure's full sequence in the same order)"
                 )
     indices = tuple(tuple(range(k * count, (k + 1) * count)) for k in range(len(order)))
-    return ExposureSets(tuple(order), base, indices)
+    plain = [parse_pattern({key: v for key, v in m.to_dict().items() if key != EXPOSURE_KEY}) for m in base]
+    return ExposureSets(tuple(order), plain, indices)
 
 
 def describe_exposures(patterns: Sequence[Pattern | Mapping[str, Any]], where: str = "capture.json") -> str | None:
