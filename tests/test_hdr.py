@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from cli_steps import assert_one_line, run
+
 from mock_devices.synth import Sensor
 from processing.phase.exposure_fusion import NoiseModel, fuse_exposures, noise_model
 from processing.phase.shifting import phase_shift
