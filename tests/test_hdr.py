@@ -279,3 +279,21 @@ def test_hdr_auto_prints_what_it_chose_and_why(capsys, tmp_path: Path, simulated
     assert 1 <= len(plan["exposures_us"]) <= 3 and len(lines) == 1 + len(plan["exposures_us"])
     sets = exposure_sets(read_capture(tmp_path / "capture").pattern_models)
     assert list(sets.exposures_us if sets.multiple else plan["exposures_us"]) == plan["exposures_us"]
+
+
+def test_import_describes_a_folder_of_several_exposures(capsys, tmp_path: Path, hdr_scan) -> None:
+    import cv2
+
+    scan, _, _, _ = hdr_scan
+    folder = tmp_path / "images"
+    folder.mkdir()
+    for i, image in enumerate(scan.object_frames):
+        cv2.imwrite(str(folder / f"{i}.png"), image)
+    argv = ["import", folder, "--patterns", "sin:f=1/8/64,steps=4", "-o", tmp_path / "capture"]
+    argv += ["--projector-width", 912, "--projector-height", 1140]
+    code, err = run(capsys, *argv, "--exposures", "1500,10000,80000")
+    assert code == 0 and "3 exposures (1500, 10000, 80000 us) of 12 patterns each" in err
+    sets = exposure_sets(read_capture(tmp_path / "capture").pattern_models)
+    assert sets.exposures_us == (1500.0, 10000.0, 80000.0)
+    code, err = run(capsys, *argv[:-4], "-o", tmp_path / "other", "--exposures", "1500,10000")
+    assert_one_line(code, err, "24 files at 2 exposures", "found 36 images")

@@ -50,6 +50,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def facts(capture: Capture) -> dict[str, Any]:
     """What `rig info` reports, as a dict."""
+    from rig.store.exposures import describe_exposures, exposure_sets
+
+    base = [p.to_dict() for p in exposure_sets(capture.pattern_models, str(capture.manifest_path)).base]
+
     m = capture.manifest
     return {
         "path": str(capture.path),
@@ -59,7 +63,8 @@ def facts(capture: Capture) -> dict[str, Any]:
         "camera": m["camera"],
         "projector": m["projector"],
         "patterns": len(capture.patterns),
-        "pattern_groups": describe_patterns(capture.patterns),
+        "pattern_groups": describe_patterns(base),  # of one exposure's sequence
+        "exposures": describe_exposures(capture.pattern_models, str(capture.manifest_path)),
         "frames": len(capture.frames),
         "verified": True,
         "extra_keys": sorted(
@@ -97,6 +102,8 @@ def run(args: argparse.Namespace) -> int:
     )
     print(f"camera {cam['width']}x{cam['height']} {cam['bit_depth']}-bit, projector {proj['width']}x{proj['height']}")
     print(f"{info['patterns']} patterns, {info['frames']} frames, all verified (sha256, size, bit depth)")
+    if info["exposures"]:
+        print(info["exposures"])
     for line in info["pattern_groups"]:
         print(f"  {line}")
     if info["extra_keys"]:

@@ -16,6 +16,10 @@ the patterns of a short description, the *pattern spec*: groups separated by ``;
 ``flat:level=1`` (also ``white``, ``black``)
     Constant frames. ``skip:N`` ignores N files.
 
+With ``exposures_us`` (``--exposures 2000,8000,32000``) the folder holds the spec's files once per
+exposure, each exposure's full sequence in turn: a capture at several exposures
+(:mod:`rig.store.exposures`).
+
 Instead of a spec string, ``--patterns`` may name a JSON file: ``{"patterns": [...]}`` with
 capture-format pattern entries, optionally ``"files": [...]`` (names in the folder, in order).
 
@@ -49,6 +53,7 @@ from rig.store.capture import (
     utc_now,
     validate_pattern,
 )
+from rig.store.exposures import EXPOSURE_KEY
 
 IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp", ".pgm", ".ppm")
 
@@ -303,6 +308,8 @@ class ImportOptions:
     scene: str = "object"
     overwrite: bool = False
     conversions: list[str] = field(default_factory=list)
+    # several exposures: the folder holds each exposure's full sequence (as the spec describes it) in turn
+    exposures_us: tuple[float, ...] = ()
 
 
 def parse_crop(text: str) -> tuple[int, int, int, int]:
@@ -362,11 +369,13 @@ def import_folder(
     if options.downsample < 1:
         raise ConfigError(f"--downsample: expected an integer >= 1, found {options.downsample}")
     entries, listed = load_spec(spec)
+    entries = _at_exposures(entries, options.exposures_us)
     files = _source_files(folder, spec, listed, options)
     if len(files) != len(entries):
         kept = sum(e is not None for e in entries)
+        times = f" at {len(options.exposures_us)} exposures" if len(options.exposures_us) > 1 else ""
         raise ConfigError(
-            f"{folder}: the pattern spec describes {len(entries)} files ({kept} patterns), found {len(files)} images"
+            f"{folder}: the pattern spec describes {len(entries)} files{times} ({kept} patterns), found {len(files)} images"
             + (f" matching {options.glob!r}" if options.glob else "")
             + (f" ({files[0].name} .. {files[-1].name})" if files else "")
         )
@@ -403,6 +412,16 @@ def import_folder(
         for i, ((_, path), image, digest) in enumerate(zip(pairs, images, digests)):
             writer.add_frame(i, image, source_file=path.name, source_sha256=digest)
     return read_capture(output)
+
+
+def _at_exposures(
+    entries: list[Pattern | Mapping[str, Any] | None], exposures_us: Sequence[float]
+) -> list[Pattern | Mapping[str, Any] | None]:
+    """The spec's files once per exposure, each pattern tagged with its exposure (rig/store/exposures.py)."""
+    if len(exposures_us) <= 1:
+        return entries
+    plain = [None if e is None else (e.to_dict() if isinstance(e, Pattern) else dict(e)) for e in entries]
+    return [None if e is None else {**e, EXPOSURE_KEY: t} for t in exposures_us for e in plain]
 
 
 def _source_files(folder: Path, spec: str, listed: list[str] | None, options: ImportOptions) -> list[Path]:
