@@ -2,8 +2,10 @@
 
 The simulated rig (software trigger, sensor model: 10 000 e- full well, 8 e- read noise, 8 bit)
 looks at the ``shiny-and-dark`` scene: a polished dome whose specular lobe saturates the camera at
-the configured 10 000 us, a matte dome and a black block (albedo 0.02) whose fringes are near the
-noise there. For each camera size and seed (the scene's noise differs by seed):
+the configured 10 000 us, a matte dome and a black block whose fringes are near the noise there.
+Each seed draws a variant of the scene (seed 0: the nominal one; others: parts moved, dark albedo
+0.01-0.04, specular peak 4-10, lobe exponent 40-100; ``[simulation] scene_variant``) and its
+noise. For each camera size and seed:
 
 - one exposure at the configured 10 000 us, and one at each exposure the assistant chose: valid
   fraction on the object (true height > 0 and lit) and height RMS against the truth there; the
@@ -56,7 +58,9 @@ def rig_config(width: int, height: int, seed: int) -> RigConfig:
         base,
         camera=replace(base.camera, width=width, height=height),
         trigger=replace(base.trigger, backend="software"),
-        simulation=SimulationConfig(scene="shiny-and-dark", snr_db=None, full_well_e=10_000.0, seed=seed),
+        simulation=SimulationConfig(
+            scene="shiny-and-dark", scene_variant=seed, snr_db=None, full_well_e=10_000.0, seed=seed
+        ),
     )
 
 

@@ -126,6 +126,7 @@ class ScanConfig:
 @dataclass(frozen=True)
 class SimulationConfig:
     scene: str = "hemisphere"
+    scene_variant: int = 0  # a scene drawn from a family (shiny-and-dark): 0 the nominal one
     snr_db: float | None = 35.0
     seed: int = 0
     l0_mm: float = 1000.0
@@ -341,6 +342,7 @@ _SCHEMA: dict[str, dict[str, Callable[[Any], Any]]] = {
     },
     "simulation": {
         "scene": _string,
+        "scene_variant": _int_range(0),
         "snr_db": _snr,
         "seed": _int_range(0),
         "l0_mm": _positive_number,

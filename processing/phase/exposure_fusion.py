@@ -65,6 +65,42 @@ class FusedExposures:
     noise: NoiseModel
 
 
+def _as_index(indices: Sequence[int]) -> slice | list[int]:
+    """A group's pattern indices as a slice when they run consecutively (views, not copies)."""
+    items = list(indices)
+    if items == list(range(items[0], items[-1] + 1)):
+        return slice(items[0], items[-1] + 1)
+    return items
+
+
+def _group_weights(
+    frames: np.ndarray, index: slice | list[int], scale: np.ndarray, noise: NoiseModel, saturation: float
+) -> np.ndarray:
+    """(E, H, W) float32 inverse-variance weights of one group: (t_k / t_max)^2 / var(A_k), 0 where saturated."""
+    weights = np.empty((frames.shape[0], *frames.shape[2:]), dtype=np.float32)
+    for k in range(frames.shape[0]):
+        part = frames[k, index]
+        level = np.add.reduce(part, axis=0, dtype=np.float32)
+        level *= np.float32(1.0 / len(part))
+        variance = noise.variance(level)
+        np.divide(np.float32(scale[k] ** 2), variance, out=weights[k])
+        if np.isfinite(saturation):
+            np.copyto(weights[k], np.float32(0.0), where=np.maximum.reduce(part, axis=0) >= saturation)
+    return weights
+
+
+def _dominant(weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per pixel the index of the largest weight (-1 where all are 0) and how many weights are positive."""
+    dominant = np.full(weights.shape[1:], -1, dtype=np.int8)
+    used = np.zeros(weights.shape[1:], dtype=np.uint8)
+    best = np.zeros(weights.shape[1:], dtype=np.float32)
+    for k, weight in enumerate(weights):
+        np.copyto(dominant, np.int8(k), where=weight > best)
+        np.maximum(best, weight, out=best)
+        used += weight > 0
+    return dominant, used
+
+
 def _check_stack(stack: np.ndarray, exposures_us: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
     frames = np.asarray(stack)
     if frames.ndim != 4:
@@ -112,18 +148,17 @@ def noise_model(
         four steps, the quantisation noise alone (``read`` = 1/12, ``shot`` = 0).
     """
     frames = np.asarray(stack)
-    flat = frames.reshape(frames.shape[0], frames.shape[1], -1)
     stride = sample_stride(frames.shape[2:])
+    sample = frames.reshape(frames.shape[0], frames.shape[1], -1)[:, :, ::stride].astype(np.float64)  # (E, N, P)
     levels: list[np.ndarray] = []
     variances: list[np.ndarray] = []
     for indices, delta in zip(groups, shifts):
         if len(indices) < 4:
             continue
-        for k in range(frames.shape[0]):
-            sample = np.asarray(flat[k, list(indices), ::stride], dtype=np.float64)
-            keep = np.all(sample < saturation, axis=0)
-            levels.append(sample[:, keep].mean(axis=0))
-            variances.append(_fit_residuals(sample[:, keep], np.asarray(delta, dtype=np.float64)))
+        for part in sample[:, list(indices)]:
+            keep = np.all(part < saturation, axis=0)
+            levels.append(part[:, keep].mean(axis=0))
+            variances.append(_fit_residuals(part[:, keep], np.asarray(delta, dtype=np.float64)))
     if not levels:
         return NoiseModel(QUANTISATION_VARIANCE, 0.0)
     level, variance = np.concatenate(levels), np.concatenate(variances)
@@ -187,24 +222,21 @@ def fuse_exposures(
     dominant = np.full(shape, -1, dtype=np.int8)
     used = np.zeros(shape, dtype=np.uint8)
     scale = times / times.max()  # relative times: the weights stay in float32 range
+    product = np.empty(shape, dtype=np.float32)
     for g, indices in enumerate(groups):
-        index = list(indices)
-        weights = np.empty((len(times), *shape), dtype=np.float32)
-        for k in range(len(times)):
-            part = frames[k, index]
-            level = part.mean(axis=0, dtype=np.float32)
-            weight = np.float32(scale[k] ** 2) / noise.variance(level)
-            weight[np.any(part >= saturation, axis=0)] = 0.0
-            weights[k] = weight
+        index = _as_index(indices)
+        weights = _group_weights(frames, index, scale, noise, saturation)
         total = weights.sum(axis=0)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            norm = np.where(total > 0, 1.0 / np.sqrt(total), 0.0).astype(np.float32)
-        out = fused[index]
+        positive = total > 0
+        norm = np.zeros(shape, dtype=np.float32)
+        np.sqrt(total, out=norm, where=positive)
+        np.divide(np.float32(1.0), norm, out=norm, where=positive)
         for k in range(len(times)):
-            coefficient = weights[k] * (norm / np.float32(scale[k]))
-            out += coefficient * frames[k, index]
-        fused[index] = out
+            coefficient = weights[k] * norm
+            coefficient *= np.float32(1.0 / scale[k])
+            for j in np.arange(count)[index]:
+                np.multiply(frames[k, j], coefficient, out=product)
+                fused[j] += product
         if g == primary:
-            dominant = np.where(total > 0, np.argmax(weights, axis=0), -1).astype(np.int8)
-            used = np.count_nonzero(weights > 0, axis=0).astype(np.uint8)
+            dominant, used = _dominant(weights)
     return FusedExposures(fused, dominant, used, noise)

@@ -73,14 +73,27 @@ def appearance_from_config(config: RigConfig) -> synth.Appearance:
     )
 
 
+def _variant(config: RigConfig) -> dict[str, int]:
+    """The scene's ``variant`` parameter from ``[simulation] scene_variant`` (ConfigError for a scene without variants)."""
+    variant = config.simulation.scene_variant
+    if not variant:
+        return {}
+    if config.simulation.scene not in scenes.VARIANTS:
+        raise ConfigError(
+            f"{config.source or 'rig config'}: [simulation] scene_variant: expected 0 for scene "
+            f"{config.simulation.scene!r} (variants exist for {', '.join(scenes.VARIANTS)}), found {variant}"
+        )
+    return {"variant": variant}
+
+
 def scene_reflectance(config: RigConfig, scene: str, geometry: synth.RigGeometry, height_mm: np.ndarray) -> Any:
     """Reflectance the simulated camera sees for a capture's ``scene`` label (1.0: uniformly matte).
 
     ``"object"`` is the configured scene; a scene of :data:`mock_devices.scenes.REFLECTANCES` (such as
     ``shiny-and-dark``) brings its own map, any other scene is matte.
     """
-    name = config.simulation.scene if scene == "object" else scene
-    reflectance = scenes.scene_reflectance(name, height_mm, geometry.pixel_mm, geometry.l0_mm, geometry.d0_mm)
+    name, variant = (config.simulation.scene, _variant(config).get("variant", 0)) if scene == "object" else (scene, 0)
+    reflectance = scenes.scene_reflectance(name, height_mm, geometry.pixel_mm, geometry.l0_mm, geometry.d0_mm, variant)
     return appearance_from_config(config).reflectivity if reflectance is None else reflectance
 
 
@@ -94,7 +107,7 @@ def scene_height(config: RigConfig, scene: str, geometry: synth.RigGeometry) -> 
     h, w, pixel_mm = geometry.camera_height, geometry.camera_width, geometry.pixel_mm
     if scene == "object":
         check_scene_name(config.simulation.scene, str(config.source) if config.source is not None else "rig config")
-        return scenes.make_scene(config.simulation.scene, h, w, pixel_mm)
+        return scenes.make_scene(config.simulation.scene, h, w, pixel_mm, **_variant(config))
     if scene == "reference":
         return np.zeros((h, w))
     match = PLANE_SCENE.fullmatch(scene)
@@ -165,6 +178,7 @@ class SimulatedRig:
         sim, g = self.config.simulation, self.geometry
         return {
             "scene": sim.scene if self.scene == "object" else self.scene,
+            **({"scene_variant": sim.scene_variant} if self.scene == "object" and sim.scene_variant else {}),
             "snr_db": sim.snr_db,
             "seed": sim.seed,
             "l0_mm": g.l0_mm,

@@ -46,9 +46,11 @@ def scene_height(name: str, geometry: synth.RigGeometry, **params: float) -> np.
     return scenes.make_scene(name, geometry.camera_height, geometry.camera_width, geometry.pixel_mm, **params)
 
 
-def scene_reflectance(name: str, height_mm: np.ndarray, geometry: synth.RigGeometry) -> np.ndarray | None:
-    """Reflectance map of a named scene under ``geometry`` (None: uniformly matte)."""
-    return scenes.scene_reflectance(name, height_mm, geometry.pixel_mm, geometry.l0_mm, geometry.d0_mm)
+def scene_reflectance(
+    name: str, height_mm: np.ndarray, geometry: synth.RigGeometry, variant: int = 0
+) -> np.ndarray | None:
+    """Reflectance map of a named scene (its ``variant``) under ``geometry`` (None: uniformly matte)."""
+    return scenes.scene_reflectance(name, height_mm, geometry.pixel_mm, geometry.l0_mm, geometry.d0_mm, variant)
 
 
 def render_exposures(
@@ -192,7 +194,8 @@ def simulate_scan(
     else:
         name = "custom"
         height = np.asarray(scene, dtype=np.float64)
-    reflectance = scene_reflectance(name, height, geometry) if isinstance(scene, str) else None
+    variant = int((scene_params or {}).get("variant", 0))
+    reflectance = scene_reflectance(name, height, geometry, variant) if isinstance(scene, str) else None
     seen = appearance if reflectance is None else replace(appearance, reflectivity=reflectance)
     rng = np.random.default_rng(seed)
     if exposures_us is not None and len(exposures_us) > 1:
