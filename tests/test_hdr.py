@@ -297,3 +297,34 @@ def test_import_describes_a_folder_of_several_exposures(capsys, tmp_path: Path, 
     assert sets.exposures_us == (1500.0, 10000.0, 80000.0)
     code, err = run(capsys, *argv[:-4], "-o", tmp_path / "other", "--exposures", "1500,10000")
     assert_one_line(code, err, "24 files at 2 exposures", "found 36 images")
+
+
+def test_sensor_noise_grows_with_the_signal_and_clips_at_the_full_well() -> None:
+    """Shot noise of variance S / (e- per grey) plus read noise; the top grey level is saturation."""
+    sensor = Sensor(full_well_e=10_000.0, read_noise_e=8.0)
+    per_dn = sensor.electrons_per_dn(8)
+    rng = np.random.default_rng(2)
+    for level in (5.0, 50.0, 200.0):
+        noisy = sensor.add_noise(np.full(200_000, level, dtype=np.float64), 8, rng)
+        assert np.var(noisy) == pytest.approx(level / per_dn + (8.0 / per_dn) ** 2, rel=0.03)
+    from mock_devices.synth import Appearance as SynthAppearance
+    from mock_devices.synth import ProjectorMap, expose
+
+    lit = np.ones((4, 4), dtype=bool)
+    mapping = ProjectorMap(u=np.zeros((4, 4)), v=np.zeros((4, 4)), lit=lit)
+    bright = expose(np.ones((4, 4)), mapping, SynthAppearance(gain=400.0, sensor=sensor), rng)
+    assert bright.dtype == np.uint8 and np.all(bright == 255)
+
+
+def test_camera_exposure_limits_are_enforced(tmp_path: Path) -> None:
+    from mock_devices.camera import SimulatedCamera
+    from mock_devices.synth import RigGeometry
+
+    geometry = RigGeometry(camera_width=32, camera_height=24)
+    camera = SimulatedCamera(None, geometry, exposure_limits_us=(100.0, 50_000.0))
+    with camera:
+        assert camera.exposure_limits_us == (100.0, 50_000.0)
+        camera.exposure_us = 40_000
+        with pytest.raises(ValueError, match="100 .. 50000 us"):
+            camera.exposure_us = 60_000
+        assert camera.exposure_us == 40_000
