@@ -80,9 +80,11 @@ def _group_weights(
     weights = np.empty((frames.shape[0], *frames.shape[2:]), dtype=np.float32)
     for k in range(frames.shape[0]):
         part = frames[k, index]
-        level = np.add.reduce(part, axis=0, dtype=np.float32)
-        level *= np.float32(1.0 / len(part))
-        variance = noise.variance(level)
+        variance = np.add.reduce(part, axis=0, dtype=np.float32)  # the sum, made var(mean) in place:
+        if noise.shot > 0:
+            np.maximum(variance, np.float32(0.0), out=variance)
+        variance *= np.float32(noise.shot / len(part))
+        variance += np.float32(noise.read)
         np.divide(np.float32(scale[k] ** 2), variance, out=weights[k])
         if np.isfinite(saturation):
             np.copyto(weights[k], np.float32(0.0), where=np.maximum.reduce(part, axis=0) >= saturation)
@@ -218,25 +220,29 @@ def fuse_exposures(
     if not 0 <= primary < len(groups):
         raise ValueError(f"primary: expected a group index 0 .. {len(groups) - 1}, found {primary}")
     shape = frames.shape[2:]
-    fused = np.zeros((count, *shape), dtype=np.float32)
+    fused = np.empty((count, *shape), dtype=np.float32)
     dominant = np.full(shape, -1, dtype=np.int8)
     used = np.zeros(shape, dtype=np.uint8)
     scale = times / times.max()  # relative times: the weights stay in float32 range
     product = np.empty(shape, dtype=np.float32)
     for g, indices in enumerate(groups):
         index = _as_index(indices)
+        patterns = np.arange(count)[index]
         weights = _group_weights(frames, index, scale, noise, saturation)
-        total = weights.sum(axis=0)
-        positive = total > 0
-        norm = np.zeros(shape, dtype=np.float32)
-        np.sqrt(total, out=norm, where=positive)
-        np.divide(np.float32(1.0), norm, out=norm, where=positive)
-        for k in range(len(times)):
-            coefficient = weights[k] * norm
-            coefficient *= np.float32(1.0 / scale[k])
-            for j in np.arange(count)[index]:
-                np.multiply(frames[k, j], coefficient, out=product)
-                fused[j] += product
         if g == primary:
             dominant, used = _dominant(weights)
+        norm = weights.sum(axis=0)
+        positive = norm > 0
+        np.sqrt(norm, out=norm)
+        np.divide(np.float32(1.0), norm, out=norm, where=positive)
+        norm[~positive] = 0.0
+        for k, coefficient in enumerate(weights):  # each weight becomes its coefficient, in place
+            coefficient *= norm
+            coefficient *= np.float32(1.0 / scale[k])
+            for j in patterns:
+                if k == 0:
+                    np.multiply(frames[k, j], coefficient, out=fused[j])
+                else:
+                    np.multiply(frames[k, j], coefficient, out=product)
+                    fused[j] += product
     return FusedExposures(fused, dominant, used, noise)

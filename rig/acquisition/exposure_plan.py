@@ -1,14 +1,16 @@
 """The exposure assistant: a quick pre-capture, a reflectance estimate per pixel, the fewest exposures that do.
 
 At two probe exposures (the configured exposure over 8 and times 2) the rig projects white, black
-and three phase shifts of the scan's highest frequency. Per pixel, from the longer probe where it
-is not saturated, else the shorter one:
+and three phase shifts of the scan's highest frequency; while more than ``SATURATED_ALLOWANCE`` of
+the pixels still clip at the shortest probe, up to two more probes, each 8 times shorter (not
+below the camera's shortest exposure). Per pixel, from the longest probe where it is not
+saturated:
 
 - white rate r_W = white / t and black rate r_K = black / t (grey levels per microsecond);
 - fringe contrast c = 2 B / (white - black) from the three shifts (defocus, subsurface scattering),
   clipped to [0, 1];
-- lit: white - black of at least ``LIT_GREY`` grey levels at the longer probe, or saturated there;
-  a pixel saturated at both probes is counted lit and never usable (the plan then says so).
+- lit: white - black of at least ``LIT_GREY`` grey levels at the longest probe, or saturated there;
+  a pixel saturated at every probe is counted lit and never usable (the plan then says so).
 
 A pixel is usable at exposure t when its brightest frame stays under the saturation margin and its
 fringe is strong enough to trust its phase::
@@ -19,7 +21,7 @@ fringe is strong enough to trust its phase::
 sqrt(2) from the configured one (two significant digits), inside the camera's exposure limits and
 under half the frame deadline, and those limits themselves. The plan is the fewest candidates (at most :data:`MAX_EXPOSURES`) whose union of usable
 pixels covers ``TARGET_COVERAGE`` of the lit pixels and whose shortest exposure leaves at most
-``SATURATED_ALLOWANCE`` of them saturated (a saturated pixel has no phase; a dark one a noisier
+``SATURATED_ALLOWANCE`` more of them saturated than the shortest candidate does (a saturated pixel has no phase; a dark one a noisier
 phase); between plans of as many exposures, the one covering most; if no plan reaches the target, the best of the largest size, and the plan says so.
 """
 
@@ -49,6 +51,7 @@ MIN_MODULATION = 0.1  # fringe amplitude B of at least a tenth of the range: wel
 SATURATED_ALLOWANCE = 0.001  # lit pixels the shortest exposure may leave saturated (hot pixels, glints)
 LIT_GREY = 3.0  # white - black at the longer probe: below this a pixel is not lit by the projector
 PROBE_FACTORS = (0.125, 2.0)  # the probe exposures, times the configured exposure
+EXTRA_PROBES = 2  # shorter probes (each 1/8 of the last) while highlights still clip
 LADDER_STEP = math.sqrt(2.0)
 LADDER_SPAN = 12  # candidates from 1/64 to 64 times the configured exposure
 SAMPLES = 20_000  # pixels the choice is made on (a regular subsample)
@@ -64,7 +67,7 @@ class ExposurePlan:
     each: list[dict[str, float]] = field(default_factory=list)  # per exposure: usable share, share only it gives
     single: dict[str, float] = field(default_factory=dict)  # the configured exposure alone: its coverage
     limits_us: tuple[float, float] = (0.0, math.inf)
-    probes_us: tuple[float, float] = (0.0, 0.0)
+    probes_us: tuple[float, ...] = ()
     reached: bool = True
 
     def lines(self) -> list[str]:
@@ -116,30 +119,39 @@ class Reflectance:
 
 
 def estimate_reflectance(probes: Sequence[tuple[float, np.ndarray]], top: float, steps: int = 3) -> Reflectance:
-    """Reflectance of each pixel from the probe captures ``(exposure_us, frames)``.
+    """Reflectance of each pixel from the probe captures ``(exposure_us, frames)``, shortest exposure first.
 
-    ``frames`` (2 + ``steps``, P): white, black, then ``steps`` uniform phase shifts; probes from
-    the shortest to the longest exposure. The longest unsaturated probe speaks for each pixel.
+    ``frames`` (2 + ``steps``, P): white, black, then ``steps`` uniform phase shifts. The longest
+    probe whose frames stay under the saturation margin speaks for each pixel; a pixel saturated at
+    every probe gets an infinite white rate (usable at no exposure).
     """
-    (short_t, short), (long_t, long) = probes[0], probes[-1]
-    short, long = np.asarray(short, dtype=np.float64), np.asarray(long, dtype=np.float64)
-    long_ok = np.all(long < SATURATION_MARGIN * top, axis=0)
-    frames = np.where(long_ok, long, short)
-    times = np.where(long_ok, long_t, short_t)
+    limit = SATURATION_MARGIN * top
+    frames = np.asarray(probes[0][1], dtype=np.float64)
+    times = np.full(frames.shape[1], probes[0][0])
+    clear = np.all(frames < limit, axis=0)
+    for exposure, data in probes[1:]:  # longer probes replace shorter ones where they do not clip
+        data = np.asarray(data, dtype=np.float64)
+        ok = np.all(data < limit, axis=0)
+        frames = np.where(ok, data, frames)
+        times = np.where(ok, exposure, times)
+        clear |= ok
     white, black, fringe = frames[0], frames[1], frames[2:]
     delta = 2.0 * np.pi * np.arange(steps) / steps
-    s = np.tensordot(np.sin(delta), fringe, axes=1)
-    c = np.tensordot(np.cos(delta), fringe, axes=1)
-    amplitude = 2.0 / steps * np.hypot(s, c)
+    amplitude = (
+        2.0 / steps * np.hypot(np.tensordot(np.sin(delta), fringe, axes=1), np.tensordot(np.cos(delta), fringe, axes=1))
+    )
     span = white - black
     with np.errstate(divide="ignore", invalid="ignore"):
         contrast = np.clip(np.where(span > 0, 2.0 * amplitude / span, 0.0), 0.0, 1.0)
-    lit = (long[0] - long[1] >= LIT_GREY) | ~long_ok
-    white_rate = white / times
-    white_rate[~long_ok & np.any(short >= SATURATION_MARGIN * top, axis=0)] = (
-        np.inf
-    )  # too bright even for the short probe
+    longest = np.asarray(probes[-1][1], dtype=np.float64)
+    lit = (longest[0] - longest[1] >= LIT_GREY) | ~np.all(longest < limit, axis=0)
+    white_rate = np.where(clear, white / times, np.inf)
     return Reflectance(white_rate, black / times, contrast, lit)
+
+
+def saturated_share(probe: np.ndarray, top: float) -> float:
+    """Share of a probe's pixels whose white frame reaches the saturation margin."""
+    return float(np.mean(np.asarray(probe)[0] >= SATURATION_MARGIN * top))
 
 
 def usable(reflectance: Reflectance, exposure_us: float, top: float) -> np.ndarray:
@@ -171,9 +183,9 @@ def choose_exposures(
 ) -> tuple[tuple[float, ...], float, bool]:
     """The fewest candidates (ascending) covering the target share of the lit pixels: (exposures, coverage, reached).
 
-    A plan must also keep all but :data:`SATURATED_ALLOWANCE` of the lit pixels unsaturated at its
-    shortest exposure (unless that is the shortest candidate): a saturated pixel has no phase at
-    all, a dark one only a noisier phase.
+    A plan must also keep all but :data:`SATURATED_ALLOWANCE` of the lit pixels that some candidate
+    keeps unsaturated unsaturated at its shortest exposure: a saturated pixel has no phase at all,
+    a dark one only a noisier phase.
     """
     lit = reflectance.lit
     total = max(int(np.count_nonzero(lit)), 1)
@@ -181,12 +193,13 @@ def choose_exposures(
     unsaturated = [
         np.count_nonzero(reflectance.white_rate[lit] * e <= SATURATION_MARGIN * top) / total for e in candidates
     ]
+    reachable = max(unsaturated)  # pixels saturated even at the shortest candidate cannot be helped
     distance = [abs(math.log(e / default_us)) for e in candidates]
     best: tuple[float, float, tuple[int, ...]] = (-1.0, 0.0, ())
     for size in range(1, MAX_EXPOSURES + 1):
         best = (-1.0, 0.0, ())
         for combo in itertools.combinations(range(len(candidates)), size):
-            if combo[0] > 0 and unsaturated[combo[0]] < 1.0 - SATURATED_ALLOWANCE:
+            if unsaturated[combo[0]] < reachable - SATURATED_ALLOWANCE:
                 continue
             covered = np.count_nonzero(np.any(table[list(combo)], axis=0)) / total
             closeness = -sum(distance[i] for i in combo)  # ties: exposures nearest the configured one
@@ -241,16 +254,34 @@ def plan_exposures(devices: RigDevices, progress: ProgressSink | None = None) ->
         progress.begin(len(probes_us), "exposure assistant: pre-capture")
     probes = []
     for exposure in probes_us:
-        frames = capture_probe(devices, patterns, exposure, settings)
-        stride = sample_stride(frames.shape[1:], SAMPLES)
-        probes.append((exposure, frames.reshape(len(frames), -1)[:, ::stride]))
-        if progress is not None:
-            progress.step(f"pre-capture at {exposure:g} us")
+        probes.append((exposure, _probe(devices, patterns, exposure, settings, progress)))
     top = float(np.iinfo(probes[0][1].dtype).max) if np.issubdtype(probes[0][1].dtype, np.integer) else np.inf
+    for _ in range(EXTRA_PROBES):  # highlights still clipped at the short probe: probe shorter
+        shortest = probes[0][0]
+        if saturated_share(probes[0][1], top) <= SATURATED_ALLOWANCE or shortest <= limits[0]:
+            break
+        exposure = max(shortest * PROBE_FACTORS[0], limits[0])
+        probes.insert(0, (exposure, _probe(devices, patterns, exposure, settings, None)))
+    probes_us = tuple(e for e, _ in probes)
     reflectance = estimate_reflectance(probes, top)
     candidates = ladder(default_us, limits, longest)
     chosen, coverage, reached = choose_exposures(reflectance, candidates, top, default_us)
     return summarise(reflectance, chosen, coverage, reached, top, default_us, limits, probes_us)
+
+
+def _probe(
+    devices: RigDevices,
+    patterns: Sequence[Mapping[str, Any]],
+    exposure: float,
+    settings: AcquisitionSettings,
+    progress: ProgressSink | None,
+) -> np.ndarray:
+    """One probe's frames on the regular subsample: (frames, pixels)."""
+    frames = capture_probe(devices, patterns, exposure, settings)
+    stride = sample_stride(frames.shape[1:], SAMPLES)
+    if progress is not None:
+        progress.step(f"pre-capture at {exposure:g} us")
+    return frames.reshape(len(frames), -1)[:, ::stride]
 
 
 def summarise(
@@ -287,6 +318,6 @@ def summarise(
         each=each,
         single={"exposure_us": default_us, "coverage": round(float(single), 4)},
         limits_us=(float(limits[0]), float(limits[1])),
-        probes_us=(float(probes_us[0]), float(probes_us[-1])),
+        probes_us=tuple(float(e) for e in probes_us),
         reached=bool(reached),
     )

@@ -52,7 +52,8 @@ def fuse_state_exposures(state: SceneState) -> None:
         return
     started = time.perf_counter()
     frames = state.frames
-    stack = frames[np.asarray(sets.indices)]  # (E, N, H, W): exposure k's full sequence at stack[k]
+    # (E, N, H, W), exposure k's full sequence at stack[k]: capture order makes it a view of the frames
+    stack = frames.reshape(len(sets.exposures_us), len(sets.base), *frames.shape[1:])
     groups, primary = fusion_groups(state.groups, len(sets.base), state.axis)
     saturation = saturation_level(frames)
     phase_shifted = [g for g in state.groups.sinusoids if g.steps >= 3]
