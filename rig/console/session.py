@@ -46,9 +46,9 @@ from rig.errors import RigError
 from rig.events import Cancelled, Reporter
 from rig.hardware.assembly import RigDevices, open_rig
 from rig.jobs import Job, Jobs
-from rig.pipeline.outputs import colour_map
 from rig.pipeline.plan import DEFAULT_CORRECTION, ProcessOptions
 from rig.store.files import INCOMPLETE_MARK
+from rig.store.result_files import colour_map
 
 log = logging.getLogger(__name__)
 
