@@ -8,8 +8,9 @@ from fastapi import APIRouter, Depends
 from pydantic import Field
 from starlette.concurrency import run_in_threadpool
 
+from rig.console.devices import ProjectorSetting
 from rig.console.routes._common import Body, session_of
-from rig.console.session import ConsoleSession, ProjectorSetting
+from rig.console.session import ConsoleSession
 
 router = APIRouter(prefix="/api", tags=["rig"])
 
