@@ -6,7 +6,7 @@
   :class:`rig.console.processing.Processing` (its own thread, so the rig is free again at once).
 - One acquisition at a time: a scan, calibration or verification while another runs is refused
   with :class:`Busy`. A scan goes through :func:`rig.acquisition.scan.scan_with` with the held
-  devices, then to processing.
+  devices; its frames go to processing from memory as they arrive.
 - Scans, processing runs, calibrations and verifications are jobs of :class:`rig.jobs.Jobs` (thread-safe; every
   job ends done, failed or cancelled, whatever it raises). Their progress comes from the services'
   :class:`rig.events.Reporter` events, published through ``publish`` with the kind of what they
@@ -21,15 +21,18 @@ import logging
 import math
 import threading
 from collections.abc import Callable
+from concurrent.futures import Future
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from drivers.errors import DeviceError
 from rig.config import RigConfig
 from rig.console.datadir import DataDir
 from rig.console.devices import ProjectorSetting, Publish, RigHolder
 from rig.console.live_view import LiveView
-from rig.console.processing import Processing
+from rig.console.processing import FrameCollector, Processing
 from rig.console.results import ResultView
 from rig.errors import RigError
 from rig.events import Cancelled, Reporter
@@ -95,7 +98,9 @@ class ConsoleSession:
 
     # ------------------------------------------------------------------ life cycle
     def start(self) -> None:
-        """Start the rig's worker thread and open the rig on it (an opening error is shown, not raised)."""
+        """Start the rig's worker thread and open the rig on it (an opening error is shown, not raised);
+        prepare the calibration's reference plane meanwhile."""
+        self.processing.warm(ProcessOptions(correction=DEFAULT_CORRECTION))
         self.rig.start()
 
     def close(self) -> None:
@@ -156,6 +161,7 @@ class ConsoleSession:
         if name is not None:
             self.data.existing("calibrations", name)
         self.calibration = name
+        self.processing.warm(ProcessOptions(correction=DEFAULT_CORRECTION))
         self._publish_status()
         return name
 
@@ -229,8 +235,11 @@ class ConsoleSession:
         )
 
     def _scan(self, job: Job, path: Path, process: bool, options: ProcessOptions | None) -> None:
-        """Worker thread: the acquisition itself, then hand the capture to processing."""
+        """Worker thread: the acquisition itself; with ``process``, its frames go to processing from
+        memory as soon as the last one arrives, while the capture is still being written."""
         from rig.acquisition.scan import scan_with
+
+        stored: Future[None] = Future()
 
         def acquire() -> None:
             devices = self.rig.open()
@@ -238,21 +247,31 @@ class ConsoleSession:
             patterns = self.config.scan.patterns()
             reporter = Reporter(f"scan {job.name}", sink=self.jobs.sink(job, "scan"), cancel=job.token)
             reporter.begin(len(patterns), f"scan {job.name}")
-            scan_with(devices, path, patterns, progress=reporter, exposure_us=self.rig.exposure_us, gain=self.rig.gain)
+            projector = (devices.projector.width, devices.projector.height)
+            held = FrameCollector(patterns, projector, devices.camera.pixel_format.bit_depth, str(path))
+
+            def on_frame(index: int, image: np.ndarray) -> None:
+                if held.add(index, image) and process:
+                    self.jobs.update(job, stage="processing", result=job.name)
+                    self.processing.queue(job, held.stack(), job.name, options, True, stored=stored)
+
+            scan_with(
+                devices, path, patterns, progress=reporter, exposure_us=self.rig.exposure_us, gain=self.rig.gain,
+                on_frame=on_frame,
+            )  # fmt: skip
 
         try:
             error = self.jobs.run(job, acquire, then_finish=not process)
         finally:
             self._end_acquisition()
         if error is not None:
+            stored.set_exception(error)
             if not isinstance(error, Cancelled) and self.rig.devices is not None and _is_device_fault(error):
                 self.rig.device_failed(error, f"scan {job.name}")
         else:
+            stored.set_result(None)
             self.rig.restore_projector()
-            if process:
-                self.jobs.update(job, stage="processing", result=job.name)
-                self.processing.queue(job, path, job.name, options, True)
-            else:
+            if not process:
                 self.jobs.update(job, result=job.name)
         self._publish_status()
 
