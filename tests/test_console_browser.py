@@ -260,6 +260,27 @@ def test_the_3d_view_draws_points_coloured_over_the_tables_range(page: Any) -> N
     print(f"3-D view drawn in {draw_ms:.0f} ms ({WIDTH}x{HEIGHT}, software WebGL)")
 
 
+def test_live_3d_shows_point_clouds_with_a_rate_readout(page: Any) -> None:
+    """Live 3-D: short scans processed as they come, drawn as points, with rate and latency shown;
+    switched off, the camera view comes back (issue 24)."""
+    wait_frames(page, 1)
+    page.get_by_test_id("live3d-toggle").check()
+    page.wait_for_function(
+        "Number(document.querySelector('[data-testid=live3d-view]').dataset.shown || 0) >= 3", timeout=60_000
+    )
+    assert page.get_by_test_id("live3d-view").is_visible() and not page.get_by_test_id("live-view").is_visible()
+    assert drawn_fraction(page, "live3d-view") > 0.02
+    rate = page.get_by_test_id("live3d-rate").inner_text()
+    assert rate.endswith(" Hz") and float(rate.split()[0]) > 0, rate
+    assert page.get_by_test_id("live3d-latency").inner_text().endswith(" ms")
+    figures = page.eval_on_selector("[data-testid=live3d-view]", "c => [c.dataset.rateHz, c.dataset.latencyMs]")
+    print(f"live 3-D ({WIDTH}x{HEIGHT}): {float(figures[0]):.1f} Hz, latency {float(figures[1]):.0f} ms")
+    shot(page, "live-3d")
+    page.get_by_test_id("live3d-toggle").uncheck()
+    page.wait_for_function("!document.querySelector('[data-testid=live-view]').hidden")
+    wait_frames(page, 2)
+
+
 def test_downloads_list_what_the_result_holds(page: Any, server: dict[str, Any]) -> None:
     """A result written with the mesh formats offers them for download, as the result store lists them."""
     from rig import api

@@ -524,3 +524,35 @@ def run_scan(
         times=times,
         writer_busy_s=writer_busy,
     )
+
+
+def acquire_stack(
+    patterns: Sequence[Mapping[str, Any]],
+    projector: Projector,
+    camera: Camera,
+    trigger: TriggerPath,
+    settings: AcquisitionSettings = AcquisitionSettings(),
+    exposure_us: float | None = None,
+    gain: float | None = None,
+) -> np.ndarray:
+    """One frame per pattern, held in memory and written nowhere: (N, H, W) in pattern order.
+
+    The same acquisition as :func:`run_scan` (trigger path, deadlines, retries, camera staged and
+    restored) for what is shown and thrown away: the console's live 3-D view.
+    """
+    if not patterns:
+        raise ValueError("patterns: expected at least one pattern to acquire")
+    times = StepTimes()
+    triggers = _TriggerLog()
+    images: list[np.ndarray] = []
+    with staged_camera(camera, trigger.source, TriggerMode.ONCE, exposure_us, gain):
+        trigger.prepare(len(patterns) * (settings.retries + 1))
+        try:
+            for index, pattern in enumerate(patterns):
+                frame, _, _ = acquire_pattern(
+                    index, pattern, len(patterns), projector, camera, trigger, settings, triggers, times
+                )
+                images.append(frame.image)
+        finally:
+            trigger.finish()
+    return np.stack(images)

@@ -3,7 +3,7 @@
 Every device call happens on the thread that opened the rig (the off-screen projector's OpenGL
 context belongs to it). Requests are queued to it as tasks (:meth:`RigHolder.call` waits for the
 answer, :meth:`RigHolder.submit` does not); between tasks, while a page watches, it hands its time
-to the live feed (:class:`LiveFeed`); with nobody watching the camera is stopped and the projector
+to a live feed (:class:`LiveFeed`: live camera frames, or the live 3-D view); with nobody watching the camera is stopped and the projector
 dark. The holder keeps what the operator set (exposure, gain, the projector's pattern) and applies
 it whenever it opens the rig. A device error closes the rig and is published as a readable
 message; the next request (or live frame, after a short pause) opens the rig again.
@@ -106,7 +106,7 @@ class RigHolder:
         self.gain: float | None = config.camera.gain
         self.projector = ProjectorSetting()
         self.device_error: str | None = None
-        self.feed: LiveFeed | None = None
+        self.feeds: list[LiveFeed] = []  # between tasks, the first that a page watches gets the time
         self._tasks: queue.Queue[tuple[Callable[[], Any], Future[Any]]] = queue.Queue()
         self._stopping = threading.Event()
         self._devices: RigDevices | None = None
@@ -149,8 +149,8 @@ class RigHolder:
     def _run(self) -> None:
         next_frame = 0.0
         while not self._stopping.is_set():
-            feed = self.feed
-            live = feed is not None and feed.watching
+            feed = next((f for f in self.feeds if f.watching), None)
+            live = feed is not None
             wait = max(0.0, next_frame - time.monotonic()) if live else IDLE_POLL_S
             try:
                 fn, future = self._tasks.get(timeout=wait)
@@ -163,8 +163,10 @@ class RigHolder:
                     except BaseException as exc:  # noqa: BLE001 - handed to the caller's thread
                         future.set_exception(exc)
                 continue
-            if live and feed is not None:
-                next_frame = time.monotonic() + feed.interval_s()
+            if feed is not None:
+                # a fixed rate: the next frame is due one interval after this one was, not after it ends
+                now = time.monotonic()
+                next_frame = max(next_frame + feed.interval_s(), now)
                 feed.tick()
             elif not self._idle:
                 self._go_idle()

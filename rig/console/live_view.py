@@ -22,6 +22,7 @@ from rig.errors import RigError
 from rig.pipeline.outputs import colour_map
 
 JPEG_QUALITY = 80
+LIVE_FPS = 25.0  # highest live frame rate: 20 a second to follow a part by hand, with headroom
 LIVE_VIEWS = ("camera", "modulation")
 FPS_WINDOW_S = 2.0  # the frame rate shown is over this many seconds
 
@@ -37,7 +38,7 @@ class LiveSettings:
 class LiveView:
     """Live frames of the rig held by ``rig`` for the pages that watch, at most ``fps`` a second."""
 
-    def __init__(self, rig: RigHolder, publish: Publish, fps: float = 20.0) -> None:
+    def __init__(self, rig: RigHolder, publish: Publish, fps: float = LIVE_FPS) -> None:
         self.rig = rig
         self.publish = publish
         self.settings = LiveSettings()

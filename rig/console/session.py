@@ -2,7 +2,8 @@
 
 - The devices are held by :class:`rig.console.devices.RigHolder` (one worker thread makes every
   device call), the live view is :class:`rig.console.live_view.LiveView` (frames between tasks
-  while a page watches), processing and the results on screen are
+  while a page watches) or, when switched on, :class:`rig.console.live_3d.Live3D` (short scans
+  processed as they come), processing and the results on screen are
   :class:`rig.console.processing.Processing` (its own thread, so the rig is free again at once).
 - One acquisition at a time: a scan, calibration or verification while another runs is refused
   with :class:`Busy`. A scan goes through :func:`rig.acquisition.scan.scan_with` with the held
@@ -31,7 +32,8 @@ from drivers.errors import DeviceError
 from rig.config import RigConfig
 from rig.console.datadir import DataDir
 from rig.console.devices import ProjectorSetting, Publish, RigHolder
-from rig.console.live_view import LiveView
+from rig.console.live_3d import Live3D
+from rig.console.live_view import LIVE_FPS, LiveView
 from rig.console.processing import FrameCollector, Processing
 from rig.console.results import ResultView
 from rig.errors import RigError
@@ -76,7 +78,7 @@ class ConsoleSession:
         data: DataDir,
         publish: Publish,
         fault_injection: bool = False,
-        live_fps: float = 20.0,
+        live_fps: float = LIVE_FPS,
     ) -> None:
         self.config = config
         self.data = data
@@ -89,7 +91,8 @@ class ConsoleSession:
         self.jobs = Jobs(lambda message: publish(message, None))
         self.rig = RigHolder(config, publish, self._publish_status)
         self.live = LiveView(self.rig, publish, live_fps)
-        self.rig.feed = self.live
+        self.live_3d = Live3D(self.rig, publish, lambda: self.live.watching, self._calibration_dir)
+        self.rig.feeds = [self.live_3d, self.live]
         self.processing = Processing(data, self.jobs, publish, self._calibration_dir, self._publish_status)
         self.current: Job | None = None  # the acquisition running
         self._acquiring = threading.Lock()
@@ -106,8 +109,10 @@ class ConsoleSession:
     def close(self) -> None:
         """Stop every job, close the devices, stop the threads (Ctrl-C, app shutdown)."""
         self.jobs.stop(reason="the console is shutting down")
+        self.live_3d.on = False
         self.rig.close()
         self.processing.close()
+        self.live_3d.close()
 
     # ------------------------------------------------------------------ what the rig holds
     @property
@@ -155,6 +160,12 @@ class ConsoleSession:
 
     def set_live(self, overlay: bool | None = None, view: str | None = None) -> dict[str, Any]:
         return self.live.set(overlay, view)
+
+    def set_live_3d(self, on: bool) -> dict[str, Any]:
+        """Continuous scanning with the short pattern set, processed and shown as it comes (or not)."""
+        reply = self.live_3d.set(on)
+        self._publish_status()
+        return reply
 
     def set_calibration(self, name: str | None) -> str | None:
         """The calibration scans are processed with (a name in DATA/calibrations, or None: phase only)."""
@@ -488,6 +499,8 @@ class ConsoleSession:
             state = "processing"
         elif self.rig.device_error and self.rig.devices is None:
             state = "fault"
+        elif self.live_3d.watching and self.rig.devices is not None:
+            state = "live 3-D"
         elif self.live.watching and self.rig.devices is not None:
             state = "live"
         else:
@@ -504,6 +517,7 @@ class ConsoleSession:
             "gain": self.rig.gain,
             "projector": dict(self.rig.projector.__dict__),
             "live": self.live.describe(),
+            "live_3d": self.live_3d.describe(),
             "calibration": self.calibration,
             "prompt": self.prompt,
             "calibrations": self.data.names("calibrations"),
