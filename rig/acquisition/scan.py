@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from rig.acquisition.exposure_plan import ExposurePlan, plan_exposures
-from rig.acquisition.loop import AcquisitionSettings, run_scan
+from rig.acquisition.loop import AcquisitionSettings, FrameHandler, run_scan
 from rig.config import RigConfig
 from rig.errors import CaptureError, ConfigError
 from rig.hardware.assembly import open_rig
@@ -105,15 +105,17 @@ def scan_with(
     gain: float | None = None,
     exposures: Exposures = None,
     plan: ExposurePlan | None = None,
+    on_frame: FrameHandler | None = None,
 ) -> ScanResult:
     """Scan with devices that are already open (a console or a calibration session holds them).
 
     ``scene`` is the label capture.json records; what is really in front of the rig is whatever
-    the operator (or the simulated world) put there. ``progress`` gets ``begin(frames)`` and is
-    stepped once per frame. ``exposure_us`` and ``gain`` override the config's camera settings
-    (the console's controls). ``exposures``: several exposure times (each exposure's full sequence
-    in turn) or ``"auto"`` (the exposure assistant chooses, after a pre-capture); None: one.
-    ``plan``: the assistant's plan that chose ``exposures``, recorded in capture.json.
+    the operator (or the simulated world) put there. ``progress`` is stepped once per frame.
+    ``exposure_us`` and ``gain`` override the config's camera settings (the console's controls).
+    ``exposures``: several exposure times (each exposure's full sequence in turn) or ``"auto"``
+    (the exposure assistant chooses, after a pre-capture); None: one. ``plan``: the assistant's
+    plan that chose ``exposures``, recorded in capture.json. ``on_frame(index, image)`` receives
+    each frame as it arrives (:func:`rig.acquisition.loop.run_scan`).
     """
 
     config = devices.config
@@ -147,6 +149,7 @@ def scan_with(
         gain=config.camera.gain if gain is None else gain,
         progress=progress,
         overwrite=overwrite,
+        on_frame=on_frame,
     )
     result.exposure_plan = plan
     return result
