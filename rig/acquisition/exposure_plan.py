@@ -240,11 +240,16 @@ def capture_probe(
     return np.stack(frames)
 
 
-def plan_exposures(devices: RigDevices, progress: ProgressSink | None = None) -> ExposurePlan:
-    """Pre-capture at two exposures, estimate reflectance, choose the exposures (module docstring)."""
+def plan_exposures(
+    devices: RigDevices, progress: ProgressSink | None = None, default_us: float | None = None
+) -> ExposurePlan:
+    """Pre-capture at two exposures, estimate reflectance, choose the exposures (module docstring).
+
+    ``default_us``: the exposure the operator uses now (default the config's ``[camera] exposure_us``).
+    """
     config = devices.config
     camera = devices.camera
-    default_us = float(config.camera.exposure_us)
+    default_us = float(config.camera.exposure_us if default_us is None else default_us)
     settings = AcquisitionSettings(config.scan.show_timeout_s, config.scan.fetch_timeout_s, config.scan.retries)
     limits = camera.exposure_limits_us
     longest = 0.5 * settings.fetch_timeout_s * 1e6  # an exposure must end well inside the frame deadline

@@ -106,6 +106,7 @@ def scan_with(
     exposures: Exposures = None,
     plan: ExposurePlan | None = None,
     on_frame: FrameHandler | None = None,
+    extra: Mapping[str, Any] | None = None,
 ) -> ScanResult:
     """Scan with devices that are already open (a console or a calibration session holds them).
 
@@ -115,7 +116,8 @@ def scan_with(
     ``exposures``: several exposure times (each exposure's full sequence in turn) or ``"auto"``
     (the exposure assistant chooses, after a pre-capture); None: one. ``plan``: the assistant's
     plan that chose ``exposures``, recorded in capture.json. ``on_frame(index, image)`` receives
-    each frame as it arrives (:func:`rig.acquisition.loop.run_scan`).
+    each frame as it arrives (:func:`rig.acquisition.loop.run_scan`). ``extra``: more top-level
+    keys for capture.json (the console's part name and notes).
     """
 
     config = devices.config
@@ -125,17 +127,20 @@ def scan_with(
     chosen, auto_plan = resolve_exposures(devices, exposures)
     plan = auto_plan or plan
     patterns = with_exposures(patterns, chosen)
+    if len(chosen) == 1:  # one exposure asked for: the whole scan at it
+        exposure_us = chosen[0]
     settings = AcquisitionSettings(
         show_timeout_s=config.scan.show_timeout_s,
         fetch_timeout_s=config.scan.fetch_timeout_s,
         retries=config.scan.retries,
     )
     log.info("scanning %d patterns into %s (%s)", len(patterns), output, settings)
-    extra: dict[str, Any] = {"rig_config": str(config.source) if config.source else "built-in simulated rig"}
+    keys: dict[str, Any] = {"rig_config": str(config.source) if config.source else "built-in simulated rig"}
+    keys.update(extra or {})
     if devices.simulation is not None:
-        extra["simulation"] = devices.simulation.description()
+        keys["simulation"] = devices.simulation.description()
     if plan is not None:
-        extra["exposure_plan"] = plan.to_dict()
+        keys["exposure_plan"] = plan.to_dict()
     result = run_scan(
         output,
         patterns,
@@ -144,7 +149,7 @@ def scan_with(
         devices.trigger,
         settings,
         scene=scene,
-        extra=extra,
+        extra=keys,
         exposure_us=config.camera.exposure_us if exposure_us is None else exposure_us,
         gain=config.camera.gain if gain is None else gain,
         progress=progress,

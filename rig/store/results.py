@@ -351,6 +351,7 @@ class StoredResult:
     mask: np.ndarray  # (H, W) bool
     points: np.ndarray | None  # (H, W, 3) float32 mm, NaN where invalid
     report: dict[str, Any]
+    exposure: np.ndarray | None = None  # (H, W) float32 us: the exposure each pixel drew on most (several exposures)
 
 
 def read_result(directory: str | Path, where: str | None = None) -> StoredResult:
@@ -379,7 +380,14 @@ def read_result(directory: str | Path, where: str | None = None) -> StoredResult
             )
         points = np.full((*mask.shape, 3), np.nan, dtype=np.float32)
         points[mask] = valid
-    return StoredResult(np.asarray(values, dtype=np.float32), unit, shows, mask, points, report)
+    exposure = None
+    if has_file(directory, EXPOSURE):
+        exposure = np.asarray(_read_array(directory, EXPOSURE, where), dtype=np.float32)
+        if exposure.shape != mask.shape:
+            raise OutputError(
+                f"{where}/{EXPOSURE}: expected the (H, W) of mask.npy {mask.shape}, found {exposure.shape}"
+            )
+    return StoredResult(np.asarray(values, dtype=np.float32), unit, shows, mask, points, report, exposure)
 
 
 def result_file(directory: str | Path, file: str) -> Path:

@@ -7,6 +7,7 @@ import { buildWizard, calibrationJob, calibrationProgress, calibrationResult, sh
 import { binaryMessage, bindSettings, showSettings } from "./live.js";
 import { bindLive3d, live3dError, showLive3d } from "./live3d.js";
 import { bindResult, openResult, resultSaved, showResult } from "./result.js";
+import { bindSetup, showSetup } from "./setup.js";
 import { buildVerify, showVerifyPrompt, verificationDone, verifyJob, verifyProgress } from "./verify.js";
 
 const ownJobs = new Set(); // jobs this page started: only their results move it to the Result view
@@ -27,6 +28,7 @@ function updateStatus(status) {
   $("verify-start").disabled = status.busy;
   $("stop-button").disabled = !(status.busy || status.jobs.length);
   showSettings(status);
+  showSetup(status);
   showLive3d(status);
   showPrompts(status.prompt);
 }
@@ -109,6 +111,7 @@ function bind() {
   $("scan-button").onclick = scan;
   $("stop-button").onclick = () => api("POST", "/api/stop", {}).catch(() => {});
   bindSettings();
+  bindSetup();
   bindLive3d();
   bindResult();
   bindCaptures();

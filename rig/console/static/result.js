@@ -3,6 +3,7 @@
 // its colour bar, the cloud's colours and the figures table share one range (the server's).
 import { $, api, showView } from "./api.js";
 import { CloudView, fetchCloud } from "./cloud.js";
+import { showExposureMap } from "./setup.js";
 
 const shown = { summary: null, values: null };
 let cloudView = null;
@@ -25,6 +26,7 @@ export async function showResult(name, summary, final, { focus = false, lastFram
   $("cloud-unit").textContent = summary.unit;
   renderFigures(summary);
   renderDownloads();
+  showExposureMap(name, summary);
   if (focus) showView("result");
   await loaded;
   const mapShown = performance.now();
