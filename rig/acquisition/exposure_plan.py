@@ -19,10 +19,12 @@ fringe is strong enough to trust its phase::
 
 (top: the camera's largest grey level). The candidate exposures are a ladder of factors of
 sqrt(2) from the configured one (two significant digits), inside the camera's exposure limits and
-under half the frame deadline, and those limits themselves. The plan is the fewest candidates (at most :data:`MAX_EXPOSURES`) whose union of usable
-pixels covers ``TARGET_COVERAGE`` of the lit pixels and whose shortest exposure leaves at most
-``SATURATED_ALLOWANCE`` more of them saturated than the shortest candidate does (a saturated pixel has no phase; a dark one a noisier
-phase); between plans of as many exposures, the one covering most; if no plan reaches the target, the best of the largest size, and the plan says so.
+under half the frame deadline, and those limits themselves. The plan is the fewest candidates (at
+most :data:`MAX_EXPOSURES`) whose union of usable pixels covers ``TARGET_COVERAGE`` of the lit
+pixels and whose shortest exposure leaves at most ``SATURATED_ALLOWANCE`` more of them saturated
+than the shortest candidate does (a saturated pixel has no phase; a dark one a noisier phase);
+between plans of as many exposures, the one covering most, then the one nearest the configured
+exposure; if no plan reaches the target, the best of the largest size, and the plan says so.
 """
 
 from __future__ import annotations
@@ -35,9 +37,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from drivers.camera import TriggerMode
 from processing.phase.shifting import sample_stride
-from rig.acquisition.loop import AcquisitionSettings, StepTimes, _TriggerLog, acquire_pattern, staged_camera
+from rig.acquisition.loop import AcquisitionSettings, acquire_in_memory
 from rig.errors import CaptureError
 
 if TYPE_CHECKING:
@@ -224,20 +225,10 @@ def capture_probe(
     devices: RigDevices, patterns: Sequence[Mapping[str, Any]], exposure_us: float, settings: AcquisitionSettings
 ) -> np.ndarray:
     """Frames (N, H, W) of ``patterns`` at ``exposure_us``, in memory (nothing is written)."""
-    camera, trigger = devices.camera, devices.trigger
-    frames = []
-    with staged_camera(camera, trigger.source, TriggerMode.ONCE, exposure_us):
-        trigger.prepare(len(patterns) * (settings.retries + 1))
-        try:
-            triggers, times = _TriggerLog(), StepTimes()
-            for index, pattern in enumerate(patterns):
-                frame, _, _ = acquire_pattern(
-                    index, pattern, len(patterns), devices.projector, camera, trigger, settings, triggers, times
-                )
-                frames.append(np.asarray(frame.image))
-        finally:
-            trigger.finish()
-    return np.stack(frames)
+    frames = acquire_in_memory(
+        patterns, devices.projector, devices.camera, devices.trigger, settings, exposure_us=exposure_us
+    )
+    return np.stack([np.asarray(frame.image) for frame in frames])
 
 
 def plan_exposures(

@@ -385,6 +385,31 @@ def _fetch_answer(
         )
 
 
+def acquire_in_memory(
+    patterns: Sequence[Mapping[str, Any]],
+    projector: Projector,
+    camera: Camera,
+    trigger: TriggerPath,
+    settings: AcquisitionSettings,
+    exposure_us: float | None = None,
+) -> list[Frame]:
+    """One frame per pattern, kept in memory (a pre-capture: nothing is written), the camera staged
+    at ``exposure_us`` and restored afterwards; the same checks and retries as a scan."""
+    frames: list[Frame] = []
+    with staged_camera(camera, trigger.source, TriggerMode.ONCE, exposure_us):
+        trigger.prepare(len(patterns) * (settings.retries + 1))
+        try:
+            triggers, times = _TriggerLog(), StepTimes()
+            for index, pattern in enumerate(patterns):
+                frame, _, _ = acquire_pattern(
+                    index, pattern, len(patterns), projector, camera, trigger, settings, triggers, times
+                )
+                frames.append(frame)
+        finally:
+            trigger.finish()
+    return frames
+
+
 def frame_metadata(frame: Frame, attempts: int) -> dict[str, Any]:
     """Per-frame keys stored in capture.json beside pattern, file and sha256."""
     meta: dict[str, Any] = {
