@@ -328,3 +328,11 @@ def test_camera_exposure_limits_are_enforced(tmp_path: Path) -> None:
         with pytest.raises(ValueError, match="100 .. 50000 us"):
             camera.exposure_us = 60_000
         assert camera.exposure_us == 40_000
+
+
+def test_the_example_config_of_shiny_and_dark_parts_loads() -> None:
+    from rig.config import load_config
+
+    config = load_config(Path(__file__).resolve().parent.parent / "examples" / "shiny-and-dark.toml")
+    assert config.simulation.scene == "shiny-and-dark" and config.simulation.full_well_e == 10_000
+    assert config.scan.exposures_us == ()  # --hdr auto or --exposures choose them
