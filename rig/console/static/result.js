@@ -4,11 +4,12 @@
 import { $, api, showView } from "./api.js";
 import { CloudView, fetchCloud } from "./cloud.js";
 
-const shown = { summary: null, values: null };
+const shown = { summary: null, values: null, calls: 0 };
 let cloudView = null;
 
 export async function showResult(name, summary, final, { focus = false, lastFrameAt = null } = {}) {
   const started = performance.now();
+  const call = ++shown.calls; // a newer result (the final after the quick one) supersedes this one
   shown.summary = summary;
   $("result-title").textContent = `${name}: ${summary.shows} (${summary.unit})` + (final ? "" : " — quick result, refining");
   const stamp = Date.now();
@@ -27,13 +28,16 @@ export async function showResult(name, summary, final, { focus = false, lastFram
   renderDownloads();
   if (focus) showView("result");
   await loaded;
+  if (call !== shown.calls) return;
   const mapShown = performance.now();
+  const view = $("view-result");
+  if (!final) view.dataset.quickMapSinceLastFrameMs = lastFrameAt ? String(mapShown - lastFrameAt) : "";
   shown.values = { ...(await valuesReady), unit: summary.unit, name };
   const cloud = await cloudReady;
+  if (call !== shown.calls) return;
   const drawStarted = performance.now();
   drawCloud(cloud);
   const done = performance.now();
-  const view = $("view-result");
   view.dataset.result = name;
   view.dataset.final = String(final);
   view.dataset.mapMs = String(mapShown - started);
