@@ -5,9 +5,10 @@ Session (no browser):
 - live view: frames per second the console session publishes (software trigger, figures,
   modulation map under a fringe, JPEG) with one page watching, at ``--live-size``;
 - scan to result: seconds from the scan's last frame to the result being published to the page
-  (processed from the frames held in memory, without fringe-order correction), at
-  ``--scan-size``, beside the peer: :func:`rig.api.process` of the same capture from disk with the
-  same options, timed in the same run (``console / peer``: the console's overhead).
+  (processed from the frames held in memory; without fringe-order correction, then with the
+  default ``auto`` and its quick result first), at ``--scan-size``, beside the peer:
+  :func:`rig.api.process` of the same capture from disk with the same options, timed in the same
+  run (``console / peer``: below 1 where the console's processing overlaps the capture's writing).
 
 Page (``--browser``, the default when Playwright and Debian's ``/usr/bin/chromium`` are there): the
 console served by uvicorn as ``rig console`` serves it, driven by Playwright in headless Chromium
@@ -108,32 +109,36 @@ def live_fps(width: int, height: int, seconds: float) -> float:
     return fps
 
 
-def scan_to_result(width: int, height: int, runs: int) -> tuple[list[float], list[float]]:
+def scan_to_result(width: int, height: int, runs: int, correction: str) -> tuple[list[float], list[float], list[float]]:
+    """Per run: last frame -> quick result and -> final result published (s), and the peer's seconds."""
     config = parse_config({"camera": {"size": [width, height]}})
     recorder = Recorder()
-    console_s, peer_s = [], []
+    quick_s, final_s, peer_s = [], [], []
+    options = ProcessOptions(correction=correction)
     with tempfile.TemporaryDirectory() as tmp:
         session = ConsoleSession(config, DataDir(tmp), recorder)
         session.start()
         try:
             calibrate(session, config)
+            time.sleep(5.0)  # the console prepares the calibration's reference plane meanwhile
             for run in range(runs):
-                job = session.scan(name=f"run-{run}", options=ProcessOptions(correction="none"))
+                job = session.scan(name=f"run-{run}", options=options)
                 with recorder.event:
                     recorder.event.wait_for(
-                        lambda job=job: any(r["job"] == job.id for r in recorder.results), timeout=120
+                        lambda job=job: any(r["job"] == job.id and r["final"] for r in recorder.results), timeout=120
                     )
-                result = next(r for r in recorder.results if r["job"] == job.id)
-                console_s.append(float(result["since_last_frame_s"]))
+                published = {r["final"]: float(r["since_last_frame_s"]) for r in recorder.results if r["job"] == job.id}
+                quick_s.append(published.get(False, published[True]))
+                final_s.append(published[True])
                 while job.state == "running":
                     time.sleep(0.05)
                 capture = session.data.path("captures", job.name)
                 started = time.perf_counter()
-                api.process(capture, session.data.path("calibrations", "cal"), ProcessOptions(correction="none"))
+                api.process(capture, session.data.path("calibrations", "cal"), options)
                 peer_s.append(time.perf_counter() - started)
         finally:
             session.close()
-    return console_s, peer_s
+    return quick_s, final_s, peer_s
 
 
 def spread(values: list[float]) -> str:
@@ -315,12 +320,16 @@ def session_bench(args: argparse.Namespace) -> None:
         f"live view {args.live_size[0]}x{args.live_size[1]}, fringe shown (modulation map computed): {fps:.1f} fps "
         f"(uncapped; the console caps it at {LIVE_FPS:g})"
     )
-    console_s, peer_s = scan_to_result(*args.scan_size, args.runs)
-    ratios = [c / p for c, p in zip(console_s, peer_s)]
-    print(f"scan to result published, {args.scan_size[0]}x{args.scan_size[1]}, correction none, {args.runs} runs:")
-    print(f"  console (last frame -> result): {spread(console_s)}")
-    print(f"  peer rig.api.process from disk: {spread(peer_s)}")
-    print(f"  console / peer: {statistics.median(ratios):.2f} ({min(ratios):.2f} - {max(ratios):.2f})")
+    w, h = args.scan_size
+    for correction in ("none", "auto"):
+        quick_s, final_s, peer_s = scan_to_result(w, h, args.runs, correction)
+        ratios = [c / p for c, p in zip(final_s, peer_s)]
+        print(f"scan to result published, {w}x{h}, correction {correction}, {args.runs} runs:")
+        if correction != "none":
+            print(f"  console (last frame -> quick result): {spread(quick_s)}")
+        print(f"  console (last frame -> result):        {spread(final_s)}")
+        print(f"  peer rig.api.process from disk:        {spread(peer_s)}")
+        print(f"  console / peer: {statistics.median(ratios):.2f} ({min(ratios):.2f} - {max(ratios):.2f})")
 
 
 def has_playwright() -> bool:
