@@ -429,6 +429,11 @@ def test_captures_reprocess_and_compare(page: Any) -> None:
     page.get_by_test_id("compare-button").click()
     page.wait_for_function("document.querySelector('[data-testid=compare-figures]').textContent.includes('rms')")
     page.wait_for_function("document.querySelector('[data-testid=compare-diff]').naturalWidth > 0")
+    # the difference map's scale: symmetric, in the results' unit, inside the largest difference
+    high, low = (page.get_by_test_id(t).inner_text().split() for t in ("compare-high", "compare-low"))
+    assert high[1] == low[1] == "mm" and float(high[0]) == -float(low[0]) > 0
+    figures = page.get_by_test_id("compare-figures").inner_text()
+    assert float(figures.split("max |d| ")[1].split()[0]) >= float(high[0])
     shot(page, "captures")
 
 
