@@ -14,6 +14,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import cv2
 import numpy as np
 import pytest
 from console_client import BASE, HEIGHT, WIDTH, WS, wait_job, wait_saved
@@ -105,6 +106,21 @@ def test_scan_gives_a_result_and_a_second_scan_is_refused_as_busy(console: TestC
     assert len(surface["z"]) == HEIGHT // surface["step"] or len(surface["z"]) == -(-HEIGHT // surface["step"])
     assert console.get("/api/results/part-001/files/phase.npy").status_code == 200
     assert console.get("/api/results/part-001/files/points.ply").status_code == 404  # phase only: no cloud
+    # the 3-D view's points: every valid pixel, coloured as the map, the phase as a relief (not edge-on)
+    cloud = console.get("/api/results/part-001/cloud.bin")
+    count = int(cloud.headers["X-Points"])
+    assert cloud.headers["X-Axis-Unit"] == "px" and cloud.headers["X-Step"] == "1"
+    xyz = np.frombuffer(cloud.content[: count * 12], dtype="<f4").reshape(-1, 3)
+    rgba = np.frombuffer(cloud.content[count * 12 :], dtype=np.uint8).reshape(-1, 4)
+    phase = np.frombuffer(values.content, dtype="<f4").reshape(HEIGHT, WIDTH)
+    assert count == np.isfinite(phase).sum()
+    assert np.ptp(xyz[:, 2]) == pytest.approx(0.25 * WIDTH, rel=1e-3)
+    bgr = cv2.imdecode(np.frombuffer(console.get("/api/results/part-001/map.png").content, np.uint8), cv2.IMREAD_COLOR)
+    cols, rows = xyz[:, 0].astype(int), xyz[:, 1].astype(int)
+    np.testing.assert_array_equal(rgba[:, :3], bgr[rows, cols, ::-1])
+    assert [float(v) for v in cloud.headers["X-Range"].split(",")] == pytest.approx(
+        [np.nanmin(phase), np.nanmax(phase)]
+    )
 
 
 def test_scan_with_a_calibration_gives_heights(
