@@ -644,31 +644,35 @@ def decode_stripes(
     index itself, a Gray code's are converted first.
     """
     planes = _validate.real_array(images, "images", ndim=3)
-    neg = None
-    level: np.ndarray | None = None
     if inverted is not None:
-        neg = _validate.real_array(inverted, "inverted", ndim=3)
-        _validate.same_shape(neg, planes.shape, "inverted")
-    elif threshold is None:
-        level = _default_gray_threshold(planes)
+        levels = _validate.real_array(inverted, "inverted", ndim=3)
+        _validate.same_shape(levels, planes.shape, "inverted")
     else:
-        level = np.asarray(threshold, dtype=np.float64)
-        if level.ndim not in (0, 2) or (level.ndim == 2 and level.shape != planes.shape[1:]):
-            raise ValueError(
-                f"threshold: expected a number or an array of shape {planes.shape[1:]}, found shape {level.shape}"
-            )
+        levels = np.broadcast_to(_bit_threshold(planes, threshold), planes.shape)  # a view, no copy
     # One plane at a time (most significant first): stripes = 2 stripes + bit. A Gray code's binary
     # bit is the XOR of its Gray bits so far (b_i = g_0 ^ ... ^ g_i).
     stripes = np.zeros(planes.shape[1:], dtype=np.int64)
     running = np.zeros(planes.shape[1:], dtype=bool)  # a Gray code's binary bit so far
     bit = np.empty(planes.shape[1:], dtype=bool)
     for index in range(planes.shape[0]):
-        np.greater(planes[index], neg[index] if neg is not None else level, out=bit)
+        np.greater(planes[index], levels[index], out=bit)
         if not binary:
             running ^= bit
         stripes <<= 1
         stripes |= running if not binary else bit
     return stripes
+
+
+def _bit_threshold(planes: np.ndarray, threshold: np.ndarray | float | None) -> np.ndarray:
+    """The level a plane's pixel is compared with: ``threshold`` (checked), else the planes' own mid-level."""
+    if threshold is None:
+        return _default_gray_threshold(planes)
+    level = np.asarray(threshold, dtype=np.float64)
+    if level.ndim not in (0, 2) or (level.ndim == 2 and level.shape != planes.shape[1:]):
+        raise ValueError(
+            f"threshold: expected a number or an array of shape {planes.shape[1:]}, found shape {level.shape}"
+        )
+    return level
 
 
 def _default_gray_threshold(planes: np.ndarray) -> np.ndarray:
