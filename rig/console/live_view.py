@@ -19,7 +19,7 @@ from drivers.errors import DeviceError
 from rig.acquisition.live import frame_figures, grab_frame
 from rig.console.devices import Publish, RigHolder
 from rig.errors import RigError
-from rig.pipeline.outputs import colour_map
+from rig.store.result_files import colour_map
 
 JPEG_QUALITY = 80
 LIVE_FPS = 25.0  # highest live frame rate: 20 a second to follow a part by hand, with headroom

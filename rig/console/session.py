@@ -41,7 +41,6 @@ from rig.events import Cancelled, Reporter
 from rig.jobs import Job, Jobs
 from rig.pipeline.plan import DEFAULT_CORRECTION, ProcessOptions
 from rig.store.files import INCOMPLETE_MARK
-from rig.store.result_files import colour_map
 
 log = logging.getLogger(__name__)
 
