@@ -96,6 +96,7 @@ def test_code_under_two_frequencies(tmp_path: Path, thresholds: str, seed: int) 
     fringes). Their beat (80 px, two cells) is what the code resolves; 22.8 and 34.2 follow."""
     kept, wrong, info = _order_errors(tmp_path, (22.8, 34.2), _code_planes("gray", 5, 40, thresholds), seed)
     assert info["code"]["resolves"] == "beat 11.4" and info["code"]["cells_per_period"] == pytest.approx(2.0)
+    assert info["code"]["margin_periods"] == pytest.approx(0.25)
     assert kept > 0.95, kept
     assert wrong < 0.002, wrong
 
