@@ -663,6 +663,50 @@ def decode_stripes(
     return stripes
 
 
+def border_side(
+    images: np.ndarray,
+    stripes: np.ndarray,
+    inverted: np.ndarray | None = None,
+    threshold: np.ndarray | float | None = None,
+    binary: bool = False,
+) -> np.ndarray:
+    """Which border of its decoded cell each pixel sits on, as the code's own bits tell it.
+
+    A pixel within the blur of a cell border reads the bits that change there (one for a Gray
+    code) at a fraction of their full contrast |plane - level|. Returns an int8 map: +1 where the
+    bits changing between cells s and s + 1 read below half the pixel's strongest bit and those
+    changing between s - 1 and s at least half, -1 for the converse, 0 where the bits do not
+    single out one border. :func:`unwrap_coded` uses it where cells and periods share their borders.
+    """
+    planes = _validate.real_array(images, "images", ndim=3)
+    if inverted is not None:
+        levels = _validate.real_array(inverted, "inverted", ndim=3)
+        _validate.same_shape(levels, planes.shape, "inverted")
+    else:
+        levels = np.broadcast_to(_bit_threshold(planes, threshold), planes.shape)
+    s = np.asarray(stripes).astype(np.int64)
+    _validate.same_shape(s, planes.shape[1:], "stripes")
+    word = s if binary else s ^ (s >> 1)
+    below, above = np.maximum(s - 1, 0), s + 1
+    left = np.where(s > 0, word ^ (below if binary else below ^ (below >> 1)), 0)  # bits changing at s - 1 | s
+    right = word ^ (above if binary else above ^ (above >> 1))  # bits changing at s | s + 1
+    weak_left = np.full(s.shape, np.inf)
+    weak_right = np.full(s.shape, np.inf)
+    strongest = np.zeros(s.shape)
+    count = planes.shape[0]
+    for index in range(count):
+        contrast = np.abs(planes[index].astype(np.float64) - levels[index])
+        np.maximum(strongest, contrast, out=strongest)
+        place = count - 1 - index  # plane 0 is the most significant bit
+        np.minimum(weak_left, np.where((left >> place) & 1 == 1, contrast, np.inf), out=weak_left)
+        np.minimum(weak_right, np.where((right >> place) & 1 == 1, contrast, np.inf), out=weak_right)
+    half = 0.5 * strongest
+    side = np.zeros(s.shape, dtype=np.int8)
+    side[(weak_right < half) & (weak_left >= half)] = 1
+    side[(weak_left < half) & (weak_right >= half)] = -1
+    return side
+
+
 def _bit_threshold(planes: np.ndarray, threshold: np.ndarray | float | None) -> np.ndarray:
     """The level a plane's pixel is compared with: ``threshold`` (checked), else the planes' own mid-level."""
     if threshold is None:
@@ -818,6 +862,7 @@ def unwrap_coded(
     stripes: np.ndarray,
     cell: float,
     max_residual: float = np.pi / 2,
+    side: np.ndarray | None = None,
 ) -> UnwrapResult:
     """Absolute phase from a decoded code (Gray or binary) and wrapped phases at one or more frequencies.
 
@@ -833,6 +878,11 @@ def unwrap_coded(
         Width of one code cell as a fraction of the axis (``1 / 2**bits``, or cell px / W).
     max_residual : float
         Bound, in radians, of each hierarchical step's residual (as :func:`unwrap_hierarchical`).
+    side : (H, W) int8 array, optional
+        :func:`border_side` of the code. Used where the rung has one cell per period (its cells'
+        borders are its phase wraps): a pixel in the first quarter of its period whose bits say
+        it sits on the border with the next cell belongs to that cell (k = s + 1), one in the
+        last quarter on the border with the previous cell to that one (k = s - 1).
 
     Returns
     -------
@@ -855,13 +905,18 @@ def unwrap_coded(
     climb = [i for i, f in enumerate(freqs) if f > rung.frequency]
     ratio = rung.cells_per_period
 
-    def kernel(stripe: np.ndarray, *raw: np.ndarray) -> tuple[np.ndarray, ...]:
+    sides = np.zeros(s.shape, dtype=np.int8) if side is None else np.asarray(side, dtype=np.int8)
+    _validate.same_shape(sides, s.shape, "side")
+
+    def kernel(stripe: np.ndarray, border: np.ndarray, *raw: np.ndarray) -> tuple[np.ndarray, ...]:
         turns = [_turns(r) for r in raw]
         anchor = turns[rung.pair[0]] if len(rung.pair) == 1 else _fraction(turns[rung.pair[0]] - turns[rung.pair[1]])
         stripe = stripe.astype(np.int64)
         valid = (stripe >= 0) & (stripe < cells)
         if rung.aligned:
             orders = stripe.astype(np.float64)
+            orders += (anchor < 0.25) & (border == 1)  # read in the previous cell, but past its border
+            orders -= (anchor >= 0.75) & (border == -1)  # read in the next cell, short of its border
         else:
             orders = (stripe + 0.5) * (1.0 / ratio) - anchor
             np.rint(orders, out=orders)
@@ -872,4 +927,4 @@ def unwrap_coded(
         phase, k, climbed = _hierarchy(coarse, [(turns[i], freqs[i]) for i in climb], tolerance)
         return phase, k, climbed & valid
 
-    return _run(kernel, [s, *maps])
+    return _run(kernel, [s, sides, *maps])

@@ -158,10 +158,13 @@ def _gray(inputs: UnwrapInputs) -> UnwrapResult:
         "resolves": f"beat {rung.frequency:g}" if len(rung.pair) == 2 else f"frequency {rung.frequency:g}",
         "cells_per_period": round(rung.cells_per_period, 6),
         # how far (in periods) a decoded cell may be off its border before the order is wrong: 0 when
-        # cells and periods share their borders (r = 1), where blur at each border decides alone
+        # cells and periods share their borders (r = 1), where the bits' border side decides
         "margin_periods": 0.0 if rung.aligned else round(0.5 - 0.5 / rung.cells_per_period, 6),
     }
-    return temporal.unwrap_coded(inputs.phases, frequencies, stripes, cell, **_max_residual(inputs.params))
+    side = None
+    if rung.aligned:  # cells and periods share borders: the code's bits say which side of one a pixel is
+        side = temporal.border_side(gray.planes, stripes, gray.inverted, gray.threshold, gray.binary)
+    return temporal.unwrap_coded(inputs.phases, frequencies, stripes, cell, side=side, **_max_residual(inputs.params))
 
 
 def _spatial(inputs: UnwrapInputs) -> UnwrapResult:
