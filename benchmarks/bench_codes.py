@@ -8,6 +8,8 @@ fringes). Rows, timed in the same interleaved runs:
   plane at a time into the stripe map;
 - ``unwrap_coded``: :func:`processing.unwrap.temporal.unwrap_coded` of both sets (the code resolves
   their 200-px beat, both follow hierarchically);
+- ``border_side``: :func:`processing.unwrap.temporal.border_side`, which side of a cell border each
+  pixel is on by its bits (what a plain code of one cell per period adds);
 - the peer, ``stacked decode``: the same decoding by whole-stack numpy operations (bits of all
   planes, cumulative XOR, a weighted sum in int64), how decode_gray worked before.
 
@@ -70,6 +72,7 @@ def main() -> int:
         {
             "decode_stripes": lambda: temporal.decode_stripes(normal, inverse),
             "unwrap_coded": lambda: temporal.unwrap_coded(phis, FREQUENCIES, stripes, CELL_PX / DISPLAY_WIDTH),
+            "border_side": lambda: temporal.border_side(normal, stripes, inverse),
             "stacked decode (peer)": lambda: _stacked_decode(normal, inverse),
         },
         args.runs,

@@ -684,22 +684,24 @@ def border_side(
         _validate.same_shape(levels, planes.shape, "inverted")
     else:
         levels = np.broadcast_to(_bit_threshold(planes, threshold), planes.shape)
-    s = np.asarray(stripes).astype(np.int64)
+    s = np.asarray(stripes).astype(np.int32)  # code words of up to MAX_CODE_BITS (24) bits
     _validate.same_shape(s, planes.shape[1:], "stripes")
     word = s if binary else s ^ (s >> 1)
     below, above = np.maximum(s - 1, 0), s + 1
     left = np.where(s > 0, word ^ (below if binary else below ^ (below >> 1)), 0)  # bits changing at s - 1 | s
     right = word ^ (above if binary else above ^ (above >> 1))  # bits changing at s | s + 1
-    weak_left = np.full(s.shape, np.inf)
-    weak_right = np.full(s.shape, np.inf)
-    strongest = np.zeros(s.shape)
+    weak_left = np.full(s.shape, np.inf, dtype=np.float32)
+    weak_right = np.full(s.shape, np.inf, dtype=np.float32)
+    strongest = np.zeros(s.shape, dtype=np.float32)
+    contrast = np.empty(s.shape, dtype=np.float32)
     count = planes.shape[0]
     for index in range(count):
-        contrast = np.abs(planes[index].astype(np.float64) - levels[index])
+        np.subtract(planes[index], levels[index], out=contrast, casting="unsafe")
+        np.abs(contrast, out=contrast)
         np.maximum(strongest, contrast, out=strongest)
-        place = count - 1 - index  # plane 0 is the most significant bit
-        np.minimum(weak_left, np.where((left >> place) & 1 == 1, contrast, np.inf), out=weak_left)
-        np.minimum(weak_right, np.where((right >> place) & 1 == 1, contrast, np.inf), out=weak_right)
+        bit = np.int32(1 << (count - 1 - index))  # plane 0 is the most significant bit
+        np.minimum(weak_left, contrast, out=weak_left, where=(left & bit) != 0)
+        np.minimum(weak_right, contrast, out=weak_right, where=(right & bit) != 0)
     half = 0.5 * strongest
     side = np.zeros(s.shape, dtype=np.int8)
     side[(weak_right < half) & (weak_left >= half)] = 1
