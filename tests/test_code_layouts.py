@@ -19,6 +19,7 @@ import pytest
 
 from mock_devices import synth
 from processing.phase.shifting import phase_shift
+from processing.projection.patterns import Gray, gray_intensity
 from processing.unwrap import temporal
 from rig.errors import CaptureError, ConfigError, ProcessingError
 from rig.hardware.synthesis import demo_geometry, simulate_scan, write_simulated_scan
@@ -198,3 +199,29 @@ def test_plain_code_borders_blurred(tmp_path: Path, seed: int) -> None:
         wrong[name] = np.mean(np.abs(result.phase - truth)[inner] > np.pi)
     assert wrong["as decoded"] > 0.003, wrong  # measured 0.54 %: the pixels next to each border
     assert wrong["border side"] < 0.1 * wrong["as decoded"], wrong  # measured 0.001 %
+
+
+def test_border_side_reads_integer_frames_as_numbers() -> None:
+    """Plain Gray planes of 16-px cells, blurred by a 4-px box: next to each border the bit that changes there
+    fades, and border_side names that border. 8-bit planes give the same sides as the same values in float (a
+    plane darker than its inverse must not wrap around in uint8 arithmetic)."""
+    u = (np.arange(1024) + 0.5) / 4.0  # 0.25-px samples across a 256-px axis
+    box = np.ones(16) / 16.0
+
+    def blurred(level: np.ndarray) -> np.ndarray:
+        return np.convolve(np.pad(level, 8, mode="edge"), box, mode="same")[8:-8]
+
+    planes = [Gray(bit=b, bits=4) for b in range(4)]
+    normal = np.stack([20 + 200 * blurred(gray_intensity(p, u, 256.0)) for p in planes])[:, None, :]
+    inverse = np.stack([20 + 200 * blurred(1 - gray_intensity(p, u, 256.0)) for p in planes])[:, None, :]
+    normal8, inverse8 = np.rint(normal).astype(np.uint8), np.rint(inverse).astype(np.uint8)
+    stripes = temporal.decode_stripes(normal8, inverse8)[0]
+    sides = temporal.border_side(normal8, stripes[None, :], inverse8)[0]
+    np.testing.assert_array_equal(sides, temporal.border_side(normal, stripes[None, :], inverse)[0])
+    within = u % 16
+    cell = np.floor(u / 16).astype(int)
+    right = (within > 15.25) & (cell < 15) & (stripes == cell)  # the bit there under half its contrast
+    left = (within < 0.75) & (cell > 0) & (stripes == cell)
+    assert right.any() and left.any()
+    assert np.all(sides[right] == 1) and np.all(sides[left] == -1)
+    assert np.all(sides[(within > 3) & (within < 13)] == 0)  # away from the blur: no border named

@@ -696,7 +696,7 @@ def border_side(
     contrast = np.empty(s.shape, dtype=np.float32)
     count = planes.shape[0]
     for index in range(count):
-        np.subtract(planes[index], levels[index], out=contrast, casting="unsafe")
+        np.subtract(planes[index], levels[index], out=contrast, dtype=np.float32)  # not in uint8: no wrap-around
         np.abs(contrast, out=contrast)
         np.maximum(strongest, contrast, out=strongest)
         bit = np.int32(1 << (count - 1 - index))  # plane 0 is the most significant bit
