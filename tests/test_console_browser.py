@@ -433,7 +433,7 @@ def test_captures_reprocess_and_compare(page: Any) -> None:
     high, low = (page.get_by_test_id(t).inner_text().split() for t in ("compare-high", "compare-low"))
     assert high[1] == low[1] == "mm" and float(high[0]) == -float(low[0]) > 0
     figures = page.get_by_test_id("compare-figures").inner_text()
-    assert float(figures.split("max |d| ")[1].split()[0]) >= float(high[0])
+    assert float(figures.split("max |d| ")[1].split()[0]) >= float(high[0]) - 0.0005  # shown to 3 decimals
     shot(page, "captures")
 
 
