@@ -11,8 +11,9 @@ from rig.commands._common import add_command
 SPEC_HELP = (
     "what the images show, in file order: groups separated by ';', e.g. "
     "'sin:f=32,steps=12,phase=pi; gray:bits=6' or 'sin:f=64/58/53,steps=4,phase=pi' or "
-    "'sin:f=36,shifts=0/90/180/270deg'; kinds sin (f, steps, phase, shifts, axis), gray (bits, "
-    "inverted=none|after|interleaved, axis), flat:LEVEL, white, black, skip:N; or @FILE.json with "
+    "'sin:f=36,shifts=0/90/180/270deg'; kinds sin (f, steps, phase, shifts, axis), gray and binary (bits, "
+    "order=msb|lsb, inverted=none|after|interleaved, period=CELL_PX, axis), flat:LEVEL, white, black, skip:N; "
+    "or @FILE.json with "
     '{"patterns": [capture-format entries], "files": [names]}'
 )
 

@@ -92,10 +92,12 @@ class ConsoleSession:
             self.calibration = calibrations[0]
         self.jobs = Jobs(lambda message: publish(message, None))
         self.rig = RigHolder(config, publish, self._publish_status)
-        self.live = LiveView(self.rig, publish, live_fps)
-        self.live_3d = Live3D(self.rig, publish, lambda: self.live.watching, self._calibration_dir)
-        self.rig.feeds = [self.live_3d, self.live]
         self.processing = Processing(data, self.jobs, publish, self._calibration_dir, self._publish_status)
+        self.live = LiveView(self.rig, publish, live_fps, paused=lambda: self.processing.scan_in_flight)
+        self.live_3d = Live3D(
+            self.rig, publish, lambda: self.live.watching, self._calibration_dir, paused=self.live.paused
+        )
+        self.rig.feeds = [self.live_3d, self.live]
         self.current: Job | None = None  # the acquisition running
         self._acquiring = threading.Lock()
         self._answer: threading.Event | None = None

@@ -12,6 +12,7 @@ import { buildVerify, showVerifyPrompt, verificationDone, verifyJob, verifyProgr
 
 const ownJobs = new Set(); // jobs this page started: only their results move it to the Result view
 let lastFrameAt = null;
+let scanClickedAt = null; // the page's own timings of its scans (benchmarks/bench_console.py reads them)
 
 // One operator prompt at a time: a verification's shows in the Verify view, a calibration's in the wizard.
 function showPrompts(prompt) {
@@ -51,7 +52,10 @@ function scanProgress(message) {
   $("scan-progress").max = e.total;
   $("scan-progress").value = e.done;
   $("scan-note").textContent = `${e.note || e.task} (${e.done} of ${e.total} frames)`;
-  if (e.kind === "step" && e.done >= e.total && ownJobs.has(message.job)) lastFrameAt = performance.now();
+  if (e.kind === "step" && e.done >= e.total && ownJobs.has(message.job) && lastFrameAt === null) {
+    lastFrameAt = performance.now();
+    if (scanClickedAt !== null) $("view-live").dataset.clickToLastFrameMs = String(lastFrameAt - scanClickedAt);
+  }
 }
 
 function processProgress(message) {
@@ -72,7 +76,10 @@ const handlers = {
   status: (m) => updateStatus(m.status),
   progress: (m) => ({ scan: scanProgress, process: processProgress, calibrate: calibrationProgress, verify: verifyProgress })[m.kind]?.(m),
   job: (m) => { noteJob(m.job); calibrationJob(m.job); captureJob(m.job); verifyJob(m.job); },
-  result: (m) => showResult(m.name, m.summary, m.final, { focus: ownJobs.has(m.job), lastFrameAt: ownJobs.has(m.job) ? lastFrameAt : null }),
+  result: (m) => {
+    if (ownJobs.has(m.job) && m.since_last_frame_s !== null) $("view-result").dataset[m.final ? "serverFinalMs" : "serverQuickMs"] = String(1000 * m.since_last_frame_s);
+    showResult(m.name, m.summary, m.final, { focus: ownJobs.has(m.job), lastFrameAt: ownJobs.has(m.job) ? lastFrameAt : null });
+  },
   saved: (m) => resultSaved(m.name),
   error: (m) => showError(m.message),
   prompt: (m) => showPrompts(m),
@@ -99,6 +106,7 @@ async function scan() {
   $("process-progress").value = 0;
   $("scan-note").textContent = "starting";
   lastFrameAt = null;
+  scanClickedAt = performance.now();
   try {
     const reply = await api("POST", "/api/scan", { options: { correction: $("scan-correction").value } });
     ownJobs.add(reply.job.id);
