@@ -43,7 +43,9 @@ function catchUp(status) {
     else noteJob(job);
   }
   const latest = status.latest_result;
-  if (latest && !$("view-result").dataset.result) openResult(latest.name).catch(() => {});
+  if (latest && !$("view-result").dataset.result) {
+    openResult(latest.name, {}, { final: latest.final, unlessNewer: true }).catch(() => {});
+  }
 }
 
 function scanProgress(message) {

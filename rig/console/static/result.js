@@ -56,8 +56,15 @@ export function resultSaved(name) {
   if (shown.summary && shown.summary.name === name) { shown.summary.saved = true; renderDownloads(); }
 }
 
-export async function openResult(name, options = {}) {
-  showResult(name, await api("GET", `/api/results/${encodeURIComponent(name)}`), true, options);
+// Open result NAME (a click in Captures, or the newest result when a page opens). `final`: whether
+// the server's copy is the corrected result (a page that opens while only the quick one is in must
+// not mark it final); `unlessNewer`: skip it if another result was shown while it was fetched (the
+// corrected result arriving on the websocket meanwhile is newer than this reply).
+export async function openResult(name, options = {}, { final = true, unlessNewer = false } = {}) {
+  const calls = shown.calls;
+  const summary = await api("GET", `/api/results/${encodeURIComponent(name)}`);
+  if (unlessNewer && calls !== shown.calls) return;
+  showResult(name, summary, final, options);
 }
 
 // The cloud in the 3-D view (points from the server, coloured as the map).
