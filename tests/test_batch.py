@@ -339,13 +339,26 @@ def test_stale_leftovers_of_a_killed_run_are_removed(tmp_path) -> None:
         (out / name).mkdir(parents=True)
     (out / ".index.csv.abcdefgh.tmp").write_text("capture,sta")
     (out / "c" / "object" / "report.json").write_text("{}")
-    assert remove_stale(out, ["a/object", "b/object", "c/object"], ("index.csv",)) == 3
+    # killed between writing the last file (report.json) and the rename: whole, but never committed
+    written = out / f"d/object{INCOMPLETE_MARK}x3y4z5w6"
+    written.mkdir(parents=True)
+    (written / "height.npy").write_bytes(b"")
+    (written / "report.json").write_text(json.dumps({"program": "fpp-rig 1.0"}))
+    verification = out / f"e/object{INCOMPLETE_MARK}x4y5z6w7"  # the same marker name, another kind: kept
+    verification.mkdir(parents=True)
+    (verification / "report.json").write_text(json.dumps({"format": "fpp-verification"}))
+    outputs = ["a/object", "b/object", "c/object", "d/object", "e/object"]
+    assert remove_stale(out, outputs, ("index.csv",)) == 4
     assert sorted(str(p.relative_to(out)) for p in out.rglob("*")) == [
         "a",
         "b",
         "c",
         "c/object",
         "c/object/report.json",
+        "d",
+        "e",
+        f"e/object{INCOMPLETE_MARK}x4y5z6w7",
+        f"e/object{INCOMPLETE_MARK}x4y5z6w7/report.json",
     ]
 
 

@@ -106,8 +106,13 @@ def reusable_report(out_dir: Path, expected: str | None) -> dict[str, Any] | Non
 # and the temporaries of its tables (``.index.csv.XXXXXXXX.tmp``).
 _LEFTOVER = re.compile(rf"(.+)(?:{re.escape(INCOMPLETE_MARK)}|{re.escape(REPLACED_MARK)})[a-z0-9_]{{8}}")
 _TABLE_TEMPORARY = re.compile(r"\.(.+)\.[a-z0-9_]{8}\.tmp")
-# Marker files of what this program writes other than a processing output: never in an output's leftovers.
-_FOREIGN_MARKERS = frozenset(marker for kind, (marker, _, _) in KINDS.items() if kind != "output")
+_OUTPUT_MARKER = KINDS["output"][0]  # report.json: a whole output's staging folder holds it
+# Marker files of what this program writes other than a processing output: never in an output's
+# leftovers. A verification's marker is report.json too: its content tells them apart.
+_FOREIGN_MARKERS = frozenset(marker for kind, (marker, _, _) in KINDS.items() if kind != "output") - {_OUTPUT_MARKER}
+_SHARED_MARKER_KINDS = [
+    (key, values) for kind, (marker, key, values) in KINDS.items() if kind != "output" and marker == _OUTPUT_MARKER
+]
 
 
 def _is_output_leftover(path: Path) -> bool:
@@ -119,7 +124,20 @@ def _is_output_leftover(path: Path) -> bool:
         entries = list(os.scandir(path))
     except OSError:
         return False
-    return all(e.is_file(follow_symlinks=False) and e.name not in _FOREIGN_MARKERS for e in entries)
+    flat = all(e.is_file(follow_symlinks=False) and e.name not in _FOREIGN_MARKERS for e in entries)
+    return flat and not _is_foreign_report(path / _OUTPUT_MARKER)
+
+
+def _is_foreign_report(report: Path) -> bool:
+    """Whether ``report`` is another kind's report.json (a verification's), not an output's."""
+    try:
+        data = files.read_json(report, files.FileLayerError, strict=False)
+    except files.FileLayerError:
+        return False  # none, or cut short by the kill: an output's
+    return isinstance(data, dict) and any(
+        key in data and any(str(data[key]) == v or str(data[key]).startswith(v + " ") for v in values)
+        for key, values in _SHARED_MARKER_KINDS
+    )
 
 
 def _entries(directory: Path) -> list[os.DirEntry[str]]:
