@@ -8,13 +8,14 @@ from __future__ import annotations
 
 from fastapi import APIRouter
 
-from rig.console.routes import calibration, data, live, scan, settings, verify
+from rig.console.routes import calibration, data, live, measure, scan, settings, verify
 
 ROUTERS: tuple[APIRouter, ...] = (
     live.router,
     settings.router,
     scan.router,
     data.router,
+    measure.router,
     calibration.router,
     verify.router,
 )
