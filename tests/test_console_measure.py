@@ -68,7 +68,7 @@ def test_step_height_from_two_regions(block: dict[str, Any]) -> None:
 
 
 def test_the_plane_around_the_block_is_flat_and_the_block_stands_above_it(block: dict[str, Any]) -> None:
-    client, (x0, y0, x1, y1) = block["client"], block["box"]
+    client, (x0, _, _, y1) = block["client"], block["box"]
     plane = _get(client, "plane", x0=2, y0=2, x1=x0 - 5, y1=y1)
     assert plane["orthogonal"] and plane["tilt_deg"] < 0.5  # the reference plane is level
     # the plane is exact and level: what the fit leaves is the noise, whose spread the region shows
