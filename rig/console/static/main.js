@@ -5,6 +5,7 @@ import { $, api, clientId, dropTokenFromAddress, showError, showView } from "./a
 import { bindCaptures, captureJob, captureProgress, loadOptions } from "./captures.js";
 import { buildWizard, calibrationJob, calibrationProgress, calibrationResult, showPrompt } from "./calibration.js";
 import { bindSettings, drawFrame, showSettings } from "./live.js";
+import { bindMeasure } from "./measure.js";
 import { bindResult, openResult, resultSaved, showResult } from "./result.js";
 import { buildVerify, showVerifyPrompt, verificationDone, verifyJob, verifyProgress } from "./verify.js";
 
@@ -107,6 +108,7 @@ function bind() {
   $("stop-button").onclick = () => api("POST", "/api/stop", {}).catch(() => {});
   bindSettings();
   bindResult();
+  bindMeasure();
   bindCaptures();
   buildWizard();
   buildVerify();

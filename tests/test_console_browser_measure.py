@@ -1,0 +1,204 @@
+"""The Result view's measuring tools in a real headless Chromium, on a scan of the simulated gauge
+block (25.000 mm high, a centred rectangle a third of the view wide and high) with the rig's exact
+calibration: an operator clicks on the map, the page shows the server's numbers, and they are the
+block's known height, width and flat floor (issue 24).
+
+With ``RIG_SCREENSHOTS=1`` the frames are 640x480 and the screenshots go to docs/console/ (as in
+test_console_browser.py), else to a temporary folder.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import os
+import shutil
+import tempfile
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from console_client import served
+
+from rig.config import load_config
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+playwright_api = pytest.importorskip(
+    "playwright.sync_api", reason="playwright not installed (pip install -e '.[test]')"
+)
+if CHROMIUM is None:
+    pytest.skip("no chromium browser (apt-get install chromium)", allow_module_level=True)
+
+SCREENSHOTS = os.environ.get("RIG_SCREENSHOTS") == "1"
+SHOTS = (
+    Path(__file__).resolve().parent.parent / "docs" / "console"
+    if SCREENSHOTS
+    else Path(tempfile.gettempdir()) / "rig-console-screenshots"
+)
+WIDTH, HEIGHT = (640, 480) if SCREENSHOTS else (320, 240)
+BLOCK_MM = 25.0  # mock_devices.scenes.gauge_block's default height
+
+
+@pytest.fixture(scope="module")
+def rig(
+    tmp_path_factory: pytest.TempPathFactory,
+    simulated_rig_toml: Callable[..., str],
+    exact_calibration: Callable[[Path, Path], Path],
+) -> Iterator[dict[str, Any]]:
+    """The console on the simulated rig looking at the gauge block, its calibration ``cal``; the block's pixel box."""
+    from rig.console.app import create_app
+    from rig.hardware.simulated import geometry_from_config, scene_height
+
+    root = tmp_path_factory.mktemp("measure-browser")
+    toml = root / "rig.toml"
+    text = simulated_rig_toml((456, 570), (WIDTH, HEIGHT), 35.0).replace('"hemisphere"', '"gauge-block"')
+    toml.write_text(text.replace("[scan]\n", "[scan]\nfetch_timeout_s = 0.5\nretries = 1\n"))
+    exact_calibration(toml, root / "data" / "calibrations" / "cal")
+    config = load_config(toml)
+    geometry = geometry_from_config(config)
+    rows, cols = np.nonzero(scene_height(config, "object", geometry) > BLOCK_MM / 2)
+    with served(create_app(config, root / "data")) as port:
+        yield {
+            "url": f"http://127.0.0.1:{port}/",
+            "box": (int(cols.min()), int(rows.min()), int(cols.max()), int(rows.max())),
+            "scale_on_top": geometry.pixel_mm * (geometry.l0_mm - BLOCK_MM) / geometry.l0_mm,
+        }
+
+
+@pytest.fixture(scope="module")
+def page(rig: dict[str, Any]) -> Iterator[Any]:
+    """A page that has scanned the block (no fringe-order correction) and shows its result."""
+    with playwright_api.sync_playwright() as p:
+        chromium = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=["--use-gl=swiftshader"])
+        page = chromium.new_context(viewport={"width": 1400, "height": 1100}).new_page()
+        page.goto(rig["url"])
+        page.wait_for_function("document.querySelector('#scan-correction').options.length > 0")
+        page.locator("#scan-correction").select_option("none")
+        page.wait_for_function("document.querySelector('#calibration').value === 'cal'")
+        page.get_by_test_id("scan-button").click()
+        page.wait_for_function("document.querySelector('#view-result').dataset.final === 'true'", timeout=90_000)
+        yield page
+        chromium.close()
+
+
+def click_map(page: Any, x: float, y: float) -> None:
+    """Click the centre of map pixel (x, y)."""
+    box = page.get_by_test_id("height-map").bounding_box()
+    page.mouse.click(box["x"] + (x + 0.5) * box["width"] / WIDTH, box["y"] + (y + 0.5) * box["height"] / HEIGHT)
+
+
+def measure(page: Any, tool: str, first: tuple[int, int], second: tuple[int, int]) -> dict[str, float]:
+    """Choose ``tool``, click its two points on the map; the figures the page shows, by test id."""
+    page.get_by_test_id("measure-tool").select_option(tool)
+    before = finished(page)
+    click_map(page, *first)
+    click_map(page, *second)
+    wait_finished(page, before)
+    shown = page.eval_on_selector_all(
+        "#measure-figures td[data-testid]", "cells => cells.map(c => [c.dataset.testid, c.dataset.value])"
+    )
+    return {key: float(value) for key, value in shown if value not in ("", "null")}
+
+
+def picked(page: Any) -> list[int]:
+    """The map pixels the clicks picked (the page writes them into its coordinate fields)."""
+    return [int(page.get_by_test_id(f"measure-{f}").input_value()) for f in ("x0", "y0", "x1", "y1")]
+
+
+def csv_download(page: Any) -> Any:
+    """What the page's CSV link downloads."""
+    return page.request.get(page.eval_on_selector("[data-testid=measure-csv]", "a => a.href"))
+
+
+def finished(page: Any) -> int:
+    """Measurements the page has finished (``data-count`` of the figures table)."""
+    return int(page.eval_on_selector("#measure-figures", "t => Number(t.dataset.count || 0)"))
+
+
+def wait_finished(page: Any, before: int) -> None:
+    page.wait_for_function(f"Number(document.querySelector('#measure-figures').dataset.count || 0) > {before}")
+
+
+def shot(page: Any, name: str) -> None:
+    SHOTS.mkdir(parents=True, exist_ok=True)
+    page.get_by_test_id("measure-panel").scroll_into_view_if_needed()
+    page.screenshot(path=str(SHOTS / f"{name}.png"), full_page=True)
+
+
+def test_region_statistics_give_the_step_height(page: Any, rig: dict[str, Any]) -> None:
+    x0, y0, x1, y1 = rig["box"]
+    top = measure(page, "roi", (x0 + 5, y0 + 5), (x1 - 5, y1 - 5))
+    floor = measure(page, "roi", (2, 2), (x0 - 5, y1))
+    assert top["measure-mean"] - floor["measure-mean"] == pytest.approx(BLOCK_MM, abs=0.3)  # mm
+    assert page.get_by_test_id("measure-mean").inner_text().endswith(" mm")
+    corners = picked(page)
+    assert np.abs(np.array(corners) - [2, 2, x0 - 5, y1]).max() <= 1  # the clicked pixels, to the pixel
+    assert (
+        page.get_by_test_id("measure-hint").inner_text()
+        == f"roi on {page_result(page)} at {', '.join(map(str, corners))}"
+    )
+
+
+def test_plane_fit_shows_the_flatness_of_the_floor_and_the_height_above_it(page: Any, rig: dict[str, Any]) -> None:
+    x0, y0, x1, y1 = rig["box"]
+    spread = measure(page, "roi", (2, 2), (x0 - 5, y1))
+    plane = measure(page, "plane", (2, 2), (x0 - 5, y1))
+    # the floor is the exact, level reference plane: the fit leaves its noise, whose spread the region shows
+    assert plane["measure-tilt"] < 0.5
+    assert plane["measure-flatness"] == pytest.approx(spread["measure-peak-to-valley"], rel=0.05)
+    assert plane["measure-rms"] == pytest.approx(spread["measure-std"], rel=0.02)
+    page.wait_for_function("document.querySelector('#measure-plane-caption').textContent.includes('above the plane')")
+    high = float(page.locator("#measure-plane-caption").inner_text().split("..")[1].split()[0])
+    assert high == pytest.approx(BLOCK_MM, abs=1.0)  # the block is the highest thing above the floor's plane
+    shot(page, "result-measure-plane")
+
+
+def test_distance_across_the_block_is_its_width_and_across_its_edge_its_height(page: Any, rig: dict[str, Any]) -> None:
+    x0, y0, x1, y1 = rig["box"]
+    row = (y0 + y1) // 2
+    across = measure(page, "distance", (x0 + 1, row), (x1 - 1, row))
+    a, _, b, _ = picked(page)
+    expected = (b - a) * rig["scale_on_top"]
+    assert across["measure-lateral-distance"] == pytest.approx(expected, abs=rig["scale_on_top"]), (a, b, rig["box"])
+    edge = measure(page, "distance", (x0 - WIDTH // 16, row), (x0 + WIDTH // 16, row))  # beyond any shadow
+    assert edge.get("measure-rise") == pytest.approx(BLOCK_MM, abs=1.0), page.get_by_test_id(
+        "measure-hint"
+    ).inner_text()
+
+
+def test_histogram_and_profile_are_drawn_and_exported_as_csv(page: Any, rig: dict[str, Any]) -> None:
+    x0, y0, x1, y1 = rig["box"]
+    page.get_by_test_id("measure-tool").select_option("histogram")
+    page.get_by_test_id("measure-bins").fill("10")
+    before = finished(page)
+    page.get_by_test_id("measure-whole").click()
+    wait_finished(page, before)
+    page.get_by_test_id("measure-chart").locator(".main-svg").first.wait_for()
+    counts = [int(r[2]) for r in list(csv.reader(io.StringIO(csv_download(page).text())))[1:]]
+    block_share = (x1 - x0 + 1) * (y1 - y0 + 1) / (WIDTH * HEIGHT)
+    assert sum(counts[-2:]) / sum(counts) == pytest.approx(block_share, rel=0.1)
+    row = (y0 + y1) // 2
+    profile = measure(page, "profile", (x0 - 20, row), (x1 + 20, row))
+    assert profile["measure-max"] == pytest.approx(BLOCK_MM, abs=2.0) and abs(profile["measure-min"]) < 2.0
+    page.get_by_test_id("measure-chart").locator(".main-svg").first.wait_for()
+    reply = csv_download(page)
+    assert reply.headers["content-type"].startswith("text/csv") and reply.text().startswith("col,row,distance_mm")
+    shot(page, "result-measure-profile")
+
+
+def test_a_point_off_the_map_is_refused_with_a_sentence(page: Any) -> None:
+    page.get_by_test_id("measure-tool").select_option("distance")
+    for field, value in (("x0", "3"), ("y0", "3"), ("x1", "5000"), ("y1", "3")):
+        page.get_by_test_id(f"measure-{field}").fill(value)
+    before = finished(page)
+    page.get_by_test_id("measure-run").click()
+    wait_finished(page, before)
+    hint = page.get_by_test_id("measure-hint")
+    expected = f"point 2 (5000, 3): outside the {WIDTH}x{HEIGHT} map; pick a pixel on the map"
+    assert page.locator("#measure-figures tr").count() == 0 and hint.inner_text() == expected
+
+
+def page_result(page: Any) -> str:
+    return str(page.eval_on_selector("#view-result", "e => e.dataset.result"))
