@@ -8,7 +8,17 @@ from __future__ import annotations
 
 from fastapi import APIRouter
 
-from rig.console.routes import calibration, data, live, measure, scan, settings, verify
+from rig.console.routes import (
+    calibration,
+    calibration_import,
+    data,
+    live,
+    manage,
+    measure,
+    scan,
+    settings,
+    verify,
+)
 
 ROUTERS: tuple[APIRouter, ...] = (
     live.router,
@@ -16,6 +26,8 @@ ROUTERS: tuple[APIRouter, ...] = (
     scan.router,
     data.router,
     measure.router,
+    manage.router,
     calibration.router,
+    calibration_import.router,
     verify.router,
 )
