@@ -15,6 +15,7 @@ from starlette.concurrency import run_in_threadpool
 from calibration.errors import CalibrationError
 from rig.calibrate.imports import import_opencv
 from rig.console.routes._common import Body, session_of
+from rig.console.routes.manage import announce
 from rig.console.session import Conflict, ConsoleSession
 from rig.errors import RigError
 
@@ -66,6 +67,4 @@ async def import_calibration(
     body: ImportBody, request: Request, session: ConsoleSession = Depends(session_of)
 ) -> dict[str, Any]:
     name = await run_in_threadpool(_import, session, body)
-    message = {"type": "data", "change": "imported", "kind": "calibrations", "name": name}
-    request.app.state.hub.publish(message)
-    return message
+    return announce(request, "imported", kind="calibrations", name=name)

@@ -42,9 +42,12 @@ def _forget(session: ConsoleSession, kind: str, name: str, new: str | None = Non
         session.set_calibration(new)
 
 
-def _announce(request: Request, change: str, **fields: Any) -> dict[str, Any]:
+def announce(request: Request, change: str, **fields: Any) -> dict[str, Any]:
+    """Tell every page what changed (a ``data`` message, then the status with the calibrations); the message."""
     message = {"type": "data", "change": change, **fields}
-    request.app.state.hub.publish(message)
+    hub = request.app.state.hub
+    hub.publish(message)
+    hub.publish({"type": "status", "status": request.app.state.session.status()})
     return message
 
 
@@ -52,7 +55,7 @@ def _announce(request: Request, change: str, **fields: Any) -> dict[str, Any]:
 def delete(kind: str, name: str, request: Request, session: ConsoleSession = Depends(session_of)) -> dict[str, Any]:
     entry = Trash(session.data).delete(kind, name, busy=_busy(session, name))
     _forget(session, kind, name)
-    return _announce(request, "deleted", **entry.as_dict())
+    return announce(request, "deleted", **entry.as_dict())
 
 
 @router.get("/trash", summary="what DATA/trash holds (captures, results, calibrations), newest first")
@@ -63,7 +66,7 @@ def trash(session: ConsoleSession = Depends(session_of)) -> dict[str, Any]:
 @router.post("/trash/restore", summary="move an entry of DATA/trash back under its name; 409 if the name is taken")
 def restore(body: RestoreBody, request: Request, session: ConsoleSession = Depends(session_of)) -> dict[str, Any]:
     name = Trash(session.data).restore(body.kind, body.entry)
-    return _announce(request, "restored", kind=body.kind, name=name)
+    return announce(request, "restored", kind=body.kind, name=name)
 
 
 @router.post("/{kind}/{name}/rename", summary="rename a capture, result or calibration; 409 if the new name is taken")
@@ -72,4 +75,4 @@ def rename(
 ) -> dict[str, Any]:
     new = Trash(session.data).rename(kind, name, body.to, busy=_busy(session, name))
     _forget(session, kind, name, new)
-    return _announce(request, "renamed", kind=kind, name=new, old=name)
+    return announce(request, "renamed", kind=kind, name=new, old=name)

@@ -6,6 +6,8 @@ import { bindCaptures, captureJob, captureProgress, loadOptions } from "./captur
 import { buildWizard, calibrationJob, calibrationProgress, calibrationResult, showPrompt } from "./calibration.js";
 import { bindSettings, drawFrame, showSettings } from "./live.js";
 import { bindMeasure } from "./measure.js";
+import { bindManage, dataChanged } from "./manage.js";
+import { bindCalibrations, showCalibrations } from "./calibrations.js";
 import { bindResult, openResult, resultSaved, showResult } from "./result.js";
 import { buildVerify, showVerifyPrompt, verificationDone, verifyJob, verifyProgress } from "./verify.js";
 
@@ -27,6 +29,7 @@ function updateStatus(status) {
   $("verify-start").disabled = status.busy;
   $("stop-button").disabled = !(status.busy || status.jobs.length);
   showSettings(status);
+  showCalibrations(status.calibrations, status.calibration);
   showPrompts(status.prompt);
 }
 
@@ -75,6 +78,7 @@ const handlers = {
   prompt: (m) => showPrompts(m),
   calibration: (m) => calibrationResult(m),
   verification: (m) => verificationDone(m).catch(() => {}),
+  data: (m) => dataChanged(m),
 };
 
 function connect() {
@@ -109,6 +113,8 @@ function bind() {
   bindSettings();
   bindResult();
   bindMeasure();
+  bindManage();
+  bindCalibrations();
   bindCaptures();
   buildWizard();
   buildVerify();

@@ -1,7 +1,12 @@
-"""The Result view's measuring tools in a real headless Chromium, on a scan of the simulated gauge
-block (25.000 mm high, a centred rectangle a third of the view wide and high) with the rig's exact
-calibration: an operator clicks on the map, the page shows the server's numbers, and they are the
-block's known height, width and flat floor (issue 24).
+"""The console's tools in a real headless Chromium, on a scan of the simulated gauge block (25.000
+mm high, a centred rectangle a third of the view wide and high) with the rig's exact calibration
+(issue 24):
+
+- measuring: an operator clicks on the map, the page shows the server's numbers, and they are the
+  block's known height, width and flat floor;
+- managing: a result deleted from the Captures view comes back with Undo, a capture is renamed,
+  calibrations are chosen, imported from an OpenCV file (a bad file is refused next to its field)
+  and deleted with Undo.
 
 With ``RIG_SCREENSHOTS=1`` the frames are 640x480 and the screenshots go to docs/console/ (as in
 test_console_browser.py), else to a temporary folder.
@@ -123,7 +128,6 @@ def wait_finished(page: Any, before: int) -> None:
 
 def shot(page: Any, name: str) -> None:
     SHOTS.mkdir(parents=True, exist_ok=True)
-    page.get_by_test_id("measure-panel").scroll_into_view_if_needed()
     page.screenshot(path=str(SHOTS / f"{name}.png"), full_page=True)
 
 
@@ -202,3 +206,87 @@ def test_a_point_off_the_map_is_refused_with_a_sentence(page: Any) -> None:
 
 def page_result(page: Any) -> str:
     return str(page.eval_on_selector("#view-result", "e => e.dataset.result"))
+
+
+# --------------------------------------------------------------------------- managing data
+
+
+def names_in(page: Any, list_id: str) -> list[str]:
+    return list(page.eval_on_selector_all(f"#{list_id} li", "items => items.map(li => li.dataset.name)"))
+
+
+def open_capture_results(page: Any) -> str:
+    """The Captures view with the scanned capture opened; the capture's name."""
+    page.locator("nav button[data-view=captures]").click()
+    first = page.locator("#capture-list li.managed").first
+    first.wait_for()
+    name = str(first.get_attribute("data-name"))
+    first.click()
+    page.locator("#capture-results li.managed").first.wait_for()
+    return name
+
+
+def test_a_result_deleted_in_the_page_comes_back_with_undo(page: Any, rig: dict[str, Any]) -> None:
+    capture = open_capture_results(page)
+    result = names_in(page, "capture-results")[0]
+    page.locator(f"#capture-results li[data-name='{result}'] [data-testid=delete]").click()
+    page.get_by_test_id("notice").wait_for()
+    assert "moved to the trash" in page.get_by_test_id("notice").inner_text()
+    page.wait_for_function(f"!document.querySelector(\"#capture-results li[data-name='{result}']\")")
+    assert page.request.get(rig["url"] + f"api/results/{result}").status == 404
+    assert page.locator("#trash-list li").count() == 1
+    shot(page, "captures-trash")
+    page.get_by_test_id("undo").click()
+    page.locator(f"#capture-results li[data-name='{result}']").wait_for()
+    assert page.request.get(rig["url"] + f"api/results/{result}").status == 200
+    page.wait_for_function("document.querySelectorAll('#trash-list li').length === 0")
+    page.once("dialog", lambda dialog: dialog.accept("renamed-capture"))
+    page.locator(f"#capture-list li[data-name='{capture}'] [data-testid=rename]").click()
+    page.locator("#capture-list li[data-name='renamed-capture']").wait_for()
+    assert capture not in names_in(page, "capture-list")
+
+
+def _opencv_file(path: Path) -> Path:
+    """An OpenCV FileStorage stereo calibration (stereoCalibrate's K1 D1 K2 D2 R T) of a small rig."""
+    import cv2
+
+    from mock_devices.stereo_synth import calibration_fields, demo_rig
+
+    truth = calibration_fields(demo_rig(WIDTH, HEIGHT, 456, 570))
+    storage = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+    keys = ("camera_matrix", "distortion", "projector_matrix", "projector_distortion", "rotation", "translation_mm")
+    for node, key in zip(("K1", "D1", "K2", "D2", "R", "T"), keys):
+        storage.write(node, np.asarray(truth[key], dtype=np.float64))
+    storage.release()
+    return path
+
+
+def test_calibrations_are_chosen_imported_and_deleted_in_the_page(page: Any, tmp_path: Path) -> None:
+    page.locator("nav button[data-view=calibration]").click()
+    page.wait_for_function("document.querySelector('#calibrations-list').dataset.active === 'cal'")
+    page.locator("#calibrations-list li[data-name=''] [data-testid=use]").click()
+    page.wait_for_function("document.querySelector('#calibrations-list').dataset.active === ''")
+    assert page.locator("#calibration").input_value() == ""  # the live view's choice follows
+    page.locator("#calibrations-list li[data-name='cal'] [data-testid=use]").click()
+    page.wait_for_function("document.querySelector('#calibration').value === 'cal'")
+    # import: a missing name, a broken file, then the real one
+    page.get_by_test_id("import-file").set_input_files(str(_opencv_file(tmp_path / "caliInfo.yml")))
+    page.get_by_test_id("import-button").click()
+    assert page.get_by_test_id("import-name-error").inner_text().startswith("give the calibration a name")
+    broken = tmp_path / "broken.yml"
+    broken.write_text("%YAML:1.0\nK1: 1\n")
+    page.get_by_test_id("import-file").set_input_files(str(broken))
+    page.get_by_test_id("import-name").fill("slm")
+    page.get_by_test_id("import-button").click()
+    page.get_by_test_id("import-file-error").wait_for()
+    assert page.get_by_test_id("import-file-error").inner_text().startswith("broken.yml: ")
+    assert page.get_by_test_id("import-name-error").is_hidden()
+    page.get_by_test_id("import-file").set_input_files(str(tmp_path / "caliInfo.yml"))
+    page.get_by_test_id("import-button").click()
+    page.locator("#calibrations-list li[data-name='slm']").wait_for()
+    assert page.get_by_test_id("import-file-error").is_hidden()
+    shot(page, "calibration-manage")
+    page.locator("#calibrations-list li[data-name='slm'] [data-testid=delete]").click()
+    page.wait_for_function("!document.querySelector(\"#calibrations-list li[data-name='slm']\")")
+    page.get_by_test_id("undo").click()
+    page.locator("#calibrations-list li[data-name='slm']").wait_for()
