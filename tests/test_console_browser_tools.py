@@ -73,19 +73,34 @@ def rig(
 
 
 @pytest.fixture(scope="module")
-def page(rig: dict[str, Any]) -> Iterator[Any]:
-    """A page that has scanned the block (no fringe-order correction) and shows its result."""
+def chromium() -> Iterator[Any]:
     with playwright_api.sync_playwright() as p:
-        chromium = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=["--use-gl=swiftshader"])
-        page = chromium.new_context(viewport={"width": 1400, "height": 1100}).new_page()
-        page.goto(rig["url"])
-        page.wait_for_function("document.querySelector('#scan-correction').options.length > 0")
-        page.locator("#scan-correction").select_option("none")
-        page.wait_for_function("document.querySelector('#calibration').value === 'cal'")
-        page.get_by_test_id("scan-button").click()
-        page.wait_for_function("document.querySelector('#view-result').dataset.final === 'true'", timeout=90_000)
-        yield page
-        chromium.close()
+        browser = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=["--use-gl=swiftshader"])
+        yield browser
+        browser.close()
+
+
+@pytest.fixture
+def browser_page(chromium: Any) -> Iterator[Any]:
+    """A fresh page of its own."""
+    context = chromium.new_context(viewport={"width": 1400, "height": 1100})
+    yield context.new_page()
+    context.close()
+
+
+@pytest.fixture(scope="module")
+def page(chromium: Any, rig: dict[str, Any]) -> Iterator[Any]:
+    """A page that has scanned the block (no fringe-order correction) and shows its result."""
+    context = chromium.new_context(viewport={"width": 1400, "height": 1100})
+    page = context.new_page()
+    page.goto(rig["url"])
+    page.wait_for_function("document.querySelector('#scan-correction').options.length > 0")
+    page.locator("#scan-correction").select_option("none")
+    page.wait_for_function("document.querySelector('#calibration').value === 'cal'")
+    page.get_by_test_id("scan-button").click()
+    page.wait_for_function("document.querySelector('#view-result').dataset.final === 'true'", timeout=90_000)
+    yield page
+    context.close()
 
 
 def click_map(page: Any, x: float, y: float) -> None:
@@ -244,6 +259,7 @@ def test_a_result_deleted_in_the_page_comes_back_with_undo(page: Any, rig: dict[
     page.locator(f"#capture-list li[data-name='{capture}'] [data-testid=rename]").click()
     page.locator("#capture-list li[data-name='renamed-capture']").wait_for()
     assert capture not in names_in(page, "capture-list")
+    assert page.get_by_test_id("error").is_hidden(), page.get_by_test_id("error").inner_text()  # no stale name
 
 
 def _opencv_file(path: Path) -> Path:
@@ -290,3 +306,31 @@ def test_calibrations_are_chosen_imported_and_deleted_in_the_page(page: Any, tmp
     page.wait_for_function("!document.querySelector(\"#calibrations-list li[data-name='slm']\")")
     page.get_by_test_id("undo").click()
     page.locator("#calibrations-list li[data-name='slm']").wait_for()
+
+
+# --------------------------------------------------------------------------- API page
+
+
+def test_the_api_page_lists_every_route_offline(browser_page: Any, rig: dict[str, Any]) -> None:
+    """Requests to any other host are aborted: the page draws every route of openapi.json regardless."""
+    elsewhere: list[str] = []
+
+    def only_the_console(route: Any) -> None:
+        if route.request.url.startswith(rig["url"]):
+            route.continue_()
+        else:
+            elsewhere.append(route.request.url)
+            route.abort()
+
+    browser_page.route("**/*", only_the_console)
+    browser_page.goto(rig["url"] + "api/docs")
+    browser_page.wait_for_function("document.querySelector('#api-routes').dataset.routes !== undefined")
+    spec = browser_page.request.get(rig["url"] + "api/openapi.json").json()
+    operations = sum(len(ops) for ops in spec["paths"].values())
+    assert int(browser_page.get_by_test_id("api-routes").get_attribute("data-routes")) == operations
+    browser_page.locator("details[data-route='GET /api/results/{name}/measure/plane'] summary").click()
+    assert (
+        "flatness" in browser_page.locator("details[data-route='GET /api/results/{name}/measure/plane']").inner_text()
+    )
+    assert elsewhere == []
+    shot(browser_page, "api-docs")

@@ -12,6 +12,7 @@ from rig.console.routes import (
     calibration,
     calibration_import,
     data,
+    docs,
     live,
     manage,
     measure,
@@ -30,4 +31,5 @@ ROUTERS: tuple[APIRouter, ...] = (
     calibration.router,
     calibration_import.router,
     verify.router,
+    docs.router,
 )

@@ -1,7 +1,7 @@
 // The Calibration view's list of calibrations: which one scans use (choose), rename, delete (to
 // the trash, with Undo), and import an OpenCV FileStorage projector-camera calibration from a file.
 // A refused import says why next to the field it concerns.
-import { $, api, clientId } from "./api.js";
+import { $, api, request } from "./api.js";
 import { button, deleteEntry, onDataChange, renameEntry } from "./manage.js";
 
 async function draw() {
@@ -57,12 +57,8 @@ async function importFile() {
   if (!file) { fieldError("import-file-error", "choose the OpenCV calibration file (.yml, .yaml or .xml)"); return; }
   if (!name) { fieldError("import-name-error", "give the calibration a name (letters, digits, '.', '_', '-')"); return; }
   const body = { name, file_name: file.name, text: await file.text(), pixel_centre: Number($("import-centre").value) };
-  const response = await fetch("/api/calibrations/import", {
-    method: "POST", body: JSON.stringify(body),
-    headers: { "Content-Type": "application/json", "X-Console-Client": clientId },
-  });
-  const reply = await response.json().catch(() => ({ error: response.statusText }));
-  if (!response.ok) { showImportError(reply.error || response.statusText); return; }
+  const reply = await request("POST", "/api/calibrations/import", body).catch((e) => { showImportError(e.message); return null; });
+  if (!reply) return;
   $("import-note").textContent = `${reply.name} imported`;
   $("import-name").value = "";
   draw();

@@ -2,7 +2,7 @@
 // height above the plane), histogram and region statistics. Two clicks on the map (or the four
 // coordinate fields) give the line, the two points or the region's corners; the numbers come from
 // the server (/api/results/NAME/measure/TOOL), which also writes the CSV the link downloads.
-import { $, api } from "./api.js";
+import { $, request } from "./api.js";
 
 const TOOLS = {
   profile: { shape: "line", hint: "click the start and the end of the line", whole: false },
@@ -163,7 +163,7 @@ export async function measure() {
   const extra = chosen === "histogram" ? { bins: $("measure-bins").value || "64" } : {};
   status.textContent = "measuring ...";
   try {
-    const figures = await api("GET", `${base}?${query(extra)}`);
+    const figures = await request("GET", `${base}?${query(extra)}`); // a refusal shows in the hint
     showFigures(figures);
     $("measure-csv").href = `${base}?${query({ ...extra, format: "csv" })}`;
     $("measure-csv").download = `${name}-${chosen}.csv`;
