@@ -334,3 +334,73 @@ def test_the_api_page_lists_every_route_offline(browser_page: Any, rig: dict[str
     )
     assert elsewhere == []
     shot(browser_page, "api-docs")
+
+
+# --------------------------------------------------------------------------- input errors
+
+
+def field_error(page: Any, field: str) -> str:
+    """The sentence shown under a field (empty when none)."""
+    line = page.get_by_test_id(f"{field}-error")
+    return str(line.inner_text()) if line.count() and line.is_visible() else ""
+
+
+def test_exposure_errors_are_sentences_and_the_field_keeps_the_cameras_value(page: Any, rig: dict[str, Any]) -> None:
+    page.locator("nav button[data-view=live]").click()
+    exposure = page.get_by_test_id("exposure")
+    actual = page.request.get(rig["url"] + "api/exposure").json()["exposure_us"]
+    exposure.fill("")
+    exposure.dispatch_event("change")
+    page.wait_for_function("document.querySelector('[data-testid=exposure-error]')?.hidden === false")
+    assert field_error(page, "exposure").startswith("Enter an exposure time in microseconds")
+    assert "found" not in field_error(page, "exposure")
+    page.wait_for_function(f"document.querySelector('#exposure').value === '{actual:g}'")
+    exposure.fill("0")
+    exposure.dispatch_event("change")
+    page.wait_for_function(
+        "document.querySelector('[data-testid=exposure-error]').textContent.startsWith('exposure_us')"
+    )
+    page.wait_for_function(f"document.querySelector('#exposure').value === '{actual:g}'")  # the camera's value
+    assert page.request.get(rig["url"] + "api/exposure").json()["exposure_us"] == actual
+    assert page.get_by_test_id("error").is_hidden()
+    exposure.fill(f"{actual:g}")
+    exposure.dispatch_event("change")
+    page.wait_for_function("document.querySelector('[data-testid=exposure-error]').hidden")
+
+
+def test_fringe_settings_reach_a_second_tab(page: Any, browser_page: Any, rig: dict[str, Any]) -> None:
+    browser_page.goto(rig["url"])
+    browser_page.wait_for_function("document.querySelector('#fringe-frequency').value !== ''")
+    page.locator("nav button[data-view=live]").click()
+    page.get_by_test_id("projector-pattern").select_option("fringe")
+    page.get_by_test_id("fringe-frequency").fill("12")
+    page.get_by_test_id("fringe-frequency").dispatch_event("change")
+    browser_page.wait_for_function("document.querySelector('#fringe-frequency').value === '12'")
+    assert browser_page.get_by_test_id("projector-pattern").input_value() == "fringe"
+
+
+def test_the_wizards_fields_say_what_is_wrong_next_to_them(page: Any) -> None:
+    page.locator("nav button[data-view=calibration]").click()
+    heights = page.locator("#cal-heights")
+    heights.fill("25, abc, 100")
+    page.get_by_test_id("calibration-start").click()
+    assert field_error(page, "cal-heights") == (
+        'Entry 2 ("abc") is not a number; enter the plane heights in mm above the reference plane, '
+        "separated by commas (e.g. 25, 50, 100)."
+    )
+    heights.fill("25, 25, 50")
+    page.get_by_test_id("calibration-start").click()
+    page.wait_for_function("document.querySelector('[data-testid=cal-heights-error]').textContent.includes('distinct')")
+    page.locator("#cal-views").fill("")
+    heights.fill("25, 50, 100")
+    page.get_by_test_id("calibration-start").click()
+    assert field_error(page, "cal-views").startswith("Enter how many tilted board views")
+    assert field_error(page, "cal-heights") == ""
+    page.locator("#cal-views").fill("9999")
+    page.get_by_test_id("calibration-start").click()
+    page.wait_for_function(
+        "document.querySelector('[data-testid=cal-views-error]')?.textContent.startsWith('board_views:')"
+    )
+    assert "{" not in field_error(page, "cal-views")  # a sentence, not a validation record
+    page.locator("#cal-views").fill("6")
+    heights.fill("25, 50, 100, 150")
