@@ -230,13 +230,20 @@ def names_in(page: Any, list_id: str) -> list[str]:
     return list(page.eval_on_selector_all(f"#{list_id} li", "items => items.map(li => li.dataset.name)"))
 
 
-def open_capture_results(page: Any) -> str:
-    """The Captures view with the scanned capture opened; the capture's name."""
+def open_capture(page: Any) -> str:
+    """The Captures view with the newest capture opened; the capture's name."""
     page.locator("nav button[data-view=captures]").click()
     first = page.locator("#capture-list li.managed").first
     first.wait_for()
     name = str(first.get_attribute("data-name"))
     first.click()
+    page.wait_for_function(f"document.querySelector('#capture-title').textContent === '{name}'")
+    return name
+
+
+def open_capture_results(page: Any) -> str:
+    """The Captures view with the scanned capture and its results shown; the capture's name."""
+    name = open_capture(page)
     page.locator("#capture-results li.managed").first.wait_for()
     return name
 
@@ -258,6 +265,11 @@ def test_a_result_deleted_in_the_page_comes_back_with_undo(page: Any, rig: dict[
     page.once("dialog", lambda dialog: dialog.accept("renamed-capture"))
     page.locator(f"#capture-list li[data-name='{capture}'] [data-testid=rename]").click()
     page.locator("#capture-list li[data-name='renamed-capture']").wait_for()
+    assert (
+        page.get_by_test_id("notice")
+        .inner_text()
+        .startswith(f"captures/{capture} renamed to renamed-capture; {result} still name {capture} in their report")
+    )
     assert capture not in names_in(page, "capture-list")
     assert page.get_by_test_id("error").is_hidden(), page.get_by_test_id("error").inner_text()  # no stale name
 
@@ -404,3 +416,20 @@ def test_the_wizards_fields_say_what_is_wrong_next_to_them(page: Any) -> None:
     assert "{" not in field_error(page, "cal-views")  # a sentence, not a validation record
     page.locator("#cal-views").fill("6")
     heights.fill("25, 50, 100, 150")
+
+
+def test_a_captures_wrapped_phase_and_frames_are_shown(page: Any) -> None:
+    open_capture(page)
+    page.locator("#capture-look summary").click()
+    page.wait_for_function("document.querySelector('#look-image').dataset.shows === 'groups/0/phase'")
+    labels = page.eval_on_selector_all("#look-what option", "o => o.map(x => x.textContent)")
+    assert labels[:2] == ["wrapped phase: x, 1 fringes, 4 steps", "modulation: x, 1 fringes"]
+    page.get_by_test_id("look-what").select_option("groups/2/modulation")
+    page.wait_for_function("document.querySelector('#look-image').dataset.shows === 'groups/2/modulation'")
+    assert page.get_by_test_id("look-note").inner_text().endswith("grey levels (turbo)")
+    page.get_by_test_id("look-what").select_option("frames/0")
+    page.wait_for_function(
+        "(() => { const i = document.querySelector('#look-image'); return i.dataset.shows === 'frames/0' && i.complete && i.naturalWidth > 0; })()"
+    )
+    assert page.eval_on_selector("#look-image", "i => [i.naturalWidth, i.naturalHeight]") == [WIDTH, HEIGHT]
+    shot(page, "captures-look")

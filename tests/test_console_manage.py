@@ -53,7 +53,8 @@ def test_rename_and_restore_refuse_a_taken_name(console: TestClient) -> None:
     assert console.post("/api/captures/a/rename", json={"to": "b"}).status_code == 409
     bad = console.post("/api/captures/a/rename", json={"to": "../x"})
     assert bad.status_code == 400 and "plain name" in bad.json()["error"]
-    assert console.post("/api/captures/a/rename", json={"to": "a2"}).json()["name"] == "a2"
+    renamed = console.post("/api/captures/a/rename", json={"to": "a2"}).json()
+    assert renamed["name"] == "a2" and renamed["results_naming_old"] == ["a"]
     assert [c["name"] for c in console.get("/api/captures").json()["captures"]] == ["b", "a2"]
     entry = console.delete("/api/results/a", headers=HEADERS).json()["entry"]
     assert console.post("/api/results/b/rename", json={"to": "a"}).status_code == 200
@@ -117,3 +118,36 @@ def test_an_opencv_calibration_is_imported_from_the_page(console: TestClient, tm
     assert not (console.app.state.session.data.root / "calibrations" / "x").exists()  # nothing half-written
     wrong = console.post("/api/calibrations/import", json={"name": "y", "file_name": "a.txt", "text": text})
     assert wrong.status_code == 400 and "FileStorage" in wrong.json()["error"]
+
+
+def test_a_captures_frames_wrapped_phase_and_modulation_are_shown(console: TestClient) -> None:
+    """The wrapped phase of the finest group agrees with the processed result's phase, wrapped (two
+    code paths: the capture view's and the pipeline's); the frames are the capture's own."""
+    from console_client import HEIGHT, WIDTH
+
+    from rig.api import load_capture
+    from rig.store.results import read_result
+
+    _scan(console, "look")
+    data = console.app.state.session.data
+    listing = console.get("/api/captures/look/frames").json()
+    capture = load_capture(data.path("captures", "look"))
+    assert len(listing["frames"]) == len(capture.patterns) and all(f["held"] for f in listing["frames"])
+    assert [g["frequency"] for g in listing["groups"]] == [1, 8, 32]
+    png = console.get("/api/captures/look/frames/3.png").content
+    shown = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_UNCHANGED)
+    assert shown.shape == (HEIGHT, WIDTH) and np.array_equal(shown, capture.load_frame(3))  # 8-bit camera
+    from rig.capture_views import wrapped_phase
+
+    wrapped, modulation = wrapped_phase(capture, 2)
+    absolute = read_result(data.path("results", "look")).values  # phase (rad) of the finest frequency
+    both = np.isfinite(absolute)
+    gap = np.angle(np.exp(1j * (absolute[both] - wrapped[both])))
+    assert np.mean(np.abs(gap) < 0.05) > 0.95
+    assert np.median(modulation[both]) > 10  # grey levels: the fringes are well lit
+    for what in ("phase", "modulation"):
+        reply = console.get(f"/api/captures/look/groups/2/{what}.png")
+        assert reply.status_code == 200 and reply.content[:4] == b"\x89PNG"
+    assert console.get("/api/captures/look/groups/3/phase.png").status_code == 400
+    assert console.get("/api/captures/look/groups/0/colour.png").status_code == 400
+    assert console.get("/api/captures/look/frames/999.png").status_code == 400

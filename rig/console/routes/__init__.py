@@ -11,6 +11,7 @@ from fastapi import APIRouter
 from rig.console.routes import (
     calibration,
     calibration_import,
+    capture_views,
     data,
     docs,
     live,
@@ -26,6 +27,7 @@ ROUTERS: tuple[APIRouter, ...] = (
     settings.router,
     scan.router,
     data.router,
+    capture_views.router,
     measure.router,
     manage.router,
     calibration.router,

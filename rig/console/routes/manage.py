@@ -12,6 +12,7 @@ from fastapi import APIRouter, Depends, Request
 from pydantic import Field
 
 from rig.console.routes._common import Body, session_of
+from rig.console.routes.data import result_capture
 from rig.console.session import ConsoleSession
 from rig.console.trash import Trash
 
@@ -73,6 +74,9 @@ def restore(body: RestoreBody, request: Request, session: ConsoleSession = Depen
 def rename(
     kind: str, name: str, body: RenameBody, request: Request, session: ConsoleSession = Depends(session_of)
 ) -> dict[str, Any]:
-    new = Trash(session.data).rename(kind, name, body.to, busy=_busy(session, name))
+    data = session.data
+    made_from = [r for r in data.names("results") if result_capture(data, r) == name] if kind == "captures" else []
+    new = Trash(data).rename(kind, name, body.to, busy=_busy(session, name))
     _forget(session, kind, name, new)
-    return announce(request, "renamed", kind=kind, name=new, old=name)
+    # a result's report.json names its capture and is never rewritten: say which ones keep the old name
+    return announce(request, "renamed", kind=kind, name=new, old=name, results_naming_old=made_from)

@@ -8,6 +8,7 @@ import { bindSettings, drawFrame, showSettings } from "./live.js";
 import { bindMeasure } from "./measure.js";
 import { bindManage, dataChanged } from "./manage.js";
 import { bindCalibrations, showCalibrations } from "./calibrations.js";
+import { bindCaptureLook } from "./capturelook.js";
 import { bindResult, openResult, resultSaved, showResult } from "./result.js";
 import { buildVerify, showVerifyPrompt, verificationDone, verifyJob, verifyProgress } from "./verify.js";
 
@@ -115,6 +116,7 @@ function bind() {
   bindMeasure();
   bindManage();
   bindCalibrations();
+  bindCaptureLook();
   bindCaptures();
   buildWizard();
   buildVerify();

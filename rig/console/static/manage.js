@@ -28,7 +28,8 @@ export async function renameEntry(kind, name, to) {
   const target = to ?? prompt(`New name for ${kind}/${name}`, name);
   if (!target || target === name) return;
   const reply = await api("POST", `/api/${kind}/${encodeURIComponent(name)}/rename`, { to: target }).catch(() => null);
-  if (reply) notice(`${kind}/${name} renamed to ${reply.name}`, false);
+  const kept = reply?.results_naming_old || [];
+  if (reply) notice(`${kind}/${name} renamed to ${reply.name}` + (kept.length ? `; ${kept.join(", ")} still name ${name} in their report` : ""), false);
 }
 
 async function restore(kind, entry) {
