@@ -433,3 +433,33 @@ def test_a_captures_wrapped_phase_and_frames_are_shown(page: Any) -> None:
     )
     assert page.eval_on_selector("#look-image", "i => [i.naturalWidth, i.naturalHeight]") == [WIDTH, HEIGHT]
     shot(page, "captures-look")
+
+
+# --------------------------------------------------------------------------- calibration you can see
+
+
+def test_a_calibration_shows_its_planes_gamma_and_board_detections(page: Any) -> None:
+    """The wizard calibrates the simulated rig (projector gamma 1) with a gamma ramp and two board
+    views; its figures show the planes, a gamma near 1, and each board view's corners and residuals."""
+    page.locator("nav button[data-view=calibration]").click()
+    page.locator("#cal-name").fill("wiz")
+    page.locator("#cal-views").fill("2")
+    page.get_by_test_id("calibration-gamma").fill("8")
+    page.get_by_test_id("calibration-start").click()
+    page.wait_for_function("document.querySelector('#cal-result').dataset.done === 'true'", timeout=180_000)
+    page.locator("#calibrations-list li[data-name='wiz'] [data-testid=show]").click()
+    page.wait_for_function("document.querySelector('#calfig').dataset.calibration === 'wiz'")
+    page.get_by_test_id("calibration-planes").locator(".main-svg").first.wait_for()
+    page.get_by_test_id("calibration-gamma-curve").locator(".main-svg").first.wait_for()
+    assert float(page.get_by_test_id("calibration-gamma-curve").get_attribute("data-gamma")) == pytest.approx(
+        1.0, abs=0.1
+    )
+    views = page.get_by_test_id("calibration-boards").locator("figure")
+    assert views.count() == 3  # the board on the plane and two tilted views
+    page.wait_for_function(
+        "[...document.querySelectorAll('#calfig-boards figure')].every(f => f.dataset.rms !== undefined)"
+    )
+    for rms in page.eval_on_selector_all("#calfig-boards figure", "fs => fs.map(f => f.dataset.rms)"):
+        assert 0 <= float(rms) < 0.5  # px: the simulated views are sharp and the fit is exact
+    shot(page, "calibration-figures")
+    page.locator("#calibrations-list li[data-name='cal'] [data-testid=use]").click()

@@ -10,6 +10,7 @@ from fastapi import APIRouter
 
 from rig.console.routes import (
     calibration,
+    calibration_figures,
     calibration_import,
     capture_views,
     data,
@@ -32,6 +33,7 @@ ROUTERS: tuple[APIRouter, ...] = (
     manage.router,
     calibration.router,
     calibration_import.router,
+    calibration_figures.router,
     verify.router,
     docs.router,
 )

@@ -2,6 +2,7 @@
 // the trash, with Undo), and import an OpenCV FileStorage projector-camera calibration from a file.
 // A refused import says why next to the field it concerns.
 import { $, api, request } from "./api.js";
+import { showCalibrationFigures } from "./calfigures.js";
 import { button, deleteEntry, onDataChange, renameEntry } from "./manage.js";
 
 async function draw() {
@@ -24,7 +25,8 @@ export function showCalibrations(calibrations, active) {
     li.classList.toggle("selected", active);
     li.append(label + (active ? " — used by scans " : " "));
     if (!active) li.append(button("Use", "use", () => choose(name)));
-    if (name) li.append(" ", button("Rename", "rename", () => renameEntry("calibrations", name)),
+    if (name) li.append(" ", button("Show", "show", () => showCalibrationFigures(name)),
+      " ", button("Rename", "rename", () => renameEntry("calibrations", name)),
       " ", button("Delete", "delete", () => deleteEntry("calibrations", name)));
     return li;
   }));
