@@ -6,7 +6,12 @@ mm high, a centred rectangle a third of the view wide and high) with the rig's e
   block's known height, width and flat floor;
 - managing: a result deleted from the Captures view comes back with Undo, a capture is renamed,
   calibrations are chosen, imported from an OpenCV file (a bad file is refused next to its field)
-  and deleted with Undo.
+  and deleted with Undo; a capture's wrapped phase, modulation and frames are shown;
+- the API page draws every route with no request beyond the console;
+- input errors: an empty or refused exposure is a sentence under the field, which returns to the
+  camera's value; fringe settings reach a second tab; the wizard's bad plane heights and counts
+  are named under their fields;
+- a calibration made by the wizard shows its planes, gamma curve and board detections.
 
 With ``RIG_SCREENSHOTS=1`` the frames are 640x480 and the screenshots go to docs/console/ (as in
 test_console_browser.py), else to a temporary folder.
