@@ -63,18 +63,21 @@ class Surface:
         return self.points[rows, cols, :2].astype(np.float64)
 
     def pixel_to_lateral(self) -> np.ndarray:
-        """The 2x3 affine map ``[x, y] = A @ [col, row, 1]`` fitted to the valid points (identity in px)."""
+        """The 2x3 affine map ``[x, y] = A @ [col, row, 1]`` fitted to the valid points (identity in px).
+
+        Fitted on an even sub-grid of about :data:`FIT_SAMPLES` pixels (the map is smooth in x, y).
+        """
         if self.points is None:
             return np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
-        xy = self.points[..., :2]
-        valid = np.isfinite(xy).all(axis=-1) & np.isfinite(self.values)
-        rows, cols = np.nonzero(valid)
-        if rows.size < MIN_PLANE_POINTS:
+        h, w = self.shape
+        step = max(1, int(np.sqrt(h * w / FIT_SAMPLES)))
+        xy = self.points[::step, ::step, :2].astype(np.float64)
+        rows, cols = np.mgrid[0:h:step, 0:w:step]
+        valid = np.isfinite(xy).all(axis=-1) & np.isfinite(self.values[::step, ::step])
+        if int(valid.sum()) < MIN_PLANE_POINTS:
             raise MeasureError("map: fewer than 3 valid points; no pixel size can be derived")
-        stride = max(1, rows.size // FIT_SAMPLES)
-        rows, cols = rows[::stride], cols[::stride]
-        design = np.stack([cols, rows, np.ones_like(cols)], axis=1).astype(np.float64)
-        solution, *_ = np.linalg.lstsq(design, xy[rows, cols].astype(np.float64), rcond=None)
+        design = np.stack([cols[valid], rows[valid], np.ones(int(valid.sum()))], axis=1).astype(np.float64)
+        solution, *_ = np.linalg.lstsq(design, xy[valid], rcond=None)
         return np.asarray(solution.T)
 
 
@@ -327,13 +330,13 @@ class PlaneFit:
             return None
         return float(np.degrees(np.arccos(min(1.0, abs(float(self.normal[2]))))))
 
-    def distance_of(self, lateral: np.ndarray, values: np.ndarray) -> np.ndarray:
-        """Signed distance of points (lateral (..., 2), values (...)) to the plane, above positive."""
-        offset = np.concatenate([lateral, values[..., None]], axis=-1) - self.centroid
+    def distance_of(self, x: np.ndarray, y: np.ndarray, values: np.ndarray) -> np.ndarray:
+        """Signed distance of points (lateral ``x``, ``y`` and ``values``, same shape) to the plane, above positive."""
+        cx, cy, cz = (float(c) for c in self.centroid)
+        nx, ny, nz = (float(c) for c in self.normal)
         if self.orthogonal:
-            return np.asarray(offset @ self.normal)
-        slope = -self.normal[:2] / self.normal[2]
-        return np.asarray(offset[..., 2] - offset[..., :2] @ slope)
+            return np.asarray((x - cx) * nx + (y - cy) * ny + (values - cz) * nz)
+        return np.asarray((values - cz) + ((x - cx) * nx + (y - cy) * ny) / nz)
 
     def figures(self) -> dict[str, Any]:
         return {
@@ -372,49 +375,57 @@ class PlaneFit:
 
 
 def fit_plane(surface: Surface, corners: Sequence[float] | None = None) -> PlaneFit:
-    """Least-squares plane through the valid pixels of the region (the whole map for None)."""
+    """Least-squares plane through the valid pixels of the region (the whole map for None).
+
+    The fit is the smallest eigenvector of the points' 3x3 scatter matrix (orthogonal), or the
+    normal equations of ``z = a x + b y + c`` (vertical): one pass over the points either way.
+    """
     region = Region.of(surface, corners)
-    rows, cols = np.mgrid[region.slices]
-    rows, cols = rows.ravel(), cols.ravel()
-    lateral = surface.lateral_at(cols, rows)
-    values = surface.values[rows, cols].astype(np.float64)
-    valid = np.isfinite(values) & np.isfinite(lateral).all(axis=1)
-    if int(valid.sum()) < MIN_PLANE_POINTS:
+    lateral = _lateral_block(surface, region)
+    values = surface.values[region.slices].astype(np.float64)
+    valid = np.isfinite(values) & np.isfinite(lateral).all(axis=-1)
+    count = int(valid.sum())
+    if count < MIN_PLANE_POINTS:
         raise MeasureError(
-            f"plane: {int(valid.sum())} valid pixels in the region {region.as_list()}; expected at least "
+            f"plane: {count} valid pixels in the region {region.as_list()}; expected at least "
             f"{MIN_PLANE_POINTS} (draw the region on the surface)"
         )
-    xyz = np.concatenate([lateral[valid], values[valid, None]], axis=1)
-    centroid = xyz.mean(axis=0)
-    centred = xyz - centroid
-    spread = np.linalg.svd(centred[:, :2], compute_uv=False)
-    if spread[1] <= 1e-6 * spread[0]:
+    coords = [lateral[..., 0][valid], lateral[..., 1][valid], values[valid]]
+    centroid = np.array([c.mean() for c in coords])
+    centred = [c - m for c, m in zip(coords, centroid)]
+    scatter = np.array([[float(np.dot(a, b)) for b in centred] for a in centred])
+    spread = np.linalg.eigvalsh(scatter[:2, :2])
+    if spread[0] <= 1e-12 * max(float(spread[1]), 1e-300):
         raise MeasureError(
             f"plane: the valid pixels of the region {region.as_list()} lie on a line; draw a wider region"
         )
     orthogonal = surface.lateral_unit == surface.unit
     if orthogonal:
-        normal = np.linalg.svd(centred, full_matrices=False)[2][-1]
+        normal = np.linalg.eigh(scatter)[1][:, 0]
     else:
-        slope = np.linalg.lstsq(centred[:, :2], centred[:, 2], rcond=None)[0]
+        slope = np.linalg.solve(scatter[:2, :2], scatter[:2, 2])
         normal = np.array([-slope[0], -slope[1], 1.0])
     normal = normal / np.linalg.norm(normal)
     if normal[2] < 0:
         normal = -normal
     fit = PlaneFit(region, centroid, normal, orthogonal, np.empty(0), surface.unit, surface.lateral_unit)
-    residuals = fit.distance_of(xyz[:, :2], xyz[:, 2])
+    residuals = fit.distance_of(*coords)
     return PlaneFit(region, centroid, normal, orthogonal, residuals, surface.unit, surface.lateral_unit)
+
+
+def _lateral_block(surface: Surface, region: Region) -> np.ndarray:
+    """(h, w, 2) lateral positions of a region's pixels (the points' x, y, or the pixels themselves)."""
+    if surface.points is not None:
+        return surface.points[region.slices][..., :2].astype(np.float64)
+    rows, cols = np.mgrid[region.slices]
+    return np.stack([cols, rows], axis=-1).astype(np.float64)
 
 
 def height_above_plane(surface: Surface, plane: PlaneFit) -> np.ndarray:
     """(H, W) signed distance of every valid pixel to ``plane`` (NaN where invalid)."""
     h, w = surface.shape
-    if surface.points is None:
-        rows, cols = np.mgrid[0:h, 0:w]
-        lateral = np.stack([cols, rows], axis=-1).astype(np.float64)
-    else:
-        lateral = surface.points[..., :2].astype(np.float64)
-    return plane.distance_of(lateral, surface.values.astype(np.float64)).astype(np.float32)
+    lateral = _lateral_block(surface, Region(0, 0, w - 1, h - 1))
+    return plane.distance_of(lateral[..., 0], lateral[..., 1], surface.values.astype(np.float64)).astype(np.float32)
 
 
 # --------------------------------------------------------------------------- region statistics
