@@ -62,6 +62,8 @@ def test_rename_and_restore_refuse_a_taken_name(console: TestClient) -> None:
     assert taken.status_code == 409 and "taken again" in taken.json()["error"]
     assert console.delete("/api/verifications/x", headers=HEADERS).status_code == 400
     assert console.delete("/api/captures/nothing", headers=HEADERS).status_code == 404
+    assert console.delete("/api/captures/b").status_code == 403  # no page header: not from the console's page
+    assert "b" in [c["name"] for c in console.get("/api/captures").json()["captures"]]
 
 
 def test_deleting_the_active_calibration_leaves_phase_only(
