@@ -4,7 +4,8 @@
 import { $, api, clientId, dropTokenFromAddress, showError, showView } from "./api.js";
 import { bindCaptures, captureJob, captureProgress, loadOptions } from "./captures.js";
 import { buildWizard, calibrationJob, calibrationProgress, calibrationResult, showPrompt } from "./calibration.js";
-import { bindSettings, drawFrame, showSettings } from "./live.js";
+import { binaryMessage, bindSettings, showSettings } from "./live.js";
+import { bindLive3d, live3dError, showLive3d } from "./live3d.js";
 import { bindMeasure } from "./measure.js";
 import { bindManage, dataChanged } from "./manage.js";
 import { bindCalibrations, showCalibrations } from "./calibrations.js";
@@ -31,6 +32,7 @@ function updateStatus(status) {
   $("stop-button").disabled = !(status.busy || status.jobs.length);
   showSettings(status);
   showCalibrations(status.calibrations, status.calibration);
+  showLive3d(status);
   showPrompts(status.prompt);
 }
 
@@ -80,6 +82,7 @@ const handlers = {
   calibration: (m) => calibrationResult(m),
   verification: (m) => verificationDone(m).catch(() => {}),
   data: (m) => dataChanged(m),
+  live3d: (m) => live3dError(m),
 };
 
 function connect() {
@@ -89,7 +92,7 @@ function connect() {
   socket.onopen = () => socket.send(JSON.stringify({ live: true }));
   socket.onclose = () => { $("state").textContent = "disconnected"; setTimeout(connect, 1000); };
   socket.onmessage = (msg) => {
-    if (typeof msg.data !== "string") { drawFrame(msg.data); return; }
+    if (typeof msg.data !== "string") { binaryMessage(msg.data); return; }
     const message = JSON.parse(msg.data);
     handlers[message.type]?.(message);
   };
@@ -112,6 +115,7 @@ function bind() {
   $("scan-button").onclick = scan;
   $("stop-button").onclick = () => api("POST", "/api/stop", {}).catch(() => {});
   bindSettings();
+  bindLive3d();
   bindResult();
   bindMeasure();
   bindManage();
