@@ -11,7 +11,7 @@ from fastapi.responses import Response
 from starlette.concurrency import run_in_threadpool
 
 from rig import capture_views
-from rig.console.results import encode_png, robust_range
+from rig.console.results import encode_png
 from rig.console.routes._common import session_of
 from rig.console.session import ConsoleSession
 from rig.errors import RigError
@@ -51,5 +51,7 @@ async def group_map(name: str, group: int, what: str, session: ConsoleSession = 
     phase, modulation = await run_in_threadpool(capture_views.wrapped_phase, capture, group)
     if what == "phase":
         return _png(colour_map(phase, -np.pi, np.pi), {"X-Range": f"{-np.pi},{np.pi}", "X-Unit": "rad"})
-    _, high = robust_range(modulation)
+    finite = modulation[np.isfinite(modulation)]
+    high = float(np.percentile(finite, 99.5)) if finite.size else 1.0
+    high = high if high > 0 else 1.0
     return _png(colour_map(modulation, 0.0, high), {"X-Range": f"0,{high}", "X-Unit": "grey levels"})

@@ -36,9 +36,10 @@ def _forget(session: ConsoleSession, kind: str, name: str, new: str | None = Non
     """What the session holds of an entry that left its place (renamed to ``new``, or deleted): a
     result shown, the active calibration (which follows a rename)."""
     if kind == "results":
-        session.results.pop(name, None)  # one dict operation: atomic under the interpreter lock
-        if session.latest and session.latest.get("name") == name:
-            session.latest = None
+        held = session.processing
+        held.results.pop(name, None)  # one dict operation: atomic under the interpreter lock
+        if held.latest and held.latest.get("name") == name:
+            held.latest = None
     if kind == "calibrations" and session.calibration == name:
         session.set_calibration(new)
 
