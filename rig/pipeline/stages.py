@@ -24,6 +24,7 @@ from calibration.store import Calibration
 from processing.denoise.frames import rpca_denoise_stack
 from processing.geometry.uncertainty import noise_sigma, phase_sigma
 from processing.phase.convention import gray_offset, heterodyne_offset
+from processing.phase.frequency_fusion import fuse_frequencies
 from processing.phase.shifting import phase_shift, shadow_mask
 from processing.unwrap.fused_pass import FringePass, fringe_pass
 from processing.unwrap.neighbour_rescue import rescue
@@ -187,25 +188,61 @@ def stage_phase(state: SceneState, options: ProcessOptions) -> None:
 
 
 def _predict_phase_sigma(state: SceneState) -> None:
-    """The capture's noise (report: ``noise_sigma_grey``) and each pixel's phase sigma at the phase's frequency.
+    """Each pixel's phase sigma at the phase's frequency, unless the frequency fusion predicted it already.
 
     Only for phase-shifted captures whose highest frequency kept its modulation B (with a
     calibration, or stage by stage); :mod:`processing.geometry.uncertainty` holds the model.
     """
     along = state.groups.along(state.axis)
     wrapped = state.wrapped
-    if state.frames is None or wrapped is None or not along or any(group.steps < 3 for group in along):
+    if state.phase_sigma is not None or state.frames is None or wrapped is None or not along:
+        return
+    if any(group.steps < 3 for group in along):
         return
     modulation = wrapped.modulation[-1] if wrapped.modulation else None
     if modulation is None:
         return
-    # the highest frequency's fit residual alone: ~16k sampled pixels pin sigma_I within 1 %
+    state.phase_sigma = phase_sigma(modulation, _noise_sigma(state), along[-1].steps)
+
+
+def _noise_sigma(state: SceneState) -> float:
+    """The capture's camera noise sigma_I in grey levels (report: ``noise_sigma_grey``), estimated once.
+
+    The highest phase-shifted frequency's fit residual alone: ~16k sampled pixels pin sigma_I within 1 %.
+    """
+    known = state.info.get("noise_sigma_grey")
+    if known is not None:
+        return float(known)
+    assert state.frames is not None
+    along = [g for g in state.groups.along(state.axis) if g.steps >= 3]
     fitted = [g for g in along if g.steps >= 4][-1:] or along
     sigma_i = noise_sigma(
         state.frames, [g.indices for g in fitted], [np.asarray(g.shifts) for g in fitted], axis=state.axis
     )
     state.info["noise_sigma_grey"] = round(sigma_i, 4)
-    state.phase_sigma = phase_sigma(modulation, sigma_i, along[-1].steps)
+    return sigma_i
+
+
+def _fusing(state: SceneState, options: ProcessOptions) -> bool:
+    """Whether every frequency goes into the absolute phase: two or more phase-shifted ones along the
+    axis, all of them phase-shifted, and ``--param frequency_fusion=false`` not given."""
+    along = state.groups.along(state.axis)
+    return (
+        options.params.get("frequency_fusion", True) is not False
+        and len(along) > 1
+        and all(group.steps >= 3 for group in along)
+    )
+
+
+def _note_fusion(state: SceneState, frequencies: Sequence[float], disagreeing: int, valid: np.ndarray) -> None:
+    """report.json's ``frequency_fusion`` entry (:mod:`processing.phase.frequency_fusion`)."""
+    state.info["frequency_fusion"] = {
+        "frequencies": [float(f) for f in frequencies],
+        "rule": "inverse predicted phase variance, each frequency scaled to the highest's units",
+        "disagreeing_pixels": int(disagreeing),
+        "disagreeing_fraction": round(disagreeing / max(1, int(np.count_nonzero(valid))), 6),
+        "off": "--param frequency_fusion=false",
+    }
 
 
 def _wrapped_phases(state: SceneState, options: ProcessOptions) -> None:
@@ -266,6 +303,7 @@ def _fused_pass(state: SceneState, options: ProcessOptions) -> bool:
     max_residual = float(options.params.get("max_residual", np.pi / 2))  # e.g. 3.14 for drifting beats
     check = method.name == "heterodyne" and convention_check.enabled(options)
     assert state.frames is not None
+    fuse = _noise_sigma(state) if _fusing(state, options) else None
     try:
         scan = fringe_pass(
             state.frames,
@@ -279,10 +317,16 @@ def _fused_pass(state: SceneState, options: ProcessOptions) -> bool:
             orders=False,  # the corrections re-derive orders from the phases; nothing else reads them
             # A + B, the texture, instead of A and B apart (one map fewer) unless B is wanted for sigma
             brightness=state.calibration is None,
+            fuse_noise=fuse,
         )
     except ValueError:
         return False  # e.g. frequencies the method refuses: the stage-by-stage path reports it as before
     _keep_fused(state, options, scan, freqs, method.name, check)
+    if scan.sigma is not None:
+        assert state.unwrapped is not None  # _keep_fused set it
+        state.phase_sigma = scan.sigma
+        state.unwrapped.fused = True
+        _note_fusion(state, freqs, scan.disagreeing, scan.valid)
     state.info["fused_pass"] = "phase shifting, modulation mask and unwrapping in one float32 pass"
     _note_other_axis(state)
     return True
@@ -405,6 +449,30 @@ def _unwrap(state: SceneState, options: ProcessOptions) -> None:
         absolute=result.absolute,
         orders=result.orders,
     )
+    if result.absolute and _fusing(state, options):
+        _fuse_stage_by_stage(state)
+
+
+def _fuse_stage_by_stage(state: SceneState) -> None:
+    """Every frequency's wrapped phase into the unwrapped phase (the stage-by-stage twin of the fused pass's)."""
+    wrapped, unwrapped = state.wrapped, state.unwrapped
+    assert wrapped is not None and unwrapped is not None
+    maps = [wrapped.phase, wrapped.modulation]
+    if any(m is None for group in maps for m in group):
+        return
+    along = state.groups.along(state.axis)
+    fused = fuse_frequencies(
+        unwrapped.phase,
+        [p for p in wrapped.phase if p is not None],
+        wrapped.frequencies,
+        [m for m in wrapped.modulation if m is not None],
+        [group.steps for group in along],
+        _noise_sigma(state),
+    )
+    unwrapped.phase = fused.phase
+    unwrapped.fused = True
+    state.phase_sigma = fused.sigma
+    _note_fusion(state, wrapped.frequencies, fused.disagreeing, unwrapped.valid)
 
 
 def _rescue_rejected(

@@ -40,6 +40,7 @@ class UnwrappedPhase:
     method: str
     absolute: bool = True
     orders: np.ndarray | None = None
+    fused: bool = False  # every frequency went into the phase (processing.phase.frequency_fusion)
 
 
 @dataclass
