@@ -171,7 +171,10 @@ def add_format_option(parser: argparse.ArgumentParser) -> None:
 def processing_options(args: argparse.Namespace) -> ProcessOptions:
     """The :class:`ProcessOptions` of the options :func:`add_processing_options` added."""
     if args.undistort is False and getattr(args, "calibration", None) is not None:
-        refuse_kept_distortion(args.calibration)
+        from calibration.store import read_calibration  # before any frame is read (rig batch: before any job)
+        from rig.pipeline.run import refuse_kept_distortion
+
+        refuse_kept_distortion(read_calibration(args.calibration), ProcessOptions(undistort=False))
     return ProcessOptions(
         unwrap=args.unwrap,
         denoise=args.denoise,
@@ -183,20 +186,6 @@ def processing_options(args: argparse.Namespace) -> ProcessOptions:
         undistort=args.undistort,
         min_island_fraction=0.0 if args.keep_islands else args.min_island,
     )
-
-
-def refuse_kept_distortion(calibration: Path) -> None:
-    """``--no-undistort`` with a camera-projector (stereo) calibration: refused, because its
-    triangulation models the lens distortion of every camera and projector ray (the frames are never
-    undistorted, so there is nothing to keep)."""
-    from calibration.stereo import STEREO
-    from calibration.store import read_calibration
-
-    if read_calibration(calibration).model == STEREO:
-        raise ConfigError(
-            f"--no-undistort: {calibration} is a camera-projector (stereo) calibration, whose triangulation "
-            "models the lens distortion of every ray; leave --no-undistort out"
-        )
 
 
 def summary(report: dict, out: Path) -> dict:

@@ -81,7 +81,8 @@ def _methods(result: ProcessResult) -> dict[str, Any]:
         "absolute_phase": obj.unwrapped.absolute,
         "denoise": options.denoise,
         "correction": options.correction,
-        "undistorted": bool(obj.info.get("undistorted", False)),
+        # true: the frames; "rays": the stereo triangulation undistorts each ray; false: neither
+        "undistorted": obj.info.get("undistorted", False),
         "fringe_axis": obj.axis,
         "frequencies": obj.wrapped.frequencies,
         "phase_frequency": obj.unwrapped.frequency,

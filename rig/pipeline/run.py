@@ -14,10 +14,11 @@ import numpy as np
 
 from calibration import models as calibration_models
 from calibration.errors import CalibrationError
+from calibration.stereo import STEREO
 from calibration.store import Calibration, read_calibration
 from processing.geometry.uncertainty import height_sigma
 from rig.blas import rpca_blas
-from rig.errors import ProcessingError
+from rig.errors import ConfigError, ProcessingError
 from rig.pipeline import reference_cache
 from rig.pipeline.corrections import REGISTRY as CORRECTIONS
 from rig.pipeline.fit import check_fit
@@ -202,6 +203,7 @@ def _scenes(
     obj = _scene("object", capture, options)
     if calibration_path is not None:
         calibration, reference_capture = load_calibration_for(capture, calibration_path, obj.axis)
+        refuse_kept_distortion(calibration, options)
     obj.calibration = calibration
     if reference_capture is None:
         return obj, None, calibration
@@ -210,6 +212,20 @@ def _scenes(
     ref.axis = obj.axis
     obj.reference = ref
     return obj, ref, calibration
+
+
+def refuse_kept_distortion(calibration: Calibration, options: ProcessOptions) -> None:
+    """``--no-undistort`` with a camera-projector (stereo) calibration: refused (ConfigError).
+
+    Its triangulation models the lens distortion of every camera and projector ray; the frames
+    are never undistorted, so there is nothing that option could keep. Checked here so that
+    ``rig process``, ``rig batch``, :func:`rig.api.process` and the console refuse alike.
+    """
+    if options.undistort is False and calibration.model == STEREO:
+        raise ConfigError(
+            f"--no-undistort: {calibration.where} is a camera-projector (stereo) calibration, whose triangulation "
+            "models the lens distortion of every ray; leave --no-undistort out"
+        )
 
 
 def _run_scene(state: SceneState, options: ProcessOptions, progress: Any, to_disk: bool) -> None:

@@ -69,10 +69,14 @@ def stage_undistort(state: SceneState, options: ProcessOptions) -> None:
     """Remove lens distortion with the calibration's ``camera_matrix`` / ``distortion``.
 
     Done by default when they are present, except for the stereo model, whose triangulation
-    undistorts camera rays itself. ``--no-undistort`` skips it.
+    undistorts camera rays itself (the report says ``"undistorted": "rays"``). ``--no-undistort``
+    skips it.
     """
     cal = state.calibration
-    if cal is None or options.undistort is False or cal.model == "stereo":
+    if cal is not None and cal.model == "stereo":  # --no-undistort is refused for it (rig.pipeline.run)
+        state.info["undistorted"] = "rays"  # the triangulation undistorts camera and projector rays
+        return
+    if cal is None or options.undistort is False:
         return
     matrix, distortion = cal.extra.get("camera_matrix"), cal.extra.get("distortion")
     if matrix is None or distortion is None:
