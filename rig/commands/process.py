@@ -139,7 +139,11 @@ def add_processing_options(parser: argparse.ArgumentParser) -> None:
         help="a parameter of the chosen denoising / correction method (repeatable; VALUE read as JSON if it parses)",
     )
     parser.add_argument(
-        "--axis", choices=("x", "y"), help="fringe axis to use when a capture has both (default: the first)"
+        "--axis",
+        choices=("x", "y", "both"),
+        help="fringe axis to use when a capture has both; both: each pixel triangulated from both projector "
+        "coordinates (camera-projector calibration). Default: both with a camera-projector calibration, else "
+        "the calibration's fringe_axis, else the first",
     )
     parser.add_argument(
         "--no-undistort",
@@ -172,7 +176,7 @@ def processing_options(args: argparse.Namespace) -> ProcessOptions:
     """The :class:`ProcessOptions` of the options :func:`add_processing_options` added."""
     if args.undistort is False and getattr(args, "calibration", None) is not None:
         from calibration.store import read_calibration  # before any frame is read (rig batch: before any job)
-        from rig.pipeline.run import refuse_kept_distortion
+        from rig.pipeline.fit import refuse_kept_distortion
 
         refuse_kept_distortion(read_calibration(args.calibration), ProcessOptions(undistort=False))
     return ProcessOptions(
@@ -242,7 +246,14 @@ def run(args: argparse.Namespace) -> int:
 
 def print_summary(report: dict, out: Path) -> None:
     """The one-line summary of a processing run (and its notes) on stderr: `rig process`, `rig scan --process`."""
-    line = f"{out}: valid {report['valid_fraction']:.1%}, unwrap {report['methods']['unwrap']}"
+    from rig.pipeline.axes import ONLY_AXIS
+
+    methods = report["methods"]
+    line = f"{out}: valid {report['valid_fraction']:.1%}, unwrap {methods['unwrap']}"
+    if (
+        methods.get("axis_choice") and methods["axis_choice"] != ONLY_AXIS
+    ):  # which axis, and why, when there was a choice
+        line += f", axis {methods['fringe_axis']} ({methods['axis_choice']})"
     if report.get("height_mm"):  # None when no valid height is finite
         h = report["height_mm"]
         line += f", {report.get('quantity', 'height')} {h['min']:.2f} .. {h['max']:.2f} mm, {report['points']} points"

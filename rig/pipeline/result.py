@@ -83,7 +83,8 @@ def _methods(result: ProcessResult) -> dict[str, Any]:
         "correction": options.correction,
         # true: the frames; "rays": the stereo triangulation undistorts each ray; false: neither
         "undistorted": obj.info.get("undistorted", False),
-        "fringe_axis": obj.axis,
+        "fringe_axis": obj.info.get("axis_choice", {}).get("axis", obj.axis),  # x, y or both (rig.pipeline.axes)
+        "axis_choice": obj.info.get("axis_choice", {}).get("why"),
         "frequencies": obj.wrapped.frequencies,
         "phase_frequency": obj.unwrapped.frequency,
         "min_modulation_ratio": options.modulation_ratio,
