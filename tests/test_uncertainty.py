@@ -113,14 +113,19 @@ def test_max_sigma_keeps_the_pixels_under_the_bound(tmp_path: Path) -> None:
         seed=25,
     )
     paths = write_simulated_scan(scan, tmp_path / "scan")
-    plain = process(paths.capture, paths.calibration, ProcessOptions(correction="none"))
-    bounded = process(paths.capture, paths.calibration, ProcessOptions(correction="none", max_sigma=1.0))
+    plain = process(paths.capture, paths.calibration, ProcessOptions(correction="none", min_modulation_ratio=0.2))
+    default = process(paths.capture, paths.calibration, ProcessOptions(correction="none"))
+    bounded = process(  # the bound in mm alone, without the default one in radians
+        paths.capture, paths.calibration, ProcessOptions(correction="none", max_sigma=1.0, max_phase_sigma=None)
+    )
     assert bounded.uncertainty is not None and bounded.height is not None
     assert np.all(bounded.uncertainty[bounded.mask] <= 1.0)
     assert np.all(np.isnan(bounded.height[~bounded.mask]))
     dark, darker = scan.lit[:, 200:260], scan.lit[:, 260:]
     assert plain.mask[:, 200:260][dark].mean() < 0.05  # the ratio rule drops the dark band
     assert bounded.mask[:, 200:260][dark].mean() > 0.9  # the noise rule keeps it
+    assert default.mask[:, 200:260][dark].mean() > 0.9  # and so does the default (the noise rule in radians)
+    assert default.object.info["validity"]["rule"] == "noise"
     assert bounded.mask[:, 260:][darker].mean() < 0.1
     assert bounded.object.info["above_max_sigma"] > 0
     error = bounded.height[:, 200:260][bounded.mask[:, 200:260]] - scan.height_mm[:, 200:260][bounded.mask[:, 200:260]]

@@ -110,15 +110,24 @@ def add_processing_options(parser: argparse.ArgumentParser) -> None:
         type=float,
         default=defaults.min_modulation_ratio,
         metavar="RATIO",
-        help="valid pixels need fringe modulation B >= RATIO x background and x the image's 99th percentile of B (default 0.2)",
+        help="validity by the modulation ratio instead of the noise: valid pixels need fringe modulation B >= RATIO x "
+        "background and x the image's 99th percentile of B (the former default, 0.2). Default: the noise rule "
+        "(--max-phase-sigma) with a 0.02 floor, or 0.2 where no phase noise can be predicted (single frames)",
+    )
+    parser.add_argument(
+        "--max-phase-sigma",
+        type=float,
+        default=defaults.max_phase_sigma,
+        metavar="RAD",
+        help=f"the noise rule: keep pixels whose predicted phase sigma is at most RAD (default {defaults.max_phase_sigma})",
     )
     parser.add_argument(
         "--max-sigma",
         type=float,
         default=defaults.max_sigma,
         metavar="MM",
-        help="keep pixels whose predicted height sigma is at most MM (the noise decides validity; the modulation "
-        "ratio drops to a 0.02 floor unless --min-modulation is lower); default: the modulation ratio alone",
+        help="also keep only pixels whose predicted height sigma is at most MM (the noise rule applies, even with "
+        "--min-modulation, whose ratio then drops to the 0.02 floor); default: no bound in mm",
     )
     parser.add_argument(
         "--min-island",
@@ -184,6 +193,7 @@ def processing_options(args: argparse.Namespace) -> ProcessOptions:
         denoise=args.denoise,
         correction=args.correction,
         min_modulation_ratio=args.min_modulation,
+        max_phase_sigma=args.max_phase_sigma,
         max_sigma=args.max_sigma,
         axis=args.axis,
         params=parse_params(args.param),

@@ -87,8 +87,9 @@ def _methods(result: ProcessResult) -> dict[str, Any]:
         "axis_choice": obj.info.get("axis_choice", {}).get("why"),
         "frequencies": obj.wrapped.frequencies,
         "phase_frequency": obj.unwrapped.frequency,
-        "min_modulation_ratio": options.modulation_ratio,
+        "min_modulation_ratio": obj.info.get("validity", {}).get("min_modulation_ratio"),
         "max_sigma_mm": options.max_sigma,
+        "validity": obj.info.get("validity"),  # rig.pipeline.stages: the noise or the modulation-ratio rule
         "min_island_fraction": options.min_island_fraction,
         "params": options.params,
     }

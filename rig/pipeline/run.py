@@ -451,5 +451,9 @@ def _check_options(options: ProcessOptions) -> None:
         raise ProcessingError(f"--axis: expected one of {', '.join(AXES)}, found {options.axis!r}")
     if options.max_sigma is not None and not options.max_sigma > 0:
         raise ProcessingError(f"--max-sigma: expected a positive number of mm, found {options.max_sigma}")
-    if not 0 < options.min_modulation_ratio <= 1:
+    if options.min_modulation_ratio is not None and not 0 < options.min_modulation_ratio <= 1:
         raise ProcessingError(f"--min-modulation: expected a fraction in (0, 1], found {options.min_modulation_ratio}")
+    if options.max_phase_sigma is not None and not options.max_phase_sigma > 0:
+        raise ProcessingError(
+            f"--max-phase-sigma: expected a positive number of radians, found {options.max_phase_sigma}"
+        )

@@ -25,14 +25,21 @@ from processing.denoise.frames import rpca_denoise_stack
 from processing.geometry.uncertainty import noise_sigma, phase_sigma
 from processing.phase.convention import gray_offset, heterodyne_offset
 from processing.phase.frequency_fusion import fuse_frequencies
-from processing.phase.shifting import phase_shift, shadow_mask
+from processing.phase.shifting import phase_shift, sample_stride, shadow_mask
 from processing.unwrap.fused_pass import FringePass, fringe_pass
 from processing.unwrap.neighbour_rescue import rescue
 from rig.blas import rpca_blas
 from rig.errors import ProcessingError
 from rig.pipeline import convention_check
 from rig.pipeline.corrections import stage_correction
-from rig.pipeline.plan import PatternGroups, ProcessOptions, _all_integers, accepted_params, choose_unwrap
+from rig.pipeline.plan import (
+    RATIO_RULE_RATIO,
+    PatternGroups,
+    ProcessOptions,
+    _all_integers,
+    accepted_params,
+    choose_unwrap,
+)
 from rig.pipeline.state import SceneState, UnwrappedPhase, WrappedPhase
 from rig.pipeline.unwrapping import REGISTRY as UNWRAPPERS
 from rig.pipeline.unwrapping import UNWRAP_METHODS, GrayPlanes, UnwrapInputs, UnwrapMethod
@@ -189,6 +196,54 @@ def stage_phase(state: SceneState, options: ProcessOptions) -> None:
             "unwrap": round(time.perf_counter() - wrapped, 4),
         }
     _predict_phase_sigma(state)
+    _bound_phase_sigma(state, options)
+
+
+def _ratio_threshold_sigma(phase_sigma: np.ndarray, ratio: float) -> float:
+    """The predicted phase sigma of a pixel whose modulation is ``ratio`` x the 99th percentile's.
+
+    sigma is proportional to 1 / B, so the 1st percentile of sigma (over a regular subsample of
+    about 16k pixels) belongs to the 99th percentile of B.
+    """
+    flat = phase_sigma.reshape(-1)[:: sample_stride(phase_sigma.shape)]
+    flat = flat[np.isfinite(flat)]
+    return float(np.percentile(flat, 1.0)) / ratio if flat.size else 0.0
+
+
+def _predictable(state: SceneState) -> bool:
+    """Whether the phase noise of this capture can be predicted: phase-shifted fringes along the axis."""
+    along = state.groups.along(state.axis)
+    return bool(along) and all(group.steps >= 3 for group in along)
+
+
+def _bound_phase_sigma(state: SceneState, options: ProcessOptions) -> None:
+    """The validity rule (report: ``validity``): under the noise rule, pixels whose predicted phase
+    sigma is above the bound leave the mask (``above_max_phase_sigma``).
+
+    The bound is ``max_phase_sigma``, or the phase sigma of a pixel at the modulation ratio's
+    threshold (0.2 x the 99th percentile of B) where that is larger: the noise rule adds dark
+    pixels with a clean phase and never drops what the ratio rule keeps in a noisy capture.
+    """
+    predictable = _predictable(state)
+    rule = options.noise_rule(predictable)
+    bound = options.max_phase_sigma if rule else None
+    unwrapped = state.unwrapped
+    if bound is not None and state.phase_sigma is not None:
+        ratio = RATIO_RULE_RATIO if options.min_modulation_ratio is None else options.min_modulation_ratio
+        bound = max(bound, _ratio_threshold_sigma(state.phase_sigma, ratio))
+    state.info["validity"] = {
+        "rule": "noise" if rule else "modulation ratio",
+        "min_modulation_ratio": options.modulation_ratio(predictable),
+        "max_phase_sigma_rad": None if bound is None else round(float(bound), 5),
+        "max_sigma_mm": options.max_sigma,
+    }
+    if bound is None or state.phase_sigma is None or unwrapped is None:
+        return
+    above = unwrapped.valid & ~(state.phase_sigma <= np.float32(bound))
+    state.info["above_max_phase_sigma"] = int(np.count_nonzero(above))
+    if above.any():
+        unwrapped.valid = unwrapped.valid & ~above
+        np.copyto(unwrapped.phase, np.float32(np.nan), where=above)  # the stage's own array
 
 
 def _predict_phase_sigma(state: SceneState) -> None:
@@ -268,7 +323,7 @@ def _wrapped_phases(state: SceneState, options: ProcessOptions) -> None:
         out.phase.append(phase)
         out.modulation.append(amplitude)
         out.background.append(background)
-        out.valid &= shadow_mask(amplitude, background, min_ratio=options.modulation_ratio)
+        out.valid &= shadow_mask(amplitude, background, min_ratio=options.modulation_ratio(_predictable(state)))
     state.wrapped = out
     state.info["valid_after_modulation"] = float(out.valid.mean())
     _note_other_axis(state)
@@ -315,12 +370,12 @@ def _fused_pass(state: SceneState, options: ProcessOptions) -> bool:
             freqs,
             method.name,
             shifts=[np.asarray(group.shifts) for group in along],
-            min_ratio=options.modulation_ratio,
+            min_ratio=options.modulation_ratio(True),  # the pass runs on phase-shifted fringes only
             max_residual=max_residual,
             keep_all=state.calibration is None or check,
             orders=False,  # the corrections re-derive orders from the phases; nothing else reads them
             # A + B, the texture, instead of A and B apart (one map fewer) unless B is wanted for sigma
-            brightness=state.calibration is None,
+            brightness=state.calibration is None and (fuse is not None or not options.noise_rule(True)),
             fuse_noise=fuse,
         )
     except ValueError:
