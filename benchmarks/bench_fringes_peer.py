@@ -7,7 +7,9 @@ the same uint8 stack:
 - ours: :func:`rig.pipeline.run.process` given the frames in memory (``frames=``) with the
   simulated calibration, ``--correction none``: the fused pass (phase shifting, modulation mask,
   Ding's two-frequency unwrapping and the noise-weighted fusion of both frequencies), the height,
-  the validity and the uncertainty map; and the fused kernel alone
+  the validity and the uncertainty map; the same with the highest frequency alone and the former
+  modulation-ratio rule (``--param frequency_fusion=false --min-modulation 0.2``: what the fusion
+  and the noise rule cost); and the fused kernel alone
   (:func:`processing.unwrap.fused_pass.fringe_pass` with ``fuse_noise``);
 - the peer: ``fringes.Fringes.decode`` (its numba decoder, all threads) set to the frames'
   convention (one axis, ``v = (15, 16)``, ``N = 6``, ``p0 = 0``, ``reverse``: the frames shift by
@@ -124,13 +126,19 @@ def main(argv: list[str] | None = None) -> int:
     paths = write_simulated_scan(scan, Path(workdir.name) / "scan")
     options = ProcessOptions(correction="none")
 
+    former = ProcessOptions(correction="none", min_modulation_ratio=0.2, params={"frequency_fusion": False})
+
     def pipeline() -> None:
         result = process(paths.capture, paths.calibration, options, frames=frames)
         assert result.uncertainty is not None and "frequency_fusion" in result.object.info
 
+    def highest_alone() -> None:
+        process(paths.capture, paths.calibration, former, frames=frames)
+
     sigma_i = noise_sigma(frames, GROUPS)
     rows: dict[str, Callable[[], object]] = {
         "rig pipeline in memory (fusion, validity, uncertainty, height)": pipeline,
+        "rig pipeline, highest frequency alone, ratio rule": highest_alone,
         "fused kernel with fusion (fringe_pass)": lambda: fringe_pass(
             frames, GROUPS, FREQUENCIES, "two-frequency", fuse_noise=sigma_i
         ),
