@@ -169,7 +169,7 @@ def process(
     else:
         height, points, mask = _height(obj, ref, calibration, notes)
         uncertainty = _uncertainty(obj, ref, calibration, mask, height, notes)
-        _note_conditioning(obj, calibration, points, notes)
+        _note_conditioning(obj, calibration, points, options.axis, notes)
     _bound_uncertainty(obj, mask, height, uncertainty, options.max_sigma, notes)
     height_time = time.perf_counter() - t0
     if progress is not None:
@@ -330,15 +330,14 @@ def _bound_uncertainty(
 
 
 def _note_conditioning(
-    obj: SceneState, calibration: Calibration | None, points: np.ndarray | None, notes: list[str]
+    obj: SceneState, calibration: Calibration | None, points: np.ndarray | None, requested: str | None, notes: list[str]
 ) -> None:
     """Stereo model: each axis's depth per projector pixel in the report; a warning for an ill-conditioned choice."""
     if calibration is None or calibration.model != STEREO or points is None:
         return
     per_pixel = stereo_conditioning(calibration, points)
     obj.info["depth_per_projector_pixel_mm"] = per_pixel
-    requested = obj.info["axis_choice"]["why"].startswith("asked for")
-    note = conditioning_note(AxisChoice((obj.axis,), "", obj.axis if requested else None), per_pixel)
+    note = conditioning_note(AxisChoice((obj.axis,), "", requested), per_pixel)
     if note is not None:
         notes.append(note)
 
