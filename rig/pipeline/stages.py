@@ -177,6 +177,10 @@ def stage_phase(state: SceneState, options: ProcessOptions) -> None:
       seconds of each);
     - single-shot patterns: :data:`rig.pipeline.single_shot_phase.SINGLE_SHOT`, whose RPCA runs
       with single-threaded BLAS (``single_shot``).
+
+    On the first two paths every phase-shifted frequency goes into the absolute phase, weighted by
+    its predicted noise (:mod:`processing.phase.frequency_fusion`; ``frequency_fusion``), and the
+    validity rule applies the predicted phase sigma (:func:`_bound_phase_sigma`; ``validity``).
     """
     assert state.frames is not None
     if state.groups.single_shot:
