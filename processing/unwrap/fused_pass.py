@@ -281,10 +281,9 @@ def fringe_pass(
         Keep A + B of each kept group (a texture: the brightest the pixel gets) instead of A and
         B apart: one full-size map instead of two.
     fuse_noise : float, optional
-        The camera noise sigma_I (grey levels): with a method, the absolute phase becomes the
-        noise-weighted combination of every group's phase
-        (:func:`processing.phase.frequency_fusion.fuse_frequencies`) and ``sigma`` its predicted
-        standard deviation. None: the highest frequency's phase alone.
+        Camera noise sigma_I (grey levels): with a method, the phase becomes the noise-weighted
+        combination of every group's (:mod:`processing.phase.frequency_fusion`), ``sigma`` its
+        predicted standard deviation. None: the highest frequency's phase alone.
 
     Returns
     -------
@@ -299,27 +298,34 @@ def fringe_pass(
     threads = _validate.positive_int(threads, "threads")
     cv2 = _backend(opencv)
     kernel, used, tables = _temporal_kernel(method, freqs, max_residual, cv2)
+    flat = stack.reshape(count, -1)
+    specs, thresholds = _group_specs(flat, lists, shifts, ratio, (height, width), cv2)
+    kept = list(range(len(lists))) if keep_all else [len(lists) - 1]
+    fusion = None if fuse_noise is None or method is None or len(lists) < 2 else _Fusion(freqs, lists, fuse_noise)
+    out = _Outputs.allocate(flat.shape[1], len(kept), method is not None, orders, brightness, fusion is not None)
+    nonnegative = np.issubdtype(stack.dtype, np.unsignedinteger) and all((s.weights[0] >= 0).all() for s in specs)
+    plan = _Plan(flat, specs, thresholds, ratio, kept, kernel, used, tables, cv2, nonnegative, fusion)
+    _run_blocks(plan, out, flat.shape[1], threads)
+    result = _result(out, freqs, method, kept, thresholds, used, (height, width))
+    result.disagreeing = 0 if fusion is None else sum(fusion.disagreeing)
+    return result
+
+
+def _group_specs(
+    flat: np.ndarray,
+    lists: list[list[int]],
+    shifts: Sequence[np.ndarray | None] | None,
+    ratio: float,
+    shape: tuple[int, int],
+    cv2: Any | None,
+) -> tuple[list[_Group], list[float]]:
+    """Each group's frame rows and float32 weights, and its modulation mask's threshold (from the subsample)."""
     specs = [
         _Group(_rows(g), shift_weights(len(g), None if shifts is None else shifts[k]).astype(np.float32))
         for k, g in enumerate(lists)
     ]
-    flat = stack.reshape(count, -1)
-    thresholds = [
-        max(ratio * _sampled_high(flat, spec, (height, width), cv2), float(np.finfo(np.float32).tiny)) for spec in specs
-    ]
-    kept = list(range(len(lists))) if keep_all else [len(lists) - 1]
-    fusing = fuse_noise is not None and method is not None and len(lists) > 1
-    out = _Outputs.allocate(flat.shape[1], len(kept), method is not None, orders, brightness, fusing)
-    nonnegative = np.issubdtype(stack.dtype, np.unsignedinteger) and all((s.weights[0] >= 0).all() for s in specs)
-    plan = _Plan(flat, specs, thresholds, ratio, kept, kernel, used, tables, cv2, nonnegative)
-    if fusing:
-        assert fuse_noise is not None
-        plan.fusion = _Fusion(freqs, [len(g) for g in lists], float(fuse_noise))
-    _run_blocks(plan, out, flat.shape[1], threads)
-    result = _result(out, freqs, method, kept, thresholds, used, (height, width))
-    if plan.fusion is not None:
-        result.disagreeing = sum(plan.fusion.disagreeing)
-    return result
+    tiny = float(np.finfo(np.float32).tiny)
+    return specs, [max(ratio * _sampled_high(flat, spec, shape, cv2), tiny) for spec in specs]
 
 
 def _result(
@@ -466,14 +472,14 @@ class _Outputs:
         )
 
 
-@dataclass
 class _Fusion:
     """What the blocks need to fuse every frequency into the absolute phase, and the disagreeing pixels they found."""
 
-    frequencies: list[float]
-    steps: list[int]
-    noise: float
-    disagreeing: list[int] = field(default_factory=list)  # one count per block (list.append is thread-safe)
+    def __init__(self, frequencies: list[float], groups: list[list[int]], noise: float) -> None:
+        self.frequencies = frequencies
+        self.steps = [len(g) for g in groups]
+        self.noise = float(noise)
+        self.disagreeing: list[int] = []  # one count per block (list.append is thread-safe)
 
 
 @dataclass

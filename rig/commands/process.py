@@ -78,6 +78,34 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_report_options(parser)
 
 
+def _add_validity_options(parser: argparse.ArgumentParser, defaults: ProcessOptions) -> None:
+    """--min-modulation, --max-phase-sigma, --max-sigma: which pixels are valid (docs/uncertainty.md)."""
+    parser.add_argument(
+        "--min-modulation",
+        type=float,
+        default=defaults.min_modulation_ratio,
+        metavar="RATIO",
+        help="validity by the modulation ratio instead of the noise: valid pixels need fringe modulation B >= RATIO x "
+        "background and x the image's 99th percentile of B (the former default, 0.2). Default: the noise rule "
+        "(--max-phase-sigma) with a 0.02 floor, or 0.2 where no phase noise can be predicted (single frames)",
+    )
+    parser.add_argument(
+        "--max-phase-sigma",
+        type=float,
+        default=defaults.max_phase_sigma,
+        metavar="RAD",
+        help=f"the noise rule: keep pixels whose predicted phase sigma is at most RAD (default {defaults.max_phase_sigma})",
+    )
+    parser.add_argument(
+        "--max-sigma",
+        type=float,
+        default=defaults.max_sigma,
+        metavar="MM",
+        help="also keep only pixels whose predicted height sigma is at most MM (the noise rule applies, even with "
+        "--min-modulation, whose ratio then drops to the 0.02 floor); default: no bound in mm",
+    )
+
+
 def add_processing_options(parser: argparse.ArgumentParser) -> None:
     """The pipeline's options (--unwrap, --denoise, --correction, ...), shared by `rig process` and `rig batch`.
 
@@ -105,30 +133,7 @@ def add_processing_options(parser: argparse.ArgumentParser) -> None:
         metavar="METHOD",
         help=LazyHelp(_correction_help),  # type: ignore[arg-type]  # argparse calls str() on it
     )
-    parser.add_argument(
-        "--min-modulation",
-        type=float,
-        default=defaults.min_modulation_ratio,
-        metavar="RATIO",
-        help="validity by the modulation ratio instead of the noise: valid pixels need fringe modulation B >= RATIO x "
-        "background and x the image's 99th percentile of B (the former default, 0.2). Default: the noise rule "
-        "(--max-phase-sigma) with a 0.02 floor, or 0.2 where no phase noise can be predicted (single frames)",
-    )
-    parser.add_argument(
-        "--max-phase-sigma",
-        type=float,
-        default=defaults.max_phase_sigma,
-        metavar="RAD",
-        help=f"the noise rule: keep pixels whose predicted phase sigma is at most RAD (default {defaults.max_phase_sigma})",
-    )
-    parser.add_argument(
-        "--max-sigma",
-        type=float,
-        default=defaults.max_sigma,
-        metavar="MM",
-        help="also keep only pixels whose predicted height sigma is at most MM (the noise rule applies, even with "
-        "--min-modulation, whose ratio then drops to the 0.02 floor); default: no bound in mm",
-    )
+    _add_validity_options(parser, defaults)
     parser.add_argument(
         "--min-island",
         type=float,
