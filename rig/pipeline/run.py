@@ -39,6 +39,7 @@ from rig.pipeline.stages import (
 from rig.pipeline.unwrapping import UNWRAP_METHODS
 from rig.store import files
 from rig.store.capture import Capture, read_capture
+from rig.store.exposures import ExposureSets, exposure_sets
 
 log = logging.getLogger(__name__)
 
@@ -59,16 +60,30 @@ def _solves_rpca(stage: str, options: ProcessOptions) -> bool:
 # --------------------------------------------------------------------------- the whole run
 
 
-def _scene(name: str, capture: Capture, axis: str | None = None, groups: PatternGroups | None = None) -> SceneState:
-    """A capture's scene along ``axis`` (default: the first axis with fringes; ProcessingError if none)."""
+def _capture_groups(capture: Capture) -> tuple[PatternGroups, ExposureSets | None]:
+    """A capture's pattern groups and, for one taken at several exposures, its exposure sets.
+
+    A multi-exposure capture is grouped by its base sequence (its exposures are fused when loaded).
+    """
     where = str(capture.manifest_path)
-    groups = group_patterns(capture.pattern_models, where) if groups is None else groups
+    sets = exposure_sets(capture.pattern_models, where)
+    return group_patterns(sets.base, where), (sets if sets.multiple else None)
+
+
+def _scene(
+    name: str,
+    capture: Capture,
+    axis: str | None = None,
+    grouped: tuple[PatternGroups, ExposureSets | None] | None = None,
+) -> SceneState:
+    """A capture's state along ``axis`` (default: the first axis with fringes; ProcessingError if none)."""
+    groups, exposures = _capture_groups(capture) if grouped is None else grouped
     if axis is None:
         captured = captured_axes(groups)
         if not captured:
-            raise ProcessingError(f"{where}: no sinusoid pattern: nothing to compute a phase from")
+            raise ProcessingError(f"{capture.manifest_path}: no sinusoid pattern: nothing to compute a phase from")
         axis = captured[0]
-    return SceneState(name=name, capture=capture, groups=groups, axis=axis)
+    return SceneState(name=name, capture=capture, groups=groups, axis=axis, exposures=exposures)
 
 
 def total_steps(with_reference: bool) -> int:
@@ -201,7 +216,8 @@ def _scenes(
     """The object's scene, its second axis's when both are processed (:mod:`rig.pipeline.axes`) and,
     with a calibration whose model needs one, the reference plane's."""
     where = str(capture.manifest_path)
-    groups = group_patterns(capture.pattern_models, where)
+    grouped = _capture_groups(capture)
+    groups = grouped[0]
     calibration, reference_capture = (None, None)
     if calibration_path is not None:
         calibration, reference_capture = _calibration_and_reference(calibration_path)
@@ -210,12 +226,12 @@ def _scenes(
     if calibration is not None:
         for axis in choice.axes:  # everything the two share must fit, along every processed axis
             check_fit(capture, calibration, axis, reference_capture)
-    obj = _scene("object", capture, choice.axes[0], groups)
+    obj = _scene("object", capture, choice.axes[0], grouped)
     obj.calibration = calibration
     obj.info["axis_choice"] = {"axis": choice.name, "why": choice.why}
     second = None
     if len(choice.axes) == 2:
-        second = _scene("object", capture, choice.axes[1], groups)
+        second = _scene("object", capture, choice.axes[1], grouped)
         second.calibration = calibration
     if reference_capture is None:
         return obj, second, None, calibration
