@@ -69,7 +69,8 @@ def stage_correction(state: SceneState, options: ProcessOptions) -> None:
         return
     inputs = needed_inputs(method, state.calibration)
     wrapped = None
-    if state.wrapped is not None and unwrapped.frequency in state.wrapped.frequencies:
+    # a fused phase is no longer the highest frequency's wrapped phase + 2 pi k: its own wrap is
+    if not unwrapped.fused and state.wrapped is not None and unwrapped.frequency in state.wrapped.frequencies:
         wrapped = state.wrapped.phase[state.wrapped.frequencies.index(unwrapped.frequency)]
     if wrapped is None or not np.isfinite(wrapped[unwrapped.valid]).all():
         wrapped = wrap_to_pi(np.nan_to_num(unwrapped.phase))  # Phi = phi + 2 pi k wraps back to phi

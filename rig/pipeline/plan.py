@@ -26,15 +26,17 @@ registries, so a new method is one entry, not a new code path:
 Automatic choice of the unwrapping method (``--unwrap auto``), from the sinusoid frequencies
 along the fringe axis (the axis of the first sinusoid pattern):
 
-1. one frequency: ``gray`` if Gray-code planes along that axis are present, else ``spatial``
-   (quality-guided); a single frame per frequency: ``ftp`` (Fourier transform profilometry,
-   then spatial unwrapping);
+1. one frequency: ``gray`` if Gray- or binary-code planes along that axis are present, else
+   ``spatial`` (quality-guided); a single frame per frequency: ``ftp`` (Fourier transform
+   profilometry, then spatial unwrapping);
 2. the lowest frequency is 1: ``hierarchical``;
 3. two coprime frequencies: ``two-frequency`` (number-theoretic, Ding);
 4. three close frequencies (highest < 2 x lowest) whose beats differ by 1 (64, 58, 53 -> 6, 5
    -> 1): ``heterodyne``; otherwise, three frequencies without a common divisor:
    ``three-frequency``;
-5. anything else: an error asking for ``--unwrap``.
+5. anything else: ``gray`` when a code runs along the axis (it resolves a period or beat, the
+   other frequencies follow hierarchically: non-integer fringe counts too), else an error asking
+   for ``--unwrap``.
 
 Methods that use fewer frequencies than captured take the highest ones. Spatial unwrapping gives
 phase up to a constant 2 pi k per connected region: the height stage then removes from each region
@@ -54,7 +56,7 @@ from typing import TYPE_CHECKING, Any
 from rig.errors import CaptureError, ProcessingError
 
 if TYPE_CHECKING:
-    from processing.projection.patterns import Pattern
+    from processing.projection.patterns import Gray, Pattern
 
 log = logging.getLogger(__name__)
 
@@ -67,7 +69,14 @@ DEFAULT_CORRECTION = "auto"
 # --------------------------------------------------------------------------- options and pattern groups
 
 
-NOISE_RULE_RATIO = 0.02  # with --max-sigma: only pixels under 2 % of the brightest's modulation are shadow outright
+NOISE_RULE_RATIO = 0.02  # with the noise rule: only pixels under 2 % of the brightest's modulation are shadow outright
+RATIO_RULE_RATIO = 0.2  # the modulation-ratio rule's default (and the rule where no phase noise can be predicted)
+# The noise rule's bound on the predicted phase sigma (rad) at the phase's frequency (docs/uncertainty.md):
+# a fringe keeps its pixels from B >= 10 sqrt(2 / J) sigma_I on (8.7 grey levels for six steps at sigma_I =
+# 1.5, 5.8 for twelve), while a pixel with no fringe (a Rayleigh-distributed modulation estimate) passes
+# with probability exp(-1 / (2 x 0.1^2)) ~ 2e-22. On the real captures 0.25 and 0.15 rad let in
+# wrong surfaces (slmaster-eye's background at 1.3 m behind the 0.73 m plaque) that 0.1 does not.
+MAX_PHASE_SIGMA = 0.1
 
 
 @dataclass
@@ -81,20 +90,27 @@ class ProcessOptions:
     undistort: bool | None = None  # None: when the calibration has camera_matrix + distortion
     denoise: str = "none"
     correction: str = DEFAULT_CORRECTION
-    min_modulation_ratio: float = 0.2
-    # keep pixels whose predicted height sigma (mm) is under this; None: the modulation ratio alone decides
+    # None: the noise rule decides validity (max_phase_sigma, max_sigma) wherever the phase noise can be
+    # predicted, with a modulation floor of NOISE_RULE_RATIO; a number: the modulation-ratio rule with it
+    min_modulation_ratio: float | None = None
+    # keep pixels whose predicted height sigma (mm) is under this (None: no bound in mm)
     max_sigma: float | None = None
+    # the noise rule: keep pixels whose predicted phase sigma (rad) is under this (None: no bound in rad)
+    max_phase_sigma: float | None = MAX_PHASE_SIGMA
     # valid regions smaller than this fraction of the largest are dropped (processing.correction.islands); 0 keeps all
     min_island_fraction: float = 0.005
     axis: str | None = None
     params: dict[str, Any] = field(default_factory=dict)
 
-    @property
-    def modulation_ratio(self) -> float:
-        """The modulation mask's ratio: ``min_modulation_ratio``, or a floor when the noise decides (``max_sigma``)."""
-        if self.max_sigma is None:
-            return self.min_modulation_ratio
-        return min(self.min_modulation_ratio, NOISE_RULE_RATIO)
+    def noise_rule(self, predictable: bool) -> bool:
+        """Whether the predicted noise decides validity: the default wherever the phase noise can be
+        predicted (``predictable``: phase-shifted fringes), and whenever ``max_sigma`` is given."""
+        return self.max_sigma is not None or (self.min_modulation_ratio is None and predictable)
+
+    def modulation_ratio(self, predictable: bool) -> float:
+        """The modulation mask's ratio: a floor under the noise rule, else ``min_modulation_ratio`` (default 0.2)."""
+        ratio = RATIO_RULE_RATIO if self.min_modulation_ratio is None else self.min_modulation_ratio
+        return min(ratio, NOISE_RULE_RATIO) if self.noise_rule(predictable) else ratio
 
 
 def accepted_params(function: Callable[..., Any], params: Mapping[str, Any]) -> dict[str, Any]:
@@ -124,12 +140,23 @@ class SinusoidGroup:
 
 @dataclass
 class GrayGroup:
-    """Gray-code bit planes along one axis: pattern index of each bit (0 = most significant)."""
+    """Code bit planes along one axis: pattern index of each bit (0 = most significant).
+
+    ``binary``: a plain binary code rather than Gray; ``period_px``: the cell width in projector
+    pixels (None: the axis over ``2**bits``).
+    """
 
     axis: str
     bits: int
     planes: dict[int, int] = field(default_factory=dict)
     inverted: dict[int, int] = field(default_factory=dict)
+    binary: bool = False
+    period_px: float | None = None
+
+    @property
+    def code(self) -> str:
+        """The pattern kind of the planes: ``gray`` or ``binary``."""
+        return "binary" if self.binary else "gray"
 
 
 @dataclass
@@ -149,6 +176,7 @@ class PatternGroups:
 def group_patterns(patterns: Sequence[Pattern | Mapping[str, Any]], where: str = "capture.json") -> PatternGroups:
     """Group patterns by kind: sinusoids per (axis, frequency), Gray planes per axis, flats."""
     from processing.projection.patterns import (  # numpy: not for the parser
+        Binary,
         Flat,
         Gray,
         Sinusoid,
@@ -168,11 +196,11 @@ def group_patterns(patterns: Sequence[Pattern | Mapping[str, Any]], where: str =
             group.indices.append(index)
             group.shifts.append(pattern.phase_delay)
         elif isinstance(pattern, Gray):
-            group_g = gray.setdefault(pattern.axis, GrayGroup(pattern.axis, pattern.bits))
-            if group_g.bits != pattern.bits:
-                raise CaptureError(
-                    f"{where}: patterns[{index}].bits: expected {group_g.bits} like the other Gray planes, found {pattern.bits}"
-                )
+            group_g = gray.setdefault(
+                pattern.axis,
+                GrayGroup(pattern.axis, pattern.bits, binary=isinstance(pattern, Binary), period_px=pattern.period_px),
+            )
+            _check_same_code(group_g, pattern, index, where)
             (group_g.inverted if pattern.inverted else group_g.planes)[pattern.bit] = index
         elif isinstance(pattern, Flat):
             flats.append((index, float(pattern.level)))
@@ -189,6 +217,19 @@ def group_patterns(patterns: Sequence[Pattern | Mapping[str, Any]], where: str =
     for group in sinusoids.values():
         _check_separable(group, where)
     return PatternGroups(list(sinusoids.values()), gray, flats, list(single.values()))
+
+
+def _check_same_code(group: GrayGroup, pattern: Gray, index: int, where: str) -> None:
+    """Every code plane along one axis belongs to one code: same kind, bits and cell width."""
+    kind = "binary" if group.binary else "gray"
+    found = {"kind": pattern.kind, "bits": pattern.bits, "period_px": pattern.period_px}
+    expected = {"kind": kind, "bits": group.bits, "period_px": group.period_px}
+    for key, value in expected.items():
+        if found[key] != value:
+            raise CaptureError(
+                f"{where}: patterns[{index}].{key}: expected {value!r} like the other code planes along "
+                f"{group.axis}, found {found[key]!r}"
+            )
 
 
 def _check_separable(group: SinusoidGroup, where: str) -> None:
@@ -230,6 +271,16 @@ def choose_unwrap(groups: PatternGroups, axis: str) -> str:
         if along[0].steps < 3:
             return "ftp"
         return "gray" if axis in groups.gray else "spatial"
+    try:
+        return _choose_temporal(freqs)
+    except ProcessingError:
+        if axis in groups.gray:  # a code along the axis resolves what the frequencies alone cannot
+            return "gray"
+        raise
+
+
+def _choose_temporal(freqs: Sequence[float]) -> str:
+    """The temporal method several frequencies allow on their own (rules 2 to 5)."""
     if not _all_integers(freqs):
         raise ProcessingError(
             f"frequencies {freqs}: temporal unwrapping needs whole fringe counts; choose --unwrap spatial"

@@ -10,6 +10,7 @@ import numpy as np
 from calibration.store import Calibration
 from rig.pipeline.plan import PatternGroups
 from rig.store.capture import Capture
+from rig.store.exposures import ExposureSets
 
 
 @dataclass
@@ -40,6 +41,7 @@ class UnwrappedPhase:
     method: str
     absolute: bool = True
     orders: np.ndarray | None = None
+    fused: bool = False  # every frequency went into the phase (processing.phase.frequency_fusion)
 
 
 @dataclass
@@ -61,3 +63,6 @@ class SceneState:
     # predicted phase standard deviation (rad) per pixel at the unwrapped frequency (processing.geometry.uncertainty)
     phase_sigma: np.ndarray | None = None
     single_shot_reference: Any = None  # processing.unwrap.single_shot.SingleShotReference of a reference capture
+    exposures: ExposureSets | None = None  # a capture taken at several exposures (fused in the load stage)
+    # per pixel the exposure (us) that weighed most in the fused phase; NaN where none was usable
+    exposure_map: np.ndarray | None = None

@@ -20,6 +20,7 @@ from rig.console.routes import (
     measure,
     scan,
     settings,
+    setup,
     verify,
 )
 
@@ -27,6 +28,7 @@ ROUTERS: tuple[APIRouter, ...] = (
     live.router,
     settings.router,
     scan.router,
+    setup.router,
     data.router,
     capture_views.router,
     measure.router,
