@@ -28,7 +28,7 @@ import numpy as np
 LISTED_REGIONS = 20
 
 
-def _label_blobs(mask: np.ndarray) -> tuple[int, np.ndarray]:
+def label_blobs(mask: np.ndarray) -> tuple[int, np.ndarray]:
     """8-connected blobs of ``mask``: (count including the background label 0, int32 labels)."""
     import cv2  # lazily: only auto needs it
 
@@ -75,7 +75,7 @@ def keep_supported_changes(
         changed = valid & (np.abs(proposed - measured) > np.pi)
     if not changed.any():
         return proposed, changed
-    count, labels = _label_blobs(changed)
+    count, labels = label_blobs(changed)
     with_proposal = breaks_per_blob(proposed, valid, labels, count)
     with_measured = breaks_per_blob(measured, valid, labels, count)
     back = with_measured <= with_proposal

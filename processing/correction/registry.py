@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -44,6 +45,7 @@ from processing.correction.phase_rpca import (
     settle_orders,
 )
 from processing.correction.region_orders import pool_region_orders
+from processing.correction.temporal_evidence import keep_temporally_supported, snap_to_lower_frequencies
 from processing.correction.voting import vote_row_orders
 from processing.denoise.rpca import RPCAResult, default_tau
 
@@ -256,13 +258,31 @@ def _candidate_orders(maps: _AutoMaps, pooled: np.ndarray, measured_breaks: int)
     return found
 
 
-def _restore_detail(maps: _AutoMaps, found: _Candidates, chosen: str) -> tuple[np.ndarray, np.ndarray, int]:
-    """Steps 5 - 6: the chosen orders where their neighbours support them (:func:`~processing.correction.order_evidence.
-    keep_supported_changes`), L except where they depart from it coherently, never off their orders.
+def _supported_orders(
+    maps: _AutoMaps, proposed: np.ndarray, temporal: _Temporal | None
+) -> tuple[np.ndarray, np.ndarray, dict[str, int] | None]:
+    """Step 5: the proposed orders where their neighbours (:func:`~processing.correction.order_evidence.
+    keep_supported_changes`) and then the lower frequencies (:func:`~processing.correction.temporal_evidence.
+    keep_temporally_supported`) support them; the unresolved pixels of both; the lower frequencies' blob counts."""
+    reordered, unresolved = keep_supported_changes(proposed, maps.phase, maps.valid)
+    if temporal is None:
+        return reordered, unresolved, None
+    snapped, moved = snap_to_lower_frequencies(reordered, maps.phase, maps.valid, temporal.frequency, temporal.lower)
+    reordered, ambiguous, counts = keep_temporally_supported(
+        snapped, maps.phase, maps.valid, temporal.frequency, temporal.lower
+    )
+    return reordered, unresolved | ambiguous, {**counts, "moved_one_order": moved}
 
-    Returns the phase, the unresolved pixels and how many orders changed.
+
+def _restore_detail(
+    maps: _AutoMaps, found: _Candidates, chosen: str, temporal: _Temporal | None
+) -> tuple[np.ndarray, np.ndarray, int, dict[str, int] | None]:
+    """Steps 5 - 6: the chosen orders where the evidence supports them (:func:`_supported_orders`), L except
+    where they depart from it coherently, never off their orders.
+
+    Returns the phase, the unresolved pixels, how many orders changed and the lower frequencies' blob counts.
     """
-    reordered, unresolved = keep_supported_changes(found.maps[chosen], maps.phase, maps.valid)
+    reordered, unresolved, counts = _supported_orders(maps, found.maps[chosen], temporal)
     reuse = chosen == "regions" and found.pooled_detail is not None and reordered is found.maps[chosen]
     out, changed = side_by_side(
         lambda: (
@@ -277,7 +297,36 @@ def _restore_detail(maps: _AutoMaps, found: _Candidates, chosen: str) -> tuple[n
     off = np.abs(out - reordered) > np.pi
     if off.any():
         out = np.where(off, reordered, out)
-    return out, unresolved, changed
+    return out, unresolved, changed, counts
+
+
+@dataclass(frozen=True)
+class _Temporal:
+    """The capture's lower frequencies, the evidence step 5 weighs order changes against."""
+
+    frequency: float
+    lower: list[tuple[float, np.ndarray]]
+
+
+def _temporal_inputs(
+    frequency: float | None, lower_wrapped: Sequence[tuple[float, np.ndarray]] | None, valid: np.ndarray
+) -> _Temporal | None:
+    """Validated ``lower_wrapped`` (None without it); ValueError naming what does not fit."""
+    if not lower_wrapped:
+        return None
+    if frequency is None or not float(frequency) > 0:
+        raise ValueError(f"frequency: expected > 0 with lower_wrapped, found {frequency}")
+    lower: list[tuple[float, np.ndarray]] = []
+    for f_low, wrapped_low in lower_wrapped:
+        wrapped_low = np.asarray(wrapped_low)
+        if not 0 < float(f_low) < float(frequency):
+            raise ValueError(f"lower_wrapped: expected frequencies in (0, {frequency:g}), found {f_low:g}")
+        if wrapped_low.shape != valid.shape:
+            raise ValueError(f"lower_wrapped at {f_low:g}: expected shape {valid.shape}, found {wrapped_low.shape}")
+        if not np.isfinite(wrapped_low[valid]).all():
+            return None  # a lower map with holes inside the mask (pixels the pass did not keep): no evidence
+        lower.append((float(f_low), np.where(valid, wrapped_low, 0.0)))
+    return _Temporal(float(frequency), lower)
 
 
 def correct_auto(
@@ -290,6 +339,7 @@ def correct_auto(
     k_sigma: float = 4.0,
     svd: str = "auto",
     decimate: int | None = None,
+    lower_wrapped: Sequence[tuple[float, np.ndarray]] | None = None,
 ) -> Result:
     """The most accurate method measured: region-pooled orders, ch. 4 RPCA, measured detail restored.
 
@@ -329,6 +379,7 @@ def correct_auto(
     if not float(k_sigma) > 0:
         raise ValueError(f"k_sigma: expected > 0, found {k_sigma}")
     phase, wrapped, valid = _inputs(absolute_phase, wrapped_phase, mask)
+    temporal = _temporal_inputs(frequency, lower_wrapped, valid)
     pooled, (sigma, measured_breaks) = side_by_side(
         lambda: pool_region_orders(phase, wrapped, valid), lambda: phase_noise_and_breaks(phase, valid)
     )
@@ -336,7 +387,7 @@ def correct_auto(
     maps = _AutoMaps(phase, wrapped, valid, sigma, decimate, tau, svd, float(k_sigma))
     found = _candidate_orders(maps, pooled, measured_breaks)
     chosen = min(found.breaks, key=found.breaks.__getitem__)  # ties: the first
-    out, unresolved, changed = _restore_detail(maps, found, chosen)
+    out, unresolved, changed, temporal_blobs = _restore_detail(maps, found, chosen, temporal)
     parameters = {
         "tau": tau if tau is not None else default_tau(phase.shape),
         "stable": True,
@@ -358,6 +409,7 @@ def correct_auto(
         order_breaks=found.breaks,
         rpca_input=found.rpca_input,
         unresolved=unresolved_summary(unresolved, valid),
+        **({"lower_frequency_blobs": temporal_blobs} if temporal_blobs is not None else {}),
     )
 
 
