@@ -22,8 +22,8 @@ measured on the thesis' Table 4.1 protocol (see :func:`correct_auto`).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np

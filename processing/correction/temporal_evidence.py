@@ -11,17 +11,24 @@ measured ones, summed over the blob) is compared with ``S``, what ``D`` is expec
 measured orders were right (each pixel's squared shift of the prediction, ``wrap(2 pi dk f_l / f)``
 squared). If the measured orders were wrong (noise pushed them past the decision boundary, the
 case corrections are for), the proposed orders fit about as well as the measured ones and ``D``
-lies near 0. The midpoint ``S / 2`` decides, with a margin of ``Z_MARGIN`` standard errors
-(``2 sigma sqrt(S)``, sigma from the misfit of the measured orders over the whole map):
+lies near 0. Misfits are counted in units of each frequency's noise variance (the median misfit of
+the measured orders over the map, :func:`noise_weights`, or the blob's own where larger). The
+midpoint ``S / 2`` decides, with a margin of :data:`Z_MARGIN` standard errors (``2 sqrt(S)``):
 
 - ``D`` well above ``S / 2``: the other frequencies contradict the change (a spatial correction that
-  pooled across a real step or blurred an edge); the measured orders stay;
+  pooled across a real step or blurred an edge); the measured orders come back on the blob's pixels
+  whose own misfit says so (a blob can also hold pixels whose measured orders were wrong);
 - ``D`` well below: the change stands;
-- in between, where the blob's evidence cannot tell the two apart: the measured orders stay and the
-  blob is reported unresolved;
+- in between, where the blob's evidence cannot tell the two apart: the proposal (which the neighbours
+  supported) stays and the blob is reported unresolved;
 - ``S`` within the margin of 0 (changes by a whole cycle of every lower frequency, e.g. 64 orders of
-  1/8/64): the frequencies cannot judge, and the change keeps what the neighbour evidence
-  (:mod:`processing.correction.order_evidence`) decided.
+  1/8/64), below :data:`SEPARATION` noise deviations or below :data:`MIN_SHIFT_RAD`: the frequencies
+  cannot judge, and the change keeps what the neighbour evidence
+  (:mod:`processing.correction.order_evidence`) decided. So do all changes where the correction changed
+  more than :data:`BROAD_FAILURE` of the map.
+
+Before judging, :func:`snap_to_lower_frequencies` moves changed pixels one order where the lower
+frequencies clearly fit the next order better.
 """
 
 from __future__ import annotations
@@ -35,7 +42,7 @@ from processing.correction.order_evidence import label_blobs
 
 TWO_PI = 2.0 * np.pi
 # Standard errors between a blob's evidence and the decision threshold for a confident decision.
-Z_MARGIN = 2.0
+Z_MARGIN = 3.0
 # A blob's lower frequencies judge it only where changing its orders shifts their predictions by more
 # than this many noise standard deviations (per pixel, root mean square): below it, the measured orders
 # are themselves likely wrong (the noise that misled the temporal unwrapping), and the evidence is
@@ -46,24 +53,54 @@ SEPARATION = 4.0
 # pixels at edges) mislead the temporal unwrapping into smaller shifts, up to 0.8 rad on the develop
 # cases, where the measured orders then fit better than the right ones.
 MIN_SHIFT_RAD = 1.0
+# Where the correction changed more than this fraction of the valid pixels, the temporal unwrapping
+# failed broadly on the capture (low SNR, few steps): its lower frequencies are as unreliable as the
+# orders they gave (on the develop cases with 6 - 15 % wrong orders, they sent right changes back to
+# orders many fringes off) and overrule nothing.
+BROAD_FAILURE = 0.01
 
 
 def lower_frequency_misfit(
-    phase: np.ndarray, frequency: float, lower: Sequence[tuple[float, np.ndarray]]
+    phase: np.ndarray,
+    frequency: float,
+    lower: Sequence[tuple[float, np.ndarray]],
+    weights: Sequence[float] | None = None,
 ) -> np.ndarray:
-    """Sum over ``lower`` = ((f_l, wrapped phase at f_l), ...) of wrap(phase f_l / frequency - phi_l)^2."""
+    """Sum over ``lower`` = ((f_l, wrapped phase at f_l), ...) of wrap(phase f_l / frequency - phi_l)^2
+    (each term times its ``weights`` entry, default 1)."""
     out = np.zeros(phase.shape, dtype=np.float64)
-    for f_low, wrapped_low in lower:
-        out += wrap_to_pi(phase * (float(f_low) / float(frequency)) - wrapped_low) ** 2
+    for index, (f_low, wrapped_low) in enumerate(lower):
+        term = wrap_to_pi(phase * (float(f_low) / float(frequency)) - wrapped_low) ** 2
+        out += term if weights is None else weights[index] * term
     return out
 
 
-def _order_shift(delta_orders: np.ndarray, frequency: float, lower: Sequence[tuple[float, np.ndarray]]) -> np.ndarray:
-    """Squared shift of every lower frequency's prediction when the orders change by ``delta_orders``."""
+def _order_shift(
+    delta_orders: np.ndarray,
+    frequency: float,
+    lower: Sequence[tuple[float, np.ndarray]],
+    weights: Sequence[float] | None = None,
+) -> np.ndarray:
+    """Squared shift of every lower frequency's prediction when the orders change by ``delta_orders``
+    (weighted as :func:`lower_frequency_misfit`)."""
     out = np.zeros(delta_orders.shape, dtype=np.float64)
-    for f_low, _wrapped in lower:
-        out += wrap_to_pi(TWO_PI * delta_orders * (float(f_low) / float(frequency))) ** 2
+    for index, (f_low, _wrapped) in enumerate(lower):
+        term = wrap_to_pi(TWO_PI * delta_orders * (float(f_low) / float(frequency))) ** 2
+        out += term if weights is None else weights[index] * term
     return out
+
+
+def noise_weights(
+    measured: np.ndarray, valid: np.ndarray, frequency: float, lower: Sequence[tuple[float, np.ndarray]]
+) -> list[float]:
+    """1 / noise variance of each lower frequency's misfit with the measured orders (median over the valid
+    pixels / 0.455, the median of chi-square with one degree of freedom: robust to wrong orders)."""
+    weights = []
+    for f_low, wrapped_low in lower:
+        term = wrap_to_pi(measured[valid] * (float(f_low) / float(frequency)) - wrapped_low[valid]) ** 2
+        variance = float(np.median(term)) / 0.455 if term.size else 0.0
+        weights.append(1.0 / max(variance, 1e-12))
+    return weights
 
 
 def snap_to_lower_frequencies(
@@ -91,12 +128,17 @@ def snap_to_lower_frequencies(
     at = proposed[changed]
     best = lower_frequency_misfit(at, frequency, lower_at)
     step = np.zeros(at.shape)
+    weights = noise_weights(measured, valid, frequency, lower)
     for delta in (-1.0, 1.0):
         shift = float(_order_shift(np.full(1, delta), frequency, lower)[0])
-        if shift < MIN_SHIFT_RAD**2:
+        separation = float(_order_shift(np.full(1, delta), frequency, lower, weights)[0])
+        if shift < MIN_SHIFT_RAD**2 or separation < SEPARATION**2:
             continue
         fits = lower_frequency_misfit(at + TWO_PI * delta, frequency, lower_at)
-        better = fits < best - shift / 2.0
+        # and the new order must fit them within the noise (3 sigma a frequency): beside edges and
+        # where the lower phases are corrupted too, a better fit is not yet a good one
+        within = lower_frequency_misfit(at + TWO_PI * delta, frequency, lower_at, weights) <= 9.0 * len(lower)
+        better = within & (fits < best - shift / 2.0)
         step[better] = delta
         best = np.where(better, fits, best)
     moved = int(np.count_nonzero(step))
@@ -125,8 +167,9 @@ def keep_temporally_supported(
 
     Returns
     -------
-    phase : (H, W) ``proposed`` with every contradicted or ambiguous blob set back to ``measured``
-    unresolved : (H, W) bool, the ambiguous blobs' pixels
+    phase : (H, W) ``proposed`` with the contradicted pixels of contradicted blobs set back to ``measured``
+    unresolved : (H, W) bool, the ambiguous blobs' pixels (their proposed orders, which the neighbours
+        supported, stay)
     counts : blobs ``kept``, ``reverted``, ``unresolved`` and ``undecidable`` (left to the neighbours)
     """
     counts = {"kept": 0, "reverted": 0, "unresolved": 0, "undecidable": 0}
@@ -137,9 +180,12 @@ def keep_temporally_supported(
     count, labels = label_blobs(changed)
     at = labels[changed]
     lower_at = [(f, p[changed]) for f, p in lower]
-    with_measured = lower_frequency_misfit(measured[changed], frequency, lower_at)
-    with_proposed = lower_frequency_misfit(proposed[changed], frequency, lower_at)
-    shift = _order_shift(np.rint((proposed[changed] - measured[changed]) / TWO_PI), frequency, lower)
+    weights = noise_weights(measured, valid, frequency, lower)  # misfits in units of each frequency's noise
+    with_measured = lower_frequency_misfit(measured[changed], frequency, lower_at, weights)
+    with_proposed = lower_frequency_misfit(proposed[changed], frequency, lower_at, weights)
+    delta = np.rint((proposed[changed] - measured[changed]) / TWO_PI)
+    shift = _order_shift(delta, frequency, lower, weights)
+    shift_rad = _order_shift(delta, frequency, lower)
     difference = np.bincount(at, weights=with_proposed - with_measured, minlength=count)
     expected = np.bincount(at, weights=shift, minlength=count)
     # the blob's own noise: the misfit of the better-fitting orders (dark or mixed pixels carry more)
@@ -147,9 +193,10 @@ def keep_temporally_supported(
         np.bincount(at, weights=with_measured, minlength=count), np.bincount(at, weights=with_proposed, minlength=count)
     )
     pixels = np.bincount(at, minlength=count)
-    variance = noise / np.maximum(pixels * len(lower), 1)
-    undecidable = (expected <= SEPARATION**2 * noise) | (expected < MIN_SHIFT_RAD**2 * pixels)
-    margin = Z_MARGIN * 2.0 * np.sqrt(variance * expected)  # standard errors of the difference
+    undecidable = (expected <= SEPARATION**2 * np.maximum(noise, pixels * len(lower))) | (
+        np.bincount(at, weights=shift_rad, minlength=count) < MIN_SHIFT_RAD**2 * pixels
+    )
+    margin = Z_MARGIN * 2.0 * np.sqrt(np.maximum(noise / np.maximum(pixels * len(lower), 1), 1.0) * expected)
     contradicted = ~undecidable & (difference > expected / 2.0 + margin)
     ambiguous = ~undecidable & ~contradicted & (difference >= expected / 2.0 - margin)
     contradicted[0] = ambiguous[0] = undecidable[0] = False
@@ -159,9 +206,13 @@ def keep_temporally_supported(
     counts["kept"] = count - 1 - counts["reverted"] - counts["unresolved"] - counts["undecidable"]
     # inside a contradicted blob, only the pixels whose own evidence contradicts the change go back
     # (a blob can mix them with pixels whose measured orders were wrong)
-    own = (shift >= MIN_SHIFT_RAD**2) & (with_proposed - with_measured > shift / 2.0)
-    own &= with_measured * SEPARATION**2 <= shift
-    back_at = ambiguous[at] | (contradicted[at] & own)
+    own = (shift_rad >= MIN_SHIFT_RAD**2) & (with_proposed - with_measured > shift / 2.0)
+    own &= np.maximum(with_measured, len(lower)) * SEPARATION**2 <= shift
+    back_at = contradicted[at] & own
+    if np.count_nonzero(changed) > BROAD_FAILURE * np.count_nonzero(valid):
+        back_at[:] = False  # the temporal unwrapping failed broadly: its lower frequencies overrule nothing
+        counts["undecidable"] += counts["reverted"]
+        counts["reverted"] = 0
     if not back_at.any():
         return proposed, np.zeros(valid.shape, dtype=bool), counts
     back = np.zeros(valid.shape, dtype=bool)
