@@ -22,7 +22,7 @@ measured on the thesis' Table 4.1 protocol (see :func:`correct_auto`).
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -30,7 +30,7 @@ import numpy as np
 
 from processing.concurrency import side_by_side
 from processing.correction.method import CorrectionMethod, Result
-from processing.correction.order_evidence import keep_supported_changes, unresolved_summary
+from processing.correction.order_evidence import keep_supported_changes, mend_spikes, unresolved_summary
 from processing.correction.orders import correct_orders_rpca
 from processing.correction.phase_rpca import (
     accept_if_consistent,
@@ -45,7 +45,12 @@ from processing.correction.phase_rpca import (
     settle_orders,
 )
 from processing.correction.region_orders import pool_region_orders
-from processing.correction.temporal_evidence import keep_temporally_supported, snap_to_lower_frequencies
+from processing.correction.temporal_evidence import (
+    keep_temporally_supported,
+    lower_frequency_misfit,
+    noise_weights,
+    snap_to_lower_frequencies,
+)
 from processing.correction.voting import vote_row_orders
 from processing.denoise.rpca import RPCAResult, default_tau
 
@@ -260,23 +265,42 @@ def _candidate_orders(maps: _AutoMaps, pooled: np.ndarray, measured_breaks: int)
 
 def _supported_orders(
     maps: _AutoMaps, proposed: np.ndarray, temporal: _Temporal | None
-) -> tuple[np.ndarray, np.ndarray, dict[str, int] | None]:
+) -> tuple[np.ndarray, np.ndarray, dict[str, int]]:
     """Step 5: the proposed orders where their neighbours (:func:`~processing.correction.order_evidence.
     keep_supported_changes`) and then the lower frequencies (:func:`~processing.correction.temporal_evidence.
-    keep_temporally_supported`) support them; the unresolved pixels of both; the lower frequencies' blob counts."""
+    keep_temporally_supported`) support them, order spikes mended (:func:`~processing.correction.order_evidence.
+    mend_spikes`); the unresolved pixels of both; what each step did."""
     reordered, unresolved = keep_supported_changes(proposed, maps.phase, maps.valid)
-    if temporal is None:
-        return reordered, unresolved, None
-    snapped, moved = snap_to_lower_frequencies(reordered, maps.phase, maps.valid, temporal.frequency, temporal.lower)
-    reordered, ambiguous, counts = keep_temporally_supported(
-        snapped, maps.phase, maps.valid, temporal.frequency, temporal.lower
-    )
-    return reordered, unresolved | ambiguous, {**counts, "moved_one_order": moved}
+    counts: dict[str, int] = {}
+    misfit = None
+    if temporal is not None:
+        snapped, moved = snap_to_lower_frequencies(
+            reordered, maps.phase, maps.valid, temporal.frequency, temporal.lower
+        )
+        reordered, ambiguous, counts = keep_temporally_supported(
+            snapped, maps.phase, maps.valid, temporal.frequency, temporal.lower
+        )
+        unresolved = unresolved | ambiguous
+        counts["moved_one_order"] = moved
+        weights = noise_weights(maps.phase, maps.valid, temporal.frequency, temporal.lower)
+        misfit = _spike_misfit(temporal, weights)
+    reordered, counts["spikes_mended"] = mend_spikes(reordered, maps.valid, misfit)
+    return reordered, unresolved, counts
+
+
+def _spike_misfit(temporal: _Temporal, weights: list[float]) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+    """Misfit of candidate phases at the given pixels with the lower frequencies (noise-weighted)."""
+
+    def misfit(values: np.ndarray, where: np.ndarray) -> np.ndarray:
+        lower = [(f_low, wrapped_low[where]) for f_low, wrapped_low in temporal.lower]
+        return lower_frequency_misfit(values, temporal.frequency, lower, weights)
+
+    return misfit
 
 
 def _restore_detail(
     maps: _AutoMaps, found: _Candidates, chosen: str, temporal: _Temporal | None
-) -> tuple[np.ndarray, np.ndarray, int, dict[str, int] | None]:
+) -> tuple[np.ndarray, np.ndarray, int, dict[str, int]]:
     """Steps 5 - 6: the chosen orders where the evidence supports them (:func:`_supported_orders`), L except
     where they depart from it coherently, never off their orders.
 
@@ -409,7 +433,7 @@ def correct_auto(
         order_breaks=found.breaks,
         rpca_input=found.rpca_input,
         unresolved=unresolved_summary(unresolved, valid),
-        **({"lower_frequency_blobs": temporal_blobs} if temporal_blobs is not None else {}),
+        evidence=temporal_blobs,
     )
 
 
