@@ -95,6 +95,7 @@ def stage_correction(state: SceneState, options: ProcessOptions) -> None:
         state.phase_sigma = state.phase_sigma * np.float32(gain)
         state.info["correction_noise_gain"] = round(gain, 4)
     unwrapped.phase = phase
+    state.unresolved = info.pop("unresolved_mask", None)  # an array: the result's unresolved.npy, not the report
     if unwrapped.orders is not None:
         orders = np.rint((np.nan_to_num(phase) - np.mod(wrapped, 2.0 * np.pi)) / (2.0 * np.pi))
         unwrapped.orders = np.where(unwrapped.valid, orders, unwrapped.orders).astype(unwrapped.orders.dtype)

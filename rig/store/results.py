@@ -10,6 +10,7 @@ A result directory (``rig process -o OUT``, the console's ``DATA/results/NAME``,
     wrapped.npy    wrapped phase per frequency (without a calibration)
     height.npy     heights in mm, NaN where invalid (with a calibration)
     uncertainty.npy  predicted height sigma in mm, NaN where invalid (with a calibration, phase shifting)
+    unresolved.npy   bool, valid pixels whose fringe orders no evidence settled (when the correction found any)
     + one file per output format asked for (with a calibration): :data:`FORMATS`
 
 A new output format is one :class:`OutputFormat` entry in :data:`FORMATS` (copy ``"stl"``): its
@@ -53,6 +54,7 @@ PREVIEW = "preview.png"
 WRAPPED = "wrapped.npy"
 HEIGHT = "height.npy"
 UNCERTAINTY = "uncertainty.npy"
+UNRESOLVED = "unresolved.npy"
 POINTS = "points.ply"
 MESH_PLY = "mesh.ply"
 MESH_STL = "mesh.stl"
@@ -169,6 +171,7 @@ MEDIA_TYPES: dict[str, str] = {
     POINTS: OCTET,
     HEIGHT: OCTET,
     UNCERTAINTY: OCTET,
+    UNRESOLVED: OCTET,
     PHASE: OCTET,
     MASK: OCTET,
     WRAPPED: OCTET,
@@ -273,6 +276,8 @@ def _write_files(
         preview = pool.submit(encode.write_preview, out / PREVIEW, shown, unit, title)
         written["phase"] = encode.write_array(out / PHASE, phase).name
         written["mask"] = encode.write_array(out / MASK, np.asarray(result.mask, dtype=bool)).name
+        if obj.unresolved is not None and obj.unresolved.any():
+            written["unresolved"] = encode.write_array(out / UNRESOLVED, obj.unresolved & result.mask).name
         if result.height is None:
             written["wrapped"] = encode.write_array(out / WRAPPED, encode.wrapped_maps(obj)).name
         else:
