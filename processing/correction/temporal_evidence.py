@@ -24,8 +24,7 @@ midpoint ``S / 2`` decides, with a margin of :data:`Z_MARGIN` standard errors (`
 - ``S`` within the margin of 0 (changes by a whole cycle of every lower frequency, e.g. 64 orders of
   1/8/64), below :data:`SEPARATION` noise deviations or below :data:`MIN_SHIFT_RAD`: the frequencies
   cannot judge, and the change keeps what the neighbour evidence
-  (:mod:`processing.correction.order_evidence`) decided. So do all changes where the correction changed
-  more than :data:`BROAD_FAILURE` of the map.
+  (:mod:`processing.correction.order_evidence`) decided.
 
 Before judging, :func:`snap_to_lower_frequencies` moves changed pixels one order where the lower
 frequencies clearly fit the next order better.
@@ -53,11 +52,6 @@ SEPARATION = 4.0
 # pixels at edges) mislead the temporal unwrapping into smaller shifts, up to 0.8 rad on the develop
 # cases, where the measured orders then fit better than the right ones.
 MIN_SHIFT_RAD = 1.0
-# Where the correction changed more than this fraction of the valid pixels, the temporal unwrapping
-# failed broadly on the capture (low SNR, few steps): its lower frequencies are as unreliable as the
-# orders they gave (on the develop cases with 6 - 15 % wrong orders, they sent right changes back to
-# orders many fringes off) and overrule nothing.
-BROAD_FAILURE = 0.01
 
 
 def lower_frequency_misfit(
@@ -209,10 +203,6 @@ def keep_temporally_supported(
     own = (shift_rad >= MIN_SHIFT_RAD**2) & (with_proposed - with_measured > shift / 2.0)
     own &= np.maximum(with_measured, len(lower)) * SEPARATION**2 <= shift
     back_at = contradicted[at] & own
-    if np.count_nonzero(changed) > BROAD_FAILURE * np.count_nonzero(valid):
-        back_at[:] = False  # the temporal unwrapping failed broadly: its lower frequencies overrule nothing
-        counts["undecidable"] += counts["reverted"]
-        counts["reverted"] = 0
     if not back_at.any():
         return proposed, np.zeros(valid.shape, dtype=bool), counts
     back = np.zeros(valid.shape, dtype=bool)
