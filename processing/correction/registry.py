@@ -274,15 +274,15 @@ def _supported_orders(
     counts: dict[str, int] = {}
     misfit = None
     if temporal is not None:
+        weights = noise_weights(maps.phase, maps.valid, temporal.frequency, temporal.lower)
         snapped, moved = snap_to_lower_frequencies(
-            reordered, maps.phase, maps.valid, temporal.frequency, temporal.lower
+            reordered, maps.phase, maps.valid, temporal.frequency, temporal.lower, weights
         )
         reordered, ambiguous, counts = keep_temporally_supported(
-            snapped, maps.phase, maps.valid, temporal.frequency, temporal.lower
+            snapped, maps.phase, maps.valid, temporal.frequency, temporal.lower, weights
         )
         unresolved = unresolved | ambiguous
         counts["moved_one_order"] = moved
-        weights = noise_weights(maps.phase, maps.valid, temporal.frequency, temporal.lower)
         misfit = _spike_misfit(temporal, weights)
     reordered, counts["spikes_mended"] = mend_spikes(reordered, maps.valid, misfit)
     return reordered, unresolved, counts

@@ -89,9 +89,10 @@ def noise_weights(
 ) -> list[float]:
     """1 / noise variance of each lower frequency's misfit with the measured orders (median over the valid
     pixels / 0.455, the median of chi-square with one degree of freedom: robust to wrong orders)."""
+    at = measured[valid]
     weights = []
     for f_low, wrapped_low in lower:
-        term = wrap_to_pi(measured[valid] * (float(f_low) / float(frequency)) - wrapped_low[valid]) ** 2
+        term = wrap_to_pi(at * (float(f_low) / float(frequency)) - wrapped_low[valid]) ** 2
         variance = float(np.median(term)) / 0.455 if term.size else 0.0
         weights.append(1.0 / max(variance, 1e-12))
     return weights
@@ -103,6 +104,7 @@ def snap_to_lower_frequencies(
     valid: np.ndarray,
     frequency: float,
     lower: Sequence[tuple[float, np.ndarray]],
+    weights: Sequence[float] | None = None,
 ) -> tuple[np.ndarray, int]:
     """``proposed`` with each changed pixel moved one order up or down where the lower frequencies clearly say so.
 
@@ -122,7 +124,8 @@ def snap_to_lower_frequencies(
     at = proposed[changed]
     best = lower_frequency_misfit(at, frequency, lower_at)
     step = np.zeros(at.shape)
-    weights = noise_weights(measured, valid, frequency, lower)
+    if weights is None:
+        weights = noise_weights(measured, valid, frequency, lower)
     for delta in (-1.0, 1.0):
         shift = float(_order_shift(np.full(1, delta), frequency, lower)[0])
         separation = float(_order_shift(np.full(1, delta), frequency, lower, weights)[0])
@@ -149,6 +152,7 @@ def keep_temporally_supported(
     valid: np.ndarray,
     frequency: float,
     lower: Sequence[tuple[float, np.ndarray]],
+    weights: Sequence[float] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, dict[str, int]]:
     """``proposed`` where the lower frequencies do not contradict it; the unresolved pixels; blob counts.
 
@@ -174,7 +178,8 @@ def keep_temporally_supported(
     count, labels = label_blobs(changed)
     at = labels[changed]
     lower_at = [(f, p[changed]) for f, p in lower]
-    weights = noise_weights(measured, valid, frequency, lower)  # misfits in units of each frequency's noise
+    if weights is None:  # misfits in units of each frequency's noise
+        weights = noise_weights(measured, valid, frequency, lower)
     with_measured = lower_frequency_misfit(measured[changed], frequency, lower_at, weights)
     with_proposed = lower_frequency_misfit(proposed[changed], frequency, lower_at, weights)
     delta = np.rint((proposed[changed] - measured[changed]) / TWO_PI)
