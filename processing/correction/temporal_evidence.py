@@ -169,6 +169,21 @@ def keep_temporally_supported(
     unresolved : (H, W) bool, the ambiguous blobs' pixels (their proposed orders, which the neighbours
         supported, stay)
     counts : blobs ``kept``, ``reverted``, ``unresolved`` and ``undecidable`` (left to the neighbours)
+
+    Examples
+    --------
+    A ramp at 17 fringes whose 13-fringe phase confirms the measured orders; a proposal three
+    orders off on a patch goes back:
+
+    >>> import numpy as np
+    >>> from processing.angles import wrap_to_pi
+    >>> truth = np.tile(np.linspace(0.0, 60.0, 80), (60, 1))
+    >>> lower = [(13.0, wrap_to_pi(truth * 13.0 / 17.0))]
+    >>> proposed = truth.copy()
+    >>> proposed[20:24, 30:34] -= 3 * 2 * np.pi
+    >>> kept, unresolved, counts = keep_temporally_supported(proposed, truth, np.ones((60, 80), bool), 17.0, lower)
+    >>> bool(np.allclose(kept, truth)), counts["reverted"], int(unresolved.sum())
+    (True, 1, 0)
     """
     counts = {"kept": 0, "reverted": 0, "unresolved": 0, "undecidable": 0}
     with np.errstate(invalid="ignore"):
