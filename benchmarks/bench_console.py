@@ -31,7 +31,8 @@ from benchmarks.measure import cpu_description, load_line  # noqa: E402
 from rig import api  # noqa: E402
 from rig.config import parse_config  # noqa: E402
 from rig.console.datadir import DataDir  # noqa: E402
-from rig.console.session import ConsoleSession, ProjectorSetting  # noqa: E402
+from rig.console.devices import ProjectorSetting  # noqa: E402
+from rig.console.session import ConsoleSession  # noqa: E402
 from rig.pipeline.plan import ProcessOptions  # noqa: E402
 
 

@@ -11,8 +11,10 @@ from __future__ import annotations
 import abc
 import contextlib
 import ctypes
+import json
 import logging
 import math
+from collections import OrderedDict
 from pathlib import Path
 from typing import Any
 
@@ -204,6 +206,9 @@ class GLProjector(RenderedProjector):
     that owns the OpenGL context, so :meth:`last_frame` never touches OpenGL and may be called
     from any thread (the simulated camera exposes from the trigger box's thread).
 
+    A pattern shown again (with the same gamma LUT) is not drawn again: the frame read back the
+    first time is handed back (the last :data:`DRAWN_KEPT` patterns are kept).
+
     Parameters
     ----------
     size : (width, height)
@@ -214,6 +219,8 @@ class GLProjector(RenderedProjector):
         moderngl standalone backend, ``"egl"`` (headless, default) or None for the platform default.
     """
 
+    DRAWN_KEPT = 16  # frames read back kept for patterns shown again
+
     def __init__(
         self, size: tuple[int, int], *, bits: int = 8, backend: str | None = "egl", name: str | None = None
     ) -> None:
@@ -223,6 +230,9 @@ class GLProjector(RenderedProjector):
         self.bits = bits
         self.backend = backend
         self._fbo: Any = None
+        # frames already read back, by pattern: reading a framebuffer back costs ~70 ms at 1280x800
+        # in software OpenGL, and a live 3-D view shows the same few patterns over and over
+        self._drawn: OrderedDict[str, np.ndarray] = OrderedDict()
 
     def _open(self) -> None:
         kwargs = {"backend": self.backend} if self.backend else {}
@@ -248,9 +258,23 @@ class GLProjector(RenderedProjector):
 
     def _show(self, pattern: Pattern) -> None:
         assert self._fbo is not None
+        key = json.dumps(pattern.to_dict(), sort_keys=True)
+        cached = self._drawn.get(key)
+        if cached is not None:  # drawn before with the same LUT: the same pixels, without the read-back
+            self._drawn.move_to_end(key)
+            self._frame = cached
+            return
         self._frame = None
         with self._current():
             self._draw(pattern, self._fbo, self.bits)
+        if self._frame is not None:
+            self._drawn[key] = self._frame
+            while len(self._drawn) > self.DRAWN_KEPT:
+                self._drawn.popitem(last=False)
+
+    def _set_gamma_lut(self, lut: np.ndarray | None) -> None:
+        self._drawn.clear()  # every pattern looks different through another LUT
+        super()._set_gamma_lut(lut)
 
     def _wait(self, timeout_s: float) -> bool:
         return self._frame is not None  # off-screen: shown once drawn and read back
@@ -260,6 +284,7 @@ class GLProjector(RenderedProjector):
 
     def _release(self) -> None:
         self._frame = None
+        self._drawn.clear()
         if self._ctx is None:
             return
         try:

@@ -155,7 +155,7 @@ def test_only_rig_api_imports_the_pipeline_run() -> None:
 
 def test_the_run_its_result_and_the_result_store_import_no_circle() -> None:
     graph = _imports()
-    for start in ("rig.pipeline.run", "rig.pipeline.result", "rig.pipeline.outputs", "rig.store.results", "rig.api"):
+    for start in ("rig.pipeline.run", "rig.pipeline.result", "rig.store.result_files", "rig.store.results", "rig.api"):
         seen, todo = set(), list(graph[start])
         while todo:
             module = todo.pop()

@@ -21,10 +21,10 @@ from calibration.store import read_calibration
 from mock_devices import synth
 from rig.cli import main
 from rig.hardware.synthesis import demo_geometry, simulate_scan, write_simulated_scan
-from rig.pipeline.outputs import read_ply_points
 from rig.pipeline.plan import ProcessOptions, choose_unwrap, group_patterns
 from rig.pipeline.run import process
 from rig.store.capture import write_capture
+from rig.store.result_files import read_ply_points
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -126,6 +126,14 @@ def test_scan_with_a_calibration_gives_heights(
     assert summary["shows"] == "height" and valid.mean() > 0.9
     assert np.median(np.abs(heights[valid] - truth[valid])) < 0.5  # mm; the hemisphere is ~80 mm high
     assert (data / "results" / "part" / "points.ply").is_file()
+    # processed from the frames held in memory: the same heights and report as the stored capture gives
+    from rig import api
+    from rig.pipeline.plan import ProcessOptions
+
+    stored = api.process(data / "captures" / "part", data / "calibrations" / "cal", ProcessOptions(correction="none"))
+    np.testing.assert_array_equal(heights, stored.height)
+    report = json.loads((data / "results" / "part" / "report.json").read_text())
+    assert report["capture"] == stored.report["capture"] == str(data / "captures" / "part")
 
 
 def test_stop_cancels_the_scan_and_leaves_no_complete_capture(console: TestClient) -> None:

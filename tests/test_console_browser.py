@@ -231,6 +231,56 @@ def test_scan_shows_3d_and_a_height_readout_matching_the_object(page: Any, serve
     shot(page, "result")
 
 
+def drawn_fraction(page: Any, canvas: str) -> float:
+    """Share of a WebGL canvas's pixels that are not its white background (drawn points)."""
+    return float(
+        page.evaluate(f"""() => {{
+        const c = document.querySelector('[data-testid={canvas}]');
+        const copy = document.createElement('canvas'); copy.width = c.width; copy.height = c.height;
+        const g = copy.getContext('2d'); g.drawImage(c, 0, 0);
+        const d = g.getImageData(0, 0, c.width, c.height).data;
+        let n = 0; for (let i = 0; i < d.length; i += 4) if (d[i] + d[i + 1] + d[i + 2] < 720) n++;
+        return n / (d.length / 4); }}""")
+    )
+
+
+def test_the_3d_view_draws_points_coloured_over_the_tables_range(page: Any) -> None:
+    """The cloud is drawn (coloured pixels on the canvas), and the map's and the cloud's colour bars
+    show the table's min and max heights (issue 24: they disagreed)."""
+    if not shown_result(page):
+        scan_and_wait(page)
+    page.locator("nav button[data-view=result]").click()
+    assert int(page.eval_on_selector("#view-result", "v => Number(v.dataset.points)")) > 0
+    assert drawn_fraction(page, "result-cloud") > 0.02
+    row = page.get_by_test_id("result-figures").locator("tr", has_text="height (mm)").locator("td").nth(1).inner_text()
+    low, high = row.split("min ")[1].split(",")[0], row.split("max ")[1]
+    assert page.get_by_test_id("scale-low").inner_text() == page.get_by_test_id("cloud-low").inner_text() == low
+    assert page.get_by_test_id("scale-high").inner_text() == page.get_by_test_id("cloud-high").inner_text() == high
+    draw_ms = float(page.eval_on_selector("#view-result", "v => v.dataset.drawMs"))
+    print(f"3-D view drawn in {draw_ms:.0f} ms ({WIDTH}x{HEIGHT}, software WebGL)")
+
+
+def test_live_3d_shows_point_clouds_with_a_rate_readout(page: Any) -> None:
+    """Live 3-D: short scans processed as they come, drawn as points, with rate and latency shown;
+    switched off, the camera view comes back (issue 24)."""
+    wait_frames(page, 1)
+    page.get_by_test_id("live3d-toggle").check()
+    page.wait_for_function(
+        "Number(document.querySelector('[data-testid=live3d-view]').dataset.shown || 0) >= 3", timeout=60_000
+    )
+    assert page.get_by_test_id("live3d-view").is_visible() and not page.get_by_test_id("live-view").is_visible()
+    assert drawn_fraction(page, "live3d-view") > 0.02
+    rate = page.get_by_test_id("live3d-rate").inner_text()
+    assert rate.endswith(" Hz") and float(rate.split()[0]) > 0, rate
+    assert page.get_by_test_id("live3d-latency").inner_text().endswith(" ms")
+    figures = page.eval_on_selector("[data-testid=live3d-view]", "c => [c.dataset.rateHz, c.dataset.latencyMs]")
+    print(f"live 3-D ({WIDTH}x{HEIGHT}): {float(figures[0]):.1f} Hz, latency {float(figures[1]):.0f} ms")
+    shot(page, "live-3d")
+    page.get_by_test_id("live3d-toggle").uncheck()
+    page.wait_for_function("!document.querySelector('[data-testid=live-view]').hidden")
+    wait_frames(page, 2)
+
+
 def test_downloads_list_what_the_result_holds(page: Any, server: dict[str, Any]) -> None:
     """A result written with the mesh formats offers them for download, as the result store lists them."""
     from rig import api

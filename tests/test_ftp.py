@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from mock_devices import scenes, synth
-from processing.phase.ftp import detect_carrier, ftp_phase
+from processing.phase.ftp import detect_carrier, ftp_amplitude, ftp_phase
 from processing.phase.shifting import phase_shift
 
 SHAPE = (96, 256)
@@ -127,3 +127,17 @@ def test_fringe_parts_recover_phase_background_and_modulation() -> None:
     np.testing.assert_allclose(parts.amplitude[inner], 40.0, rtol=0.02)
     np.testing.assert_allclose(parts.background[inner], 100.0, atol=1e-6)
     assert parts.valid[inner].all() and not parts.valid[:, 120:136].any()
+
+
+@pytest.mark.parametrize("axis", [0, 1])
+def test_amplitude_alone_in_float32_matches_the_double_precision_one(axis: int) -> None:
+    """ftp_amplitude (the live view's modulation map) is ftp_phase's amplitude to float32 precision,
+    and both are the analytic modulation in the interior."""
+    image = _fringes(_object_phase(2.0))
+    image = image if axis == 1 else image.T.copy()
+    _, expected = ftp_phase(image, axis=axis)
+    amplitude = ftp_amplitude(image.astype(np.float32), axis=axis)
+    assert amplitude.dtype == np.float32
+    np.testing.assert_allclose(amplitude, expected, rtol=1e-4, atol=1e-3)
+    inner = amplitude[:, EDGE:-EDGE] if axis == 1 else amplitude[EDGE:-EDGE, :]
+    assert np.median(np.abs(inner - 60.0)) < 2.0  # the modulation the fringes were made with

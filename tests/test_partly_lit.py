@@ -16,7 +16,7 @@ from cli_steps import calibrate_on_plane
 from realdata import import_eye, import_eye_calibration, needs_real_data, process_eye
 
 from rig.cli import main
-from rig.pipeline.outputs import colour_map
+from rig.store.result_files import colour_map
 
 PARTLY_LIT = """
 [projector]

@@ -71,6 +71,24 @@ def test_last_frame_follows_the_latest_pattern() -> None:
         assert projector.last_frame().max() == 0.0
 
 
+def test_a_pattern_shown_again_is_the_same_frame_until_the_gamma_lut_changes() -> None:
+    """Re-shown patterns come from the frames already read back (issue 24: live 3-D), never stale ones."""
+    pattern = {"kind": "sinusoid", "axis": "x", "frequency": 3.0, "steps": 4, "step": 1}
+    with GLProjector(SIZE) as projector:
+        projector.show(pattern)
+        first = projector.last_frame()
+        projector.show({"kind": "flat", "level": 1.0})
+        projector.show(pattern)
+        np.testing.assert_array_equal(projector.last_frame(), first)
+        projector.last_frame()[:] = 0.0  # a caller's copy: the kept frame is not touched
+        np.testing.assert_array_equal(projector.last_frame(), first)
+        lut = np.linspace(0.0, 1.0, 256) ** 2.2
+        projector.set_gamma_lut(lut)
+        projector.show(pattern)
+        expected = expected_drive(pattern, SIZE) ** 2.2
+        assert np.abs(projector.last_frame() - expected).max() < 2 / 255
+
+
 def test_missing_backend_is_device_not_found() -> None:
     projector = GLProjector(SIZE, backend="no-such-backend")
     with pytest.raises(DeviceNotFoundError, match="no-such-backend"):

@@ -19,10 +19,9 @@ from processing.geometry.uncertainty import correction_gain, noise_sigma, phase_
 from processing.phase.shifting import phase_shift
 from rig.cli import main
 from rig.hardware.synthesis import demo_appearance, demo_geometry, simulate_scan, write_simulated_scan
-from rig.pipeline.outputs import read_ply_points
 from rig.pipeline.plan import ProcessOptions
 from rig.pipeline.run import process
-from rig.store.result_files import write_ply
+from rig.store.result_files import read_ply_points, write_ply
 
 
 def _fringes(steps: int, sigma: float, seed: int, shape: tuple[int, int] = (240, 320)) -> tuple[np.ndarray, np.ndarray]:

@@ -5,7 +5,7 @@ Main entry points:
 
 - :func:`phase_shift` (``shifting``): wrapped phase, background and modulation of an N-step stack;
   :func:`wrapped_phase` for the phase alone, :func:`shadow_mask` and :func:`quality_map` to judge it.
-- :func:`ftp_phase` (``ftp``): wrapped phase of a single fringe image, around a carrier found by
+- :func:`ftp_phase` (``ftp``; :func:`ftp_amplitude` its amplitude alone, float32): wrapped phase of a single fringe image, around a carrier found by
   :func:`detect_carrier`.
 - :func:`heterodyne_offset`, :func:`gray_offset` (``convention``): the phase offset a capture's
   images carry against its stated convention.
@@ -19,7 +19,7 @@ from processing._lazy import lazy_exports
 
 if TYPE_CHECKING:
     from processing.phase.convention import OffsetEstimate, gray_offset, heterodyne_offset
-    from processing.phase.ftp import FringeParts, detect_carrier, ftp_fringe_parts, ftp_phase
+    from processing.phase.ftp import FringeParts, detect_carrier, ftp_amplitude, ftp_fringe_parts, ftp_phase
     from processing.phase.shifting import PhaseShiftResult, phase_shift, quality_map, shadow_mask, wrapped_phase
 
 _SOURCES = {
@@ -30,6 +30,7 @@ _SOURCES = {
     "wrapped_phase": "shifting",
     "FringeParts": "ftp",
     "detect_carrier": "ftp",
+    "ftp_amplitude": "ftp",
     "ftp_fringe_parts": "ftp",
     "ftp_phase": "ftp",
     "OffsetEstimate": "convention",
@@ -42,6 +43,7 @@ __all__ = [
     "OffsetEstimate",
     "PhaseShiftResult",
     "detect_carrier",
+    "ftp_amplitude",
     "ftp_fringe_parts",
     "ftp_phase",
     "gray_offset",

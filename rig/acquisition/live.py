@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 
 from drivers.camera import Camera, TriggerMode, TriggerSource
-from processing.phase.ftp import ftp_phase
+from processing.phase.ftp import ftp_amplitude
 from processing.phase.shifting import shadow_mask
 
 HISTOGRAM_BINS = 256
@@ -61,8 +61,8 @@ def frame_figures(image: np.ndarray, max_value: int, fringe_axis: str | None = N
     focus = float(cv2.Laplacian(levels, cv2.CV_32F).var())
     modulation = valid = valid_fraction = None
     if fringe_axis in ("x", "y"):
-        _, amplitude = ftp_phase(levels.astype(np.float32), axis=1 if fringe_axis == "x" else 0)
-        modulation = (amplitude / 255.0).astype(np.float32)
+        amplitude = ftp_amplitude(levels, axis=1 if fringe_axis == "x" else 0)
+        modulation = amplitude / np.float32(255.0)
         valid = shadow_mask(amplitude)
         valid_fraction = float(valid.mean())
     return FrameFigures(

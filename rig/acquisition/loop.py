@@ -57,6 +57,8 @@ from rig.events import ProgressSink
 from rig.hardware.trigger_paths import TriggerPath
 from rig.store.capture import CaptureWriter
 
+FrameHandler = Callable[[int, np.ndarray], None]  # (pattern index, stored image), as each frame arrives
+
 log = logging.getLogger(__name__)
 
 # Errors after which showing the pattern again and firing a new trigger may succeed.
@@ -425,8 +427,9 @@ def _acquire_all(
     background: BackgroundWriter | InlineWriter,
     records: list[dict[str, Any]],
     progress: ProgressSink | None,
+    on_frame: FrameHandler | None = None,
 ) -> tuple[int, int]:
-    """One frame per pattern, handed to the writer in order; returns (attempts, discarded frames) in all."""
+    """One frame per pattern, handed to the writer (and ``on_frame``) in order; returns (attempts, discarded frames)."""
     attempts_total = discarded_total = 0
     triggers = _TriggerLog()
     for index, pattern in enumerate(patterns):
@@ -439,6 +442,8 @@ def _acquire_all(
         meta = frame_metadata(frame, attempts)
         background.put(index, frame.image, meta)
         records.append({"pattern": index, **meta})
+        if on_frame is not None:
+            on_frame(index, frame.image)
         times.store_s += time.perf_counter() - stored
         if progress is not None:
             progress.step(f"frame {index + 1}")
@@ -459,6 +464,7 @@ def run_scan(
     progress: ProgressSink | None = None,
     overwrite: bool = False,
     background_writer: bool = True,
+    on_frame: FrameHandler | None = None,
 ) -> ScanResult:
     """Acquire one frame per pattern and write the capture at ``path`` atomically.
 
@@ -485,6 +491,9 @@ def run_scan(
     background_writer : bool
         Encode and write frames on a writer thread while the next one is acquired (default);
         False writes each frame before the next pattern is shown.
+    on_frame : callable(pattern_index, image), optional
+        Called with each stored frame as it arrives (the console processes the frames held in
+        memory while the capture is still being written). The image must not be modified.
     """
     if not patterns:
         raise ValueError("patterns: expected at least one pattern to scan")
@@ -499,7 +508,7 @@ def run_scan(
                 trigger.prepare(len(patterns) * (settings.retries + 1))
                 try:
                     attempts_total, discarded_total = _acquire_all(
-                        patterns, projector, camera, trigger, settings, times, background, records, progress
+                        patterns, projector, camera, trigger, settings, times, background, records, progress, on_frame
                     )
                 finally:
                     trigger.finish()
@@ -515,3 +524,35 @@ def run_scan(
         times=times,
         writer_busy_s=writer_busy,
     )
+
+
+def acquire_stack(
+    patterns: Sequence[Mapping[str, Any]],
+    projector: Projector,
+    camera: Camera,
+    trigger: TriggerPath,
+    settings: AcquisitionSettings = AcquisitionSettings(),
+    exposure_us: float | None = None,
+    gain: float | None = None,
+) -> np.ndarray:
+    """One frame per pattern, held in memory and written nowhere: (N, H, W) in pattern order.
+
+    The same acquisition as :func:`run_scan` (trigger path, deadlines, retries, camera staged and
+    restored) for what is shown and thrown away: the console's live 3-D view.
+    """
+    if not patterns:
+        raise ValueError("patterns: expected at least one pattern to acquire")
+    times = StepTimes()
+    triggers = _TriggerLog()
+    images: list[np.ndarray] = []
+    with staged_camera(camera, trigger.source, TriggerMode.ONCE, exposure_us, gain):
+        trigger.prepare(len(patterns) * (settings.retries + 1))
+        try:
+            for index, pattern in enumerate(patterns):
+                frame, _, _ = acquire_pattern(
+                    index, pattern, len(patterns), projector, camera, trigger, settings, triggers, times
+                )
+                images.append(frame.image)
+        finally:
+            trigger.finish()
+    return np.stack(images)

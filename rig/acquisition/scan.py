@@ -11,7 +11,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from rig.acquisition.loop import AcquisitionSettings, run_scan
+from rig.acquisition.loop import AcquisitionSettings, FrameHandler, run_scan
 from rig.config import RigConfig
 from rig.errors import CaptureError
 from rig.hardware.assembly import open_rig
@@ -67,12 +67,14 @@ def scan_with(
     progress: ProgressSink | None = None,
     exposure_us: float | None = None,
     gain: float | None = None,
+    on_frame: FrameHandler | None = None,
 ) -> ScanResult:
     """Scan with devices that are already open (a console or a calibration session holds them).
 
     ``scene`` is the label capture.json records; what is really in front of the rig is whatever
     the operator (or the simulated world) put there. ``progress`` is stepped once per frame.
     ``exposure_us`` and ``gain`` override the config's camera settings (the console's controls).
+    ``on_frame(index, image)`` receives each frame as it arrives (:func:`rig.acquisition.loop.run_scan`).
     """
 
     config = devices.config
@@ -101,4 +103,5 @@ def scan_with(
         gain=config.camera.gain if gain is None else gain,
         progress=progress,
         overwrite=overwrite,
+        on_frame=on_frame,
     )

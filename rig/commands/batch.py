@@ -13,7 +13,7 @@ import statistics
 import sys
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, TextIO
+from typing import TYPE_CHECKING
 
 from rig.commands._common import add_command, add_report_options, print_json
 from rig.commands.process import add_format_option, add_processing_options, processing_options
@@ -83,17 +83,13 @@ def parse_methods(text: str | None) -> tuple[str, ...]:
 class ProgressView:
     """Renders the batch's events: the bar with captures per minute and ETA, messages as lines."""
 
-    def __init__(self, bar: Progress, stream: TextIO, quiet: bool) -> None:
+    def __init__(self, bar: Progress) -> None:
         self.bar = bar
-        self.stream = stream
-        self.quiet = quiet
         self.started = time.time()
 
     def __call__(self, event: Event) -> None:
         if event.kind == "message":
-            if not self.quiet:
-                clear = "\r\033[K" if self.bar.tty else ""  # the bar's line, on a terminal
-                print(f"{clear}batch: {event.note}", file=self.stream)
+            self.bar.say(f"batch: {event.note}")
         elif event.kind == "begin":
             self.bar.begin(event.total)
             self.started = event.time
@@ -177,7 +173,7 @@ def run(args: argparse.Namespace) -> int:
         scheduler=args.scheduler,
     )
     with Progress("batch", total=1, quiet=args.quiet) as bar:
-        result = run_batch(plan, progress=Reporter("batch", sink=ProgressView(bar, sys.stderr, args.quiet)))
+        result = run_batch(plan, progress=Reporter("batch", sink=ProgressView(bar)))
     ok, failed, skipped = (result.count(s) for s in ("ok", "error", "skipped"))
     table = compare_summary(result, plan.compare) if plan.compare else []
     if args.json:

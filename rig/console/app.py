@@ -24,6 +24,7 @@ from rig.config import RigConfig
 from rig.console.access import AccessMiddleware, AccessRules
 from rig.console.datadir import DataDir
 from rig.console.hub import Hub
+from rig.console.live_view import LIVE_FPS
 from rig.console.routes import ROUTERS
 from rig.console.routes.live import STATIC
 from rig.console.session import Busy, Conflict, ConsoleSession
@@ -35,7 +36,7 @@ def create_app(
     data_dir: str | Path,
     token: str | None = None,
     fault_injection: bool = False,
-    live_fps: float = 20.0,
+    live_fps: float = LIVE_FPS,
     host: str = "127.0.0.1",
     allowed_hosts: Iterable[str] = (),
 ) -> FastAPI:

@@ -20,6 +20,8 @@ from rig.store import results as store
 from rig.store.result_files import colour_map
 
 SURFACE_MAX_SIDE = 160  # samples along the longer side of the 3-D surface
+CLOUD_MAX_POINTS = 1 << 18  # points sent for the 3-D view (every pixel up to 512x512, else a regular subset)
+PHASE_RELIEF = 0.25  # a phase map's drawn relief, as a fraction of its width (rad and pixels do not compare)
 
 
 @dataclass
@@ -56,8 +58,9 @@ class ResultView:
         return (int(self.values.shape[0]), int(self.values.shape[1]))
 
     def value_range(self) -> tuple[float, float]:
-        """Colour-scale range: the 0.5th to 99.5th percentile of the valid values."""
-        return robust_range(self.values)
+        """Colour-scale range of the map and the 3-D view: the lowest and highest valid value (what the
+        report's figures say), widened where they are equal."""
+        return full_range(self.values)
 
     def png(self) -> bytes:
         """The colour-mapped map (turbo, invalid grey) as PNG."""
@@ -87,6 +90,41 @@ class ResultView:
             "step": step,
         }
 
+    def cloud(self, max_points: int = CLOUD_MAX_POINTS) -> tuple[bytes, dict[str, str]]:
+        """The valid pixels as a point cloud for a WebGL view, and its description (HTTP headers).
+
+        Bytes: N float32 (x, y, z) triples, then N RGBA uint8 colours from the same colour map and
+        range as :meth:`png`. x, y, z in mm with points; without them (a phase map) pixel columns and
+        rows with the phase scaled to a relief of :data:`PHASE_RELIEF` of the width, so that the view
+        is not edge-on. Every pixel up to ``max_points`` valid ones, else every ``step``-th row and column.
+        """
+        h, w = self.shape
+        valid_all = np.isfinite(self.values)
+        step = max(1, int(np.ceil(np.sqrt(np.count_nonzero(valid_all) / max_points))))
+        values = self.values[::step, ::step]
+        low, high = self.value_range()
+        if self.points is not None and self.shows == "height":
+            xyz = self.points[::step, ::step].astype(np.float32)
+            axis_unit, z_scale = "mm", 1.0
+        else:
+            rows, cols = np.mgrid[0:h:step, 0:w:step].astype(np.float32)
+            z_scale = PHASE_RELIEF * w / (high - low)
+            xyz = np.stack([cols, rows, (values - np.float32(low)) * np.float32(z_scale)], axis=-1)
+            axis_unit = "px"
+        valid = np.isfinite(values) & np.isfinite(xyz).all(axis=-1)
+        rgb = colour_map(values[valid][:, None], low, high).reshape(-1, 3)[:, ::-1]  # OpenCV's BGR to RGB
+        rgba = np.concatenate([rgb, np.full((len(rgb), 1), 255, np.uint8)], axis=1)
+        positions = np.ascontiguousarray(xyz[valid], dtype="<f4")
+        headers = {
+            "X-Points": str(len(positions)),
+            "X-Step": str(step),
+            "X-Range": f"{low},{high}",
+            "X-Unit": self.unit,
+            "X-Axis-Unit": axis_unit,
+            "X-Z-Scale": str(z_scale),
+        }
+        return positions.tobytes() + np.ascontiguousarray(rgba).tobytes(), headers
+
     def summary(self) -> dict[str, Any]:
         """Key figures of the report, for the page and the API."""
         report = self.report
@@ -109,13 +147,13 @@ class ResultView:
         }
 
 
-def robust_range(values: np.ndarray) -> tuple[float, float]:
-    """0.5th and 99.5th percentile of the finite values ((0, 1) when there are none)."""
+def full_range(values: np.ndarray) -> tuple[float, float]:
+    """Lowest and highest finite value ((0, 1) when there are none; widened by 0.5 when equal)."""
     finite = values[np.isfinite(values)]
     if finite.size == 0:
         return 0.0, 1.0
-    low, high = (float(v) for v in np.percentile(finite, [0.5, 99.5]))
-    return (low, high) if high > low else (low, low + 1.0)
+    low, high = float(finite.min()), float(finite.max())
+    return (low, high) if high > low else (low - 0.5, high + 0.5)
 
 
 def encode_png(image: np.ndarray) -> bytes:
@@ -142,18 +180,30 @@ def difference(a: ResultView, b: ResultView) -> tuple[np.ndarray, dict[str, Any]
         )
     diff = a.values - b.values
     both = np.isfinite(diff)
-    figures: dict[str, Any] = {"a": a.name, "b": b.name, "unit": a.unit, "valid_fraction": float(both.mean())}
+    bound = symmetric_bound(diff)
+    figures: dict[str, Any] = {
+        "a": a.name,
+        "b": b.name,
+        "unit": a.unit,
+        "valid_fraction": float(both.mean()),
+        "scale": [-bound, bound],  # the difference map's colour range
+    }
     if both.any():
         d = diff[both].astype(np.float64)
         figures.update(mean=float(d.mean()), rms=float(np.sqrt(np.mean(d**2))), max_abs=float(np.max(np.abs(d))))
     return diff, figures
 
 
-def difference_png(diff: np.ndarray) -> tuple[bytes, float]:
-    """The difference map on a symmetric colour scale (+-99.5th percentile of |diff|) and that bound."""
+def symmetric_bound(diff: np.ndarray) -> float:
+    """The difference map's colour scale is -bound .. +bound: the 99.5th percentile of |diff| (1 when none)."""
     finite = np.abs(diff[np.isfinite(diff)])
     bound = float(np.percentile(finite, 99.5)) if finite.size else 1.0
-    bound = bound if bound > 0 else 1.0
+    return bound if bound > 0 else 1.0
+
+
+def difference_png(diff: np.ndarray) -> tuple[bytes, float]:
+    """The difference map on its symmetric colour scale (:func:`symmetric_bound`) and that bound."""
+    bound = symmetric_bound(diff)
     return encode_png(colour_map(diff, -bound, bound)), bound
 
 

@@ -1,7 +1,7 @@
 """What a processing run gives back: :class:`ProcessResult` and the report (report.json's content).
 
 Its own module so that the run (:mod:`rig.pipeline.run`), the file encoders
-(:mod:`rig.pipeline.outputs`) and the result store (:mod:`rig.store.results`) all import it
+(:mod:`rig.store.result_files`) and the result store (:mod:`rig.store.results`) all import it
 without importing each other.
 """
 

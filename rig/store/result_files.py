@@ -8,13 +8,14 @@ their names, are :mod:`rig.store.results`' business.
 from __future__ import annotations
 
 import json
-import os
 from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import cv2
 import numpy as np
+
+from calibration.jsonfile import write_text_atomic
 
 if TYPE_CHECKING:
     from rig.pipeline.state import SceneState
@@ -261,9 +262,7 @@ def _json_default(value: Any) -> Any:
 def write_report(path: Path, report: Mapping[str, Any]) -> Path:
     """report.json, pretty-printed (numpy scalars and paths converted)."""
     text = json.dumps(report, indent=2, default=_json_default, ensure_ascii=False) + "\n"
-    tmp = Path(f"{path}.tmp")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)
+    write_text_atomic(path, text, durable=False)  # inside a staging directory renamed whole
     return path
 
 

@@ -95,6 +95,17 @@ async def result_surface(name: str, session: ConsoleSession = Depends(session_of
     return await run_in_threadpool(view.surface)
 
 
+@router.get(
+    "/results/{name}/cloud.bin",
+    summary="the valid pixels as a coloured point cloud for a WebGL view: N float32 (x, y, z), then N RGBA bytes"
+    " (X-Points, X-Step, X-Range, X-Unit, X-Axis-Unit, X-Z-Scale headers)",
+)
+async def result_cloud(name: str, session: ConsoleSession = Depends(session_of)) -> Response:
+    view = await _view(session, name)
+    body, headers = await run_in_threadpool(view.cloud)
+    return Response(body, media_type="application/octet-stream", headers=headers)
+
+
 @router.get("/results/{name}/files", summary="the files a result holds (what the page offers for download)")
 async def result_files(name: str, session: ConsoleSession = Depends(session_of)) -> dict[str, Any]:
     path = session.data.existing("results", name)

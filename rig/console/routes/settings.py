@@ -8,8 +8,9 @@ from fastapi import APIRouter, Depends
 from pydantic import Field
 from starlette.concurrency import run_in_threadpool
 
+from rig.console.devices import ProjectorSetting
 from rig.console.routes._common import Body, session_of
-from rig.console.session import ConsoleSession, ProjectorSetting
+from rig.console.session import ConsoleSession
 
 router = APIRouter(prefix="/api", tags=["rig"])
 
@@ -56,3 +57,12 @@ async def get_projector(session: ConsoleSession = Depends(session_of)) -> dict[s
 @router.put("/live", summary="live view drawing: saturation overlay, camera or modulation map")
 async def set_live(body: LiveBody, session: ConsoleSession = Depends(session_of)) -> dict[str, Any]:
     return session.set_live(body.overlay, body.view)
+
+
+class Live3DBody(Body):
+    on: bool = Field(..., description="true: scan the short pattern set continuously and show each set's points")
+
+
+@router.put("/live3d", summary="live 3-D view on or off: continuous short scans processed as they come")
+async def set_live_3d(body: Live3DBody, session: ConsoleSession = Depends(session_of)) -> dict[str, Any]:
+    return await run_in_threadpool(session.set_live_3d, body.on)

@@ -1,11 +1,19 @@
 // The live view: camera frames and their figures, camera and projector settings, device status.
 import { $, api, fillSelect } from "./api.js";
+import { drawLive3d } from "./live3d.js";
 
-export async function drawFrame(buffer) {
-  const view = new DataView(buffer);
-  const headerLength = view.getUint32(0, true);
+// A binary message: a 4-byte header length, the JSON header, then a live frame's JPEG or a live 3-D cloud.
+export function binaryMessage(buffer) {
+  const received = performance.now();
+  const headerLength = new DataView(buffer).getUint32(0, true);
   const header = JSON.parse(new TextDecoder().decode(new Uint8Array(buffer, 4, headerLength)));
-  const bitmap = await createImageBitmap(new Blob([new Uint8Array(buffer, 4 + headerLength)], { type: "image/jpeg" }));
+  const payload = new Uint8Array(buffer, 4 + headerLength);
+  if (header.type === "live3d") drawLive3d(header, payload, received);
+  else drawFrame(header, payload);
+}
+
+async function drawFrame(header, payload) {
+  const bitmap = await createImageBitmap(new Blob([payload], { type: "image/jpeg" }));
   const canvas = $("live-view");
   if (canvas.width !== bitmap.width || canvas.height !== bitmap.height) {
     canvas.width = bitmap.width; canvas.height = bitmap.height;

@@ -4,7 +4,8 @@
 import { $, api, clientId, dropTokenFromAddress, showError, showView } from "./api.js";
 import { bindCaptures, captureJob, captureProgress, loadOptions } from "./captures.js";
 import { buildWizard, calibrationJob, calibrationProgress, calibrationResult, showPrompt } from "./calibration.js";
-import { bindSettings, drawFrame, showSettings } from "./live.js";
+import { binaryMessage, bindSettings, showSettings } from "./live.js";
+import { bindLive3d, live3dError, showLive3d } from "./live3d.js";
 import { bindResult, openResult, resultSaved, showResult } from "./result.js";
 import { buildVerify, showVerifyPrompt, verificationDone, verifyJob, verifyProgress } from "./verify.js";
 
@@ -26,6 +27,7 @@ function updateStatus(status) {
   $("verify-start").disabled = status.busy;
   $("stop-button").disabled = !(status.busy || status.jobs.length);
   showSettings(status);
+  showLive3d(status);
   showPrompts(status.prompt);
 }
 
@@ -74,6 +76,7 @@ const handlers = {
   prompt: (m) => showPrompts(m),
   calibration: (m) => calibrationResult(m),
   verification: (m) => verificationDone(m).catch(() => {}),
+  live3d: (m) => live3dError(m),
 };
 
 function connect() {
@@ -83,7 +86,7 @@ function connect() {
   socket.onopen = () => socket.send(JSON.stringify({ live: true }));
   socket.onclose = () => { $("state").textContent = "disconnected"; setTimeout(connect, 1000); };
   socket.onmessage = (msg) => {
-    if (typeof msg.data !== "string") { drawFrame(msg.data); return; }
+    if (typeof msg.data !== "string") { binaryMessage(msg.data); return; }
     const message = JSON.parse(msg.data);
     handlers[message.type]?.(message);
   };
@@ -106,6 +109,7 @@ function bind() {
   $("scan-button").onclick = scan;
   $("stop-button").onclick = () => api("POST", "/api/stop", {}).catch(() => {});
   bindSettings();
+  bindLive3d();
   bindResult();
   bindCaptures();
   buildWizard();

@@ -1,8 +1,11 @@
-// The Result view: colour-mapped map, hover read-out, 3-D surface, key figures and downloads.
-// Any tab shows the newest result; only the tab whose job made it switches to this view.
+// The Result view: colour-mapped map, hover read-out, 3-D point cloud, key figures and downloads.
+// Any tab shows the newest result; only the tab whose job made it switches to this view. The map,
+// its colour bar, the cloud's colours and the figures table share one range (the server's).
 import { $, api, showView } from "./api.js";
+import { CloudView, fetchCloud } from "./cloud.js";
 
 const shown = { summary: null, values: null };
+let cloudView = null;
 
 export async function showResult(name, summary, final, { focus = false, lastFrameAt = null } = {}) {
   const started = performance.now();
@@ -13,25 +16,30 @@ export async function showResult(name, summary, final, { focus = false, lastFram
   const valuesReady = fetch(`${base}/values.f32?v=${stamp}`).then(async (r) => ({
     data: new Float32Array(await r.arrayBuffer()), width: Number(r.headers.get("X-Width")), height: Number(r.headers.get("X-Height")),
   }));
-  const surfaceReady = api("GET", `${base}/surface`);
+  const cloudReady = fetchCloud(`${base}/cloud.bin?v=${stamp}`).catch(() => null);
   const map = $("height-map");
   const loaded = new Promise((resolve) => { map.onload = resolve; map.onerror = resolve; });
   map.src = `${base}/map.png?v=${stamp}`;
-  $("scale-high").textContent = summary.range[1].toFixed(2) + " " + summary.unit;
-  $("scale-low").textContent = summary.range[0].toFixed(2) + " " + summary.unit;
+  for (const [where, value] of [["scale-high", summary.range[1]], ["scale-low", summary.range[0]],
+    ["cloud-high", summary.range[1]], ["cloud-low", summary.range[0]]]) $(where).textContent = formatValue(value);
+  $("cloud-unit").textContent = summary.unit;
   renderFigures(summary);
   renderDownloads();
   if (focus) showView("result");
   await loaded;
   const mapShown = performance.now();
   shown.values = { ...(await valuesReady), unit: summary.unit, name };
-  await drawSurface(await surfaceReady);
+  const cloud = await cloudReady;
+  const drawStarted = performance.now();
+  drawCloud(cloud);
   const done = performance.now();
   const view = $("view-result");
   view.dataset.result = name;
   view.dataset.final = String(final);
   view.dataset.mapMs = String(mapShown - started);
   view.dataset.renderMs = String(done - started);
+  view.dataset.drawMs = String(done - drawStarted);
+  view.dataset.points = String(cloud ? cloud.count : 0);
   view.dataset.mapSinceLastFrameMs = lastFrameAt ? String(mapShown - lastFrameAt) : "";
   view.dataset.sinceLastFrameMs = lastFrameAt ? String(done - lastFrameAt) : "";
 }
@@ -44,20 +52,18 @@ export async function openResult(name, options = {}) {
   showResult(name, await api("GET", `/api/results/${encodeURIComponent(name)}`), true, options);
 }
 
-async function drawSurface(surface) {
-  if (!window.Plotly) return;
-  const trace = {
-    type: "surface", x: surface.x, y: surface.y, z: surface.z, colorscale: "Turbo", showscale: true,
-    colorbar: { title: { text: surface.unit } },
-  };
-  const layout = {
-    margin: { l: 0, r: 0, t: 0, b: 0 },
-    scene: { aspectmode: "data", xaxis: { title: { text: "x (" + surface.axis_unit + ")" } },
-             yaxis: { title: { text: "y (" + surface.axis_unit + ")" } }, zaxis: { title: { text: surface.unit } } },
-  };
-  if (surface.axis_unit !== surface.unit) layout.scene.aspectmode = "cube";
-  await window.Plotly.react($("result-3d"), [trace], layout, { responsive: true, displaylogo: false });
+// The cloud in the 3-D view (points from the server, coloured as the map).
+function drawCloud(cloud) {
+  cloudView = cloudView || new CloudView($("result-cloud"));
+  if (!cloud || !cloudView.ready) { $("cloud-info").textContent = cloudView.ready ? "no 3-D view" : "no WebGL in this browser"; return; }
+  cloudView.setCloud(cloud.positions, cloud.colours);
+  const every = cloud.step > 1 ? `, every ${cloud.step}${cloud.step === 2 ? "nd" : cloud.step === 3 ? "rd" : "th"} row and column` : "";
+  const axes = cloud.axisUnit === "px" ? "x, y in pixels, phase as relief" : `x, y, z in ${cloud.axisUnit}`;
+  $("cloud-info").textContent = `${cloud.count.toLocaleString("en")} points${every}; ${axes}`;
 }
+
+// A colour-bar or table figure: the same digits wherever the range is shown.
+export function formatValue(value) { return value.toFixed(2); }
 
 function readout(event) {
   const v = shown.values;
@@ -74,7 +80,8 @@ function readout(event) {
 function renderFigures(s) {
   const rows = [
     ["valid pixels", s.valid_fraction === null ? "-" : (100 * s.valid_fraction).toFixed(1) + " %"],
-    ["height (mm)", s.height_mm ? `min ${s.height_mm.min.toFixed(2)}, median ${s.height_mm.median.toFixed(2)}, max ${s.height_mm.max.toFixed(2)}` : "no calibration: phase only"],
+    ["height (mm)", s.height_mm ? `min ${formatValue(s.height_mm.min)}, median ${formatValue(s.height_mm.median)}, max ${formatValue(s.height_mm.max)}` : "no calibration: phase only"],
+    ["colour range", `${formatValue(s.range[0])} .. ${formatValue(s.range[1])} ${s.unit}`],
     ["wrapped phase", s.methods.wrapped_phase], ["unwrap", s.methods.unwrap], ["denoise", s.methods.denoise],
     ["correction", s.methods.correction], ["frequencies", (s.methods.frequencies || []).join(", ")],
     ["processing time", s.timings_s.total !== undefined ? s.timings_s.total.toFixed(2) + " s" : "-"],
@@ -107,7 +114,6 @@ async function renderDownloads() {
 
 export function bindResult() {
   $("height-map").onmousemove = readout;
-  document.addEventListener("view", (event) => {
-    if (event.detail === "result" && window.Plotly && shown.summary) window.Plotly.Plots.resize($("result-3d"));
-  });
+  document.addEventListener("view", (event) => { if (event.detail === "result" && cloudView) cloudView.draw(); });
+  window.addEventListener("resize", () => { if (cloudView) cloudView.draw(); });
 }
