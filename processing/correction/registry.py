@@ -420,30 +420,40 @@ def correct_auto(
     maps = _AutoMaps(phase, wrapped, valid, sigma, decimate, tau, svd, float(k_sigma))
     found = _candidate_orders(maps, pooled, measured_breaks)
     chosen = min(found.breaks, key=found.breaks.__getitem__)  # ties: the first
-    out, unresolved, changed, temporal_blobs = _restore_detail(maps, found, chosen, temporal)
+    out, unresolved, changed, evidence = _restore_detail(maps, found, chosen, temporal)
+    extra = {"unresolved": unresolved, "changed": changed, "evidence": evidence, "temporal": temporal is not None}
+    return out, _auto_info(maps, found, chosen, start, frequency, extra)
+
+
+def _auto_info(
+    maps: _AutoMaps, found: _Candidates, chosen: str, start: float, frequency: float | None, extra: dict[str, Any]
+) -> dict[str, Any]:
+    """``auto``'s report entry: solver, steps, candidates and what the evidence steps decided (``extra``)."""
     parameters = {
-        "tau": tau if tau is not None else default_tau(phase.shape),
+        "tau": maps.tau if maps.tau is not None else default_tau(maps.phase.shape),
         "stable": True,
         "k_sigma": maps.k_sigma,
-        "svd": svd,
+        "svd": maps.svd,
     }
     steps = ["pool-region-orders", "rpca-phase", "reorder-if-consistent"]
-    steps += (["settle-orders"] if len(found.maps) > 2 else []) + ["keep-supported-changes", "restore-detail"]
-    return out, _solver_info(
+    steps += ["settle-orders"] if len(found.maps) > 2 else []
+    steps += ["keep-supported-changes"] + (["lower-frequency-evidence"] if extra["temporal"] else [])
+    steps += ["mend-spikes", "restore-detail"]
+    return _solver_info(
         "auto",
         parameters,
         start,
         frequency,
         found.result,
         steps=steps,
-        orders_changed=int(changed),
+        orders_changed=int(extra["changed"]),
         misfit_pixels=int(np.count_nonzero(found.misfit)),
         guard=chosen,
         order_breaks=found.breaks,
         rpca_input=found.rpca_input,
-        unresolved=unresolved_summary(unresolved, valid),
-        unresolved_mask=unresolved,
-        evidence=temporal_blobs,
+        unresolved=unresolved_summary(extra["unresolved"], maps.valid),
+        unresolved_mask=extra["unresolved"],
+        evidence=extra["evidence"],
     )
 
 

@@ -33,6 +33,7 @@ frequencies clearly fit the next order better.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -146,6 +147,33 @@ def snap_to_lower_frequencies(
     return out, moved
 
 
+@dataclass(frozen=True)
+class _PixelEvidence:
+    """Per changed pixel: noise-weighted misfits of both orders, the shift between them weighted and in rad^2."""
+
+    with_measured: np.ndarray
+    with_proposed: np.ndarray
+    shift: np.ndarray
+    shift_rad: np.ndarray
+
+    @classmethod
+    def of(
+        cls,
+        proposed: np.ndarray,
+        measured: np.ndarray,
+        frequency: float,
+        lower: Sequence[tuple[float, np.ndarray]],
+        weights: Sequence[float],
+    ) -> _PixelEvidence:
+        delta = np.rint((proposed - measured) / TWO_PI)
+        return cls(
+            lower_frequency_misfit(measured, frequency, lower, weights),
+            lower_frequency_misfit(proposed, frequency, lower, weights),
+            _order_shift(delta, frequency, lower, weights),
+            _order_shift(delta, frequency, lower),
+        )
+
+
 def keep_temporally_supported(
     proposed: np.ndarray,
     measured: np.ndarray,
@@ -192,23 +220,21 @@ def keep_temporally_supported(
         return proposed, np.zeros(valid.shape, dtype=bool), counts
     count, labels = label_blobs(changed)
     at = labels[changed]
-    lower_at = [(f, p[changed]) for f, p in lower]
     if weights is None:  # misfits in units of each frequency's noise
         weights = noise_weights(measured, valid, frequency, lower)
-    with_measured = lower_frequency_misfit(measured[changed], frequency, lower_at, weights)
-    with_proposed = lower_frequency_misfit(proposed[changed], frequency, lower_at, weights)
-    delta = np.rint((proposed[changed] - measured[changed]) / TWO_PI)
-    shift = _order_shift(delta, frequency, lower, weights)
-    shift_rad = _order_shift(delta, frequency, lower)
-    difference = np.bincount(at, weights=with_proposed - with_measured, minlength=count)
-    expected = np.bincount(at, weights=shift, minlength=count)
+    ev = _PixelEvidence.of(
+        proposed[changed], measured[changed], frequency, [(f, p[changed]) for f, p in lower], weights
+    )
+    difference = np.bincount(at, weights=ev.with_proposed - ev.with_measured, minlength=count)
+    expected = np.bincount(at, weights=ev.shift, minlength=count)
     # the blob's own noise: the misfit of the better-fitting orders (dark or mixed pixels carry more)
     noise = np.minimum(
-        np.bincount(at, weights=with_measured, minlength=count), np.bincount(at, weights=with_proposed, minlength=count)
+        np.bincount(at, weights=ev.with_measured, minlength=count),
+        np.bincount(at, weights=ev.with_proposed, minlength=count),
     )
     pixels = np.bincount(at, minlength=count)
     undecidable = (expected <= SEPARATION**2 * np.maximum(noise, pixels * len(lower))) | (
-        np.bincount(at, weights=shift_rad, minlength=count) < MIN_SHIFT_RAD**2 * pixels
+        np.bincount(at, weights=ev.shift_rad, minlength=count) < MIN_SHIFT_RAD**2 * pixels
     )
     margin = Z_MARGIN * 2.0 * np.sqrt(np.maximum(noise / np.maximum(pixels * len(lower), 1), 1.0) * expected)
     contradicted = ~undecidable & (difference > expected / 2.0 + margin)
@@ -220,8 +246,8 @@ def keep_temporally_supported(
     counts["kept"] = count - 1 - counts["reverted"] - counts["unresolved"] - counts["undecidable"]
     # inside a contradicted blob, only the pixels whose own evidence contradicts the change go back
     # (a blob can mix them with pixels whose measured orders were wrong)
-    own = (shift_rad >= MIN_SHIFT_RAD**2) & (with_proposed - with_measured > shift / 2.0)
-    own &= np.maximum(with_measured, len(lower)) * SEPARATION**2 <= shift
+    own = (ev.shift_rad >= MIN_SHIFT_RAD**2) & (ev.with_proposed - ev.with_measured > ev.shift / 2.0)
+    own &= np.maximum(ev.with_measured, len(lower)) * SEPARATION**2 <= ev.shift
     back_at = contradicted[at] & own
     if not back_at.any():
         return proposed, np.zeros(valid.shape, dtype=bool), counts
