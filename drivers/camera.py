@@ -168,8 +168,19 @@ class Camera(Device):
         value = float(value)
         if not (math.isfinite(value) and value > 0):
             raise ValueError(f"exposure_us: expected a finite time > 0, found {value}")
+        if self._is_open:
+            low, high = self.exposure_limits_us
+            if not low <= value <= high:
+                raise ValueError(f"exposure_us: expected {low:g} .. {high:g} us ({self.name}), found {value:g}")
         self._exposure_us = self._push_setting("exposure_us", value, self._set_exposure_us)
         log.debug("%s: exposure %.1f us", self.name, self._exposure_us)
+
+    @property
+    def exposure_limits_us(self) -> tuple[float, float]:
+        """(shortest, longest) exposure in microseconds the device accepts (open: the device's own;
+        unknown limits read as (0, inf))."""
+        limits = self._read_exposure_limits_us() if self._is_open else None
+        return (0.0, math.inf) if limits is None else (float(limits[0]), float(limits[1]))
 
     @property
     def gain(self) -> float:
@@ -438,6 +449,10 @@ class Camera(Device):
 
     def _read_exposure_us(self) -> float | None:
         """The device's exposure at open (None: keep the base's default)."""
+        return None
+
+    def _read_exposure_limits_us(self) -> tuple[float, float] | None:
+        """The device's (shortest, longest) exposure in microseconds (None: unknown)."""
         return None
 
     def _read_gain(self) -> float | None:

@@ -255,6 +255,13 @@ class PylonCamera(Camera):
     def _read_exposure_us(self) -> float | None:
         return float(self._read(self._exposure_node))
 
+    def _read_exposure_limits_us(self) -> tuple[float, float] | None:
+        node = self._node(self._exposure_node)
+        try:
+            return (float(node.GetMin()), float(node.GetMax()))
+        except (AttributeError, _genicam().GenericException):  # a node without limits (or an emulator's)
+            return None
+
     def _set_exposure_us(self, value: float) -> float | None:
         self._write(self._exposure_node, float(value))
         return float(self._read(self._exposure_node))

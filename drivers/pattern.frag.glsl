@@ -22,6 +22,8 @@ uniform sampler2D speckle;   // R32F (width x height) field Z of 0 / 1, row 0 = 
 uniform int bits;
 uniform int bit;             // 0 = most significant
 uniform bool inverted;
+uniform bool binary;          // plain binary code (cell s carries s) instead of Gray
+uniform float period_px;      // code cell width in pixels; 0: extent / 2^bits
 uniform float level;
 uniform int pitch_px;        // grid: line spacing, line and crosshair widths in pixels
 uniform int line_px;
@@ -39,10 +41,13 @@ float sinusoid(float coord, float extent) {
 }
 
 float gray(int index, int extent) {
-    // stripe = floor((k + 0.5) * 2^bits / W), in integers so that stripe borders are exact
+    // stripe = floor((k + 0.5) * 2^bits / W), in integers so that stripe borders are exact;
+    // with a cell width, floor((k + 0.5) / period_px)
     uint stripes = 1u << uint(bits);
-    uint stripe = min((uint(2 * index + 1) * stripes) / uint(2 * extent), stripes - 1u);
-    uint code = stripe ^ (stripe >> 1u);
+    uint stripe = period_px > 0.0
+        ? uint(min(floor((float(index) + 0.5) / period_px), float(stripes - 1u)))
+        : min((uint(2 * index + 1) * stripes) / uint(2 * extent), stripes - 1u);
+    uint code = binary ? stripe : stripe ^ (stripe >> 1u);
     float value = float((code >> uint(bits - 1 - bit)) & 1u);
     return inverted ? 1.0 - value : value;
 }

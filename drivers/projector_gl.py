@@ -23,13 +23,13 @@ import numpy as np
 
 from drivers.errors import DeviceNotFoundError
 from drivers.projector import Projector
-from processing.projection.patterns import Flat, Gray, Grid, Pattern, Sinusoid, SpeckleSinusoid
+from processing.projection.patterns import Binary, Flat, Gray, Grid, Pattern, Sinusoid, SpeckleSinusoid
 from processing.projection.speckle import speckle_field
 
 log = logging.getLogger(__name__)
 
 SHADER_DIR = Path(__file__).resolve().parent
-KIND_CODES = {"sinusoid": 0, "speckle-sinusoid": 1, "gray": 2, "flat": 3, "grid": 4}
+KIND_CODES = {"sinusoid": 0, "speckle-sinusoid": 1, "gray": 2, "binary": 2, "flat": 3, "grid": 4}
 FRAMEBUFFER_DTYPES = {8: "f1", 32: "f4"}  # bits per pixel -> moderngl dtype (f1: normalised 8-bit)
 
 
@@ -112,6 +112,8 @@ class PatternRenderer:
             self._set("bits", int(pattern.bits))
             self._set("bit", int(pattern.bit))
             self._set("inverted", bool(pattern.inverted))
+            self._set("binary", isinstance(pattern, Binary))
+            self._set("period_px", 0.0 if pattern.period_px is None else float(pattern.period_px))
         elif isinstance(pattern, Flat):
             self._set("level", float(pattern.level))
         elif isinstance(pattern, Grid):

@@ -80,6 +80,8 @@ class SimulatedCamera(Camera):
         by the pixel format's.
     reference_exposure_us : float
         Exposure at which ``appearance.gain`` holds; the signal scales with exposure_us / this.
+    exposure_limits_us : (float, float)
+        Shortest and longest exposure the simulated sensor accepts (as a real camera's limits).
     faults : CameraFaults, optional
     rng : numpy Generator, optional
         Noise source (seed it for reproducible frames).
@@ -96,6 +98,7 @@ class SimulatedCamera(Camera):
         appearance: Appearance = Appearance(),
         *,
         reference_exposure_us: float = 10_000.0,
+        exposure_limits_us: tuple[float, float] = (20.0, 1_000_000.0),
         faults: CameraFaults | None = None,
         rng: np.random.Generator | None = None,
         sleep: Callable[[float], None] | None = None,
@@ -113,6 +116,10 @@ class SimulatedCamera(Camera):
         self.geometry = geometry
         self.appearance = appearance
         self.reference_exposure_us = float(reference_exposure_us)
+        low, high = (float(v) for v in exposure_limits_us)
+        if not 0 < low <= high:
+            raise ValueError(f"exposure_limits_us: expected 0 < shortest <= longest, found {exposure_limits_us}")
+        self.limits_us = (low, high)
         self.faults = faults or CameraFaults()
         self.rng = rng if rng is not None else np.random.default_rng()
         self.sleep = sleep
@@ -215,6 +222,9 @@ class SimulatedCamera(Camera):
 
     def now(self) -> float:
         return self._clock_s
+
+    def _read_exposure_limits_us(self) -> tuple[float, float] | None:
+        return self.limits_us
 
     def _check_present(self) -> None:
         if self._gone:

@@ -71,8 +71,45 @@ class RigGeometry:
 
 
 @dataclass(frozen=True)
+class Sensor:
+    """A camera sensor's noise and saturation, so that exposure matters as it does on a real one.
+
+    The full well (electrons) maps onto the top digital number of the bit depth; each pixel's
+    signal S (in DN, before clipping) gets shot noise of variance S / (electrons per DN) and read
+    noise of ``read_noise_e`` electrons; then quantisation and clipping at the top DN (saturation).
+    """
+
+    full_well_e: float = 10_000.0
+    read_noise_e: float = 8.0
+
+    def __post_init__(self) -> None:
+        if not self.full_well_e > 0:
+            raise ValueError(f"full_well_e: expected > 0 electrons, found {self.full_well_e}")
+        if not self.read_noise_e >= 0:
+            raise ValueError(f"read_noise_e: expected >= 0 electrons, found {self.read_noise_e}")
+
+    def electrons_per_dn(self, bit_depth: int | None) -> float:
+        """Conversion gain: the full well over the top digital number (8 bit when the output stays float)."""
+        return self.full_well_e / float((1 << (bit_depth or 8)) - 1)
+
+    def add_noise(self, signal: np.ndarray, bit_depth: int | None, rng: np.random.Generator) -> np.ndarray:
+        """``signal`` (DN) with shot and read noise (Gaussian approximation of Poisson), in place when float."""
+        per_dn = self.electrons_per_dn(bit_depth)
+        work = signal.dtype.type
+        variance = np.maximum(signal, 0.0) / work(per_dn)
+        variance += work((self.read_noise_e / per_dn) ** 2)
+        noise = rng.standard_normal(signal.shape, dtype=work)
+        noise *= np.sqrt(variance, out=variance)
+        signal += noise
+        return signal
+
+
+@dataclass(frozen=True)
 class Appearance:
-    """Photometric model of the scene and the camera (intensities in camera digital numbers)."""
+    """Photometric model of the scene and the camera (intensities in camera digital numbers).
+
+    ``sensor`` (a :class:`Sensor`) replaces the ``snr_db`` noise by shot and read noise.
+    """
 
     reflectivity: float | np.ndarray = 1.0
     ambient: float = 0.0  # light not from the projector, in projector-intensity units
@@ -81,6 +118,7 @@ class Appearance:
     snr_db: float | None = None  # additive white Gaussian noise, signal power = mean(I^2)
     bit_depth: int | None = 8  # None: keep float
     shadow_level: float = 0.0  # intensity seen in projector shadow (besides ambient)
+    sensor: Sensor | None = None  # shot + read noise and full well instead of snr_db
 
 
 @dataclass
@@ -198,7 +236,8 @@ def expose(
     """Camera image from the projector intensity reaching each pixel (before gamma).
 
     I = gain * reflectivity * (ambient + gamma(projected) on lit pixels, shadow_level elsewhere),
-    then noise at ``snr_db`` and quantisation to ``bit_depth``. A float32 ``projected`` (what
+    then noise (the ``sensor``'s shot and read noise, else white noise at ``snr_db``) and
+    quantisation to ``bit_depth``, clipping at its top value (saturation). A float32 ``projected`` (what
     :func:`sample_projector_image` returns) is exposed in float32, anything else in float64.
     """
     projected = np.asarray(projected)
@@ -213,7 +252,10 @@ def expose(
         light *= scale.astype(work, copy=False)
     else:
         light *= work(scale)
-    image = light if appearance.snr_db is None else awgn(light, appearance.snr_db, rng)
+    if appearance.sensor is not None:
+        image = appearance.sensor.add_noise(light, appearance.bit_depth, rng)
+    else:
+        image = light if appearance.snr_db is None else awgn(light, appearance.snr_db, rng)
     if appearance.bit_depth is None:
         return image.astype(np.float32, copy=False)
     top = (1 << appearance.bit_depth) - 1

@@ -249,13 +249,18 @@ def scan(
     scene: str = "object",
     overwrite: bool = False,
     progress: ProgressSink | None = None,
+    exposures: Sequence[float] | str | None = None,
 ) -> ScanResult:
-    """Scan with the rig of ``config`` (the simulated rig when None) into a new capture ``output``."""
+    """Scan with the rig of ``config`` (the simulated rig when None) into a new capture ``output``.
+
+    ``exposures``: times in microseconds (each exposure's full sequence in turn), ``"auto"`` (the
+    exposure assistant chooses; its plan is ``result.exposure_plan``), None: ``[scan] exposures_us``.
+    """
     from rig.acquisition.scan import scan as _scan
     from rig.config import RigConfig as _RigConfig
 
     rig_config = config if isinstance(config, _RigConfig) else load_config(config)
-    return _scan(rig_config, Path(output), scene=scene, overwrite=overwrite, progress=progress)
+    return _scan(rig_config, Path(output), scene=scene, overwrite=overwrite, progress=progress, exposures=exposures)
 
 
 def check_scan_then_process(
@@ -291,6 +296,7 @@ def scan_then_process(
     options: ProcessOptions | None = None,
     scan_progress: ProgressSink | None = None,
     process_progress: ProgressSink | None = None,
+    exposures: Sequence[float] | str | None = None,
 ) -> tuple[ScanResult, dict[str, Any]]:
     """Scan into ``output``, then process it with ``calibration`` into ``process_output``
     (default ``OUTPUT-processed``); every pre-check (:func:`check_scan_then_process`) runs before
@@ -299,6 +305,6 @@ def scan_then_process(
 
     destination = Path(process_output) if process_output is not None else default_output(Path(output))
     check_scan_then_process(output, calibration, destination, overwrite)
-    scanned = scan(output, config, scene=scene, overwrite=overwrite, progress=scan_progress)
+    scanned = scan(output, config, scene=scene, overwrite=overwrite, progress=scan_progress, exposures=exposures)
     report = process_to(scanned.path, destination, calibration, options, process_progress, overwrite=overwrite)
     return scanned, report

@@ -85,6 +85,8 @@ class ScanConfig:
     speckle_seed: int = 0
     speckle_dot_px: int = 3
     speckle_gain: float = 0.3
+    # several exposures: each exposure's full pattern sequence in turn (docs/hdr.md); empty: [camera] exposure_us
+    exposures_us: tuple[float, ...] = ()
 
     def patterns(self) -> list[dict[str, Any]]:
         """The capture-format pattern entries of one scan, in projection order.
@@ -124,6 +126,7 @@ class ScanConfig:
 @dataclass(frozen=True)
 class SimulationConfig:
     scene: str = "hemisphere"
+    scene_variant: int = 0  # a scene drawn from a family (shiny-and-dark): 0 the nominal one
     snr_db: float | None = 35.0
     seed: int = 0
     l0_mm: float = 1000.0
@@ -134,6 +137,9 @@ class SimulationConfig:
     gamma: float = 1.0
     ambient: float = 0.1
     camera_gain: float = 200.0
+    # the sensor's full well (electrons at the top grey level): set, it replaces snr_db by shot and read noise
+    full_well_e: float | None = None
+    read_noise_e: float = 8.0
 
 
 @dataclass(frozen=True)
@@ -249,6 +255,32 @@ def _frequency(value: Any) -> float:
     return float(value)
 
 
+MAX_EXPOSURES = 8  # exposures of one scan: more multiplies the scan time for little more range
+
+
+def exposure_list(value: Any) -> tuple[float, ...]:
+    """Exposures in microseconds: distinct positive numbers, at most :data:`MAX_EXPOSURES`, in the order given."""
+    if not isinstance(value, list) or not 1 <= len(value) <= MAX_EXPOSURES:
+        raise _Bad(f"a list of 1 to {MAX_EXPOSURES} exposure times in microseconds")
+    out = tuple(_positive_number(v) for v in value)
+    if len(set(out)) != len(out):
+        raise _Bad("distinct exposure times")
+    return out
+
+
+def parse_exposures(text: str, where: str = "--exposures") -> tuple[float, ...]:
+    """Exposures from a comma-separated list in microseconds (``2000,8000,32000``); ConfigError in one line."""
+    expected = "comma-separated exposure times in microseconds such as 2000,8000,32000"
+    try:
+        values = [float(part) for part in str(text).split(",")]
+    except ValueError:
+        raise ConfigError(f"{where}: expected {expected}, found {_found(text)}") from None
+    try:
+        return exposure_list(values)
+    except _Bad as bad:
+        raise ConfigError(f"{where}: expected {bad} ({expected}), found {_found(text)}") from None
+
+
 def _size(value: Any) -> tuple[int, int]:
     if (
         not isinstance(value, list)
@@ -306,9 +338,11 @@ _SCHEMA: dict[str, dict[str, Callable[[Any], Any]]] = {
         "speckle_seed": _int_range(0),
         "speckle_dot_px": _int_range(1, 64),
         "speckle_gain": _fraction,
+        "exposures_us": exposure_list,
     },
     "simulation": {
         "scene": _string,
+        "scene_variant": _int_range(0),
         "snr_db": _snr,
         "seed": _int_range(0),
         "l0_mm": _positive_number,
@@ -319,6 +353,8 @@ _SCHEMA: dict[str, dict[str, Callable[[Any], Any]]] = {
         "gamma": _positive_number,
         "ambient": _non_negative_number,
         "camera_gain": _positive_number,
+        "full_well_e": _positive_number,
+        "read_noise_e": _non_negative_number,
     },
 }
 

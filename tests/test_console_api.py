@@ -14,6 +14,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import cv2
 import numpy as np
 import pytest
 from console_client import BASE, HEIGHT, WIDTH, WS, wait_job, wait_saved
@@ -105,6 +106,21 @@ def test_scan_gives_a_result_and_a_second_scan_is_refused_as_busy(console: TestC
     assert len(surface["z"]) == HEIGHT // surface["step"] or len(surface["z"]) == -(-HEIGHT // surface["step"])
     assert console.get("/api/results/part-001/files/phase.npy").status_code == 200
     assert console.get("/api/results/part-001/files/points.ply").status_code == 404  # phase only: no cloud
+    # the 3-D view's points: every valid pixel, coloured as the map, the phase as a relief (not edge-on)
+    cloud = console.get("/api/results/part-001/cloud.bin")
+    count = int(cloud.headers["X-Points"])
+    assert cloud.headers["X-Axis-Unit"] == "px" and cloud.headers["X-Step"] == "1"
+    xyz = np.frombuffer(cloud.content[: count * 12], dtype="<f4").reshape(-1, 3)
+    rgba = np.frombuffer(cloud.content[count * 12 :], dtype=np.uint8).reshape(-1, 4)
+    phase = np.frombuffer(values.content, dtype="<f4").reshape(HEIGHT, WIDTH)
+    assert count == np.isfinite(phase).sum()
+    assert np.ptp(xyz[:, 2]) == pytest.approx(0.25 * WIDTH, rel=1e-3)
+    bgr = cv2.imdecode(np.frombuffer(console.get("/api/results/part-001/map.png").content, np.uint8), cv2.IMREAD_COLOR)
+    cols, rows = xyz[:, 0].astype(int), xyz[:, 1].astype(int)
+    np.testing.assert_array_equal(rgba[:, :3], bgr[rows, cols, ::-1])
+    assert [float(v) for v in cloud.headers["X-Range"].split(",")] == pytest.approx(
+        [np.nanmin(phase), np.nanmax(phase)]
+    )
 
 
 def test_scan_with_a_calibration_gives_heights(
@@ -134,6 +150,50 @@ def test_scan_with_a_calibration_gives_heights(
     np.testing.assert_array_equal(heights, stored.height)
     report = json.loads((data / "results" / "part" / "report.json").read_text())
     assert report["capture"] == stored.report["capture"] == str(data / "captures" / "part")
+
+
+def test_live_3d_sends_point_clouds_at_the_objects_height(
+    tmp_path: Path, console_rig_toml: Path, exact_calibration: Callable[[Path, Path], Path]
+) -> None:
+    """Live 3-D (issue 24): short sets processed as they come, each a cloud whose heights are the
+    simulated object's, with its rate and latency; switched off, live camera frames come back."""
+    from rig.hardware.simulated import geometry_from_config, scene_height
+
+    data = tmp_path / "data"
+    exact_calibration(console_rig_toml, data / "calibrations" / "cal")
+    config = load_config(console_rig_toml)
+    truth = scene_height(config, "object", geometry_from_config(config))
+    with TestClient(create_app(config, data), base_url=BASE) as client:
+        with client.websocket_connect(WS + "/api/events") as socket:
+            socket.receive_text()  # hello
+            socket.send_text(json.dumps({"live": True}))
+            assert client.put("/api/live3d", json={"on": True}).json()["on"] is True
+            clouds = []
+            while len(clouds) < 3:
+                message = socket.receive()
+                if message.get("bytes"):
+                    raw = message["bytes"]
+                    size = int.from_bytes(raw[:4], "little")
+                    header = json.loads(raw[4 : 4 + size])
+                    if header["type"] == "live3d":
+                        clouds.append((header, raw[4 + size :]))
+            assert client.get("/api/status").json()["live_3d"]["sets"] >= 3
+            assert client.put("/api/live3d", json={"on": False}).json()["on"] is False
+            while True:  # the camera view again
+                message = socket.receive()
+                raw = message.get("bytes") or b"\0\0\0\0{}"
+                size = int.from_bytes(raw[:4], "little")
+                if json.loads(raw[4 : 4 + size] or b"{}").get("type") == "frame":
+                    break
+    header, body = clouds[-1]
+    assert header["patterns"] == 8 and header["unit"] == "mm" and header["axis_unit"] == "mm"
+    assert header["rate_hz"] > 0 and header["latency_ms"] > 0
+    xyz = np.frombuffer(body[: header["points"] * 12], dtype="<f4").reshape(-1, 3)
+    assert len(body) == header["points"] * 16
+    heights = np.sort(xyz[:, 2])
+    top = truth[np.isfinite(truth)].max()
+    assert abs(heights[-len(heights) // 200] - top) < 3.0, (heights[-len(heights) // 200], top)  # mm, near the top
+    assert abs(np.median(heights) - np.median(truth[np.isfinite(truth)])) < 3.0
 
 
 def test_stop_cancels_the_scan_and_leaves_no_complete_capture(console: TestClient) -> None:

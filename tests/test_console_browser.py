@@ -258,6 +258,17 @@ def test_the_3d_view_draws_points_coloured_over_the_tables_range(page: Any) -> N
     assert page.get_by_test_id("scale-high").inner_text() == page.get_by_test_id("cloud-high").inner_text() == high
     draw_ms = float(page.eval_on_selector("#view-result", "v => v.dataset.drawMs"))
     print(f"3-D view drawn in {draw_ms:.0f} ms ({WIDTH}x{HEIGHT}, software WebGL)")
+    page.set_viewport_size({"width": 1024, "height": 768})  # the issue's window: everything in sight
+    try:
+        page.wait_for_timeout(200)
+        downloads = page.get_by_test_id("downloads").locator("a").first.bounding_box()
+        assert downloads is not None and downloads["y"] + downloads["height"] <= 768
+        cloud = page.get_by_test_id("result-cloud").bounding_box()
+        assert cloud is not None and cloud["x"] + cloud["width"] <= 1024 and cloud["width"] > 200
+        bar, unit = page.locator(".cloud-bar").bounding_box(), page.locator("#cloud-unit").bounding_box()
+        assert bar is not None and unit is not None and unit["y"] >= bar["y"] + bar["height"]  # title below the bar
+    finally:
+        page.set_viewport_size({"width": 1400, "height": 900})
 
 
 def test_live_3d_shows_point_clouds_with_a_rate_readout(page: Any) -> None:
@@ -418,6 +429,11 @@ def test_captures_reprocess_and_compare(page: Any) -> None:
     page.get_by_test_id("compare-button").click()
     page.wait_for_function("document.querySelector('[data-testid=compare-figures]').textContent.includes('rms')")
     page.wait_for_function("document.querySelector('[data-testid=compare-diff]').naturalWidth > 0")
+    # the difference map's scale: symmetric, in the results' unit, inside the largest difference
+    high, low = (page.get_by_test_id(t).inner_text().split() for t in ("compare-high", "compare-low"))
+    assert high[1] == low[1] == "mm" and float(high[0]) == -float(low[0]) > 0
+    figures = page.get_by_test_id("compare-figures").inner_text()
+    assert float(figures.split("max |d| ")[1].split()[0]) >= float(high[0]) - 0.0005  # shown to 3 decimals
     shot(page, "captures")
 
 
@@ -470,6 +486,10 @@ def test_a_scan_survives_a_reload_and_shows_in_a_second_tab_without_moving_it(
                 return v.dataset.result === '{job["name"]}' && v.dataset.final === 'true'; }})()""",
             timeout=60_000,
         )
+    deadline = time.monotonic() + 60  # the result is on screen before its files are written: then done
+    while page.request.get(server["url"] + f"api/jobs/{job['id']}").json()["state"] == "running":
+        assert time.monotonic() < deadline, "the scan's job still running 60 s after its result was shown"
+        time.sleep(0.1)
     assert page.request.get(server["url"] + f"api/jobs/{job['id']}").json()["state"] == "done"
     captures = page.request.get(server["url"] + "api/captures").json()["captures"]
     assert [c for c in captures if c["name"] == job["name"]][0].get("complete", True)

@@ -155,7 +155,7 @@ def test_patterns_built_in_code_write_the_main_keys_and_changed_options() -> Non
     ("entry", "key", "message"),
     [
         ({"kind": "flat"}, "level", "level: missing"),
-        ({"kind": "cross"}, "kind", "kind: expected one of sinusoid, speckle-sinusoid, gray, flat"),
+        ({"kind": "cross"}, "kind", "kind: expected one of sinusoid, speckle-sinusoid, gray, binary, flat"),
         (
             {"kind": "sinusoid", "frequency": 0, "steps": 4, "step": 0},
             "frequency",

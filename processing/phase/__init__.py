@@ -7,6 +7,8 @@ Main entry points:
   :func:`wrapped_phase` for the phase alone, :func:`shadow_mask` and :func:`quality_map` to judge it.
 - :func:`ftp_phase` (``ftp``; :func:`ftp_amplitude` its amplitude alone, float32): wrapped phase of a single fringe image, around a carrier found by
   :func:`detect_carrier`.
+- :func:`fuse_exposures` (``exposure_fusion``): frames of several exposures fused per pixel by
+  inverse-variance weights (saturated frames left out), with the camera's :func:`noise_model`.
 - :func:`heterodyne_offset`, :func:`gray_offset` (``convention``): the phase offset a capture's
   images carry against its stated convention.
 """
@@ -19,6 +21,7 @@ from processing._lazy import lazy_exports
 
 if TYPE_CHECKING:
     from processing.phase.convention import OffsetEstimate, gray_offset, heterodyne_offset
+    from processing.phase.exposure_fusion import FusedExposures, NoiseModel, fuse_exposures, noise_model
     from processing.phase.ftp import FringeParts, detect_carrier, ftp_amplitude, ftp_fringe_parts, ftp_phase
     from processing.phase.shifting import PhaseShiftResult, phase_shift, quality_map, shadow_mask, wrapped_phase
 
@@ -36,18 +39,26 @@ _SOURCES = {
     "OffsetEstimate": "convention",
     "gray_offset": "convention",
     "heterodyne_offset": "convention",
+    "FusedExposures": "exposure_fusion",
+    "NoiseModel": "exposure_fusion",
+    "fuse_exposures": "exposure_fusion",
+    "noise_model": "exposure_fusion",
 }
 
 __all__ = [
     "FringeParts",
+    "FusedExposures",
+    "NoiseModel",
     "OffsetEstimate",
     "PhaseShiftResult",
     "detect_carrier",
     "ftp_amplitude",
     "ftp_fringe_parts",
     "ftp_phase",
+    "fuse_exposures",
     "gray_offset",
     "heterodyne_offset",
+    "noise_model",
     "phase_shift",
     "quality_map",
     "shadow_mask",

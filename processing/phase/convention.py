@@ -58,33 +58,44 @@ def gray_offset(
     phi: np.ndarray,
     stripes: np.ndarray,
     bits: int,
-    frequency: int,
+    frequency: float,
     valid: np.ndarray | None = None,
     axis: str = "x",
+    cell_periods: float | None = None,
 ) -> OffsetEstimate:
-    """Offset of the wrapped phase ``phi`` against a decoded Gray-code stripe index.
+    """Offset of the wrapped phase ``phi`` against a decoded Gray-code (or binary-code) stripe index.
 
     Parameters
     ----------
     phi : (H, W) wrapped phase at ``frequency`` (any 2 pi representation; periods start at 0).
     stripes : (H, W) int stripe index decoded from ``bits`` planes.
-    bits, frequency : the code's planes and the sinusoid's fringe count; 2**bits must be 2 f
-        (complementary) or f (plain).
+    bits, frequency : the code's planes and the sinusoid's fringe count.
     valid : (H, W) bool, optional: pixels to use (default every finite phase).
-    axis : the fringe axis (plain codes compare neighbours along it).
+    axis : the fringe axis (codes with one cell per period compare neighbours along it).
+    cell_periods : width of one code cell in periods of ``frequency``, at most 1; default
+        ``frequency / 2**bits``, which must then be 1 (plain) or 1/2 (complementary).
+
+    With one cell per period the cells' borders are the phase wraps: the phase of two
+    neighbours across a border points at the offset. With smaller cells each cell's centre
+    predicts the phase 2 pi ((s + 1/2) cell_periods mod 1), which the phase spreads around.
     """
     phi = np.asarray(phi, dtype=np.float64)
     s = np.asarray(stripes).astype(np.int64)
     use = np.isfinite(phi) if valid is None else np.asarray(valid, dtype=bool) & np.isfinite(phi)
     count = 1 << bits
     use &= (s >= 0) & (s < count)
-    if count == 2 * frequency:  # complementary: the half period each stripe covers
-        expected = np.pi / 2 + np.pi * (s & 1)
+    if cell_periods is None:
+        if count not in (frequency, 2 * frequency):
+            raise ValueError(
+                f"bits: expected 2**bits == frequency or 2 * frequency, found bits = {bits}, frequency = {frequency}"
+            )
+        cell_periods = frequency / count
+    if not 0.0 < cell_periods <= 1.0 + 1e-9:
+        raise ValueError(f"cell_periods: expected a cell of at most one period, found {cell_periods}")
+    if abs(cell_periods - 1.0) > 1e-6:  # several cells per period: each cell's centre
+        centre = (s + 0.5) * cell_periods
+        expected = TWO_PI * (centre - np.floor(centre))
         return _circular_mean((phi - expected)[use])
-    if count != frequency:
-        raise ValueError(
-            f"bits: expected 2**bits == frequency or 2 * frequency, found bits = {bits}, frequency = {frequency}"
-        )
     along = 1 if axis == "x" else 0
     a = [slice(None), slice(None)]
     b = [slice(None), slice(None)]

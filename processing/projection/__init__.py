@@ -3,7 +3,7 @@
 Main entry points:
 
 - :class:`Pattern` and its kinds (``patterns``): :class:`Sinusoid`, :class:`SpeckleSinusoid`,
-  :class:`Gray`, :class:`Flat`, :class:`Grid`; :func:`parse_pattern` reads one from JSON and
+  :class:`Gray`, :class:`Binary`, :class:`Flat`, :class:`Grid`; :func:`parse_pattern` reads one from JSON and
   :func:`pattern_image` renders it.
 - :func:`speckle_field` (``speckle``): the binary speckle of the single-shot pattern.
 """
@@ -16,6 +16,7 @@ from processing._lazy import lazy_exports
 
 if TYPE_CHECKING:
     from processing.projection.patterns import (
+        Binary,
         Flat,
         Gray,
         Grid,
@@ -29,6 +30,7 @@ if TYPE_CHECKING:
     from processing.projection.speckle import speckle_field
 
 _SOURCES = {
+    "Binary": "patterns",
     "Flat": "patterns",
     "Gray": "patterns",
     "Grid": "patterns",
@@ -42,6 +44,7 @@ _SOURCES = {
 }
 
 __all__ = [
+    "Binary",
     "Flat",
     "Gray",
     "Grid",

@@ -33,6 +33,7 @@ import numpy as np
 from processing.projection.speckle import DEFAULT_DOT_PX, DEFAULT_SEED, DEFAULT_SPECKLE_GAIN, cached_speckle_field
 
 AXES = ("x", "y")
+MAX_CODE_BITS = 24  # code words of Gray/binary planes: 16 M cells, far beyond any projector
 _MISSING = object()
 
 
@@ -255,25 +256,47 @@ class SpeckleSinusoid(Sinusoid):
 
 @dataclass(frozen=True, kw_only=True, eq=False)
 class Gray(Pattern):
-    """Gray-code bit plane ``bit`` (0 the most significant) of ``bits``; ``inverted`` its negative."""
+    """Gray-code bit plane ``bit`` (0 the most significant) of ``bits``; ``inverted`` its negative.
+
+    The axis is cut into cells: ``period_px`` projector pixels wide when given (a code of cells
+    that do not tile the axis in ``2**bits``, e.g. OpenCV's GrayCodePattern upscaled to 100-px
+    cells), else ``W / 2**bits``. Cell ``s`` carries the code word of ``s`` (see
+    :func:`stripe_code`); cells past the last code word repeat it.
+    """
 
     kind: ClassVar[str] = "gray"
-    KEYS: ClassVar[tuple[str, ...]] = ("axis", "bit", "bits", "inverted")
-    MAIN_KEYS: ClassVar[tuple[str, ...]] = KEYS
+    KEYS: ClassVar[tuple[str, ...]] = ("axis", "bit", "bits", "inverted", "period_px")
+    MAIN_KEYS: ClassVar[tuple[str, ...]] = ("axis", "bit", "bits", "inverted")
 
     axis: str = "x"
     bit: int
     bits: int
     inverted: bool = False
+    period_px: float | None = None
 
     def validate(self) -> None:
         _check_axis(self.axis)
         _check_int("bits", self.bits, 1)
+        if self.bits > MAX_CODE_BITS:
+            raise PatternError("bits", f"an integer in 1 .. {MAX_CODE_BITS}", self.bits)
         _check_int("bit", self.bit, 0)
         if self.bit >= self.bits:
             raise PatternError("bit", f"0 .. {self.bits - 1} (bits = {self.bits})", self.bit)
         if not isinstance(self.inverted, bool):
             raise PatternError("inverted", "true or false", self.inverted)
+        if self.period_px is not None:
+            _check_number("period_px", self.period_px, positive=True)
+
+    def cell_px(self, extent: float) -> float:
+        """Width of one code cell in projector pixels along an axis ``extent`` pixels long."""
+        return float(self.period_px) if self.period_px is not None else float(extent) / (1 << self.bits)
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class Binary(Gray):
+    """Plain binary-code bit plane: as :class:`Gray`, but cell ``s`` carries ``s`` itself."""
+
+    kind: ClassVar[str] = "binary"
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -322,7 +345,9 @@ class Grid(Pattern):
         _check_number("background", self.background)
 
 
-PATTERN_TYPES: dict[str, type[Pattern]] = {cls.kind: cls for cls in (Sinusoid, SpeckleSinusoid, Gray, Flat, Grid)}
+PATTERN_TYPES: dict[str, type[Pattern]] = {
+    cls.kind: cls for cls in (Sinusoid, SpeckleSinusoid, Gray, Binary, Flat, Grid)
+}
 PATTERN_KINDS = tuple(PATTERN_TYPES)
 # Kinds a projector shows but a capture never holds (capture-format v1 does not define them).
 PROJECTOR_ONLY_KINDS = (Grid.kind,)
@@ -404,25 +429,37 @@ def sinusoid_intensity(pattern: Sinusoid | Mapping[str, Any], u: np.ndarray, ext
     return float(sinusoid.offset) + float(sinusoid.amplitude) * np.cos(phase)
 
 
-def gray_stripe_index(u: np.ndarray, extent: float, bits: int) -> np.ndarray:
-    """Index of the Gray-code stripe (0 .. 2**bits - 1) that projector coordinate ``u`` lies in."""
+def gray_stripe_index(u: np.ndarray, extent: float, bits: int, cell_px: float | None = None) -> np.ndarray:
+    """Index of the code cell (0 .. 2**bits - 1) that projector coordinate ``u`` lies in.
+
+    Cells are ``cell_px`` wide (default ``extent / 2**bits``); coordinates past the last cell
+    read the last one.
+    """
     stripes = 1 << bits
-    return np.clip(np.floor(np.asarray(u, dtype=np.float64) * stripes / extent), 0, stripes - 1).astype(np.int64)
+    coord = np.asarray(u, dtype=np.float64)
+    cells = coord * stripes / extent if cell_px is None else coord / float(cell_px)
+    return np.clip(np.floor(cells), 0, stripes - 1).astype(np.int64)
+
+
+def stripe_code(stripe: np.ndarray, binary: bool = False) -> np.ndarray:
+    """The code word a cell carries: Gray ``s ^ (s >> 1)``, or ``s`` itself for a plain binary code."""
+    return stripe if binary else stripe ^ (stripe >> 1)
 
 
 def gray_intensity(pattern: Gray | Mapping[str, Any], u: np.ndarray, extent: float) -> np.ndarray:
-    """Intensity (0 or 1) of one Gray-code bit plane; ``bit`` 0 is the most significant.
+    """Intensity (0 or 1) of one Gray- or binary-code bit plane; ``bit`` 0 is the most significant.
 
-    The projector width is cut into ``2**bits`` stripes; stripe ``s`` carries Gray code
-    ``s ^ (s >> 1)``. ``inverted`` gives the complementary (negative) image.
+    The axis is cut into cells (:meth:`Gray.cell_px`); cell ``s`` carries code word
+    :func:`stripe_code` of ``s``, and plane ``bit`` shows its bit ``bits - 1 - bit``.
+    ``inverted`` gives the complementary (negative) image.
     """
-    gray_pattern = as_pattern(pattern)
-    if not isinstance(gray_pattern, Gray):
-        raise PatternError("kind", "'gray'", gray_pattern.kind)
-    stripe = gray_stripe_index(u, extent, gray_pattern.bits)
-    gray = stripe ^ (stripe >> 1)
-    value = ((gray >> (gray_pattern.bits - 1 - gray_pattern.bit)) & 1).astype(np.float64)
-    return 1.0 - value if gray_pattern.inverted else value
+    code_pattern = as_pattern(pattern)
+    if not isinstance(code_pattern, Gray):
+        raise PatternError("kind", "'gray' or 'binary'", code_pattern.kind)
+    stripe = gray_stripe_index(u, extent, code_pattern.bits, code_pattern.cell_px(extent))
+    code = stripe_code(stripe, isinstance(code_pattern, Binary))
+    value = ((code >> (code_pattern.bits - 1 - code_pattern.bit)) & 1).astype(np.float64)
+    return 1.0 - value if code_pattern.inverted else value
 
 
 def grid_intensity(

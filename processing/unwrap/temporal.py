@@ -22,7 +22,10 @@ Methods
   (e.g. 64, 58, 53 -> 6, 5 -> 1), then hierarchically back up to the highest frequency.
 - :func:`decode_gray` and :func:`unwrap_gray`: Gray-code stripe index (processing.projection.patterns'
   convention) and fringe orders from it, plain or complementary (Zhang, Su, Xiang and Sun,
-  Opt. Lasers Eng. 2012).
+  Opt. Lasers Eng. 2012); :func:`decode_stripes` for plain binary codes too.
+- :func:`unwrap_coded`: a Gray or binary code of any cell width under one or more (not
+  necessarily whole) frequencies: the code resolves the period or beat it matches
+  (:func:`code_rung`), the higher frequencies follow hierarchically.
 """
 
 from __future__ import annotations
@@ -423,7 +426,7 @@ def _check_frequencies_coprime(frequencies: Sequence[int], name: str) -> None:
 
 
 def _hierarchy(
-    coarse: np.ndarray, steps: Sequence[tuple[np.ndarray, int]], max_residual: float
+    coarse: np.ndarray, steps: Sequence[tuple[np.ndarray, float]], max_residual: float
 ) -> tuple[np.ndarray, ...]:
     """Climb from absolute turns at the unit frequency through (normalised turns, frequency) steps.
 
@@ -431,7 +434,7 @@ def _hierarchy(
     (phase, orders, valid) with valid where every residual |estimate - result| stayed within
     ``max_residual`` radians.
     """
-    absolute, f_prev = coarse, 1
+    absolute, f_prev = coarse, 1.0
     limit = max_residual / TWO_PI
     valid = np.ones(coarse.shape, dtype=bool)
     for turns, f in steps:
@@ -622,27 +625,100 @@ def decode_gray(
     Returns
     -------
     stripes : (H, W) int64 array in [0, 2**B)
-        Stripe index s (projector stripe s covers u in [s W / 2**B, (s + 1) W / 2**B)).
+        Stripe index s (projector stripe s covers u in [s W / 2**B, (s + 1) W / 2**B), or
+        [s P, (s + 1) P) for cells P pixels wide).
+    """
+    return decode_stripes(images, inverted, threshold, binary=False)
+
+
+def decode_stripes(
+    images: np.ndarray,
+    inverted: np.ndarray | None = None,
+    threshold: np.ndarray | float | None = None,
+    binary: bool = False,
+) -> np.ndarray:
+    """Stripe index from captured code bit planes: Gray code, or plain binary with ``binary``.
+
+    The planes are thresholded as in :func:`decode_gray` (the inverted planes, else
+    ``threshold``, else the planes' own per-pixel mid-level); a binary code's bits are the stripe
+    index itself, a Gray code's are converted first.
     """
     planes = _validate.real_array(images, "images", ndim=3)
     if inverted is not None:
-        neg = _validate.real_array(inverted, "inverted", ndim=3)
-        _validate.same_shape(neg, planes.shape, "inverted")
-        bits = planes > neg
+        levels = _validate.real_array(inverted, "inverted", ndim=3)
+        _validate.same_shape(levels, planes.shape, "inverted")
     else:
-        if threshold is None:
-            level = _default_gray_threshold(planes)
-        else:
-            level = np.asarray(threshold, dtype=np.float64)
-            if level.ndim not in (0, 2) or (level.ndim == 2 and level.shape != planes.shape[1:]):
-                raise ValueError(
-                    f"threshold: expected a number or an array of shape {planes.shape[1:]}, found shape {level.shape}"
-                )
-        bits = planes > level
-    # Gray -> binary: b_i = g_0 ^ g_1 ^ ... ^ g_i (cumulative XOR over the planes, MSB first).
-    binary = np.bitwise_xor.accumulate(bits.astype(np.uint8), axis=0)
-    weights = 1 << np.arange(planes.shape[0] - 1, -1, -1, dtype=np.int64)
-    return np.tensordot(weights, binary.astype(np.int64), axes=(0, 0))
+        levels = np.broadcast_to(_bit_threshold(planes, threshold), planes.shape)  # a view, no copy
+    # One plane at a time (most significant first): stripes = 2 stripes + bit. A Gray code's binary
+    # bit is the XOR of its Gray bits so far (b_i = g_0 ^ ... ^ g_i).
+    stripes = np.zeros(planes.shape[1:], dtype=np.int64)
+    running = np.zeros(planes.shape[1:], dtype=bool)  # a Gray code's binary bit so far
+    bit = np.empty(planes.shape[1:], dtype=bool)
+    for index in range(planes.shape[0]):
+        np.greater(planes[index], levels[index], out=bit)
+        if not binary:
+            running ^= bit
+        stripes <<= 1
+        stripes |= running if not binary else bit
+    return stripes
+
+
+def border_side(
+    images: np.ndarray,
+    stripes: np.ndarray,
+    inverted: np.ndarray | None = None,
+    threshold: np.ndarray | float | None = None,
+    binary: bool = False,
+) -> np.ndarray:
+    """Which border of its decoded cell each pixel sits on, as the code's own bits tell it.
+
+    A pixel within the blur of a cell border reads the bits that change there (one for a Gray
+    code) at a fraction of their full contrast |plane - level|. Returns an int8 map: +1 where the
+    bits changing between cells s and s + 1 read below half the pixel's strongest bit and those
+    changing between s - 1 and s at least half, -1 for the converse, 0 where the bits do not
+    single out one border. :func:`unwrap_coded` uses it where cells and periods share their borders.
+    """
+    planes = _validate.real_array(images, "images", ndim=3)
+    if inverted is not None:
+        levels = _validate.real_array(inverted, "inverted", ndim=3)
+        _validate.same_shape(levels, planes.shape, "inverted")
+    else:
+        levels = np.broadcast_to(_bit_threshold(planes, threshold), planes.shape)
+    s = np.asarray(stripes).astype(np.int32)  # code words of up to MAX_CODE_BITS (24) bits
+    _validate.same_shape(s, planes.shape[1:], "stripes")
+    word = s if binary else s ^ (s >> 1)
+    below, above = np.maximum(s - 1, 0), s + 1
+    left = np.where(s > 0, word ^ (below if binary else below ^ (below >> 1)), 0)  # bits changing at s - 1 | s
+    right = word ^ (above if binary else above ^ (above >> 1))  # bits changing at s | s + 1
+    weak_left = np.full(s.shape, np.inf, dtype=np.float32)
+    weak_right = np.full(s.shape, np.inf, dtype=np.float32)
+    strongest = np.zeros(s.shape, dtype=np.float32)
+    contrast = np.empty(s.shape, dtype=np.float32)
+    count = planes.shape[0]
+    for index in range(count):
+        np.subtract(planes[index], levels[index], out=contrast, dtype=np.float32)  # not in uint8: no wrap-around
+        np.abs(contrast, out=contrast)
+        np.maximum(strongest, contrast, out=strongest)
+        bit = np.int32(1 << (count - 1 - index))  # plane 0 is the most significant bit
+        np.minimum(weak_left, contrast, out=weak_left, where=(left & bit) != 0)
+        np.minimum(weak_right, contrast, out=weak_right, where=(right & bit) != 0)
+    half = 0.5 * strongest
+    side = np.zeros(s.shape, dtype=np.int8)
+    side[(weak_right < half) & (weak_left >= half)] = 1
+    side[(weak_left < half) & (weak_right >= half)] = -1
+    return side
+
+
+def _bit_threshold(planes: np.ndarray, threshold: np.ndarray | float | None) -> np.ndarray:
+    """The level a plane's pixel is compared with: ``threshold`` (checked), else the planes' own mid-level."""
+    if threshold is None:
+        return _default_gray_threshold(planes)
+    level = np.asarray(threshold, dtype=np.float64)
+    if level.ndim not in (0, 2) or (level.ndim == 2 and level.shape != planes.shape[1:]):
+        raise ValueError(
+            f"threshold: expected a number or an array of shape {planes.shape[1:]}, found shape {level.shape}"
+        )
+    return level
 
 
 def _default_gray_threshold(planes: np.ndarray) -> np.ndarray:
@@ -713,3 +789,144 @@ def unwrap_gray(
         return _finish(turns, orders, valid, np.isfinite(turns))
 
     return _run(kernel, [p, s])
+
+
+# --------------------------------------------------------------------------- a code under several frequencies
+#
+# A Gray or binary code cuts the projector axis into cells ``cell`` wide (a fraction of the axis,
+# W / 2**bits or a given width). It resolves a fringe period directly when the period holds at
+# least one cell: with r = period / cell cells per period, the cell's centre predicts the absolute
+# phase to within half a cell, and k = round((s + 1/2) / r - t) is right while that half cell
+# plus the phase noise stays under half a period (r > 1; r = 2 is the complementary Gray code of
+# Zhang et al.). With r = 1 the cells and periods share their borders and k = s. Periods shorter
+# than a cell follow hierarchically from a resolved one; the beat of two frequencies (their
+# difference, e.g. kamino410's 100 px and 200/3 px fringes beat at 200 px = 2 cells of 100 px)
+# is a period the code may resolve with a wider margin than either frequency.
+
+# Cells per period from which the rounding rule's margin (1/2 - 1/(2r) turns) is a quarter period.
+ROBUST_CELLS_PER_PERIOD = 2.0
+_RATIO_TOLERANCE = 1e-6
+
+
+@dataclass(frozen=True)
+class CodeRung:
+    """The period a code resolves: a captured frequency (``pair`` of one index) or the beat of two.
+
+    ``frequency``: fringes across the axis (the beat's: the difference of the pair's);
+    ``pair``: indices into the captured frequencies, (i,) or (higher, lower) for a beat;
+    ``cells_per_period``: r = 1 / (frequency * cell).
+    """
+
+    frequency: float
+    pair: tuple[int, ...]
+    cells_per_period: float
+
+    @property
+    def aligned(self) -> bool:
+        """One cell per period: cells and periods share their borders (k is the cell index)."""
+        return abs(self.cells_per_period - 1.0) < _RATIO_TOLERANCE
+
+
+def code_rung(frequencies: Sequence[float], cell: float) -> CodeRung:
+    """The period a code of cells ``cell`` wide (fraction of the axis) resolves among ``frequencies``.
+
+    Candidates are the captured frequencies and the beats of every pair, those with at least one
+    cell per period. The highest-frequency candidate with :data:`ROBUST_CELLS_PER_PERIOD` cells per
+    period or more is chosen (a quarter period of margin), else the highest with at least one.
+    ``ValueError`` (one line) when every period and beat is shorter than a cell.
+    """
+    freqs = [float(f) for f in frequencies]
+    if not freqs or not all(f > 0 and math.isfinite(f) for f in freqs):
+        raise ValueError(f"frequencies: expected positive fringe counts, found {freqs}")
+    if not (cell > 0 and math.isfinite(cell)):
+        raise ValueError(f"cell: expected a positive fraction of the axis, found {cell}")
+    rungs = [CodeRung(f, (i,), 1.0 / (f * cell)) for i, f in enumerate(freqs)]
+    for i, fa in enumerate(freqs):
+        for j, fb in enumerate(freqs):
+            if fa > fb:
+                rungs.append(CodeRung(fa - fb, (i, j), 1.0 / ((fa - fb) * cell)))
+    resolvable = [r for r in rungs if r.cells_per_period >= 1.0 - _RATIO_TOLERANCE]
+    robust = [r for r in resolvable if r.cells_per_period >= ROBUST_CELLS_PER_PERIOD - _RATIO_TOLERANCE]
+    pool = robust or resolvable
+    if not pool:
+        periods = ", ".join(f"{1.0 / (f * cell):.3g}" for f in sorted(freqs))
+        raise ValueError(
+            f"the code's cells are wider than every fringe period and every beat of two frequencies "
+            f"(periods {periods} cells); expected a period or beat of at least one cell"
+        )
+    # highest frequency first; of equals, a captured frequency before a beat (less noise)
+    return max(pool, key=lambda r: (r.frequency, -len(r.pair)))
+
+
+def unwrap_coded(
+    phis: Sequence[np.ndarray],
+    frequencies: Sequence[float],
+    stripes: np.ndarray,
+    cell: float,
+    max_residual: float = np.pi / 2,
+    side: np.ndarray | None = None,
+) -> UnwrapResult:
+    """Absolute phase from a decoded code (Gray or binary) and wrapped phases at one or more frequencies.
+
+    Parameters
+    ----------
+    phis : sequence of (H, W) arrays
+        Wrapped phases at ``frequencies`` (any 2 pi representation, periods starting at phase 0).
+    frequencies : sequence of positive numbers, increasing
+        Fringes across the axis; need not be whole (1920 px / 100 px = 19.2).
+    stripes : (H, W) int array
+        Cell index from :func:`decode_stripes`; cells past ``1 / cell`` are invalid.
+    cell : float
+        Width of one code cell as a fraction of the axis (``1 / 2**bits``, or cell px / W).
+    max_residual : float
+        Bound, in radians, of each hierarchical step's residual (as :func:`unwrap_hierarchical`).
+    side : (H, W) int8 array, optional
+        :func:`border_side` of the code. Used where the rung has one cell per period (its cells'
+        borders are its phase wraps): a pixel in the first quarter of its period whose bits say
+        it sits on the border with the next cell belongs to that cell (k = s + 1), one in the
+        last quarter on the border with the previous cell to that one (k = s - 1).
+
+    Returns
+    -------
+    UnwrapResult
+        Absolute phase and orders at the highest frequency. The code resolves the rung of
+        :func:`code_rung`; the captured frequencies above it follow hierarchically, a pixel
+        staying valid while every step's residual is within ``max_residual``.
+    """
+    freqs = [float(f) for f in frequencies]
+    if any(b <= a for a, b in zip(freqs, freqs[1:])):
+        raise ValueError(f"frequencies: expected increasing values, found {freqs}")
+    rung = code_rung(freqs, cell)
+    maps = _validate.phase_maps(phis, "phis", len(freqs), refuse_infinity=False)
+    s = np.asarray(stripes)
+    if not np.issubdtype(s.dtype, np.integer):
+        raise ValueError(f"stripes: expected an integer array, found dtype {s.dtype}")
+    _validate.same_shape(s, maps[0].shape, "stripes")
+    tolerance = _validate.finite_float(max_residual, "max_residual", minimum=0.0, strict=True)
+    cells = math.ceil(1.0 / cell - _RATIO_TOLERANCE)
+    climb = [i for i, f in enumerate(freqs) if f > rung.frequency]
+    ratio = rung.cells_per_period
+
+    sides = np.zeros(s.shape, dtype=np.int8) if side is None else np.asarray(side, dtype=np.int8)
+    _validate.same_shape(sides, s.shape, "side")
+
+    def kernel(stripe: np.ndarray, border: np.ndarray, *raw: np.ndarray) -> tuple[np.ndarray, ...]:
+        turns = [_turns(r) for r in raw]
+        anchor = turns[rung.pair[0]] if len(rung.pair) == 1 else _fraction(turns[rung.pair[0]] - turns[rung.pair[1]])
+        stripe = stripe.astype(np.int64)
+        valid = (stripe >= 0) & (stripe < cells)
+        if rung.aligned:
+            orders = stripe.astype(np.float64)
+            orders += (anchor < 0.25) & (border == 1)  # read in the previous cell, but past its border
+            orders -= (anchor >= 0.75) & (border == -1)  # read in the next cell, short of its border
+        else:
+            orders = (stripe + 0.5) * (1.0 / ratio) - anchor
+            np.rint(orders, out=orders)
+        if not climb:
+            finite = np.isfinite(anchor)
+            return _finish(anchor, _integers(orders, finite), valid, finite)
+        coarse = (orders + anchor) * (1.0 / rung.frequency)  # absolute turns at the unit frequency
+        phase, k, climbed = _hierarchy(coarse, [(turns[i], freqs[i]) for i in climb], tolerance)
+        return phase, k, climbed & valid
+
+    return _run(kernel, [s, sides, *maps])

@@ -56,6 +56,7 @@ from rig.errors import CaptureError
 from rig.events import ProgressSink
 from rig.hardware.trigger_paths import TriggerPath
 from rig.store.capture import CaptureWriter
+from rig.store.exposures import EXPOSURE_KEY
 
 FrameHandler = Callable[[int, np.ndarray], None]  # (pattern index, stored image), as each frame arrives
 
@@ -233,6 +234,7 @@ class ScanResult:
     wall_s: float
     times: StepTimes = field(default_factory=StepTimes)
     writer_busy_s: float = 0.0
+    exposure_plan: Any = None  # rig.acquisition.exposure_plan.ExposurePlan when the assistant chose the exposures
 
 
 def _pattern_label(index: int, total: int, pattern: Mapping[str, Any]) -> str:
@@ -383,6 +385,31 @@ def _fetch_answer(
         )
 
 
+def acquire_in_memory(
+    patterns: Sequence[Mapping[str, Any]],
+    projector: Projector,
+    camera: Camera,
+    trigger: TriggerPath,
+    settings: AcquisitionSettings,
+    exposure_us: float | None = None,
+) -> list[Frame]:
+    """One frame per pattern, kept in memory (a pre-capture: nothing is written), the camera staged
+    at ``exposure_us`` and restored afterwards; the same checks and retries as a scan."""
+    frames: list[Frame] = []
+    with staged_camera(camera, trigger.source, TriggerMode.ONCE, exposure_us):
+        trigger.prepare(len(patterns) * (settings.retries + 1))
+        try:
+            triggers, times = _TriggerLog(), StepTimes()
+            for index, pattern in enumerate(patterns):
+                frame, _, _ = acquire_pattern(
+                    index, pattern, len(patterns), projector, camera, trigger, settings, triggers, times
+                )
+                frames.append(frame)
+        finally:
+            trigger.finish()
+    return frames
+
+
 def frame_metadata(frame: Frame, attempts: int) -> dict[str, Any]:
     """Per-frame keys stored in capture.json beside pattern, file and sha256."""
     meta: dict[str, Any] = {
@@ -395,6 +422,21 @@ def frame_metadata(frame: Frame, attempts: int) -> dict[str, Any]:
     if attempts > 1:
         meta["attempts"] = attempts
     return meta
+
+
+def _change_exposure(camera: Camera, trigger: TriggerPath, triggers: _TriggerLog, exposure_us: float) -> None:
+    """Between two exposures' sequences: stop the camera, set the next exposure, start it again.
+
+    Once per exposure, not per frame: many cameras accept a new exposure only while stopped, and a
+    hardware-triggered sequence (trigger box, DLP pattern sequence) runs at one exposure throughout.
+    """
+    log.info("%s: exposure %g us for the next sequence", camera.name, exposure_us)
+    camera.stop()
+    camera.exposure_us = exposure_us
+    camera.start()
+    triggers.fired = 0
+    if trigger.indices_restart_with_camera:
+        triggers.next_index = 0
 
 
 def _capture_writer(
@@ -433,6 +475,9 @@ def _acquire_all(
     attempts_total = discarded_total = 0
     triggers = _TriggerLog()
     for index, pattern in enumerate(patterns):
+        planned = pattern.get(EXPOSURE_KEY)
+        if planned is not None and float(planned) != camera.exposure_us:
+            _change_exposure(camera, trigger, triggers, float(planned))
         frame, attempts, discarded = acquire_pattern(
             index, pattern, len(patterns), projector, camera, trigger, settings, triggers, times
         )
@@ -473,7 +518,8 @@ def run_scan(
     path : path
         The capture directory to create (must not exist unless ``overwrite``).
     patterns : sequence of capture-format pattern dicts
-        Projected in order.
+        Projected in order. Patterns carrying ``exposure_us`` (a scan at several exposures,
+        :func:`rig.store.exposures.with_exposures`) set the camera's exposure for their sequence.
     projector, camera : opened devices
     trigger : TriggerPath
         How exposures are started (:class:`SoftwareTrigger`, :class:`BoxTrigger`); the camera's
@@ -497,6 +543,8 @@ def run_scan(
     """
     if not patterns:
         raise ValueError("patterns: expected at least one pattern to scan")
+    if patterns[0].get(EXPOSURE_KEY) is not None:  # several exposures: staged from the first, restored after
+        exposure_us = float(patterns[0][EXPOSURE_KEY])
     started = time.perf_counter()
     times = StepTimes()
     records: list[dict[str, Any]] = []

@@ -11,8 +11,9 @@ from rig.commands._common import add_command
 SPEC_HELP = (
     "what the images show, in file order: groups separated by ';', e.g. "
     "'sin:f=32,steps=12,phase=pi; gray:bits=6' or 'sin:f=64/58/53,steps=4,phase=pi' or "
-    "'sin:f=36,shifts=0/90/180/270deg'; kinds sin (f, steps, phase, shifts, axis), gray (bits, "
-    "inverted=none|after|interleaved, axis), flat:LEVEL, white, black, skip:N; or @FILE.json with "
+    "'sin:f=36,shifts=0/90/180/270deg'; kinds sin (f, steps, phase, shifts, axis), gray and binary (bits, "
+    "order=msb|lsb, inverted=none|after|interleaved, period=CELL_PX, axis), flat:LEVEL, white, black, skip:N; "
+    "or @FILE.json with "
     '{"patterns": [capture-format entries], "files": [names]}'
 )
 
@@ -52,10 +53,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--crop", metavar="X,Y,W,H", help="keep only this rectangle of every image")
     parser.add_argument("--downsample", type=int, default=1, metavar="N", help="average N x N pixel blocks (default 1)")
     parser.add_argument("--scene", default="object", help="scene label of the capture (default object)")
+    parser.add_argument(
+        "--exposures",
+        metavar="US,US,...",
+        help="the folder holds SPEC's files once per exposure, each exposure's full sequence in turn "
+        "(e.g. 2000,8000,32000 microseconds): a capture at several exposures, fused when processed",
+    )
     parser.add_argument("--overwrite", action="store_true", help="replace an existing capture")
 
 
 def run(args: argparse.Namespace) -> int:
+    from rig.config import parse_exposures
+    from rig.store.exposures import describe_exposures
     from rig.store.importer import ImportOptions, import_folder, parse_crop
 
     options = ImportOptions(
@@ -68,6 +77,7 @@ def run(args: argparse.Namespace) -> int:
         downsample=args.downsample,
         scene=args.scene,
         overwrite=args.overwrite,
+        exposures_us=parse_exposures(args.exposures) if args.exposures else (),
     )
     capture = import_folder(args.folder, args.patterns, args.output, options)
     provenance = capture.manifest["import"]
@@ -78,4 +88,7 @@ def run(args: argparse.Namespace) -> int:
         + (f"; {', '.join(provenance['conversions'])}" if provenance["conversions"] else ""),
         file=sys.stderr,
     )
+    exposures = describe_exposures(capture.pattern_models, str(capture.manifest_path))
+    if exposures:
+        print(f"{capture.path}: {exposures}", file=sys.stderr)
     return 0

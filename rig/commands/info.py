@@ -16,19 +16,22 @@ def describe_patterns(patterns: list[dict[str, Any]]) -> list[str]:
     """One line per group of patterns, e.g. ``sinusoid x: f=8, 4 steps``."""
     lines: list[str] = []
     sinusoids: dict[tuple[str, str, float], int] = Counter()
-    gray: dict[tuple[str, int, bool], int] = Counter()
+    gray: dict[tuple[str, int, bool], int] = Counter()  # (code, axis and cells), bits, inverted
     flats: list[float] = []
     for p in patterns:
         if p["kind"] in ("sinusoid", "speckle-sinusoid"):
             sinusoids[(p["kind"], p.get("axis", "x"), float(p["frequency"]))] += 1
-        elif p["kind"] == "gray":
-            gray[(p.get("axis", "x"), int(p["bits"]), bool(p.get("inverted", False)))] += 1
+        elif p["kind"] in ("gray", "binary"):
+            cells = f"{p['kind']} {p.get('axis', 'x')}" + (
+                f" ({p['period_px']:g}-px cells)" if "period_px" in p else ""
+            )
+            gray[(cells, int(p["bits"]), bool(p.get("inverted", False)))] += 1
         elif p["kind"] == "flat":
             flats.append(float(p["level"]))
     for (kind, axis, freq), count in sinusoids.items():
         lines.append(f"{kind} {axis}: frequency {freq:g}, {count} step{'s' if count != 1 else ''}")
-    for (axis, bits, inverted), count in gray.items():
-        lines.append(f"gray {axis}: {count} of {bits} bit planes{' (inverted)' if inverted else ''}")
+    for (code, bits, inverted), count in gray.items():
+        lines.append(f"{code}: {count} of {bits} bit planes{' (inverted)' if inverted else ''}")
     if flats:
         lines.append("flat: levels " + ", ".join(f"{level:g}" for level in flats))
     return lines
@@ -50,6 +53,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def facts(capture: Capture) -> dict[str, Any]:
     """What `rig info` reports, as a dict."""
+    from rig.store.exposures import describe_exposures, exposure_sets
+
+    base = [p.to_dict() for p in exposure_sets(capture.pattern_models, str(capture.manifest_path)).base]
+
     m = capture.manifest
     return {
         "path": str(capture.path),
@@ -59,7 +66,8 @@ def facts(capture: Capture) -> dict[str, Any]:
         "camera": m["camera"],
         "projector": m["projector"],
         "patterns": len(capture.patterns),
-        "pattern_groups": describe_patterns(capture.patterns),
+        "pattern_groups": describe_patterns(base),  # of one exposure's sequence
+        "exposures": describe_exposures(capture.pattern_models, str(capture.manifest_path)),
         "frames": len(capture.frames),
         "verified": True,
         "extra_keys": sorted(
@@ -97,6 +105,8 @@ def run(args: argparse.Namespace) -> int:
     )
     print(f"camera {cam['width']}x{cam['height']} {cam['bit_depth']}-bit, projector {proj['width']}x{proj['height']}")
     print(f"{info['patterns']} patterns, {info['frames']} frames, all verified (sha256, size, bit depth)")
+    if info["exposures"]:
+        print(info["exposures"])
     for line in info["pattern_groups"]:
         print(f"  {line}")
     if info["extra_keys"]:

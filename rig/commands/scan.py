@@ -48,6 +48,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--process-output", type=Path, metavar="OUT", help="where --process writes (default: CAPTURE-processed)"
     )
+    parser.add_argument(
+        "--exposures",
+        metavar="US,US,...",
+        help="capture each exposure's full sequence in turn, e.g. 2000,8000,32000 (microseconds); "
+        "default [scan] exposures_us, else the camera's one exposure",
+    )
+    parser.add_argument(
+        "--hdr",
+        choices=("auto",),
+        help="auto: a quick pre-capture chooses the fewest exposures (at most 3) that bring 98 %% of the lit "
+        "object into the usable range, and says why",
+    )
     parser.add_argument("--overwrite", action="store_true", help="replace an existing capture directory")
     parser.set_defaults(func=run)
 
@@ -61,12 +73,15 @@ def run(args: argparse.Namespace) -> int:
     from rig.acquisition.scan import default_capture_path
     from rig.store.results import default_output
 
+    exposures = _exposures(args)
     config = api.load_config(args.config)
     output = args.output or default_capture_path()
     frames = len(config.scan.patterns())
     if not args.process:
         with Progress(f"scan {output}", total=frames) as progress:
-            result = api.scan(output, config, scene=args.scene, overwrite=args.overwrite, progress=progress)
+            result = api.scan(
+                output, config, scene=args.scene, overwrite=args.overwrite, progress=progress, exposures=exposures
+            )
         _print_scan(result)
         return 0
     from rig.commands.process import print_summary
@@ -82,6 +97,7 @@ def run(args: argparse.Namespace) -> int:
             overwrite=args.overwrite,
             scan_progress=progress,
             process_progress=progress,
+            exposures=exposures,
         )
     _print_scan(result)
     print_summary(report, destination)
@@ -89,8 +105,22 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _exposures(args: argparse.Namespace) -> tuple[float, ...] | str | None:
+    """``--exposures`` parsed (one clear line if it is not a list of times), or ``"auto"`` for ``--hdr auto``."""
+    from rig.config import parse_exposures
+
+    if args.hdr and args.exposures:
+        raise ConfigError("--hdr auto and --exposures: expected one of them (the assistant chooses the exposures)")
+    if args.hdr:
+        return "auto"
+    return None if args.exposures is None else parse_exposures(args.exposures)
+
+
 def _print_scan(result: ScanResult) -> None:
     """The scan's line on stderr and its capture directory on stdout (for scripts: the default name has the time)."""
+    if result.exposure_plan is not None:
+        for line in result.exposure_plan.lines():
+            print(f"exposure assistant: {line}", file=sys.stderr)
     retried = result.attempts - len(result.frames)
     print(
         f"{result.path}: {len(result.frames)} frames in {result.wall_s:.2f} s"

@@ -110,6 +110,7 @@ class RigHolder:
         self._tasks: queue.Queue[tuple[Callable[[], Any], Future[Any]]] = queue.Queue()
         self._stopping = threading.Event()
         self._devices: RigDevices | None = None
+        self._limits: tuple[float, float] = (0.0, math.inf)  # the open camera's exposure limits
         self._stack: contextlib.ExitStack | None = None
         self._fault: str | None = None
         self._reopen_at = 0.0
@@ -200,6 +201,7 @@ class RigHolder:
             self.device_failed(exc, "opening the rig")
             raise
         self._devices, self._stack = devices, stack
+        self._limits = devices.camera.exposure_limits_us  # read once, on the devices' thread
         self.device_error = None
         self._idle = False
         log.info("console: rig open")
@@ -281,6 +283,14 @@ class RigHolder:
 
         self.call(apply)
         return {"exposure_us": self.exposure_us, "gain": self.gain}
+
+    def exposure_limits_us(self) -> list[float | None]:
+        """The open camera's (shortest, longest) exposure in microseconds (read when it opened); None
+        where unknown or closed."""
+        if self._devices is None:
+            return [None, None]
+        low, high = self._limits
+        return [low if low > 0 else None, high if math.isfinite(high) else None]
 
     def set_projector(self, setting: ProjectorSetting) -> dict[str, Any]:
         """Show a pattern between scans (alignment, exposure checks, the live modulation map)."""

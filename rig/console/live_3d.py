@@ -42,6 +42,7 @@ log = logging.getLogger(__name__)
 
 CLOUD_POINTS = 1 << 16  # points sent per set (a regular subset of the valid pixels)
 RATE_WINDOW_S = 2.0  # the rate shown is over this many seconds
+RETRY_S = 0.2  # pause before the next set after the rig could not give one
 OPTIONS = ProcessOptions(correction="none")
 LIVE_FREQUENCIES = 2
 
@@ -104,7 +105,8 @@ def _signature(pattern: dict[str, Any]) -> str:
 class Live3D:
     """Continuous scan-and-process of the rig held by ``rig`` while on and ``watched()``; see the module docstring.
 
-    ``calibration`` gives the chosen calibration's directory (None: phase only), read for each set.
+    ``calibration`` gives the chosen calibration's directory (None: phase only), read for each set;
+    while ``paused()`` (a scan's results are being computed) no set is taken.
     """
 
     def __init__(
@@ -113,11 +115,14 @@ class Live3D:
         publish: Publish,
         watched: Callable[[], bool],
         calibration: Callable[[], Path | None],
+        paused: Callable[[], bool] = lambda: False,
     ) -> None:
         self.rig = rig
         self.publish = publish
         self.watched = watched
         self.calibration = calibration
+        self.paused = paused
+        self._wait_s = 0.0  # before the next set: none while sets come, a pause after a failure
         self.on = False
         self.sets = 0
         self.rate_hz = 0.0
@@ -164,15 +169,16 @@ class Live3D:
     # ------------------------------------------------------------------ LiveFeed (worker thread)
     @property
     def watching(self) -> bool:
-        return self.on and self.watched()
+        return self.on and self.watched() and not self.paused()
 
     def interval_s(self) -> float:
-        return 0.0  # one set after another: acquiring is what paces it
+        return self._wait_s  # one set after another (acquiring paces it), or a pause after a failure
 
     def tick(self) -> None:
         """Acquire one set and hand it to the processing thread (replacing a set still waiting)."""
         from rig.acquisition.loop import AcquisitionSettings, acquire_stack
 
+        self._wait_s = RETRY_S
         devices = self.rig.live_devices()
         if devices is None:
             return
@@ -188,6 +194,7 @@ class Live3D:
             if self.rig.devices is not None:
                 self.rig.device_failed(exc, "live 3-D")
             return
+        self._wait_s = 0.0
         projector = (devices.projector.width, devices.projector.height)
         item = (frames, time.monotonic(), projector, devices.camera.pixel_format.bit_depth)
         with self._lock:

@@ -9,6 +9,7 @@ the camera picture (saturated pixels in red) or of the fringe modulation map.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -36,11 +37,17 @@ class LiveSettings:
 
 
 class LiveView:
-    """Live frames of the rig held by ``rig`` for the pages that watch, at most ``fps`` a second."""
+    """Live frames of the rig held by ``rig`` for the pages that watch, at most ``fps`` a second.
 
-    def __init__(self, rig: RigHolder, publish: Publish, fps: float = LIVE_FPS) -> None:
+    ``paused()``: whether to leave the machine to other work for now (no frame, the rig stays as it is).
+    """
+
+    def __init__(
+        self, rig: RigHolder, publish: Publish, fps: float = LIVE_FPS, paused: Callable[[], bool] = lambda: False
+    ) -> None:
         self.rig = rig
         self.publish = publish
+        self.paused = paused
         self.settings = LiveSettings()
         self.watchers = 0
         self.fps = 0.0
@@ -70,7 +77,10 @@ class LiveView:
         return self.settings.__dict__
 
     def tick(self) -> None:
-        """Worker thread: take one frame and publish it (a device error closes the rig instead)."""
+        """Worker thread: take one frame and publish it (a device error closes the rig instead); none
+        while ``paused()`` (a scan's results are being computed: they come first)."""
+        if self.paused():
+            return
         devices = self.rig.live_devices()
         if devices is None:
             return
@@ -114,7 +124,7 @@ class LiveView:
     def _picture(self, figures: Any) -> np.ndarray:
         """The picture sent to the page: the frame (saturation in red) or the modulation map."""
         if self.settings.view == "modulation" and figures.modulation is not None:
-            top = float(np.percentile(figures.modulation, 99)) or 1.0
+            top = float(np.percentile(figures.modulation[::4, ::4], 99)) or 1.0  # a colour scale: a sample will do
             picture = colour_map(figures.modulation, 0.0, top)
             picture[~figures.valid] //= 3  # where the pipeline would drop the phase
             return picture

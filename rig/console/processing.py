@@ -94,6 +94,12 @@ class Processing:
         self.latest: dict[str, Any] | None = None  # the newest result shown: name, job, final
         self._lock = threading.Lock()
         self._thread = ThreadPoolExecutor(max_workers=1, thread_name_prefix="console-process")
+        self._scans_in_flight = 0  # scans' runs queued or running (the live view pauses for them)
+
+    @property
+    def scan_in_flight(self) -> bool:
+        """Whether a scan's frames are being processed (or wait to be): the operator waits for that result."""
+        return self._scans_in_flight > 0
 
     def close(self) -> None:
         """Finish the run in progress and drop the queued ones."""
@@ -114,10 +120,18 @@ class Processing:
         ``capture``: a capture directory, or a scan's frames in memory (:meth:`FrameCollector.stack`)
         with ``stored``, the future of that capture being written (outputs wait for it).
         """
+        scan = stored is not None
         try:
+            with self._lock:
+                self._scans_in_flight += scan
             self._thread.submit(self._process, job, capture, name, options, quick_first, salvage, stored)
         except RuntimeError as exc:
+            self._done(scan)
             self.jobs.finish(job, RigError(f"not processed: {exc}"))
+
+    def _done(self, scan: bool) -> None:
+        with self._lock:
+            self._scans_in_flight -= scan
 
     def _process(
         self,
@@ -154,7 +168,10 @@ class Processing:
             self.jobs.update(job, result=name)
             self.publish({"type": "saved", "name": name, "job": job.id}, None)
 
-        self.jobs.run(job, run)
+        try:
+            self.jobs.run(job, run)
+        finally:
+            self._done(stored is not None)
         self.on_change()
 
     def warm(self, options: ProcessOptions) -> None:

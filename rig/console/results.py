@@ -21,6 +21,8 @@ from rig.store.result_files import colour_map
 
 SURFACE_MAX_SIDE = 160  # samples along the longer side of the 3-D surface
 CLOUD_MAX_POINTS = 1 << 18  # points sent for the 3-D view (every pixel up to 512x512, else a regular subset)
+# the exposure map's colours, shortest exposure first (distinct for colour-blind readers: Okabe-Ito)
+EXPOSURE_COLOURS = ("#0072b2", "#e69f00", "#009e73", "#cc79a7", "#56b4e9", "#d55e00", "#f0e442", "#000000")
 PHASE_RELIEF = 0.25  # a phase map's drawn relief, as a fraction of its width (rad and pixels do not compare)
 
 
@@ -35,6 +37,7 @@ class ResultView:
     points: np.ndarray | None  # (H, W, 3) mm, NaN where invalid
     report: dict[str, Any]
     saved: bool = False
+    exposure: np.ndarray | None = None  # (H, W) us, NaN where invalid: a capture at several exposures
     _png: bytes | None = field(default=None, repr=False)
 
     @classmethod
@@ -44,14 +47,19 @@ class ResultView:
             values, unit, shows = result.height, "mm", "height"
         else:
             values, unit, shows = np.where(result.mask, result.phase, np.nan), "rad", "phase"
-        return cls(name, np.asarray(values, dtype=np.float32), unit, shows, result.points, result.report)
+        exposure = result.object.exposure_map
+        if exposure is not None:
+            exposure = np.where(result.mask, exposure, np.float32(np.nan)).astype(np.float32)
+        return cls(
+            name, np.asarray(values, dtype=np.float32), unit, shows, result.points, result.report, exposure=exposure
+        )
 
     @classmethod
     def from_directory(cls, name: str, path: Path) -> ResultView:
         """From a result directory (report.json, height.npy or phase.npy, mask.npy, points.ply), read
         through the result store: a FIFO, a device or a link out of the directory is refused, not followed."""
         stored = store.read_result(path, where=f"results/{name}")
-        return cls(name, stored.values, stored.unit, stored.shows, stored.points, stored.report, saved=True)
+        return cls(name, stored.values, stored.unit, stored.shows, stored.points, stored.report, True, stored.exposure)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -68,6 +76,32 @@ class ResultView:
             low, high = self.value_range()
             self._png = encode_png(colour_map(self.values, low, high))
         return self._png
+
+    def exposures(self) -> list[dict[str, Any]]:
+        """The exposure map's legend: each exposure (us), its share of the valid pixels and its colour."""
+        if self.exposure is None:
+            return []
+        values = self.exposure[np.isfinite(self.exposure)]
+        times, counts = np.unique(values, return_counts=True)
+        total = max(int(values.size), 1)
+        return [
+            {
+                "exposure_us": float(t),
+                "share": round(int(c) / total, 4),
+                "colour": EXPOSURE_COLOURS[i % len(EXPOSURE_COLOURS)],
+            }
+            for i, (t, c) in enumerate(zip(times, counts))
+        ]
+
+    def exposure_png(self) -> bytes:
+        """The exposure map as PNG: one colour per exposure (the legend's), invalid pixels grey."""
+        if self.exposure is None:
+            raise RigError(f"results/{self.name}: not a capture at several exposures (no exposure map)")
+        image = np.full((*self.shape, 3), 128, dtype=np.uint8)
+        for entry in self.exposures():
+            rgb = [int(entry["colour"][i : i + 2], 16) for i in (1, 3, 5)]
+            image[self.exposure == np.float32(entry["exposure_us"])] = rgb[::-1]  # OpenCV writes BGR
+        return encode_png(image)
 
     def surface(self, max_side: int = SURFACE_MAX_SIDE) -> dict[str, Any]:
         """Down-sampled grid for a 3-D surface: x, y (mm, or pixels without points), z; None where invalid."""
@@ -144,6 +178,7 @@ class ResultView:
             "calibration": report.get("calibration"),
             "notes": report.get("notes", []),
             "saved": self.saved,
+            "exposures": self.exposures(),
         }
 
 

@@ -29,7 +29,8 @@ from typing import Any
 import numpy as np
 
 from drivers.errors import DeviceError
-from rig.config import RigConfig
+from rig.config import PATTERN_SETS, RigConfig
+from rig.console import scan_setup
 from rig.console.datadir import DataDir
 from rig.console.devices import ProjectorSetting, Publish, RigHolder
 from rig.console.live_3d import Live3D
@@ -40,6 +41,7 @@ from rig.errors import RigError
 from rig.events import Cancelled, Reporter
 from rig.jobs import Job, Jobs
 from rig.pipeline.plan import DEFAULT_CORRECTION, ProcessOptions
+from rig.store.exposures import with_exposures
 from rig.store.files import INCOMPLETE_MARK
 
 log = logging.getLogger(__name__)
@@ -90,14 +92,17 @@ class ConsoleSession:
             self.calibration = calibrations[0]
         self.jobs = Jobs(lambda message: publish(message, None))
         self.rig = RigHolder(config, publish, self._publish_status)
-        self.live = LiveView(self.rig, publish, live_fps)
-        self.live_3d = Live3D(self.rig, publish, lambda: self.live.watching, self._calibration_dir)
-        self.rig.feeds = [self.live_3d, self.live]
         self.processing = Processing(data, self.jobs, publish, self._calibration_dir, self._publish_status)
+        self.live = LiveView(self.rig, publish, live_fps, paused=lambda: self.processing.scan_in_flight)
+        self.live_3d = Live3D(
+            self.rig, publish, lambda: self.live.watching, self._calibration_dir, paused=self.live.paused
+        )
+        self.rig.feeds = [self.live_3d, self.live]
         self.current: Job | None = None  # the acquisition running
         self._acquiring = threading.Lock()
         self._answer: threading.Event | None = None
         self.prompt: dict[str, str] | None = None  # the calibration prompt waiting for the operator
+        self.setup, self.setup_note = scan_setup.load(data.root)  # remembered per data folder
 
     # ------------------------------------------------------------------ life cycle
     def start(self) -> None:
@@ -157,6 +162,52 @@ class ConsoleSession:
         reply = self.rig.set_projector(setting)
         self._publish_status()
         return reply
+
+    def set_scan_setup(self, changes: dict[str, Any]) -> dict[str, Any]:
+        """Change the scan setup (checked, remembered in the data folder); every page sees it."""
+        setup = scan_setup.checked(self.setup, changes)
+        scan_setup.save(self.data.root, setup)
+        self.setup, self.setup_note = setup, None
+        self._publish_status()
+        return self.describe_setup()
+
+    def describe_setup(self) -> dict[str, Any]:
+        """The scan setup as the page shows it, with the rig config's values for empty fields."""
+        scan = self.setup.config(self.config).scan
+        return {
+            **self.setup.to_dict(),
+            "pattern_sets": list(PATTERN_SETS),
+            "used": {
+                "frequencies": list(scan.frequencies),
+                "steps": scan.steps,
+                "frames": len(scan.patterns()) * max(len(scan.exposures_us), 1),
+            },
+            "exposure_limits_us": self.rig.exposure_limits_us(),
+            "note": self.setup_note,
+        }
+
+    def suggest_exposures(self) -> dict[str, Any]:
+        """The exposure assistant's plan for what is in front of the rig now (a short pre-capture).
+
+        An acquisition: :class:`Busy` while another runs. The plan is shown, not applied: the page
+        puts its exposures in the setup when the operator takes them.
+        """
+        from rig.acquisition.exposure_plan import plan_exposures
+
+        self._acquisition_slot()
+        try:
+
+            def run() -> dict[str, Any]:
+                devices = self.rig.open()
+                devices.camera.stop()  # the live view's acquisition
+                try:
+                    return plan_exposures(devices, default_us=self.rig.exposure_us).to_dict()
+                finally:
+                    self.rig.restore_projector()
+
+            return self.rig.call(run)
+        finally:
+            self._acquiring.release()
 
     def set_live(self, overlay: bool | None = None, view: str | None = None) -> dict[str, Any]:
         return self.live.set(overlay, view)
@@ -241,11 +292,19 @@ class ConsoleSession:
 
         :class:`Busy` if an acquisition runs; the job runs to its end whatever the pages do.
         """
+        setup = self.setup
         return self._start_acquisition(
-            "scan", "captures", name, "scan", client, lambda job, path: self._scan(job, path, process, options)
+            "scan",
+            "captures",
+            name,
+            setup.capture_prefix(),
+            client,
+            lambda job, path: self._scan(job, path, process, options, setup),
         )
 
-    def _scan(self, job: Job, path: Path, process: bool, options: ProcessOptions | None) -> None:
+    def _scan(
+        self, job: Job, path: Path, process: bool, options: ProcessOptions | None, setup: scan_setup.ScanSetup
+    ) -> None:
         """Worker thread: the acquisition itself; with ``process``, its frames go to processing from
         memory as soon as the last one arrives, while the capture is still being written."""
         from rig.acquisition.scan import scan_with
@@ -255,7 +314,9 @@ class ConsoleSession:
         def acquire() -> None:
             devices = self.rig.open()
             devices.camera.stop()  # the live view's software-trigger acquisition
-            patterns = self.config.scan.patterns()
+            scan = setup.config(self.config).scan
+            base = scan.patterns()
+            patterns = with_exposures(base, scan.exposures_us)  # each exposure's full sequence in turn
             reporter = Reporter(f"scan {job.name}", sink=self.jobs.sink(job, "scan"), cancel=job.token)
             reporter.begin(len(patterns), f"scan {job.name}")
             projector = (devices.projector.width, devices.projector.height)
@@ -267,8 +328,8 @@ class ConsoleSession:
                     self.processing.queue(job, held.stack(), job.name, options, True, stored=stored)
 
             scan_with(
-                devices, path, patterns, progress=reporter, exposure_us=self.rig.exposure_us, gain=self.rig.gain,
-                on_frame=on_frame,
+                devices, path, base, progress=reporter, exposure_us=self.rig.exposure_us, gain=self.rig.gain,
+                on_frame=on_frame, exposures=scan.exposures_us or None, extra=setup.capture_extra(),
             )  # fmt: skip
 
         try:
@@ -521,6 +582,7 @@ class ConsoleSession:
             "calibration": self.calibration,
             "prompt": self.prompt,
             "calibrations": self.data.names("calibrations"),
+            "scan_setup": self.describe_setup(),
             "simulated": self.config.simulated,
             "fault_injection": self.fault_injection,
             "config": str(self.config.source) if self.config.source else "built-in simulated rig",

@@ -57,9 +57,44 @@ def geometry_from_config(config: RigConfig) -> synth.RigGeometry:
 
 
 def appearance_from_config(config: RigConfig) -> synth.Appearance:
-    """Photometry of ``[simulation]``: ambient light, projector gamma, camera gain and noise, 8 bit."""
+    """Photometry of ``[simulation]``: ambient light, projector gamma, camera gain and noise, 8 bit.
+
+    With ``full_well_e`` the noise is the sensor's shot and read noise (:class:`mock_devices.synth.Sensor`).
+    """
     sim = config.simulation
-    return synth.Appearance(ambient=sim.ambient, gamma=sim.gamma, gain=sim.camera_gain, snr_db=sim.snr_db, bit_depth=8)
+    sensor = None
+    if sim.full_well_e is not None:
+        try:
+            sensor = synth.Sensor(full_well_e=sim.full_well_e, read_noise_e=sim.read_noise_e)
+        except ValueError as exc:
+            raise ConfigError(f"{config.source or 'rig config'}: [simulation] {exc}") from None
+    return synth.Appearance(
+        ambient=sim.ambient, gamma=sim.gamma, gain=sim.camera_gain, snr_db=sim.snr_db, bit_depth=8, sensor=sensor
+    )
+
+
+def _variant(config: RigConfig) -> dict[str, int]:
+    """The scene's ``variant`` parameter from ``[simulation] scene_variant`` (ConfigError for a scene without variants)."""
+    variant = config.simulation.scene_variant
+    if not variant:
+        return {}
+    if config.simulation.scene not in scenes.VARIANTS:
+        raise ConfigError(
+            f"{config.source or 'rig config'}: [simulation] scene_variant: expected 0 for scene "
+            f"{config.simulation.scene!r} (variants exist for {', '.join(scenes.VARIANTS)}), found {variant}"
+        )
+    return {"variant": variant}
+
+
+def scene_reflectance(config: RigConfig, scene: str, geometry: synth.RigGeometry, height_mm: np.ndarray) -> Any:
+    """Reflectance the simulated camera sees for a capture's ``scene`` label (1.0: uniformly matte).
+
+    ``"object"`` is the configured scene; a scene of :data:`mock_devices.scenes.REFLECTANCES` (such as
+    ``shiny-and-dark``) brings its own map, any other scene is matte.
+    """
+    name, variant = (config.simulation.scene, _variant(config).get("variant", 0)) if scene == "object" else (scene, 0)
+    reflectance = scenes.scene_reflectance(name, height_mm, geometry.pixel_mm, geometry.l0_mm, geometry.d0_mm, variant)
+    return appearance_from_config(config).reflectivity if reflectance is None else reflectance
 
 
 def scene_height(config: RigConfig, scene: str, geometry: synth.RigGeometry) -> np.ndarray:
@@ -72,7 +107,7 @@ def scene_height(config: RigConfig, scene: str, geometry: synth.RigGeometry) -> 
     h, w, pixel_mm = geometry.camera_height, geometry.camera_width, geometry.pixel_mm
     if scene == "object":
         check_scene_name(config.simulation.scene, str(config.source) if config.source is not None else "rig config")
-        return scenes.make_scene(config.simulation.scene, h, w, pixel_mm)
+        return scenes.make_scene(config.simulation.scene, h, w, pixel_mm, **_variant(config))
     if scene == "reference":
         return np.zeros((h, w))
     match = PLANE_SCENE.fullmatch(scene)
@@ -143,6 +178,7 @@ class SimulatedRig:
         sim, g = self.config.simulation, self.geometry
         return {
             "scene": sim.scene if self.scene == "object" else self.scene,
+            **({"scene_variant": sim.scene_variant} if self.scene == "object" and sim.scene_variant else {}),
             "snr_db": sim.snr_db,
             "seed": sim.seed,
             "l0_mm": g.l0_mm,
@@ -159,11 +195,15 @@ class SimulatedRig:
             # GLProjector reads each frame back when it is shown, in the thread that owns its
             # OpenGL context: the camera, exposed from the trigger box's thread, never touches GL.
             self.projector = self._stack.enter_context(GLProjector(self.config.projector.size, name="GLProjector"))
+            appearance = replace(
+                appearance_from_config(self.config),
+                reflectivity=scene_reflectance(self.config, self.scene, self.geometry, self.height_mm),
+            )
             self.camera = SimulatedCamera(
                 self.projector,
                 self.geometry,
                 self.height_mm,
-                appearance_from_config(self.config),
+                appearance,
                 reference_exposure_us=self.config.camera.exposure_us,
                 faults=self.camera_faults,
                 rng=np.random.default_rng([self.config.simulation.seed, zlib.crc32(self.scene.encode())]),
@@ -193,6 +233,7 @@ class SimulatedRig:
             reflectivity = board_albedo(self.config, board, int(match.group(1) or 0))
         else:
             height = scene_height(self.config, scene, self.geometry)
+            reflectivity = scene_reflectance(self.config, scene, self.geometry, height)
         self.camera.set_scene(height)
         self.camera.appearance = replace(self.camera.appearance, reflectivity=reflectivity)
         self.scene, self.height_mm = scene, height

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -28,6 +28,7 @@ import numpy as np
 from calibration.store import Calibration, write_calibration
 from mock_devices import scenes, synth
 from rig.store.capture import write_capture
+from rig.store.exposures import with_exposures
 
 DEFAULT_FREQUENCIES = (1, 8, 64)
 DEFAULT_STEPS = 4
@@ -43,6 +44,34 @@ true_absolute_phase = synth.true_absolute_phase
 def scene_height(name: str, geometry: synth.RigGeometry, **params: float) -> np.ndarray:
     """Height map (mm) of a named scene of :data:`mock_devices.scenes.SCENES` seen by ``geometry``'s camera."""
     return scenes.make_scene(name, geometry.camera_height, geometry.camera_width, geometry.pixel_mm, **params)
+
+
+def scene_reflectance(
+    name: str, height_mm: np.ndarray, geometry: synth.RigGeometry, variant: int = 0
+) -> np.ndarray | None:
+    """Reflectance map of a named scene (its ``variant``) under ``geometry`` (None: uniformly matte)."""
+    return scenes.scene_reflectance(name, height_mm, geometry.pixel_mm, geometry.l0_mm, geometry.d0_mm, variant)
+
+
+def render_exposures(
+    height_mm: np.ndarray,
+    geometry: synth.RigGeometry,
+    patterns: Sequence[Mapping[str, Any]],
+    appearance: synth.Appearance,
+    exposures_us: Sequence[float],
+    rng: np.random.Generator,
+    reference_exposure_us: float = 10_000.0,
+) -> tuple[np.ndarray, synth.ProjectorMap]:
+    """Frames (E * N, H, W) of each exposure's full sequence in turn (the capture order of
+    :func:`rig.store.exposures.with_exposures`); the signal scales with exposure / ``reference_exposure_us``."""
+    mapping = synth.projector_coordinates(np.asarray(height_mm, dtype=np.float64), geometry)
+    stacks = [
+        synth.render_stack(
+            patterns, mapping, geometry, replace(appearance, gain=appearance.gain * e / reference_exposure_us), rng
+        )
+        for e in exposures_us
+    ]
+    return np.concatenate(stacks), mapping
 
 
 def render_scene(
@@ -103,13 +132,14 @@ class SimulatedScan:
     """Frames of an object and of the reference plane under the same patterns, with the truth."""
 
     geometry: synth.RigGeometry
-    patterns: list[dict[str, Any]]
+    patterns: list[dict[str, Any]]  # the base sequence (the reference plane's)
     height_mm: np.ndarray  # (H, W) true scene heights
     object_frames: np.ndarray  # (N, H, W)
     reference_frames: np.ndarray  # (N, H, W)
     object_map: synth.ProjectorMap
     reference_map: synth.ProjectorMap
     description: dict[str, Any] = field(default_factory=dict)
+    object_patterns: list[dict[str, Any]] | None = None  # the object's, when taken at several exposures
 
     @property
     def lit(self) -> np.ndarray:
@@ -128,6 +158,8 @@ def simulate_scan(
     appearance: synth.Appearance | None = None,
     seed: int | None = 0,
     scene_params: Mapping[str, float] | None = None,
+    exposures_us: Sequence[float] | None = None,
+    reference_exposure_us: float = 10_000.0,
 ) -> SimulatedScan:
     """Render a scene and the flat reference plane under a pattern sequence.
 
@@ -145,6 +177,11 @@ def simulate_scan(
         Seed of the noise generator (reproducible by default).
     scene_params : mapping, optional
         Extra parameters of the named scene.
+    exposures_us : sequence of float, optional
+        Several exposures: the object is captured at each (each exposure's full sequence in turn,
+        patterns tagged with their exposure), the reference plane once at ``reference_exposure_us``,
+        the exposure at which ``appearance.gain`` holds. A named scene with a reflectance map
+        (``shiny-and-dark``) is rendered with it.
     """
     geometry = demo_geometry() if geometry is None else geometry
     pattern_list: list[dict[str, Any]] = [
@@ -157,19 +194,34 @@ def simulate_scan(
     else:
         name = "custom"
         height = np.asarray(scene, dtype=np.float64)
+    variant = int((scene_params or {}).get("variant", 0))
+    reflectance = scene_reflectance(name, height, geometry, variant) if isinstance(scene, str) else None
+    seen = appearance if reflectance is None else replace(appearance, reflectivity=reflectance)
     rng = np.random.default_rng(seed)
-    object_frames, object_map = render_scene(height, geometry, pattern_list, appearance, rng)
+    if exposures_us is not None and len(exposures_us) > 1:
+        object_frames, object_map = render_exposures(
+            height, geometry, pattern_list, seen, exposures_us, rng, reference_exposure_us
+        )
+        object_patterns = with_exposures(pattern_list, exposures_us)
+    else:
+        exposure = reference_exposure_us if not exposures_us else float(exposures_us[0])
+        seen = replace(seen, gain=seen.gain * exposure / reference_exposure_us)
+        object_frames, object_map = render_scene(height, geometry, pattern_list, seen, rng)
+        object_patterns = pattern_list
     reference_frames, reference_map = render_scene(np.zeros_like(height), geometry, pattern_list, appearance, rng)
-    description = {
+    description: dict[str, Any] = {
         "scene": name,
         "scene_params": dict(scene_params or {}),
         "seed": seed,
         "snr_db": appearance.snr_db,
         "max_height_mm": float(np.max(height)),
     }
+    if exposures_us is not None:
+        description["exposures_us"] = [float(e) for e in exposures_us]
     return SimulatedScan(
         geometry=geometry,
         patterns=pattern_list,
+        object_patterns=object_patterns,
         height_mm=height,
         object_frames=object_frames,
         reference_frames=reference_frames,
@@ -209,7 +261,8 @@ def write_simulated_scan(scan: SimulatedScan, out: str | os.PathLike[str]) -> Si
     g = scan.geometry
     projector = {"width": g.projector_width, "height": g.projector_height}
     extra = {"simulation": dict(scan.description)}
-    write_capture(paths.capture, scan.object_frames, scan.patterns, projector, scene="object", extra=extra)
+    object_patterns = scan.object_patterns or scan.patterns
+    write_capture(paths.capture, scan.object_frames, object_patterns, projector, scene="object", extra=extra)
     write_capture(paths.reference, scan.reference_frames, scan.patterns, projector, scene="reference", extra=extra)
     write_calibration(paths.calibration, scan.calibration(reference="reference"))
     root.mkdir(parents=True, exist_ok=True)

@@ -26,15 +26,17 @@ registries, so a new method is one entry, not a new code path:
 Automatic choice of the unwrapping method (``--unwrap auto``), from the sinusoid frequencies
 along the fringe axis (the axis of the first sinusoid pattern):
 
-1. one frequency: ``gray`` if Gray-code planes along that axis are present, else ``spatial``
-   (quality-guided); a single frame per frequency: ``ftp`` (Fourier transform profilometry,
-   then spatial unwrapping);
+1. one frequency: ``gray`` if Gray- or binary-code planes along that axis are present, else
+   ``spatial`` (quality-guided); a single frame per frequency: ``ftp`` (Fourier transform
+   profilometry, then spatial unwrapping);
 2. the lowest frequency is 1: ``hierarchical``;
 3. two coprime frequencies: ``two-frequency`` (number-theoretic, Ding);
 4. three close frequencies (highest < 2 x lowest) whose beats differ by 1 (64, 58, 53 -> 6, 5
    -> 1): ``heterodyne``; otherwise, three frequencies without a common divisor:
    ``three-frequency``;
-5. anything else: an error asking for ``--unwrap``.
+5. anything else: ``gray`` when a code runs along the axis (it resolves a period or beat, the
+   other frequencies follow hierarchically: non-integer fringe counts too), else an error asking
+   for ``--unwrap``.
 
 Methods that use fewer frequencies than captured take the highest ones. Spatial unwrapping gives
 phase up to a constant 2 pi k per connected region: the height stage then removes from each region
@@ -54,7 +56,7 @@ from typing import TYPE_CHECKING, Any
 from rig.errors import CaptureError, ProcessingError
 
 if TYPE_CHECKING:
-    from processing.projection.patterns import Pattern
+    from processing.projection.patterns import Gray, Pattern
 
 log = logging.getLogger(__name__)
 
@@ -124,12 +126,23 @@ class SinusoidGroup:
 
 @dataclass
 class GrayGroup:
-    """Gray-code bit planes along one axis: pattern index of each bit (0 = most significant)."""
+    """Code bit planes along one axis: pattern index of each bit (0 = most significant).
+
+    ``binary``: a plain binary code rather than Gray; ``period_px``: the cell width in projector
+    pixels (None: the axis over ``2**bits``).
+    """
 
     axis: str
     bits: int
     planes: dict[int, int] = field(default_factory=dict)
     inverted: dict[int, int] = field(default_factory=dict)
+    binary: bool = False
+    period_px: float | None = None
+
+    @property
+    def code(self) -> str:
+        """The pattern kind of the planes: ``gray`` or ``binary``."""
+        return "binary" if self.binary else "gray"
 
 
 @dataclass
@@ -149,6 +162,7 @@ class PatternGroups:
 def group_patterns(patterns: Sequence[Pattern | Mapping[str, Any]], where: str = "capture.json") -> PatternGroups:
     """Group patterns by kind: sinusoids per (axis, frequency), Gray planes per axis, flats."""
     from processing.projection.patterns import (  # numpy: not for the parser
+        Binary,
         Flat,
         Gray,
         Sinusoid,
@@ -168,11 +182,11 @@ def group_patterns(patterns: Sequence[Pattern | Mapping[str, Any]], where: str =
             group.indices.append(index)
             group.shifts.append(pattern.phase_delay)
         elif isinstance(pattern, Gray):
-            group_g = gray.setdefault(pattern.axis, GrayGroup(pattern.axis, pattern.bits))
-            if group_g.bits != pattern.bits:
-                raise CaptureError(
-                    f"{where}: patterns[{index}].bits: expected {group_g.bits} like the other Gray planes, found {pattern.bits}"
-                )
+            group_g = gray.setdefault(
+                pattern.axis,
+                GrayGroup(pattern.axis, pattern.bits, binary=isinstance(pattern, Binary), period_px=pattern.period_px),
+            )
+            _check_same_code(group_g, pattern, index, where)
             (group_g.inverted if pattern.inverted else group_g.planes)[pattern.bit] = index
         elif isinstance(pattern, Flat):
             flats.append((index, float(pattern.level)))
@@ -189,6 +203,19 @@ def group_patterns(patterns: Sequence[Pattern | Mapping[str, Any]], where: str =
     for group in sinusoids.values():
         _check_separable(group, where)
     return PatternGroups(list(sinusoids.values()), gray, flats, list(single.values()))
+
+
+def _check_same_code(group: GrayGroup, pattern: Gray, index: int, where: str) -> None:
+    """Every code plane along one axis belongs to one code: same kind, bits and cell width."""
+    kind = "binary" if group.binary else "gray"
+    found = {"kind": pattern.kind, "bits": pattern.bits, "period_px": pattern.period_px}
+    expected = {"kind": kind, "bits": group.bits, "period_px": group.period_px}
+    for key, value in expected.items():
+        if found[key] != value:
+            raise CaptureError(
+                f"{where}: patterns[{index}].{key}: expected {value!r} like the other code planes along "
+                f"{group.axis}, found {found[key]!r}"
+            )
 
 
 def _check_separable(group: SinusoidGroup, where: str) -> None:
@@ -230,6 +257,16 @@ def choose_unwrap(groups: PatternGroups, axis: str) -> str:
         if along[0].steps < 3:
             return "ftp"
         return "gray" if axis in groups.gray else "spatial"
+    try:
+        return _choose_temporal(freqs)
+    except ProcessingError:
+        if axis in groups.gray:  # a code along the axis resolves what the frequencies alone cannot
+            return "gray"
+        raise
+
+
+def _choose_temporal(freqs: Sequence[float]) -> str:
+    """The temporal method several frequencies allow on their own (rules 2 to 5)."""
     if not _all_integers(freqs):
         raise ProcessingError(
             f"frequencies {freqs}: temporal unwrapping needs whole fringe counts; choose --unwrap spatial"

@@ -36,6 +36,7 @@ from rig.pipeline.stages import (
 from rig.pipeline.unwrapping import UNWRAP_METHODS
 from rig.store import files
 from rig.store.capture import Capture, read_capture
+from rig.store.exposures import exposure_sets
 
 log = logging.getLogger(__name__)
 
@@ -66,9 +67,16 @@ def _fringe_axis(groups: PatternGroups, options: ProcessOptions, where: str) -> 
 
 
 def _scene(name: str, capture: Capture, options: ProcessOptions) -> SceneState:
-    groups = group_patterns(capture.pattern_models, str(capture.manifest_path))
+    """A capture's state; one taken at several exposures is grouped by its base sequence (fused when loaded)."""
+    where = str(capture.manifest_path)
+    sets = exposure_sets(capture.pattern_models, where)
+    groups = group_patterns(sets.base, where)
     return SceneState(
-        name=name, capture=capture, groups=groups, axis=_fringe_axis(groups, options, str(capture.manifest_path))
+        name=name,
+        capture=capture,
+        groups=groups,
+        axis=_fringe_axis(groups, options, where),
+        exposures=sets if sets.multiple else None,
     )
 
 

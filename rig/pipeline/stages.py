@@ -31,6 +31,7 @@ from rig.blas import rpca_blas
 from rig.errors import ProcessingError
 from rig.pipeline import convention_check
 from rig.pipeline.corrections import stage_correction
+from rig.pipeline.exposures import fuse_state_exposures
 from rig.pipeline.plan import PatternGroups, ProcessOptions, _all_integers, accepted_params, choose_unwrap
 from rig.pipeline.state import SceneState, UnwrappedPhase, WrappedPhase
 from rig.pipeline.unwrapping import REGISTRY as UNWRAPPERS
@@ -46,10 +47,13 @@ def stage_load(state: SceneState, options: ProcessOptions) -> None:
     """Decode every frame (checksums, size and bit depth checked) into an (N, H, W) stack.
 
     Frames given in memory (:func:`rig.pipeline.run.process`'s ``frames``) are checked against the
-    manifest instead: one per pattern, the camera's size and the bit depth's dtype.
+    manifest instead: one per pattern, the camera's size and the bit depth's dtype. A capture taken
+    at several exposures leaves this stage as one fused stack of its base patterns
+    (:mod:`rig.pipeline.exposures`).
     """
     if state.frames is None:
         state.frames = state.capture.load_frames()
+        fuse_state_exposures(state)
         return
     capture, frames = state.capture, state.frames
     expected = (len(capture.patterns), *capture.shape)
@@ -62,6 +66,7 @@ def stage_load(state: SceneState, options: ProcessOptions) -> None:
         raise ProcessingError(
             f"frames: expected dtype {dtype} for camera.bit_depth {capture.bit_depth}, found {frames.dtype}"
         )
+    fuse_state_exposures(state)
 
 
 def stage_undistort(state: SceneState, options: ProcessOptions) -> None:
@@ -201,8 +206,13 @@ def _predict_phase_sigma(state: SceneState) -> None:
         return
     # the highest frequency's fit residual alone: ~16k sampled pixels pin sigma_I within 1 %
     fitted = [g for g in along if g.steps >= 4][-1:] or along
-    sigma_i = noise_sigma(
-        state.frames, [g.indices for g in fitted], [np.asarray(g.shifts) for g in fitted], axis=state.axis
+    fused = state.info.get("exposures")  # fused exposures: unit noise at every pixel by construction
+    sigma_i = (
+        float(fused["noise_sigma_grey"])
+        if fused
+        else noise_sigma(
+            state.frames, [g.indices for g in fitted], [np.asarray(g.shifts) for g in fitted], axis=state.axis
+        )
     )
     state.info["noise_sigma_grey"] = round(sigma_i, 4)
     state.phase_sigma = phase_sigma(modulation, sigma_i, along[-1].steps)
@@ -348,15 +358,26 @@ def _gray_threshold(state: SceneState) -> np.ndarray | None:
 
 
 def _gray_planes(state: SceneState) -> GrayPlanes:
-    """The capture's Gray-code planes along the fringe axis (ProcessingError when it has none)."""
+    """The capture's code planes (Gray or binary) along the fringe axis (ProcessingError when it has none)."""
     gray = state.groups.gray.get(state.axis)
     if gray is None:
-        raise ProcessingError(f"--unwrap gray: the capture has no Gray-code planes along {state.axis}")
+        raise ProcessingError(f"--unwrap gray: the capture has no Gray- or binary-code planes along {state.axis}")
     assert state.frames is not None
+    width, height = state.capture.projector_size
+    extent = float(width if state.axis == "x" else height)
+    cell = None
+    if gray.period_px is not None:
+        covered = float(gray.period_px) * (1 << gray.bits)
+        if covered < extent:
+            raise ProcessingError(
+                f"{state.capture.manifest_path}: {gray.code} code along {state.axis}: {1 << gray.bits} cells of "
+                f"{gray.period_px:g} px cover {covered:g} px; expected at least the projector's {extent:g} px"
+            )
+        cell = float(gray.period_px) / extent
     planes = state.frames[[gray.planes[b] for b in range(gray.bits)]]
     inverted = state.frames[[gray.inverted[b] for b in range(gray.bits)]] if gray.inverted else None
     threshold = None if inverted is not None else _gray_threshold(state)
-    return GrayPlanes(planes, inverted, threshold, gray.bits)
+    return GrayPlanes(planes, inverted, threshold, gray.bits, gray.binary, cell, gray.period_px)
 
 
 def _unwrap_inputs(state: SceneState, options: ProcessOptions, method: UnwrapMethod) -> UnwrapInputs:
@@ -381,6 +402,7 @@ def _unwrap_inputs(state: SceneState, options: ProcessOptions, method: UnwrapMet
         params=options.params,
         check_convention=functools.partial(_check_convention, state, options),
         gray=_gray_planes(state) if "gray" in method.needs else None,
+        info=state.info,
     )
 
 
@@ -431,9 +453,10 @@ def _check_convention(
     options: ProcessOptions,
     evidence: str,
     maps: Sequence[np.ndarray],
-    freqs: Sequence[int],
+    freqs: Sequence[float],
     stripes: np.ndarray | None = None,
     bits: int = 0,
+    cell_periods: float | None = None,
 ) -> None:
     """Refuse images whose phase convention differs from the capture's (:mod:`rig.pipeline.convention_check`)."""
     if not convention_check.enabled(options):
@@ -441,10 +464,10 @@ def _check_convention(
     assert state.wrapped is not None
     if evidence == "gray":
         assert stripes is not None
-        estimate = gray_offset(maps[0], stripes, bits, freqs[0], state.wrapped.valid, state.axis)
+        estimate = gray_offset(maps[0], stripes, bits, freqs[0], state.wrapped.valid, state.axis, cell_periods)
         text = "the Gray-code period boundaries fall mid-period instead of at the phase wrap"
     else:
-        estimate = heterodyne_offset(maps, freqs, state.wrapped.valid)
+        estimate = heterodyne_offset(maps, [int(f) for f in freqs], state.wrapped.valid)
         text = "the heterodyne residuals are far above the noise (the beats disagree with the finest phase)"
     state.info["phase_convention_offset_rad"] = estimate.offset
     convention_check.check(estimate, text, state.capture, state.capture.patterns, str(state.capture.manifest_path))

@@ -10,6 +10,7 @@ import numpy as np
 from calibration.store import Calibration
 from rig.pipeline.plan import PatternGroups
 from rig.store.capture import Capture
+from rig.store.exposures import ExposureSets
 
 
 @dataclass
@@ -63,3 +64,6 @@ class SceneState:
     # predicted phase standard deviation (rad) per pixel at the unwrapped frequency (processing.geometry.uncertainty)
     phase_sigma: np.ndarray | None = None
     single_shot_reference: Any = None  # processing.unwrap.single_shot.SingleShotReference of a reference capture
+    exposures: ExposureSets | None = None  # a capture taken at several exposures (fused in the load stage)
+    # per pixel the exposure (us) that weighed most in the fused phase; NaN where none was usable
+    exposure_map: np.ndarray | None = None

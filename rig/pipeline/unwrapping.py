@@ -13,7 +13,7 @@ entries. A new method is one entry here: copy ``two-frequency`` for a temporal m
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
@@ -30,20 +30,33 @@ class ConventionCheck(Protocol):
         self,
         evidence: str,
         maps: Sequence[np.ndarray],
-        freqs: Sequence[int],
+        freqs: Sequence[float],
         stripes: np.ndarray | None = None,
         bits: int = 0,
+        cell_periods: float | None = None,
     ) -> None: ...
 
 
 @dataclass(frozen=True)
 class GrayPlanes:
-    """Captured Gray-code bit planes along the fringe axis (most significant first) and how to threshold them."""
+    """Captured code bit planes along the fringe axis (most significant first) and how to threshold them.
+
+    ``binary``: a plain binary code, not Gray. ``cell``: the width of one code cell as a fraction
+    of the axis (``1 / 2**bits`` unless the patterns give ``period_px``); ``cell_px`` in pixels.
+    """
 
     planes: np.ndarray
     inverted: np.ndarray | None
     threshold: np.ndarray | None
     bits: int
+    binary: bool = False
+    cell: float | None = None
+    cell_px: float | None = None
+
+    @property
+    def cell_fraction(self) -> float:
+        """One cell's width as a fraction of the axis."""
+        return self.cell if self.cell is not None else 1.0 / (1 << self.bits)
 
 
 @dataclass(frozen=True)
@@ -54,7 +67,8 @@ class UnwrapInputs:
     first; whole numbers as ints when the method needs whole fringe counts). ``valid``: the
     modulation mask. ``gray``: the Gray planes when the method needs ``"gray"``. ``params``: the
     run's ``--param`` entries. ``check_convention``: call with the method's own evidence of the
-    phase convention (heterodyne residuals, Gray period boundaries).
+    phase convention (heterodyne residuals, Gray period boundaries). ``info``: where the method
+    says what it did, for report.json's ``stage_info``.
     """
 
     phases: list[np.ndarray]
@@ -63,6 +77,7 @@ class UnwrapInputs:
     params: Mapping[str, Any]
     check_convention: ConventionCheck
     gray: GrayPlanes | None = None
+    info: dict[str, Any] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -118,17 +133,38 @@ def _heterodyne(inputs: UnwrapInputs) -> UnwrapResult:
 def _gray(inputs: UnwrapInputs) -> UnwrapResult:
     gray = inputs.gray
     assert gray is not None  # declared in needs: the phase stage supplies it
-    stripes = temporal.decode_gray(gray.planes, inverted=gray.inverted, threshold=gray.threshold)
-    frequency = int(inputs.frequencies[-1])
-    complementary = (1 << gray.bits) == 2 * frequency
-    if not complementary and (1 << gray.bits) != frequency:
+    stripes = temporal.decode_stripes(gray.planes, inverted=gray.inverted, threshold=gray.threshold, binary=gray.binary)
+    frequencies = [float(f) for f in inputs.frequencies]
+    cell = gray.cell_fraction
+    try:
+        rung = temporal.code_rung(frequencies, cell)
+    except ValueError:
+        cell_text = f"{gray.cell_px:g} px" if gray.cell_px is not None else f"1/{1 << gray.bits} of the axis"
+        periods = ", ".join(f"{1.0 / (f * cell):.3g}" for f in frequencies)
         raise ProcessingError(
-            f"--unwrap gray: {gray.bits} Gray bits give {1 << gray.bits} stripes; expected the fringe count "
-            f"{inputs.frequencies[-1]:g} (or twice it, complementary Gray code)"
+            f"--unwrap gray: the code's cells ({cell_text}) are wider than every fringe period ({periods} cells) "
+            "and every beat of two frequencies; expected a period or beat of at least one cell"
+        ) from None
+    evidence = [i for i, f in enumerate(frequencies) if f * cell <= 1.0 + 1e-9]  # captured periods of >= 1 cell
+    if evidence:
+        index = evidence[-1]
+        inputs.check_convention(
+            "gray", [inputs.phases[index]], [frequencies[index]], stripes, gray.bits, frequencies[index] * cell
         )
-    phase = inputs.phases[-1]
-    inputs.check_convention("gray", [phase], [frequency], stripes, gray.bits)
-    return temporal.unwrap_gray(phase, stripes, gray.bits, frequency, complementary=complementary)
+    inputs.info["code"] = {
+        "kind": "binary" if gray.binary else "gray",
+        "bits": gray.bits,
+        "cell_px": gray.cell_px,
+        "resolves": f"beat {rung.frequency:g}" if len(rung.pair) == 2 else f"frequency {rung.frequency:g}",
+        "cells_per_period": round(rung.cells_per_period, 6),
+        # how far (in periods) a decoded cell may be off its border before the order is wrong: 0 when
+        # cells and periods share their borders (r = 1), where the bits' border side decides
+        "margin_periods": 0.0 if rung.aligned else round(0.5 - 0.5 / rung.cells_per_period, 6),
+    }
+    side = None
+    if rung.aligned:  # cells and periods share borders: the code's bits say which side of one a pixel is
+        side = temporal.border_side(gray.planes, stripes, gray.inverted, gray.threshold, gray.binary)
+    return temporal.unwrap_coded(inputs.phases, frequencies, stripes, cell, side=side, **_max_residual(inputs.params))
 
 
 def _spatial(inputs: UnwrapInputs) -> UnwrapResult:
@@ -176,7 +212,9 @@ _ENTRIES = (
     UnwrapMethod(
         "gray",
         _gray,
-        "Gray-code bit planes give the fringe order of the highest frequency (plain or complementary)",
+        "Gray- or binary-code bit planes resolve the fringe period (or beat of two frequencies) their cells "
+        "match; higher frequencies follow hierarchically (plain, complementary, any cell width)",
+        all_frequencies=True,
         needs=("gray",),
         rescue=False,
     ),
@@ -199,7 +237,8 @@ REGISTRY: dict[str, UnwrapMethod] = {method.name: method for method in _ENTRIES}
 
 AUTO_DESCRIPTION = (
     "gray or spatial for one frequency (ftp for a single frame), hierarchical when frequency 1 is present, "
-    "two-frequency for 2 coprime, heterodyne or three-frequency for 3"
+    "two-frequency for 2 coprime, heterodyne or three-frequency for 3, gray where a code runs along the axis "
+    "and no other method fits"
 )
 
 # What --unwrap accepts: auto (rig.pipeline.plan.choose_unwrap picks an entry) and every entry.

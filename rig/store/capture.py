@@ -52,6 +52,7 @@ from processing.projection.patterns import (
 )
 from rig.errors import CaptureError
 from rig.store import files
+from rig.store.exposures import exposure_sets
 
 log = logging.getLogger(__name__)
 
@@ -172,6 +173,7 @@ def validate_manifest(manifest: Any, where: str) -> list[Pattern]:
     frames = manifest.get("frames")
     if not isinstance(frames, list):
         raise _fail(where, "frames", "a list", frames)
+    exposure_sets(models, where)  # a multi-exposure capture's sequences line up (rig/store/exposures.py)
     owner = _check_frames(frames, len(patterns), where)
     if manifest["complete"]:
         missing = [i for i in range(len(patterns)) if i not in owner]
@@ -430,12 +432,15 @@ def check_same_patterns(reference: Capture, capture: Capture) -> None:
             f"{reference.manifest_path}: projector: expected {capture.projector_size} like "
             f"{capture.manifest_path}, found {reference.projector_size}"
         )
-    if len(reference.patterns) != len(capture.patterns):
+    # a capture taken at several exposures projects its base sequence at each: the reference needs that sequence once
+    ref_base = exposure_sets(reference.pattern_models, str(reference.manifest_path)).base
+    obj_base = exposure_sets(capture.pattern_models, str(capture.manifest_path)).base
+    if len(ref_base) != len(obj_base):
         raise CaptureError(
-            f"{reference.manifest_path}: patterns: expected the {len(capture.patterns)} patterns of "
-            f"{capture.manifest_path}, found {len(reference.patterns)}"
+            f"{reference.manifest_path}: patterns: expected the {len(obj_base)} patterns of "
+            f"{capture.manifest_path}, found {len(ref_base)}"
         )
-    for i, (ref, obj) in enumerate(zip(reference.pattern_models, capture.pattern_models)):
+    for i, (ref, obj) in enumerate(zip(ref_base, obj_base)):
         if not same_projection(ref, obj):
             raise CaptureError(
                 f"{reference.manifest_path}: patterns[{i}]: expected {pattern_signature(obj)} like "

@@ -9,12 +9,18 @@ the patterns of a short description, the *pattern spec*: groups separated by ``;
     group per frequency. Keys: ``f`` (or ``frequency``), ``steps``, ``phase`` (the pattern's
     ``phase_rad``: a number, ``pi``, ``-pi``, ``pi/2``, ``90deg``), ``shifts`` (non-uniform or
     explicitly listed shifts, ``0/90/180/270deg`` or radians, ``/``-separated), ``axis`` (x|y).
-``gray:bits=6``
-    Gray-code bit planes, most significant first (processing.projection.patterns' convention; ``order=lsb``
+``gray:bits=6`` (``binary:bits=6`` for a plain binary code)
+    Code bit planes, most significant first (processing.projection.patterns' convention; ``order=lsb``
     for planes stored least significant first); ``inverted=after`` (all planes, then all inverted
-    ones) or ``inverted=interleaved`` (plane, inverted plane, ...); ``axis``.
+    ones) or ``inverted=interleaved`` (plane, inverted plane, ...); ``period=P`` cells P projector
+    pixels wide (default: the axis over 2**bits); ``axis``. Column bits then row bits (OpenCV's
+    GrayCodePattern) are two groups: ``gray:bits=5,inverted=interleaved; gray:bits=4,inverted=interleaved,axis=y``.
 ``flat:level=1`` (also ``white``, ``black``)
     Constant frames. ``skip:N`` ignores N files.
+
+With ``exposures_us`` (``--exposures 2000,8000,32000``) the folder holds the spec's files once per
+exposure, each exposure's full sequence in turn: a capture at several exposures
+(:mod:`rig.store.exposures`).
 
 Instead of a spec string, ``--patterns`` may name a JSON file: ``{"patterns": [...]}`` with
 capture-format pattern entries, optionally ``"files": [...]`` (names in the folder, in order).
@@ -39,7 +45,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from processing.projection.patterns import Flat, Gray, Pattern, Sinusoid
+from processing.projection.patterns import MAX_CODE_BITS, Binary, Flat, Gray, Pattern, Sinusoid
 from rig.errors import CaptureError, ConfigError
 from rig.store import files as files_layer
 from rig.store.capture import (
@@ -49,6 +55,7 @@ from rig.store.capture import (
     utc_now,
     validate_pattern,
 )
+from rig.store.exposures import EXPOSURE_KEY
 
 IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp", ".pgm", ".ppm")
 
@@ -144,7 +151,7 @@ def parse_spec(spec: str) -> list[Pattern | None]:
         where = f"--patterns group {number} ({group!r})"
         parser = _GROUP_PARSERS.get(kind)
         if parser is None:
-            raise ConfigError(f"{where}: unknown kind {kind!r}; expected sin, gray, flat, white, black or skip")
+            raise ConfigError(f"{where}: unknown kind {kind!r}; expected sin, gray, binary, flat, white, black or skip")
         out.extend(parser(kind, body, where))
     return out
 
@@ -176,26 +183,30 @@ def _sinusoid_group(_kind: str, body: str, where: str) -> list[Pattern | None]:
     ]
 
 
-def _gray_group(_kind: str, body: str, where: str) -> list[Pattern | None]:
-    """``gray:bits=N[,order=msb|lsb,inverted=after|interleaved,axis=..]``: Gray-code bit planes,
-    most significant first unless ``order=lsb``."""
-    p = _params(body, where, ("bits", "order", "inverted", "axis"))
+def _gray_group(kind: str, body: str, where: str) -> list[Pattern | None]:
+    """``gray:bits=N[,order=msb|lsb,inverted=after|interleaved,period=P,axis=..]`` (or ``binary:``): code
+    bit planes, most significant first unless ``order=lsb``; ``period`` the cell width in projector pixels."""
+    p = _params(body, where, ("bits", "order", "inverted", "period", "axis"))
     if "bits" not in p:
         raise ConfigError(f"{where}: expected bits=N")
     bits = _positive_int(p["bits"], f"{where}: bits")
+    if bits > MAX_CODE_BITS:
+        raise ConfigError(f"{where}: bits: expected 1 .. {MAX_CODE_BITS}, found {bits}")
     inverted = p.get("inverted", "none")
     if inverted not in ("none", "after", "interleaved"):
         raise ConfigError(f"{where}: inverted: expected none, after or interleaved, found {inverted!r}")
     significance = p.get("order", "msb")
     if significance not in ("msb", "lsb"):
         raise ConfigError(f"{where}: order: expected msb (most significant plane first) or lsb, found {significance!r}")
+    period = _positive_number(p["period"], f"{where}: period") if "period" in p else None
     axis = _axis(p, where)
     planes = range(bits) if significance == "msb" else range(bits - 1, -1, -1)  # bit 0: the most significant
     if inverted == "interleaved":  # each bit, then its inverse
         order = [(b, inv) for b in planes for inv in (False, True)]
     else:  # every bit, then (after) every inverse
         order = [(b, inv) for inv in ((False, True) if inverted == "after" else (False,)) for b in planes]
-    return [Gray(axis=axis, bit=b, bits=bits, inverted=inv) for b, inv in order]
+    code = Binary if kind == "binary" else Gray
+    return [code(axis=axis, bit=b, bits=bits, inverted=inv, period_px=period) for b, inv in order]
 
 
 def _flat_group(kind: str, body: str, where: str) -> list[Pattern | None]:
@@ -221,6 +232,7 @@ _GROUP_PARSERS: dict[str, Callable[[str, str, str], list[Pattern | None]]] = {
     "sin": _sinusoid_group,
     "sinusoid": _sinusoid_group,
     "gray": _gray_group,
+    "binary": _gray_group,
     "flat": _flat_group,
     "white": _flat_group,
     "black": _flat_group,
@@ -303,6 +315,8 @@ class ImportOptions:
     scene: str = "object"
     overwrite: bool = False
     conversions: list[str] = field(default_factory=list)
+    # several exposures: the folder holds each exposure's full sequence (as the spec describes it) in turn
+    exposures_us: tuple[float, ...] = ()
 
 
 def parse_crop(text: str) -> tuple[int, int, int, int]:
@@ -362,11 +376,13 @@ def import_folder(
     if options.downsample < 1:
         raise ConfigError(f"--downsample: expected an integer >= 1, found {options.downsample}")
     entries, listed = load_spec(spec)
+    entries = _at_exposures(entries, options.exposures_us)
     files = _source_files(folder, spec, listed, options)
     if len(files) != len(entries):
         kept = sum(e is not None for e in entries)
+        times = f" at {len(options.exposures_us)} exposures" if len(options.exposures_us) > 1 else ""
         raise ConfigError(
-            f"{folder}: the pattern spec describes {len(entries)} files ({kept} patterns), found {len(files)} images"
+            f"{folder}: the pattern spec describes {len(entries)} files{times} ({kept} patterns), found {len(files)} images"
             + (f" matching {options.glob!r}" if options.glob else "")
             + (f" ({files[0].name} .. {files[-1].name})" if files else "")
         )
@@ -403,6 +419,16 @@ def import_folder(
         for i, ((_, path), image, digest) in enumerate(zip(pairs, images, digests)):
             writer.add_frame(i, image, source_file=path.name, source_sha256=digest)
     return read_capture(output)
+
+
+def _at_exposures(
+    entries: list[Pattern | Mapping[str, Any] | None], exposures_us: Sequence[float]
+) -> list[Pattern | Mapping[str, Any] | None]:
+    """The spec's files once per exposure, each pattern tagged with its exposure (rig/store/exposures.py)."""
+    if len(exposures_us) <= 1:
+        return entries
+    plain = [None if e is None else (e.to_dict() if isinstance(e, Pattern) else dict(e)) for e in entries]
+    return [None if e is None else {**e, EXPOSURE_KEY: t} for t in exposures_us for e in plain]
 
 
 def _source_files(folder: Path, spec: str, listed: list[str] | None, options: ImportOptions) -> list[Path]:

@@ -11,6 +11,7 @@ A result directory (``rig process -o OUT``, the console's ``DATA/results/NAME``,
     height.npy     heights in mm, NaN where invalid (with a calibration)
     uncertainty.npy  predicted height sigma in mm, NaN where invalid (with a calibration, phase shifting)
     unresolved.npy   bool, valid pixels whose fringe orders no evidence settled (when the correction found any)
+    exposure.npy   per pixel the exposure (us) that weighed most in the fused phase (captures at several exposures)
     + one file per output format asked for (with a calibration): :data:`FORMATS`
 
 A new output format is one :class:`OutputFormat` entry in :data:`FORMATS` (copy ``"stl"``): its
@@ -55,6 +56,7 @@ WRAPPED = "wrapped.npy"
 HEIGHT = "height.npy"
 UNCERTAINTY = "uncertainty.npy"
 UNRESOLVED = "unresolved.npy"
+EXPOSURE = "exposure.npy"
 POINTS = "points.ply"
 MESH_PLY = "mesh.ply"
 MESH_STL = "mesh.stl"
@@ -172,6 +174,7 @@ MEDIA_TYPES: dict[str, str] = {
     HEIGHT: OCTET,
     UNCERTAINTY: OCTET,
     UNRESOLVED: OCTET,
+    EXPOSURE: OCTET,
     PHASE: OCTET,
     MASK: OCTET,
     WRAPPED: OCTET,
@@ -278,6 +281,9 @@ def _write_files(
         written["mask"] = encode.write_array(out / MASK, np.asarray(result.mask, dtype=bool)).name
         if obj.unresolved is not None and obj.unresolved.any():
             written["unresolved"] = encode.write_array(out / UNRESOLVED, obj.unresolved & result.mask).name
+        if obj.exposure_map is not None:
+            exposure = np.where(result.mask, obj.exposure_map, np.float32(np.nan)).astype(np.float32)
+            written["exposure"] = encode.write_array(out / EXPOSURE, exposure).name
         if result.height is None:
             written["wrapped"] = encode.write_array(out / WRAPPED, encode.wrapped_maps(obj)).name
         else:
@@ -350,6 +356,7 @@ class StoredResult:
     mask: np.ndarray  # (H, W) bool
     points: np.ndarray | None  # (H, W, 3) float32 mm, NaN where invalid
     report: dict[str, Any]
+    exposure: np.ndarray | None = None  # (H, W) float32 us: the exposure each pixel drew on most (several exposures)
 
 
 def read_result(directory: str | Path, where: str | None = None) -> StoredResult:
@@ -378,7 +385,14 @@ def read_result(directory: str | Path, where: str | None = None) -> StoredResult
             )
         points = np.full((*mask.shape, 3), np.nan, dtype=np.float32)
         points[mask] = valid
-    return StoredResult(np.asarray(values, dtype=np.float32), unit, shows, mask, points, report)
+    exposure = None
+    if has_file(directory, EXPOSURE):
+        exposure = np.asarray(_read_array(directory, EXPOSURE, where), dtype=np.float32)
+        if exposure.shape != mask.shape:
+            raise OutputError(
+                f"{where}/{EXPOSURE}: expected the (H, W) of mask.npy {mask.shape}, found {exposure.shape}"
+            )
+    return StoredResult(np.asarray(values, dtype=np.float32), unit, shows, mask, points, report, exposure)
 
 
 def result_file(directory: str | Path, file: str) -> Path:

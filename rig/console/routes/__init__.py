@@ -8,12 +8,13 @@ from __future__ import annotations
 
 from fastapi import APIRouter
 
-from rig.console.routes import calibration, data, live, scan, settings, verify
+from rig.console.routes import calibration, data, live, scan, settings, setup, verify
 
 ROUTERS: tuple[APIRouter, ...] = (
     live.router,
     settings.router,
     scan.router,
+    setup.router,
     data.router,
     calibration.router,
     verify.router,

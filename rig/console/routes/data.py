@@ -76,6 +76,17 @@ async def result_png(name: str, session: ConsoleSession = Depends(session_of)) -
 
 
 @router.get(
+    "/results/{name}/exposure.png",
+    summary="a capture at several exposures: per pixel the exposure it drew on most (colours: the summary's exposures)",
+)
+async def result_exposure_png(name: str, session: ConsoleSession = Depends(session_of)) -> Response:
+    view = await _view(session, name)
+    if view.exposure is None:
+        raise HTTPException(404, f"results/{name}: not a capture at several exposures (no exposure map)")
+    return Response(await run_in_threadpool(view.exposure_png), media_type="image/png")
+
+
+@router.get(
     "/results/{name}/values.f32",
     summary="raw values as little-endian float32, row-major (X-Width, X-Height, X-Unit headers)",
 )

@@ -104,8 +104,8 @@ async function compare() {
   $("compare-cap-a").textContent = a;
   $("compare-cap-b").textContent = b;
   $("compare-cap-diff").textContent = `${a} − ${b}`;
-  $("compare-high").textContent = `+${figures.scale[1].toFixed(3)} ${figures.unit}`;
-  $("compare-low").textContent = `${figures.scale[0].toFixed(3)} ${figures.unit}`;
+  $("compare-high").textContent = `+${figures.scale[1].toPrecision(3)} ${figures.unit}`;
+  $("compare-low").textContent = `${figures.scale[0].toPrecision(3)} ${figures.unit}`;
   $("compare-figures").textContent = figures.rms === undefined ? "no pixel valid in both"
     : `rms ${figures.rms.toFixed(3)} ${figures.unit}, max |d| ${figures.max_abs.toFixed(3)} ${figures.unit}, mean ${figures.mean.toFixed(3)} ${figures.unit}`;
 }

@@ -7,10 +7,12 @@ import { buildWizard, calibrationJob, calibrationProgress, calibrationResult, sh
 import { binaryMessage, bindSettings, showSettings } from "./live.js";
 import { bindLive3d, live3dError, showLive3d } from "./live3d.js";
 import { bindResult, openResult, resultSaved, showResult } from "./result.js";
+import { bindSetup, showSetup } from "./setup.js";
 import { buildVerify, showVerifyPrompt, verificationDone, verifyJob, verifyProgress } from "./verify.js";
 
 const ownJobs = new Set(); // jobs this page started: only their results move it to the Result view
 let lastFrameAt = null;
+let scanClickedAt = null; // the page's own timings of its scans (benchmarks/bench_console.py reads them)
 
 // One operator prompt at a time: a verification's shows in the Verify view, a calibration's in the wizard.
 function showPrompts(prompt) {
@@ -27,6 +29,7 @@ function updateStatus(status) {
   $("verify-start").disabled = status.busy;
   $("stop-button").disabled = !(status.busy || status.jobs.length);
   showSettings(status);
+  showSetup(status);
   showLive3d(status);
   showPrompts(status.prompt);
 }
@@ -49,7 +52,10 @@ function scanProgress(message) {
   $("scan-progress").max = e.total;
   $("scan-progress").value = e.done;
   $("scan-note").textContent = `${e.note || e.task} (${e.done} of ${e.total} frames)`;
-  if (e.kind === "step" && e.done >= e.total && ownJobs.has(message.job)) lastFrameAt = performance.now();
+  if (e.kind === "step" && e.done >= e.total && ownJobs.has(message.job) && lastFrameAt === null) {
+    lastFrameAt = performance.now();
+    if (scanClickedAt !== null) $("view-live").dataset.clickToLastFrameMs = String(lastFrameAt - scanClickedAt);
+  }
 }
 
 function processProgress(message) {
@@ -70,7 +76,10 @@ const handlers = {
   status: (m) => updateStatus(m.status),
   progress: (m) => ({ scan: scanProgress, process: processProgress, calibrate: calibrationProgress, verify: verifyProgress })[m.kind]?.(m),
   job: (m) => { noteJob(m.job); calibrationJob(m.job); captureJob(m.job); verifyJob(m.job); },
-  result: (m) => showResult(m.name, m.summary, m.final, { focus: ownJobs.has(m.job), lastFrameAt: ownJobs.has(m.job) ? lastFrameAt : null }),
+  result: (m) => {
+    if (ownJobs.has(m.job) && m.since_last_frame_s !== null) $("view-result").dataset[m.final ? "serverFinalMs" : "serverQuickMs"] = String(1000 * m.since_last_frame_s);
+    showResult(m.name, m.summary, m.final, { focus: ownJobs.has(m.job), lastFrameAt: ownJobs.has(m.job) ? lastFrameAt : null });
+  },
   saved: (m) => resultSaved(m.name),
   error: (m) => showError(m.message),
   prompt: (m) => showPrompts(m),
@@ -97,6 +106,7 @@ async function scan() {
   $("process-progress").value = 0;
   $("scan-note").textContent = "starting";
   lastFrameAt = null;
+  scanClickedAt = performance.now();
   try {
     const reply = await api("POST", "/api/scan", { options: { correction: $("scan-correction").value } });
     ownJobs.add(reply.job.id);
@@ -109,6 +119,7 @@ function bind() {
   $("scan-button").onclick = scan;
   $("stop-button").onclick = () => api("POST", "/api/stop", {}).catch(() => {});
   bindSettings();
+  bindSetup();
   bindLive3d();
   bindResult();
   bindCaptures();

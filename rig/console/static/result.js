@@ -3,12 +3,14 @@
 // its colour bar, the cloud's colours and the figures table share one range (the server's).
 import { $, api, showView } from "./api.js";
 import { CloudView, fetchCloud } from "./cloud.js";
+import { showExposureMap } from "./setup.js";
 
-const shown = { summary: null, values: null };
+const shown = { summary: null, values: null, calls: 0 };
 let cloudView = null;
 
 export async function showResult(name, summary, final, { focus = false, lastFrameAt = null } = {}) {
   const started = performance.now();
+  const call = ++shown.calls; // a newer result (the final after the quick one) supersedes this one
   shown.summary = summary;
   $("result-title").textContent = `${name}: ${summary.shows} (${summary.unit})` + (final ? "" : " — quick result, refining");
   const stamp = Date.now();
@@ -16,7 +18,8 @@ export async function showResult(name, summary, final, { focus = false, lastFram
   const valuesReady = fetch(`${base}/values.f32?v=${stamp}`).then(async (r) => ({
     data: new Float32Array(await r.arrayBuffer()), width: Number(r.headers.get("X-Width")), height: Number(r.headers.get("X-Height")),
   }));
-  const cloudReady = fetchCloud(`${base}/cloud.bin?v=${stamp}`).catch(() => null);
+  // the quick result's map only: its 3-D view would hold up the corrected result, which follows at once
+  const cloudReady = final ? fetchCloud(`${base}/cloud.bin?v=${stamp}`).catch(() => null) : Promise.resolve(undefined);
   const map = $("height-map");
   const loaded = new Promise((resolve) => { map.onload = resolve; map.onerror = resolve; });
   map.src = `${base}/map.png?v=${stamp}`;
@@ -25,15 +28,20 @@ export async function showResult(name, summary, final, { focus = false, lastFram
   $("cloud-unit").textContent = summary.unit;
   renderFigures(summary);
   renderDownloads();
+  showExposureMap(name, summary);
   if (focus) showView("result");
   await loaded;
+  if (call !== shown.calls) return;
   const mapShown = performance.now();
+  const view = $("view-result");
+  if (!final) view.dataset.quickMapSinceLastFrameMs = lastFrameAt ? String(mapShown - lastFrameAt) : "";
   shown.values = { ...(await valuesReady), unit: summary.unit, name };
   const cloud = await cloudReady;
+  if (call !== shown.calls) return;
   const drawStarted = performance.now();
-  drawCloud(cloud);
+  if (cloud !== undefined) drawCloud(cloud);
+  else clearCloud("3-D view: when the corrected result is in");
   const done = performance.now();
-  const view = $("view-result");
   view.dataset.result = name;
   view.dataset.final = String(final);
   view.dataset.mapMs = String(mapShown - started);
@@ -60,6 +68,12 @@ function drawCloud(cloud) {
   const every = cloud.step > 1 ? `, every ${cloud.step}${cloud.step === 2 ? "nd" : cloud.step === 3 ? "rd" : "th"} row and column` : "";
   const axes = cloud.axisUnit === "px" ? "x, y in pixels, phase as relief" : `x, y, z in ${cloud.axisUnit}`;
   $("cloud-info").textContent = `${cloud.count.toLocaleString("en")} points${every}; ${axes}`;
+}
+
+// No cloud (yet): an empty view rather than the previous result's points beside this map.
+function clearCloud(note) {
+  if (cloudView && cloudView.ready) cloudView.setCloud(new Float32Array(0), new Uint8Array(0));
+  $("cloud-info").textContent = note;
 }
 
 // A colour-bar or table figure: the same digits wherever the range is shown.
