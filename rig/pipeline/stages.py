@@ -386,7 +386,8 @@ def _fused_pass(state: SceneState, options: ProcessOptions) -> bool:
             shifts=[np.asarray(group.shifts) for group in along],
             min_ratio=options.modulation_ratio(True),  # the pass runs on phase-shifted fringes only
             max_residual=max_residual,
-            keep_all=state.calibration is None or check,
+            # auto weighs its order changes against the lower frequencies' wrapped phases
+            keep_all=state.calibration is None or check or options.correction == "auto",
             orders=False,  # the corrections re-derive orders from the phases; nothing else reads them
             # A + B, the texture, instead of A and B apart (one map fewer) unless B is wanted for sigma
             brightness=state.calibration is None and (fuse is not None or not options.noise_rule(True)),
