@@ -39,6 +39,9 @@ TWO_PI = 2.0 * np.pi
 # is left out: 6 rejects by chance ~2e-9 of the pixels (none of a megapixel image), while 4 would
 # reject 6e-5, pixels whose large but honest noise then costs the fused phase 0.05 % of RMS error.
 AGREEMENT_SIGMAS = 6.0
+_INVERSE_TWO_PI = np.array(1.0 / TWO_PI, dtype=np.float32)
+_PI_SQUARED = np.array(np.pi**2, dtype=np.float32)
+_MIN_SCALED_BOUND = 1e-6  # smallest c^2 2 sigma_I^2 (grey^2) whose weights are scaled by its inverse
 
 
 @dataclass
@@ -98,65 +101,81 @@ def fuse_frequencies(
     top = float(frequencies[-1])
     base = np.asarray(absolute, dtype=np.float32)
     noise = 2.0 * float(sigma_i) ** 2
+    # Weights in units of 1 / (c^2 2 sigma_I^2) make the agreement bound their plain sum (one product
+    # fewer per frequency). Below _MIN_SCALED_BOUND (sigma_I ~1e-4 grey, far under 8-bit rounding)
+    # the scaled products could overflow float32: the weights stay unscaled and the bound is multiplied.
+    agreement = AGREEMENT_SIGMAS**2 * noise
+    unit = 1.0 / agreement if agreement >= _MIN_SCALED_BOUND else 1.0
+    bound = agreement * unit  # c^2 2 sigma_I^2 in the weights' unit
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         b_top = np.asarray(modulation[-1], dtype=np.float32)
-        top_weight = np.multiply(b_top, b_top, dtype=np.float32)
-        top_weight *= np.float32(steps[-1])  # w_K = J_K B_K^2
+        top_weight = np.multiply(b_top, b_top)
+        top_weight *= _constant(steps[-1] * unit)  # w_K = J_K B_K^2
         total, shift, agreeing = top_weight, None, None  # sum_k w_k; sum_k w_k (Phi_K^(k) - Phi_K)
         for k in range(count - 1):
             weight, offset, agrees = _lower_frequency(
-                base, wrapped[k], modulation[k], steps[k], top / float(frequencies[k]), top_weight, noise
+                base, wrapped[k], modulation[k], steps[k] * unit, top / float(frequencies[k]), top_weight, bound
             )
+            total = np.add(top_weight, weight) if shift is None else np.add(total, weight, out=total)
             offset *= weight
-            total = total + weight if shift is None else np.add(total, weight, out=total)
             shift = offset if shift is None else np.add(shift, offset, out=shift)
             agreeing = agrees if agreeing is None else np.logical_and(agreeing, agrees, out=agreeing)
         if shift is None:  # one frequency: nothing to combine
             total = total.copy()
-            phase = np.add(base, np.float32(0.0), out=out, dtype=np.float32)
+            phase = base.copy() if out is None else out
+            if out is not None and out is not base:
+                np.copyto(out, base)
         else:
             shift /= total
-            phase = np.add(base, shift, out=out, dtype=np.float32)
-        sigma = np.divide(np.float32(noise), total, out=sigma_out if sigma_out is not None else total)
+            phase = np.add(base, shift, out=out if out is not None else shift)
+        sigma = np.divide(_constant(noise * unit), total, out=sigma_out if sigma_out is not None else total)
         np.sqrt(sigma, out=sigma)
     if agreeing is None:
         return FusedPhase(phase, sigma, 0)
-    finite = int(np.count_nonzero(base == base))  # NaN != NaN
+    finite = base.size - int(np.count_nonzero(np.isnan(base)))
     return FusedPhase(phase, sigma, finite - int(np.count_nonzero(agreeing)))
+
+
+def _constant(value: float) -> np.ndarray:
+    """A float32 scalar as a 0-d array: numpy's ufuncs take it several times faster than a NumPy scalar."""
+    return np.array(value, dtype=np.float32)
 
 
 def _lower_frequency(
     base: np.ndarray,
     wrapped: np.ndarray,
     modulation: np.ndarray,
-    steps: int,
+    steps: float,
     ratio: float,
     top_weight: np.ndarray,
-    noise: float,
+    bound_scale: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Weight (0 where it disagrees), offset Phi_K^(k) - Phi_K and agreement of one lower frequency.
 
-    ``ratio`` = f_K / f_k; ``top_weight`` = w_K = J_K B_K^2. The agreement test
+    ``ratio`` = f_K / f_k; ``steps`` = J_k u and ``top_weight`` = w_K = J_K B_K^2 u in the weights'
+    unit u; ``bound_scale`` = c^2 2 sigma_I^2 u. The agreement test
     ``offset^2 <= c^2 2 sigma_I^2 (1 / w_k + 1 / w_K)`` is evaluated without reciprocals as
-    ``offset^2 w_k w_K <= c^2 2 sigma_I^2 (w_k + w_K)`` (numpy's masked copies cost ten products).
+    ``offset^2 w_k w_K <= c^2 2 sigma_I^2 u (w_k + w_K)`` (numpy's masked copies cost ten products);
+    with u = 1 / (c^2 2 sigma_I^2) the bound is the plain sum.
     """
     phi = np.asarray(wrapped, dtype=np.float32)
     # (phi_k - Phi_K / r) / 2 pi wrapped to [-1/2, 1/2] turns: its absolute phase's offset, unwrapped with Phi_K's
-    turns = np.multiply(phi, np.float32(1.0 / TWO_PI))
-    offset = np.multiply(base, np.float32(1.0 / (TWO_PI * ratio)))
+    turns = np.multiply(phi, _INVERSE_TWO_PI)
+    offset = np.multiply(base, _constant(1.0 / (TWO_PI * ratio)))
     np.subtract(turns, offset, out=offset)
     np.rint(offset, out=turns)
     offset -= turns
-    offset *= np.float32(TWO_PI * ratio)  # in radians of the highest frequency
+    offset *= _constant(TWO_PI * ratio)  # in radians of the highest frequency
     b = np.asarray(modulation, dtype=np.float32)
-    weight = np.multiply(b, b, dtype=np.float32)
-    weight *= np.float32(steps / ratio**2)  # w_k = J_k B_k^2 (f_k / f_K)^2
+    weight = np.multiply(b, b)
+    weight *= _constant(steps / ratio**2)  # w_k = J_k B_k^2 (f_k / f_K)^2
     square = np.multiply(offset, offset, out=turns)
-    agrees = square < np.float32(np.pi**2)  # under half a fringe of the highest frequency
+    agrees = np.less(square, _PI_SQUARED)  # under half a fringe of the highest frequency
     square *= weight
     square *= top_weight
     bound = np.add(weight, top_weight)
-    bound *= np.float32(AGREEMENT_SIGMAS**2 * noise)
-    agrees &= square <= bound  # NaN compares False
+    if bound_scale != 1.0:
+        bound *= _constant(bound_scale)
+    agrees &= np.less_equal(square, bound)  # NaN compares False
     weight *= agrees
     return weight, offset, agrees

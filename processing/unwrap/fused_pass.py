@@ -550,9 +550,15 @@ class _Plan:
         if fusion is not None:
             assert out.sigma is not None
             fused = fuse_frequencies(
-                phase, angles, fusion.frequencies, amplitudes, fusion.steps, fusion.noise, out=phase
+                phase,
+                angles,
+                fusion.frequencies,
+                amplitudes,
+                fusion.steps,
+                fusion.noise,
+                out=phase,
+                sigma_out=out.sigma[window],
             )
-            np.copyto(out.sigma[window], fused.sigma)
             fusion.disagreeing.append(fused.disagreeing)
 
     def _mask(
