@@ -7,7 +7,8 @@ every row once, in turn, so a change of load hits all rows alike):
 - ``none path``: :func:`processing.unwrap.fused_pass.fringe_pass` + eq. 1.15 in float32, what
   ``rig process --correction none`` computes (the peer every ratio is taken against);
 - ``auto (correction only)``: :func:`processing.correction.registry.correct_auto` on the object's
-  absolute and wrapped phase (the reference is corrected once and cached, not per capture);
+  absolute and wrapped phase, weighed against the lower frequency's wrapped phase (the reference is
+  corrected once and cached, not per capture);
 - ``rpca-phase (correction only)``: plain ch. 4 RPCA, for scale;
 - ``none path + auto``: the two together, what ``rig process`` computes by default.
 
@@ -62,9 +63,15 @@ def simulate(case: str, seed: int = 0):
 
 
 def auto_pipeline(stack, frequencies, reference_phase, geometry) -> np.ndarray:
-    """fringe_pass, ``auto`` on the object's phase, eq. 1.15 (float32)."""
-    scan = fringe_pass(stack, GROUPS, frequencies, "two-frequency")
-    phase, _ = correct_auto(scan.phase.astype(np.float64), scan.wrapped[-1].astype(np.float64), mask=scan.valid)
+    """fringe_pass (keeping the lower frequency's wrapped phase), ``auto`` on the object's phase, eq. 1.15 (float32)."""
+    scan = fringe_pass(stack, GROUPS, frequencies, "two-frequency", keep_all=True)
+    phase, _ = correct_auto(
+        scan.phase.astype(np.float64),
+        scan.wrapped[-1].astype(np.float64),
+        mask=scan.valid,
+        frequency=frequencies[1],
+        lower_wrapped=[(frequencies[0], scan.wrapped[0])],
+    )
     delta = (phase - reference_phase).astype(np.float32)
     return phase_to_height(delta, geometry.l0_mm, geometry.d0_mm, geometry.per_mm(frequencies[1]), dtype=np.float32)
 
@@ -77,11 +84,12 @@ def run_case(case: str, runs: int) -> None:
     label, frequencies, _ = CASES[case]
     geometry, freqs, obj_map, obj, ref = simulate(case)
     reference_phase = fringe_pass(ref, GROUPS, freqs, "two-frequency").phase  # stored with the calibration
-    scan = fringe_pass(obj, GROUPS, freqs, "two-frequency")
+    scan = fringe_pass(obj, GROUPS, freqs, "two-frequency", keep_all=True)
     phase, wrapped, valid = scan.phase.astype(np.float64), scan.wrapped[-1].astype(np.float64), scan.valid
+    evidence = {"frequency": freqs[1], "lower_wrapped": [(freqs[0], scan.wrapped[0])]}
     rows: dict[str, Callable[[], object]] = {
         "none path (fringe_pass + eq. 1.15)": lambda: fused_pipeline(obj, freqs, reference_phase, geometry),
-        "auto (correction only)": lambda: correct_auto(phase, wrapped, mask=valid),
+        "auto (correction only)": lambda: correct_auto(phase, wrapped, mask=valid, **evidence),
         "rpca-phase (correction only)": lambda: correct_rpca_phase(phase, wrapped, mask=valid),
         "none path + auto": lambda: auto_pipeline(obj, freqs, reference_phase, geometry),
     }
@@ -97,7 +105,7 @@ def run_case(case: str, runs: int) -> None:
         print(f"{name:38s} {_stats(walls):>30s} {cpu:8.4f} {spread:>34s}")
     truth = synth.true_absolute_phase(obj_map, geometry, freqs[1])
     lit = obj_map.lit & valid
-    corrected, info = correct_auto(phase, wrapped, mask=valid)
+    corrected, info = correct_auto(phase, wrapped, mask=valid, **evidence)
     before = int(np.sum(np.abs(phase - truth)[lit] > np.pi))
     after = int(np.sum(np.abs(corrected - truth)[lit] > np.pi))
     print(

@@ -11,12 +11,15 @@ rendering (gamma, noise, quantisation) produces the fringe images.
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import cv2
 import numpy as np
 
-from mock_devices.synth import ProjectorMap
+from mock_devices.synth import Appearance, ProjectorMap, expose
+from processing.projection.patterns import pattern_intensity
 
 
 @dataclass(frozen=True)
@@ -72,6 +75,41 @@ def demo_rig(
     centre = np.array([150.0, -5.0, 10.0])  # projector centre in the camera frame
     translation = -rotation @ centre
     return StereoRig(camera, projector, rotation, translation)
+
+
+def aimed_rig(
+    projector_centre_mm: tuple[float, float, float],
+    camera_width: int = 160,
+    camera_height: int = 128,
+    projector_width: int = 912,
+    projector_height: int = 684,
+    target_mm: tuple[float, float, float] = (0.0, 0.0, 600.0),
+) -> StereoRig:
+    """:func:`demo_rig`'s camera and projector with the projector at ``projector_centre_mm`` (camera
+    frame), aimed at ``target_mm``: e.g. a diagonal baseline, along which both fringe axes carry depth."""
+    base = demo_rig(camera_width, camera_height, projector_width, projector_height)
+    centre = np.asarray(projector_centre_mm, dtype=np.float64)
+    forward = np.asarray(target_mm, dtype=np.float64) - centre
+    forward /= np.linalg.norm(forward)
+    right = np.cross((0.0, 1.0, 0.0), forward)
+    right /= np.linalg.norm(right)
+    down = np.cross(forward, right)
+    rotation = np.stack([right, down, forward])  # rows: the projector's axes in the camera frame
+    return StereoRig(base.camera, base.projector, rotation, -rotation @ centre)
+
+
+def render_frames(
+    rig: StereoRig,
+    mapping: ProjectorMap,
+    patterns: Sequence[Mapping[str, Any]],
+    appearance: Appearance,
+    rng: np.random.Generator,
+) -> np.ndarray:
+    """Camera images (N, H, W) of capture-format patterns (either axis) projected by the rig on a traced scene."""
+    size = (rig.projector.width, rig.projector.height)
+    return np.stack(
+        [expose(pattern_intensity(p, mapping.u, mapping.v, size), mapping, appearance, rng) for p in patterns]
+    )
 
 
 def demo_scene() -> Scene:

@@ -37,6 +37,17 @@ def test_default_correction_is_auto_and_is_recorded(small_capture, small_scan, t
     assert report["unresolved_fraction"] == unresolved["fraction"]
     assert 0 <= unresolved["fraction"] <= 1 and len(unresolved["regions"]) <= 20
     assert "unresolved_fraction" not in none
+    # the capture's lower frequencies reach auto (the fused pass keeps their wrapped phases for it)
+    evidence = report["stage_info"]["object"]["correction"]["evidence"]
+    assert {"kept", "reverted", "unresolved", "undecidable", "moved_one_order", "spikes_mended"} <= set(evidence)
+    # the unresolved pixels are a file when there are any, inside the valid mask, as many as reported
+    if unresolved["pixels"]:
+        mask = np.load(tmp_path / "auto" / "unresolved.npy")
+        assert report["files"]["unresolved"] == "unresolved.npy"
+        assert mask.dtype == bool and not (mask & ~np.load(tmp_path / "auto" / "mask.npy")).any()
+        assert int(mask.sum()) <= unresolved["pixels"]
+    else:
+        assert "unresolved" not in report["files"]
     # auto never makes the heights worse than no correction (64 fringes over 160 px: steep phase).
     assert height_rms(tmp_path / "auto", small_scan) <= height_rms(tmp_path / "none", small_scan)
 

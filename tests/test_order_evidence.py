@@ -4,7 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from processing.correction.order_evidence import breaks_per_blob, keep_supported_changes, unresolved_summary
+from processing.correction.order_evidence import (
+    breaks_per_blob,
+    keep_supported_changes,
+    mend_spikes,
+    unresolved_summary,
+)
 
 TWO_PI = 2.0 * np.pi
 
@@ -74,3 +79,39 @@ def test_nothing_changed_nothing_unresolved() -> None:
     phase, unresolved = keep_supported_changes(truth, truth.copy(), valid)
     assert phase is truth and not unresolved.any()
     assert unresolved_summary(unresolved, valid) == {"pixels": 0, "fraction": 0.0, "regions": []}
+
+
+def test_a_lone_order_spike_takes_the_order_of_its_neighbours() -> None:
+    truth = _ramp()
+    valid = np.ones(truth.shape, dtype=bool)
+    spiky = truth.copy()
+    spiky[20, 30] -= 11 * TWO_PI
+    spiky[0, 5] += TWO_PI  # on the border: three neighbours only, left alone
+    mended, count = mend_spikes(spiky, valid)
+    assert count == 1
+    assert abs(mended[20, 30] - truth[20, 30]) < 1e-9
+    np.testing.assert_array_equal(mended[0, 5], spiky[0, 5])
+
+
+def test_a_spike_at_the_corner_of_a_step_takes_the_order_the_misfit_prefers() -> None:
+    """Two neighbours on each side of a step of six fringes: either side is as well supported."""
+    rows, cols = np.mgrid[0:20, 0:20].astype(np.float64)
+    truth = 0.05 * cols + np.where(cols > rows, 6 * TWO_PI, 0.0)  # the step runs along the diagonal
+    valid = np.ones(truth.shape, dtype=bool)
+    spiky = truth.copy()
+    spiky[10, 11] -= 11 * TWO_PI  # above the diagonal: up and right neighbours on its side
+    upper = truth[10, 11]
+    mended, count = mend_spikes(spiky, valid, lambda values, where: np.abs(values - upper))
+    assert count == 1 and mended[10, 11] == upper
+    lower_side = truth[10, 11] - 6 * TWO_PI
+    mended, _ = mend_spikes(spiky, valid, lambda values, where: np.abs(values - lower_side))
+    assert abs(mended[10, 11] - lower_side) < 1e-9
+
+
+def test_a_pixel_with_one_continuous_neighbour_is_no_spike() -> None:
+    truth = _ramp()
+    valid = np.ones(truth.shape, dtype=bool)
+    pair = truth.copy()
+    pair[30, 40:42] += TWO_PI  # two wrong pixels side by side: each has one neighbour that agrees
+    mended, count = mend_spikes(pair, valid)
+    assert count == 0 and mended is pair

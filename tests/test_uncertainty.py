@@ -112,14 +112,19 @@ def test_max_sigma_keeps_the_pixels_under_the_bound(tmp_path: Path) -> None:
         seed=25,
     )
     paths = write_simulated_scan(scan, tmp_path / "scan")
-    plain = process(paths.capture, paths.calibration, ProcessOptions(correction="none"))
-    bounded = process(paths.capture, paths.calibration, ProcessOptions(correction="none", max_sigma=1.0))
+    plain = process(paths.capture, paths.calibration, ProcessOptions(correction="none", min_modulation_ratio=0.2))
+    default = process(paths.capture, paths.calibration, ProcessOptions(correction="none"))
+    bounded = process(  # the bound in mm alone, without the default one in radians
+        paths.capture, paths.calibration, ProcessOptions(correction="none", max_sigma=1.0, max_phase_sigma=None)
+    )
     assert bounded.uncertainty is not None and bounded.height is not None
     assert np.all(bounded.uncertainty[bounded.mask] <= 1.0)
     assert np.all(np.isnan(bounded.height[~bounded.mask]))
     dark, darker = scan.lit[:, 200:260], scan.lit[:, 260:]
     assert plain.mask[:, 200:260][dark].mean() < 0.05  # the ratio rule drops the dark band
     assert bounded.mask[:, 200:260][dark].mean() > 0.9  # the noise rule keeps it
+    assert default.mask[:, 200:260][dark].mean() > 0.9  # and so does the default (the noise rule in radians)
+    assert default.object.info["validity"]["rule"] == "noise"
     assert bounded.mask[:, 260:][darker].mean() < 0.1
     assert bounded.object.info["above_max_sigma"] > 0
     error = bounded.height[:, 200:260][bounded.mask[:, 200:260]] - scan.height_mm[:, 200:260][bounded.mask[:, 200:260]]
@@ -154,3 +159,33 @@ def test_the_ply_sigma_property_round_trips(tmp_path: Path) -> None:
     record = np.frombuffer(body, dtype=[("xyz", "<f4", (3,)), ("rgb", "u1", (3,)), ("sigma", "<f4")])
     np.testing.assert_array_equal(record["sigma"], sigma)
     np.testing.assert_array_equal(read_ply_points(path), points)
+
+
+def test_the_default_measures_a_dark_flat_target_as_well_as_its_noise_allows(tmp_path: Path) -> None:
+    """Half a plane at reflectivity 0.12 (modulation ~12 grey levels at 8 bit): the issue's dark board.
+
+    Target: >= 85 % of it measured; accuracy unchanged: the bright half as under the former rule,
+    the dark half's plane error what its predicted sigma says (within the model's factor 1.5).
+    """
+    reflectivity = np.ones((240, 320))
+    reflectivity[:, 160:] = 0.12
+    scan = simulate_scan(
+        "flat",
+        geometry=demo_geometry(320, 240),
+        patterns=synth.sinusoid_patterns((1, 8, 64), 6),
+        appearance=synth.Appearance(reflectivity=reflectivity, ambient=0.1, gain=200.0, snr_db=35.0),
+        seed=63,
+    )
+    paths = write_simulated_scan(scan, tmp_path / "scan")
+    former = process(paths.capture, paths.calibration, ProcessOptions(correction="none", min_modulation_ratio=0.2))
+    default = process(paths.capture, paths.calibration, ProcessOptions(correction="none"))
+    assert default.height is not None and default.uncertainty is not None and former.height is not None
+    dark, bright = (slice(None), slice(160, None)), (slice(None), slice(0, 160))
+    assert former.mask[dark][scan.lit[dark]].mean() < 0.05
+    assert default.mask[dark][scan.lit[dark]].mean() >= 0.85
+    np.testing.assert_array_equal(default.mask[bright], former.mask[bright])
+    np.testing.assert_allclose(default.height[bright], former.height[bright], equal_nan=True)
+    keep = default.mask[dark] & scan.lit[dark]
+    error = (default.height - scan.height_mm)[dark][keep]
+    predicted = float(np.median(default.uncertainty[dark][keep]))
+    assert 1 / 1.5 <= np.sqrt(np.mean(error**2)) / predicted <= 1.5

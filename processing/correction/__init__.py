@@ -15,6 +15,8 @@ Main entry points:
 - :func:`fill_shadows` and :func:`valid_mask` (``shadow_fill``), :func:`island_mask` (``islands``):
   what the corrections do with invalid pixels.
 - :func:`undersampled_for_spatial_methods` (``sampling``): whether spatial corrections may run.
+- :func:`keep_temporally_supported` (``temporal_evidence``): order changes weighed against the
+  capture's lower frequencies.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ if TYPE_CHECKING:
     from processing.correction.registry import CORRECTIONS, correct, correct_auto
     from processing.correction.sampling import fringe_step_rad, undersampled_for_spatial_methods
     from processing.correction.shadow_fill import fill_shadows, valid_mask
+    from processing.correction.temporal_evidence import keep_temporally_supported
     from processing.correction.voting import vote_row_orders
 
 _SOURCES = {
@@ -48,6 +51,7 @@ _SOURCES = {
     "island_mask": "islands",
     "fringe_step_rad": "sampling",
     "undersampled_for_spatial_methods": "sampling",
+    "keep_temporally_supported": "temporal_evidence",
 }
 
 __all__ = [
@@ -60,6 +64,7 @@ __all__ = [
     "fill_shadows",
     "fringe_step_rad",
     "island_mask",
+    "keep_temporally_supported",
     "pool_region_orders",
     "undersampled_for_spatial_methods",
     "valid_mask",

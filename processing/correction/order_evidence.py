@@ -20,15 +20,17 @@ A change must earn its place, so a wrong proposal can never win by a tie.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
+TWO_PI = 2.0 * np.pi
 # The largest unresolved blobs listed in a report, by size.
 LISTED_REGIONS = 20
 
 
-def _label_blobs(mask: np.ndarray) -> tuple[int, np.ndarray]:
+def label_blobs(mask: np.ndarray) -> tuple[int, np.ndarray]:
     """8-connected blobs of ``mask``: (count including the background label 0, int32 labels)."""
     import cv2  # lazily: only auto needs it
 
@@ -75,7 +77,7 @@ def keep_supported_changes(
         changed = valid & (np.abs(proposed - measured) > np.pi)
     if not changed.any():
         return proposed, changed
-    count, labels = _label_blobs(changed)
+    count, labels = label_blobs(changed)
     with_proposal = breaks_per_blob(proposed, valid, labels, count)
     with_measured = breaks_per_blob(measured, valid, labels, count)
     back = with_measured <= with_proposal
@@ -106,3 +108,40 @@ def unresolved_summary(unresolved: np.ndarray, valid: np.ndarray) -> dict[str, A
             left, top, width, height, area = (int(v) for v in stats[label])
             regions.append([top, left, top + height - 1, left + width - 1, area])
     return {"pixels": pixels, "fraction": round(pixels / total, 6), "regions": regions}
+
+
+def mend_spikes(
+    phase: np.ndarray, valid: np.ndarray, misfit: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
+) -> tuple[np.ndarray, int]:
+    """``phase`` with every order spike moved onto the order its neighbours support; how many moved.
+
+    A spike is a valid pixel whose four neighbours are all valid and all more than pi away: no
+    surface a camera resolves puts one pixel a fringe or more off everything around it, but a wrong
+    order does (left by every step before when its blob was a tie, e.g. at a corner of a step where
+    two neighbours sit on each side). Each spike takes the order that makes it continuous with the
+    most neighbours; between equally supported orders (a corner), the one with the lowest
+    ``misfit(values, spikes)`` (the misfit of candidate phases at the spike pixels with the lower
+    frequencies, when given), else the one nearest the neighbours' median.
+    """
+    rows, cols = phase.shape
+    padded = np.pad(np.where(valid, phase, np.nan), 1, constant_values=np.nan)
+    neighbours = np.stack(
+        [padded[1 + dy : 1 + dy + rows, 1 + dx : 1 + dx + cols] for dy, dx in ((-1, 0), (1, 0), (0, -1), (0, 1))]
+    )
+    with np.errstate(invalid="ignore"):
+        spike = valid & np.all(np.abs(neighbours - phase) > np.pi, axis=0)  # an invalid neighbour: no spike
+    if not spike.any():
+        return phase, 0
+    at = phase[spike]
+    around = neighbours[:, spike]  # (4, n)
+    candidates = at + TWO_PI * np.rint((around - at) / TWO_PI)  # the order of each neighbour's side
+    support = (np.abs(candidates[:, None, :] - around[None, :, :]) <= np.pi).sum(axis=1)  # (4, n)
+    if misfit is not None:
+        tie_break = np.stack([misfit(c, spike) for c in candidates])
+    else:
+        tie_break = np.abs(candidates - np.median(around, axis=0))
+    score = np.where(support == support.max(axis=0), tie_break, np.inf)
+    choice = np.argmin(score, axis=0)
+    out = phase.copy()
+    out[spike] = candidates[choice, np.arange(at.size)]
+    return out, int(at.size)

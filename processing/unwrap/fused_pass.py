@@ -11,6 +11,7 @@ absolute phase in one visit::
     frames (N_i, P) --weights (3, N_i)--> A, B cos phi, B sin phi      one small product per frequency
     -> wrapped phase phi in [0, 2 pi), modulation B, the modulation mask of each frequency
     -> fringe orders and absolute phase of the highest frequency       (processing.unwrap.temporal's methods)
+    -> every frequency's phase in the absolute phase, noise-weighted    (processing.phase.frequency_fusion)
 
 Angles and magnitudes come from OpenCV (``cv2.phase``, ``cv2.magnitude``, imported on first use)
 when it is installed: numpy's arctan2 costs about 20 ms per megapixel on CPUs without AVX-512,
@@ -38,6 +39,7 @@ from typing import Any
 import numpy as np
 
 from processing import _validate
+from processing.phase.frequency_fusion import fuse_frequencies
 from processing.phase.shifting import robust_high, sample_stride, shift_weights
 from processing.unwrap.temporal import TEMPORAL_METHODS, TurnKernel, pair_table, turn_kernel
 
@@ -143,6 +145,11 @@ class FringePass:
         Minimum modulation of each group's mask.
     phase_frequency : float
         The frequency of ``phase`` (the highest one the method reads).
+    sigma : float32 map or None
+        With ``fuse_noise``: the predicted standard deviation (rad) of the fused ``phase``.
+    disagreeing : int
+        With ``fuse_noise``: pixels where a lower frequency disagreed with the highest and was
+        left out (:func:`processing.phase.frequency_fusion.fuse_frequencies`).
     """
 
     frequencies: list[float]
@@ -158,6 +165,8 @@ class FringePass:
     thresholds: list[float]
     phase_frequency: float
     brightness: list[np.ndarray] = field(default_factory=list)  # A + B per kept group, when asked for
+    sigma: np.ndarray | None = None
+    disagreeing: int = 0
 
 
 @dataclass(frozen=True)
@@ -233,6 +242,7 @@ def fringe_pass(
     threads: int = 1,
     orders: bool = True,
     brightness: bool = False,
+    fuse_noise: float | None = None,
 ) -> FringePass:
     """Wrapped phases, modulation mask and (optionally) temporal unwrapping in one pass.
 
@@ -270,6 +280,10 @@ def fringe_pass(
     brightness : bool
         Keep A + B of each kept group (a texture: the brightest the pixel gets) instead of A and
         B apart: one full-size map instead of two.
+    fuse_noise : float, optional
+        Camera noise sigma_I (grey levels): with a method, the phase becomes the noise-weighted
+        combination of every group's (:mod:`processing.phase.frequency_fusion`), ``sigma`` its
+        predicted standard deviation. None: the highest frequency's phase alone.
 
     Returns
     -------
@@ -284,20 +298,34 @@ def fringe_pass(
     threads = _validate.positive_int(threads, "threads")
     cv2 = _backend(opencv)
     kernel, used, tables = _temporal_kernel(method, freqs, max_residual, cv2)
+    flat = stack.reshape(count, -1)
+    specs, thresholds = _group_specs(flat, lists, shifts, ratio, (height, width), cv2)
+    kept = list(range(len(lists))) if keep_all else [len(lists) - 1]
+    fusion = None if fuse_noise is None or method is None or len(lists) < 2 else _Fusion(freqs, lists, fuse_noise)
+    out = _Outputs.allocate(flat.shape[1], len(kept), method is not None, orders, brightness, fusion is not None)
+    nonnegative = np.issubdtype(stack.dtype, np.unsignedinteger) and all((s.weights[0] >= 0).all() for s in specs)
+    plan = _Plan(flat, specs, thresholds, ratio, kept, kernel, used, tables, cv2, nonnegative, fusion)
+    _run_blocks(plan, out, flat.shape[1], threads)
+    result = _result(out, freqs, method, kept, thresholds, used, (height, width))
+    result.disagreeing = 0 if fusion is None else sum(fusion.disagreeing)
+    return result
+
+
+def _group_specs(
+    flat: np.ndarray,
+    lists: list[list[int]],
+    shifts: Sequence[np.ndarray | None] | None,
+    ratio: float,
+    shape: tuple[int, int],
+    cv2: Any | None,
+) -> tuple[list[_Group], list[float]]:
+    """Each group's frame rows and float32 weights, and its modulation mask's threshold (from the subsample)."""
     specs = [
         _Group(_rows(g), shift_weights(len(g), None if shifts is None else shifts[k]).astype(np.float32))
         for k, g in enumerate(lists)
     ]
-    flat = stack.reshape(count, -1)
-    thresholds = [
-        max(ratio * _sampled_high(flat, spec, (height, width), cv2), float(np.finfo(np.float32).tiny)) for spec in specs
-    ]
-    kept = list(range(len(lists))) if keep_all else [len(lists) - 1]
-    out = _Outputs.allocate(flat.shape[1], len(kept), method is not None, orders, brightness)
-    nonnegative = np.issubdtype(stack.dtype, np.unsignedinteger) and all((s.weights[0] >= 0).all() for s in specs)
-    plan = _Plan(flat, specs, thresholds, ratio, kept, kernel, used, tables, cv2, nonnegative)
-    _run_blocks(plan, out, flat.shape[1], threads)
-    return _result(out, freqs, method, kept, thresholds, used, (height, width))
+    tiny = float(np.finfo(np.float32).tiny)
+    return specs, [max(ratio * _sampled_high(flat, spec, shape, cv2), tiny) for spec in specs]
 
 
 def _result(
@@ -324,6 +352,7 @@ def _result(
         thresholds=thresholds,
         phase_frequency=freqs[used[-1]] if used else freqs[-1],
         brightness=[m.reshape(shape) for m in out.brightness],
+        sigma=None if out.sigma is None else out.sigma.reshape(shape),
     )
 
 
@@ -411,17 +440,25 @@ class _Outputs:
     modulation: list[np.ndarray]
     background: list[np.ndarray]
     brightness: list[np.ndarray]
+    sigma: np.ndarray | None = None  # the fused phase's predicted sigma, when fusing
 
     @classmethod
     def allocate(
-        cls, pixels: int, kept: int, unwrapping: bool, orders: bool = True, brightness: bool = False
+        cls,
+        pixels: int,
+        kept: int,
+        unwrapping: bool,
+        orders: bool = True,
+        brightness: bool = False,
+        fusing: bool = False,
     ) -> _Outputs:
         # One allocation for the float32 maps: large enough for numpy to ask for huge pages, and
         # a few big blocks instead of many 3 MiB ones keep the allocator from returning them to
         # the system between runs (fresh pages cost more to touch than the pass to compute).
         per_group = 2 if brightness else 3
-        maps = np.empty((per_group * kept + (1 if unwrapping else 0), pixels), dtype=np.float32)
+        maps = np.empty((per_group * kept + (1 if unwrapping else 0) + (1 if fusing else 0), pixels), dtype=np.float32)
         rows = list(maps)
+        sigma = rows.pop() if fusing else None
         return cls(
             phase=rows.pop() if unwrapping else None,
             orders=np.empty(pixels, dtype=np.int32) if unwrapping and orders else None,
@@ -431,7 +468,18 @@ class _Outputs:
             modulation=[] if brightness else rows[kept : 2 * kept],
             background=[] if brightness else rows[2 * kept :],
             brightness=rows[kept:] if brightness else [],
+            sigma=sigma,
         )
+
+
+class _Fusion:
+    """What the blocks need to fuse every frequency into the absolute phase, and the disagreeing pixels they found."""
+
+    def __init__(self, frequencies: list[float], groups: list[list[int]], noise: float) -> None:
+        self.frequencies = frequencies
+        self.steps = [len(g) for g in groups]
+        self.noise = float(noise)
+        self.disagreeing: list[int] = []  # one count per block (list.append is thread-safe)
 
 
 @dataclass
@@ -448,6 +496,7 @@ class _Plan:
     tables: _DingTables | None
     cv2: Any | None
     background_nonnegative: bool  # unsigned frames and non-negative A weights
+    fusion: _Fusion | None = None
 
     def run(self, out: _Outputs, start: int, stop: int) -> None:
         """Blocks of [start, stop): scratch buffers are this call's own, outputs disjoint slices."""
@@ -462,6 +511,7 @@ class _Plan:
         window = slice(begin, end)
         valid = out.valid[window]
         angles: list[np.ndarray] = []
+        amplitudes: list[np.ndarray] = []
         for g, spec in enumerate(self.specs):
             frames = scratch.frames[g]
             np.copyto(frames, self.flat[spec.rows, window], casting="unsafe")
@@ -470,8 +520,8 @@ class _Plan:
             slot = self.kept.index(g) if g in self.kept else -1
             angle = out.wrapped[slot][window] if slot >= 0 else scratch.angle[g]
             angles.append(_angle_into(coeffs[1], coeffs[2], angle, cv2, below_two_pi=slot >= 0 or self.tables is None))
-            modulation = out.modulation[slot][window] if slot >= 0 and out.modulation else scratch.modulation
-            _magnitude_into(coeffs[1], coeffs[2], modulation, cv2)
+            modulation = out.modulation[slot][window] if slot >= 0 and out.modulation else scratch.modulation[g]
+            amplitudes.append(_magnitude_into(coeffs[1], coeffs[2], modulation, cv2))
             if slot >= 0 and out.brightness:
                 np.add(coeffs[0], modulation, out=out.brightness[slot][window])
             elif slot >= 0:
@@ -487,15 +537,29 @@ class _Plan:
         orders = None if out.orders is None else out.orders[window]
         if self.tables is not None:  # NaN outside the modulated pixels comes from the tables
             self._ding_opencv(angles[self.used[0]], angles[self.used[1]], phase, orders, valid, scratch)
-            return
-        turns = [np.minimum(angles[i] * np.float32(1.0 / TWO_PI), _BELOW_ONE) for i in self.used]
-        absolute, k, consistent = self.kernel(turns)
-        np.copyto(phase, absolute, casting="same_kind")
-        if orders is not None:
-            np.copyto(orders, k, casting="unsafe")
-        valid &= consistent
-        np.logical_not(out.modulated[window], out=scratch.test)
-        np.copyto(phase, np.float32(np.nan), where=scratch.test)
+        else:
+            turns = [np.minimum(angles[i] * np.float32(1.0 / TWO_PI), _BELOW_ONE) for i in self.used]
+            absolute, k, consistent = self.kernel(turns)
+            np.copyto(phase, absolute, casting="same_kind")
+            if orders is not None:
+                np.copyto(orders, k, casting="unsafe")
+            valid &= consistent
+            np.logical_not(out.modulated[window], out=scratch.test)
+            np.copyto(phase, np.float32(np.nan), where=scratch.test)
+        fusion = self.fusion
+        if fusion is not None:
+            assert out.sigma is not None
+            fused = fuse_frequencies(
+                phase,
+                angles,
+                fusion.frequencies,
+                amplitudes,
+                fusion.steps,
+                fusion.noise,
+                out=phase,
+                sigma_out=out.sigma[window],
+            )
+            fusion.disagreeing.append(fused.disagreeing)
 
     def _mask(
         self, background: np.ndarray, modulation: np.ndarray, threshold: float, out: np.ndarray, scratch: _Scratch
@@ -544,7 +608,7 @@ class _Scratch:
     frames: list[np.ndarray]
     coeffs: list[np.ndarray]
     angle: list[np.ndarray]
-    modulation: np.ndarray
+    modulation: list[np.ndarray]
     level: np.ndarray
     test: np.ndarray
     positive: np.ndarray
@@ -572,7 +636,7 @@ class _Scratch:
             frames=[np.empty((s.weights.shape[1], size), dtype=np.float32) for s in specs],
             coeffs=[np.empty((3, size), dtype=np.float32) for _ in specs],
             angle=[vector() for _ in specs],
-            modulation=vector(),
+            modulation=[vector() for _ in specs],
             level=vector(),
             test=vector(np.bool_),
             positive=vector(np.bool_),

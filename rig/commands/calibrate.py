@@ -172,22 +172,18 @@ def _device_and_import_options(parser: argparse.ArgumentParser) -> None:
 
 
 def _import_opencv(args: argparse.Namespace) -> int:
-    from calibration.opencv_yaml import import_opencv_calibration
-    from calibration.store import Calibration, write_calibration
-    from rig.errors import OutputError
-    from rig.store import files
+    from rig.calibrate.imports import import_opencv
 
     if args.projector_size is None:
         raise ConfigError("--import-opencv needs --projector-size WxH (the FileStorage file does not record it)")
-    output = args.output or Path("calibration")
-    files.check_writable(output, ("calibration",), args.overwrite, OutputError)  # before reading anything
-    fields = import_opencv_calibration(
-        args.import_opencv, args.projector_size, pixel_centre=args.pixel_centre, camera_size=args.camera_size
+    target = import_opencv(
+        args.import_opencv,
+        args.output or Path("calibration"),
+        args.projector_size,
+        camera_size=args.camera_size,
+        pixel_centre=args.pixel_centre,
+        overwrite=args.overwrite,
     )
-    fields.pop("model")
-    with files.staged_directory(output, ("calibration",), args.overwrite, OutputError) as staging:
-        write_calibration(staging, Calibration(model="stereo", extra=fields))
-    target = output / "calibration.json"
     print(f"{target}: stereo calibration imported from {args.import_opencv}", file=sys.stderr)
     return 0
 

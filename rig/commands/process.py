@@ -78,6 +78,34 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_report_options(parser)
 
 
+def _add_validity_options(parser: argparse.ArgumentParser, defaults: ProcessOptions) -> None:
+    """--min-modulation, --max-phase-sigma, --max-sigma: which pixels are valid (docs/uncertainty.md)."""
+    parser.add_argument(
+        "--min-modulation",
+        type=float,
+        default=defaults.min_modulation_ratio,
+        metavar="RATIO",
+        help="validity by the modulation ratio instead of the noise: valid pixels need fringe modulation B >= RATIO x "
+        "background and x the image's 99th percentile of B (the former default, 0.2). Default: the noise rule "
+        "(--max-phase-sigma) with a 0.02 floor, or 0.2 where no phase noise can be predicted (single frames)",
+    )
+    parser.add_argument(
+        "--max-phase-sigma",
+        type=float,
+        default=defaults.max_phase_sigma,
+        metavar="RAD",
+        help=f"the noise rule: keep pixels whose predicted phase sigma is at most RAD (default {defaults.max_phase_sigma})",
+    )
+    parser.add_argument(
+        "--max-sigma",
+        type=float,
+        default=defaults.max_sigma,
+        metavar="MM",
+        help="also keep only pixels whose predicted height sigma is at most MM (the noise rule applies, even with "
+        "--min-modulation, whose ratio then drops to the 0.02 floor); default: no bound in mm",
+    )
+
+
 def add_processing_options(parser: argparse.ArgumentParser) -> None:
     """The pipeline's options (--unwrap, --denoise, --correction, ...), shared by `rig process` and `rig batch`.
 
@@ -105,21 +133,7 @@ def add_processing_options(parser: argparse.ArgumentParser) -> None:
         metavar="METHOD",
         help=LazyHelp(_correction_help),  # type: ignore[arg-type]  # argparse calls str() on it
     )
-    parser.add_argument(
-        "--min-modulation",
-        type=float,
-        default=defaults.min_modulation_ratio,
-        metavar="RATIO",
-        help="valid pixels need fringe modulation B >= RATIO x background and x the image's 99th percentile of B (default 0.2)",
-    )
-    parser.add_argument(
-        "--max-sigma",
-        type=float,
-        default=defaults.max_sigma,
-        metavar="MM",
-        help="keep pixels whose predicted height sigma is at most MM (the noise decides validity; the modulation "
-        "ratio drops to a 0.02 floor unless --min-modulation is lower); default: the modulation ratio alone",
-    )
+    _add_validity_options(parser, defaults)
     parser.add_argument(
         "--min-island",
         type=float,
@@ -139,7 +153,11 @@ def add_processing_options(parser: argparse.ArgumentParser) -> None:
         help="a parameter of the chosen denoising / correction method (repeatable; VALUE read as JSON if it parses)",
     )
     parser.add_argument(
-        "--axis", choices=("x", "y"), help="fringe axis to use when a capture has both (default: the first)"
+        "--axis",
+        choices=("x", "y", "both"),
+        help="fringe axis to use when a capture has both; both: each pixel triangulated from both projector "
+        "coordinates (camera-projector calibration). Default: both with a camera-projector calibration, else "
+        "the calibration's fringe_axis, else the first",
     )
     parser.add_argument(
         "--no-undistort",
@@ -171,32 +189,22 @@ def add_format_option(parser: argparse.ArgumentParser) -> None:
 def processing_options(args: argparse.Namespace) -> ProcessOptions:
     """The :class:`ProcessOptions` of the options :func:`add_processing_options` added."""
     if args.undistort is False and getattr(args, "calibration", None) is not None:
-        refuse_kept_distortion(args.calibration)
+        from calibration.store import read_calibration  # before any frame is read (rig batch: before any job)
+        from rig.pipeline.fit import refuse_kept_distortion
+
+        refuse_kept_distortion(read_calibration(args.calibration), ProcessOptions(undistort=False))
     return ProcessOptions(
         unwrap=args.unwrap,
         denoise=args.denoise,
         correction=args.correction,
         min_modulation_ratio=args.min_modulation,
+        max_phase_sigma=args.max_phase_sigma,
         max_sigma=args.max_sigma,
         axis=args.axis,
         params=parse_params(args.param),
         undistort=args.undistort,
         min_island_fraction=0.0 if args.keep_islands else args.min_island,
     )
-
-
-def refuse_kept_distortion(calibration: Path) -> None:
-    """``--no-undistort`` with a camera-projector (stereo) calibration: refused, because its
-    triangulation models the lens distortion of every camera and projector ray (the frames are never
-    undistorted, so there is nothing to keep)."""
-    from calibration.stereo import STEREO
-    from calibration.store import read_calibration
-
-    if read_calibration(calibration).model == STEREO:
-        raise ConfigError(
-            f"--no-undistort: {calibration} is a camera-projector (stereo) calibration, whose triangulation "
-            "models the lens distortion of every ray; leave --no-undistort out"
-        )
 
 
 def summary(report: dict, out: Path) -> dict:
@@ -253,7 +261,14 @@ def run(args: argparse.Namespace) -> int:
 
 def print_summary(report: dict, out: Path) -> None:
     """The one-line summary of a processing run (and its notes) on stderr: `rig process`, `rig scan --process`."""
-    line = f"{out}: valid {report['valid_fraction']:.1%}, unwrap {report['methods']['unwrap']}"
+    from rig.pipeline.axes import ONLY_AXIS
+
+    methods = report["methods"]
+    line = f"{out}: valid {report['valid_fraction']:.1%}, unwrap {methods['unwrap']}"
+    if (
+        methods.get("axis_choice") and methods["axis_choice"] != ONLY_AXIS
+    ):  # which axis, and why, when there was a choice
+        line += f", axis {methods['fringe_axis']} ({methods['axis_choice']})"
     if report.get("height_mm"):  # None when no valid height is finite
         h = report["height_mm"]
         line += f", {report.get('quantity', 'height')} {h['min']:.2f} .. {h['max']:.2f} mm, {report['points']} points"

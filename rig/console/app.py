@@ -2,8 +2,8 @@
 
 :func:`create_app` builds it around one :class:`rig.console.session.ConsoleSession` and the
 routers of :mod:`rig.console.routes`; the routes only translate HTTP to session calls (which call
-the services). FastAPI serves the OpenAPI document at ``/api/openapi.json`` and its explorer at
-``/api/docs``. Who may call it is decided by :mod:`rig.console.access` before any route runs.
+the services). FastAPI serves the OpenAPI document at ``/api/openapi.json``; ``/api/docs`` is a page of the
+console drawing it (no CDN). Who may call it is decided by :mod:`rig.console.access` before any route runs.
 """
 
 from __future__ import annotations
@@ -67,7 +67,7 @@ def create_app(
         version="1",
         lifespan=lifespan,
         openapi_url="/api/openapi.json",
-        docs_url="/api/docs",
+        docs_url=None,  # /api/docs is the console's own offline page (routes/docs.py)
         redoc_url=None,
     )
     app.state.session = session

@@ -9,6 +9,8 @@ Layout::
     DATA/verifications/NAME/   verifications of a calibration (report.json, report.md, figures/, captures/)
     DATA/artefacts.toml        the calibrated artefacts a verification uses (default: the simulated rig's)
     DATA/trash/KIND/NAME/      what the operator discarded (an interrupted scan), kept until removed by hand
+    DATA/trash/KIND/NAME@TIME/ a capture, result or calibration deleted from the page (restorable:
+                               rig.console.trash)
 
 Staging folders the file layer writes into (``NAME.incomplete-XXXX``, ``NAME.replaced-XXXX``) are
 never names: a kill between writing and renaming leaves one behind, and it must not pass for a

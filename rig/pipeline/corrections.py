@@ -69,10 +69,13 @@ def stage_correction(state: SceneState, options: ProcessOptions) -> None:
         return
     inputs = needed_inputs(method, state.calibration)
     wrapped = None
-    if state.wrapped is not None and unwrapped.frequency in state.wrapped.frequencies:
+    # a fused phase is no longer the highest frequency's wrapped phase + 2 pi k: its own wrap is
+    if not unwrapped.fused and state.wrapped is not None and unwrapped.frequency in state.wrapped.frequencies:
         wrapped = state.wrapped.phase[state.wrapped.frequencies.index(unwrapped.frequency)]
     if wrapped is None or not np.isfinite(wrapped[unwrapped.valid]).all():
         wrapped = wrap_to_pi(np.nan_to_num(unwrapped.phase))  # Phi = phi + 2 pi k wraps back to phi
+    if method.name == "auto":
+        inputs["lower_wrapped"] = _lower_wrapped(state)
     try:
         phase, info = method(
             unwrapped.phase,
@@ -93,11 +96,25 @@ def stage_correction(state: SceneState, options: ProcessOptions) -> None:
         state.phase_sigma = state.phase_sigma * np.float32(gain)
         state.info["correction_noise_gain"] = round(gain, 4)
     unwrapped.phase = phase
+    state.unresolved = info.pop("unresolved_mask", None)  # an array: the result's unresolved.npy, not the report
     if unwrapped.orders is not None:
         orders = np.rint((np.nan_to_num(phase) - np.mod(wrapped, 2.0 * np.pi)) / (2.0 * np.pi))
         unwrapped.orders = np.where(unwrapped.valid, orders, unwrapped.orders).astype(unwrapped.orders.dtype)
     state.info["correction"] = info
     _note_unresolved(state, info)
+
+
+def _lower_wrapped(state: SceneState) -> list[tuple[float, np.ndarray]]:
+    """(frequency, wrapped phase) of every frequency below the unwrapped one that the capture kept: the
+    temporal evidence ``auto`` weighs its order changes against (none after spatial unwrapping)."""
+    unwrapped, wrapped = state.unwrapped, state.wrapped
+    if unwrapped is None or wrapped is None or not unwrapped.absolute:
+        return []
+    return [
+        (float(f), phase)
+        for f, phase in zip(wrapped.frequencies, wrapped.phase)
+        if phase is not None and 0 < float(f) < float(unwrapped.frequency)
+    ]
 
 
 def _note_unresolved(state: SceneState, info: dict[str, Any]) -> None:

@@ -11,7 +11,9 @@ both values, the likely cause and the fix:
 * fringe axis: the axis the calibration was fitted on (``fringe_axis``) against the capture's;
 * patterns and frequencies: the reference-plane capture must use the capture's patterns;
 * units: lengths that are implausibly short for millimetres (a translation or distance written
-  in metres).
+  in metres);
+* options: ``--no-undistort`` with a camera-projector model, whose triangulation undistorts every
+  ray (:func:`refuse_kept_distortion`).
 """
 
 from __future__ import annotations
@@ -20,8 +22,10 @@ from typing import Any
 
 from calibration.errors import CalibrationError
 from calibration.models import units_problem
+from calibration.stereo import STEREO
 from calibration.store import Calibration
-from rig.errors import CaptureError
+from rig.errors import CaptureError, ConfigError
+from rig.pipeline.plan import ProcessOptions
 from rig.store.capture import Capture, check_same_patterns
 
 
@@ -79,3 +83,17 @@ def check_fit(capture: Capture, calibration: Calibration, axis: str, reference: 
                 "made with other scan settings (frequencies, steps, sizes) than the calibration; fix: scan with "
                 "the calibration's settings or calibrate again with these"
             ) from None
+
+
+def refuse_kept_distortion(calibration: Calibration, options: ProcessOptions) -> None:
+    """``--no-undistort`` with a camera-projector (stereo) calibration: refused (ConfigError).
+
+    Its triangulation models the lens distortion of every camera and projector ray; the frames
+    are never undistorted, so there is nothing that option could keep. Checked here so that
+    ``rig process``, ``rig batch``, :func:`rig.api.process` and the console refuse alike.
+    """
+    if options.undistort is False and calibration.model == STEREO:
+        raise ConfigError(
+            f"--no-undistort: {calibration.where} is a camera-projector (stereo) calibration, whose triangulation "
+            "models the lens distortion of every ray; leave --no-undistort out"
+        )

@@ -69,7 +69,14 @@ DEFAULT_CORRECTION = "auto"
 # --------------------------------------------------------------------------- options and pattern groups
 
 
-NOISE_RULE_RATIO = 0.02  # with --max-sigma: only pixels under 2 % of the brightest's modulation are shadow outright
+NOISE_RULE_RATIO = 0.02  # with the noise rule: only pixels under 2 % of the brightest's modulation are shadow outright
+RATIO_RULE_RATIO = 0.2  # the modulation-ratio rule's default (and the rule where no phase noise can be predicted)
+# The noise rule's bound on the predicted phase sigma (rad) at the phase's frequency (docs/uncertainty.md):
+# a fringe keeps its pixels from B >= 10 sqrt(2 / J) sigma_I on (8.7 grey levels for six steps at sigma_I =
+# 1.5, 5.8 for twelve), while a pixel with no fringe (a Rayleigh-distributed modulation estimate) passes
+# with probability exp(-1 / (2 x 0.1^2)) ~ 2e-22. On the real captures 0.25 and 0.15 rad let in
+# wrong surfaces (slmaster-eye's background at 1.3 m behind the 0.73 m plaque) that 0.1 does not.
+MAX_PHASE_SIGMA = 0.1
 
 
 @dataclass
@@ -83,20 +90,27 @@ class ProcessOptions:
     undistort: bool | None = None  # None: when the calibration has camera_matrix + distortion
     denoise: str = "none"
     correction: str = DEFAULT_CORRECTION
-    min_modulation_ratio: float = 0.2
-    # keep pixels whose predicted height sigma (mm) is under this; None: the modulation ratio alone decides
+    # None: the noise rule decides validity (max_phase_sigma, max_sigma) wherever the phase noise can be
+    # predicted, with a modulation floor of NOISE_RULE_RATIO; a number: the modulation-ratio rule with it
+    min_modulation_ratio: float | None = None
+    # keep pixels whose predicted height sigma (mm) is under this (None: no bound in mm)
     max_sigma: float | None = None
+    # the noise rule: keep pixels whose predicted phase sigma (rad) is under this (None: no bound in rad)
+    max_phase_sigma: float | None = MAX_PHASE_SIGMA
     # valid regions smaller than this fraction of the largest are dropped (processing.correction.islands); 0 keeps all
     min_island_fraction: float = 0.005
     axis: str | None = None
     params: dict[str, Any] = field(default_factory=dict)
 
-    @property
-    def modulation_ratio(self) -> float:
-        """The modulation mask's ratio: ``min_modulation_ratio``, or a floor when the noise decides (``max_sigma``)."""
-        if self.max_sigma is None:
-            return self.min_modulation_ratio
-        return min(self.min_modulation_ratio, NOISE_RULE_RATIO)
+    def noise_rule(self, predictable: bool) -> bool:
+        """Whether the predicted noise decides validity: the default wherever the phase noise can be
+        predicted (``predictable``: phase-shifted fringes), and whenever ``max_sigma`` is given."""
+        return self.max_sigma is not None or (self.min_modulation_ratio is None and predictable)
+
+    def modulation_ratio(self, predictable: bool) -> float:
+        """The modulation mask's ratio: a floor under the noise rule, else ``min_modulation_ratio`` (default 0.2)."""
+        ratio = RATIO_RULE_RATIO if self.min_modulation_ratio is None else self.min_modulation_ratio
+        return min(ratio, NOISE_RULE_RATIO) if self.noise_rule(predictable) else ratio
 
 
 def accepted_params(function: Callable[..., Any], params: Mapping[str, Any]) -> dict[str, Any]:

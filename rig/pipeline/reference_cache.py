@@ -42,7 +42,7 @@ from rig.pipeline.state import SceneState, UnwrappedPhase
 
 log = logging.getLogger(__name__)
 
-FORMAT = 2  # 2: entries keep the predicted phase sigma (processing.geometry.uncertainty)
+FORMAT = 3  # 2: entries keep the predicted phase sigma (processing.geometry.uncertainty); 3: fused frequencies
 DIRECTORY = "reference"  # below the cache root
 PREFIX = "reference-"
 CACHE_ENV = "RIG_CACHE_DIR"

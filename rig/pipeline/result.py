@@ -81,12 +81,15 @@ def _methods(result: ProcessResult) -> dict[str, Any]:
         "absolute_phase": obj.unwrapped.absolute,
         "denoise": options.denoise,
         "correction": options.correction,
-        "undistorted": bool(obj.info.get("undistorted", False)),
-        "fringe_axis": obj.axis,
+        # true: the frames; "rays": the stereo triangulation undistorts each ray; false: neither
+        "undistorted": obj.info.get("undistorted", False),
+        "fringe_axis": obj.info.get("axis_choice", {}).get("axis", obj.axis),  # x, y or both (rig.pipeline.axes)
+        "axis_choice": obj.info.get("axis_choice", {}).get("why"),
         "frequencies": obj.wrapped.frequencies,
         "phase_frequency": obj.unwrapped.frequency,
-        "min_modulation_ratio": options.modulation_ratio,
+        "min_modulation_ratio": obj.info.get("validity", {}).get("min_modulation_ratio"),
         "max_sigma_mm": options.max_sigma,
+        "validity": obj.info.get("validity"),  # rig.pipeline.stages: the noise or the modulation-ratio rule
         "min_island_fraction": options.min_island_fraction,
         "params": options.params,
     }

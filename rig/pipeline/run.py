@@ -14,13 +14,16 @@ import numpy as np
 
 from calibration import models as calibration_models
 from calibration.errors import CalibrationError
+from calibration.stereo import STEREO
 from calibration.store import Calibration, read_calibration
+from processing.geometry.axis_fusion import fuse_points
 from processing.geometry.uncertainty import height_sigma
 from rig.blas import rpca_blas
 from rig.errors import ProcessingError
 from rig.pipeline import reference_cache
+from rig.pipeline.axes import AXES, AxisChoice, captured_axes, choose_axes, conditioning_note, stereo_conditioning
 from rig.pipeline.corrections import REGISTRY as CORRECTIONS
-from rig.pipeline.fit import check_fit
+from rig.pipeline.fit import check_fit, refuse_kept_distortion
 from rig.pipeline.plan import (
     PatternGroups,
     ProcessOptions,
@@ -36,7 +39,7 @@ from rig.pipeline.stages import (
 from rig.pipeline.unwrapping import UNWRAP_METHODS
 from rig.store import files
 from rig.store.capture import Capture, read_capture
-from rig.store.exposures import exposure_sets
+from rig.store.exposures import ExposureSets, exposure_sets
 
 log = logging.getLogger(__name__)
 
@@ -57,45 +60,35 @@ def _solves_rpca(stage: str, options: ProcessOptions) -> bool:
 # --------------------------------------------------------------------------- the whole run
 
 
-def _fringe_axis(groups: PatternGroups, options: ProcessOptions, where: str) -> str:
-    if options.axis is not None:
-        return options.axis
-    candidates = groups.sinusoids or groups.single_shot
-    if not candidates:
-        raise ProcessingError(f"{where}: no sinusoid pattern: nothing to compute a phase from")
-    return candidates[0].axis
+def _capture_groups(capture: Capture) -> tuple[PatternGroups, ExposureSets | None]:
+    """A capture's pattern groups and, for one taken at several exposures, its exposure sets.
 
-
-def _scene(name: str, capture: Capture, options: ProcessOptions) -> SceneState:
-    """A capture's state; one taken at several exposures is grouped by its base sequence (fused when loaded)."""
+    A multi-exposure capture is grouped by its base sequence (its exposures are fused when loaded).
+    """
     where = str(capture.manifest_path)
     sets = exposure_sets(capture.pattern_models, where)
-    groups = group_patterns(sets.base, where)
-    return SceneState(
-        name=name,
-        capture=capture,
-        groups=groups,
-        axis=_fringe_axis(groups, options, where),
-        exposures=sets if sets.multiple else None,
-    )
+    return group_patterns(sets.base, where), (sets if sets.multiple else None)
+
+
+def _scene(
+    name: str,
+    capture: Capture,
+    axis: str | None = None,
+    grouped: tuple[PatternGroups, ExposureSets | None] | None = None,
+) -> SceneState:
+    """A capture's state along ``axis`` (default: the first axis with fringes; ProcessingError if none)."""
+    groups, exposures = _capture_groups(capture) if grouped is None else grouped
+    if axis is None:
+        captured = captured_axes(groups)
+        if not captured:
+            raise ProcessingError(f"{capture.manifest_path}: no sinusoid pattern: nothing to compute a phase from")
+        axis = captured[0]
+    return SceneState(name=name, capture=capture, groups=groups, axis=axis, exposures=exposures)
 
 
 def total_steps(with_reference: bool) -> int:
     """Progress steps of :func:`process` (stages of each capture, then height)."""
     return len(SCENE_STAGES) * (2 if with_reference else 1) + 1
-
-
-def load_calibration_for(
-    capture: Capture, calibration_path: str | Path, axis: str
-) -> tuple[Calibration, Capture | None]:
-    """Read a calibration and (when its model needs one) its reference capture, checked against ``capture``.
-
-    Everything the two share must fit (:func:`rig.pipeline.fit.check_fit`): camera and projector
-    size, fringe axis (``axis``, the one the capture is processed along), patterns, units.
-    """
-    calibration, reference = _calibration_and_reference(calibration_path)
-    check_fit(capture, calibration, axis, reference)
-    return calibration, reference
 
 
 # Calibrations read, with their reference captures, by the identity of the files they came from:
@@ -168,16 +161,31 @@ def process(
     started = time.perf_counter()
     if not isinstance(capture, Capture):
         capture = read_capture(capture, salvage=salvage, verify=False)  # the load stage checks every frame
-    obj, ref, calibration = _scenes(capture, calibration_path, options)
+    obj, second, ref, calibration = _scenes(capture, calibration_path, options)
     obj.frames = None if frames is None else np.asarray(frames)
+    if second is not None:  # both axes: the frames are decoded once and read by both scenes
+        if obj.frames is None:
+            obj.frames = capture.load_frames()
+        second.frames = obj.frames
     if progress is not None:
         progress.begin(total_steps(ref is not None))
     for state in ([ref] if ref is not None else []) + [obj]:
         _run_scene(state, options, progress, to_disk=reference_cache_to_disk and state is ref)
+    if second is not None:  # its stages are not among the progress steps announced
+        _run_scene(second, options, None, to_disk=False)
     notes: list[str] = []
     t0 = time.perf_counter()
-    height, points, mask = _height(obj, ref, calibration, notes)
-    uncertainty = _uncertainty(obj, ref, calibration, mask, height, options.max_sigma, notes)
+    height: np.ndarray | None
+    uncertainty: np.ndarray | None
+    points: np.ndarray | None
+    if second is not None:
+        assert calibration is not None
+        height, points, mask, uncertainty = _height_both(obj, second, calibration, notes)
+    else:
+        height, points, mask = _height(obj, ref, calibration, notes)
+        uncertainty = _uncertainty(obj, ref, calibration, mask, height, notes)
+        _note_conditioning(obj, calibration, points, options.axis, notes)
+    _bound_uncertainty(obj, mask, height, uncertainty, options.max_sigma, notes)
     height_time = time.perf_counter() - t0
     if progress is not None:
         progress.step("height")
@@ -204,20 +212,33 @@ def process(
 
 def _scenes(
     capture: Capture, calibration_path: str | Path | None, options: ProcessOptions
-) -> tuple[SceneState, SceneState | None, Calibration | None]:
-    """The object's scene and, with a calibration whose model needs one, its reference plane's."""
+) -> tuple[SceneState, SceneState | None, SceneState | None, Calibration | None]:
+    """The object's scene, its second axis's when both are processed (:mod:`rig.pipeline.axes`) and,
+    with a calibration whose model needs one, the reference plane's."""
+    where = str(capture.manifest_path)
+    grouped = _capture_groups(capture)
+    groups = grouped[0]
     calibration, reference_capture = (None, None)
-    obj = _scene("object", capture, options)
     if calibration_path is not None:
-        calibration, reference_capture = load_calibration_for(capture, calibration_path, obj.axis)
+        calibration, reference_capture = _calibration_and_reference(calibration_path)
+        refuse_kept_distortion(calibration, options)
+    choice = choose_axes(groups, calibration, options.axis, where)
+    if calibration is not None:
+        for axis in choice.axes:  # everything the two share must fit, along every processed axis
+            check_fit(capture, calibration, axis, reference_capture)
+    obj = _scene("object", capture, choice.axes[0], grouped)
     obj.calibration = calibration
+    obj.info["axis_choice"] = {"axis": choice.name, "why": choice.why}
+    second = None
+    if len(choice.axes) == 2:
+        second = _scene("object", capture, choice.axes[1], grouped)
+        second.calibration = calibration
     if reference_capture is None:
-        return obj, None, calibration
-    ref = _scene("reference", reference_capture, options)
+        return obj, second, None, calibration
+    ref = _scene("reference", reference_capture, obj.axis)
     ref.calibration = calibration
-    ref.axis = obj.axis
     obj.reference = ref
-    return obj, ref, calibration
+    return obj, second, ref, calibration
 
 
 def _run_scene(state: SceneState, options: ProcessOptions, progress: Any, to_disk: bool) -> None:
@@ -282,16 +303,13 @@ def _uncertainty(
     calibration: Calibration | None,
     mask: np.ndarray,
     height: np.ndarray | None,
-    max_sigma: float | None,
     notes: list[str],
 ) -> np.ndarray | None:
-    """Predicted height sigma (mm, NaN where invalid); with ``max_sigma`` the pixels above it leave the mask.
+    """Predicted height sigma (mm, NaN where invalid).
 
     The object's and the reference's phase sigma add in quadrature (docs/uncertainty.md).
     """
     if calibration is None or height is None or obj.phase_sigma is None:
-        if max_sigma is not None:
-            notes.append("--max-sigma: no uncertainty predicted for this capture (phase-shifted fringes needed)")
         return None
     assert obj.unwrapped is not None
     sigma_phi = obj.phase_sigma
@@ -302,13 +320,81 @@ def _uncertainty(
     # heights carry the spatial unwrapping's per-region offsets that the model call does not
     forward = calibration.model != "stereo" and obj.unwrapped.absolute and (ref is None or _absolute(ref))
     uncertainty = height_sigma(height_of, obj.unwrapped.phase, sigma_phi, base=height if forward else None)
-    if max_sigma is not None:
-        above = mask & ~(uncertainty <= np.float32(max_sigma))
-        obj.info["above_max_sigma"] = int(np.count_nonzero(above))
-        mask &= ~above
-        np.copyto(height, np.float32(np.nan), where=above)
     np.copyto(uncertainty, np.float32(np.nan), where=~mask)
     return uncertainty
+
+
+def _bound_uncertainty(
+    obj: SceneState,
+    mask: np.ndarray,
+    height: np.ndarray | None,
+    uncertainty: np.ndarray | None,
+    max_sigma: float | None,
+    notes: list[str],
+) -> None:
+    """With ``max_sigma`` the pixels whose predicted sigma is above it leave the mask (in place)."""
+    if max_sigma is None:
+        return
+    if uncertainty is None or height is None:
+        notes.append("--max-sigma: no uncertainty predicted for this capture (phase-shifted fringes needed)")
+        return
+    above = mask & ~(uncertainty <= np.float32(max_sigma))
+    obj.info["above_max_sigma"] = int(np.count_nonzero(above))
+    mask &= ~above
+    np.copyto(height, np.float32(np.nan), where=above)
+    np.copyto(uncertainty, np.float32(np.nan), where=above)
+
+
+def _note_conditioning(
+    obj: SceneState, calibration: Calibration | None, points: np.ndarray | None, requested: str | None, notes: list[str]
+) -> None:
+    """Stereo model: each axis's depth per projector pixel in the report; a warning for an ill-conditioned choice."""
+    if calibration is None or calibration.model != STEREO or points is None:
+        return
+    per_pixel = stereo_conditioning(calibration, points)
+    obj.info["depth_per_projector_pixel_mm"] = per_pixel
+    note = conditioning_note(AxisChoice((obj.axis,), "", requested), per_pixel)
+    if note is not None:
+        notes.append(note)
+
+
+def _height_both(
+    obj: SceneState, second: SceneState, calibration: Calibration, notes: list[str]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Heights, points, mask and sigma of a stereo capture triangulated along both axes.
+
+    Each axis's points and predicted sigma along the camera ray, combined by
+    :func:`processing.geometry.axis_fusion.fuse_points`; report: ``axis_fusion`` (pixels from both,
+    from one alone, disagreeing) and each axis's depth per projector pixel.
+    """
+    points, sigmas = [], []
+    for state in (obj, second):
+        assert state.unwrapped is not None
+        axis_points, _ = stage_height(state, None, calibration, notes)
+        assert axis_points is not None  # the stereo model makes points
+        axis_points = np.where(state.unwrapped.valid[..., None], axis_points, np.nan)
+        phase_sigma = state.phase_sigma if state.phase_sigma is not None else np.float32(1.0)
+        height_of = functools.partial(_model_height, state, None, calibration)
+        points.append(axis_points)
+        sigmas.append(height_sigma(height_of, state.unwrapped.phase, np.asarray(phase_sigma, dtype=np.float32)))
+    fused = fuse_points(points, sigmas)
+    height = calibration_models.stereo_model(calibration).heights(fused.points).astype(np.float32)
+    mask = np.isfinite(height) & np.isfinite(fused.sigma)
+    np.copyto(height, np.float32(np.nan), where=~mask)
+    uncertainty = np.where(mask, fused.sigma, np.float32(np.nan)).astype(np.float32)
+    obj.info["axis_fusion"] = {
+        "both_axes_pixels": fused.combined,
+        "x_only_pixels": fused.alone[0],
+        "y_only_pixels": fused.alone[1],
+        "disagreeing_pixels": fused.disagreeing,
+        "rule": "inverse-variance mean of the two points on each camera ray; where they disagree beyond "
+        "6 sigma, no point (nothing tells which axis is right)",
+    }
+    obj.info["other_axis"] = second.info
+    obj.info["depth_per_projector_pixel_mm"] = stereo_conditioning(calibration, fused.points)
+    if any(state.phase_sigma is None for state in (obj, second)):
+        notes.append("--axis both: no phase noise predicted; the axes are weighted by their geometry alone")
+    return height, fused.points, mask, uncertainty
 
 
 def _absolute(state: SceneState) -> bool:
@@ -376,9 +462,13 @@ def _check_options(options: ProcessOptions) -> None:
         raise ProcessingError(f"--correction: expected one of {', '.join(CORRECTIONS)}, found {options.correction!r}")
     if not 0 <= options.min_island_fraction <= 1:
         raise ProcessingError(f"--min-island: expected a fraction in [0, 1], found {options.min_island_fraction}")
-    if options.axis not in (None, "x", "y"):
-        raise ProcessingError(f"--axis: expected x or y, found {options.axis!r}")
+    if options.axis not in (None, *AXES):
+        raise ProcessingError(f"--axis: expected one of {', '.join(AXES)}, found {options.axis!r}")
     if options.max_sigma is not None and not options.max_sigma > 0:
         raise ProcessingError(f"--max-sigma: expected a positive number of mm, found {options.max_sigma}")
-    if not 0 < options.min_modulation_ratio <= 1:
+    if options.min_modulation_ratio is not None and not 0 < options.min_modulation_ratio <= 1:
         raise ProcessingError(f"--min-modulation: expected a fraction in (0, 1], found {options.min_modulation_ratio}")
+    if options.max_phase_sigma is not None and not options.max_phase_sigma > 0:
+        raise ProcessingError(
+            f"--max-phase-sigma: expected a positive number of radians, found {options.max_phase_sigma}"
+        )

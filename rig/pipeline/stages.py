@@ -24,7 +24,8 @@ from calibration.store import Calibration
 from processing.denoise.frames import rpca_denoise_stack
 from processing.geometry.uncertainty import noise_sigma, phase_sigma
 from processing.phase.convention import gray_offset, heterodyne_offset
-from processing.phase.shifting import phase_shift, shadow_mask
+from processing.phase.frequency_fusion import fuse_frequencies
+from processing.phase.shifting import phase_shift, sample_stride, shadow_mask
 from processing.unwrap.fused_pass import FringePass, fringe_pass
 from processing.unwrap.neighbour_rescue import rescue
 from rig.blas import rpca_blas
@@ -32,7 +33,14 @@ from rig.errors import ProcessingError
 from rig.pipeline import convention_check
 from rig.pipeline.corrections import stage_correction
 from rig.pipeline.exposures import fuse_state_exposures
-from rig.pipeline.plan import PatternGroups, ProcessOptions, _all_integers, accepted_params, choose_unwrap
+from rig.pipeline.plan import (
+    RATIO_RULE_RATIO,
+    PatternGroups,
+    ProcessOptions,
+    _all_integers,
+    accepted_params,
+    choose_unwrap,
+)
 from rig.pipeline.state import SceneState, UnwrappedPhase, WrappedPhase
 from rig.pipeline.unwrapping import REGISTRY as UNWRAPPERS
 from rig.pipeline.unwrapping import UNWRAP_METHODS, GrayPlanes, UnwrapInputs, UnwrapMethod
@@ -73,10 +81,14 @@ def stage_undistort(state: SceneState, options: ProcessOptions) -> None:
     """Remove lens distortion with the calibration's ``camera_matrix`` / ``distortion``.
 
     Done by default when they are present, except for the stereo model, whose triangulation
-    undistorts camera rays itself. ``--no-undistort`` skips it.
+    undistorts camera rays itself (the report says ``"undistorted": "rays"``). ``--no-undistort``
+    skips it.
     """
     cal = state.calibration
-    if cal is None or options.undistort is False or cal.model == "stereo":
+    if cal is not None and cal.model == "stereo":  # --no-undistort is refused for it (rig.pipeline.run)
+        state.info["undistorted"] = "rays"  # the triangulation undistorts camera and projector rays
+        return
+    if cal is None or options.undistort is False:
         return
     matrix, distortion = cal.extra.get("camera_matrix"), cal.extra.get("distortion")
     if matrix is None or distortion is None:
@@ -170,6 +182,10 @@ def stage_phase(state: SceneState, options: ProcessOptions) -> None:
       seconds of each);
     - single-shot patterns: :data:`rig.pipeline.single_shot_phase.SINGLE_SHOT`, whose RPCA runs
       with single-threaded BLAS (``single_shot``).
+
+    On the first two paths every phase-shifted frequency goes into the absolute phase, weighted by
+    its predicted noise (:mod:`processing.phase.frequency_fusion`; ``frequency_fusion``), and the
+    validity rule applies the predicted phase sigma (:func:`_bound_phase_sigma`; ``validity``).
     """
     assert state.frames is not None
     if state.groups.single_shot:
@@ -189,22 +205,84 @@ def stage_phase(state: SceneState, options: ProcessOptions) -> None:
             "unwrap": round(time.perf_counter() - wrapped, 4),
         }
     _predict_phase_sigma(state)
+    _bound_phase_sigma(state, options)
+
+
+def _ratio_threshold_sigma(phase_sigma: np.ndarray, ratio: float) -> float:
+    """The predicted phase sigma of a pixel whose modulation is ``ratio`` x the 99th percentile's.
+
+    sigma is proportional to 1 / B, so the 1st percentile of sigma (over a regular subsample of
+    about 16k pixels) belongs to the 99th percentile of B.
+    """
+    flat = phase_sigma.reshape(-1)[:: sample_stride(phase_sigma.shape)]
+    flat = flat[np.isfinite(flat)]
+    return float(np.percentile(flat, 1.0)) / ratio if flat.size else 0.0
+
+
+def _predictable(state: SceneState) -> bool:
+    """Whether the phase noise of this capture can be predicted: phase-shifted fringes along the axis."""
+    along = state.groups.along(state.axis)
+    return bool(along) and all(group.steps >= 3 for group in along)
+
+
+def _bound_phase_sigma(state: SceneState, options: ProcessOptions) -> None:
+    """The validity rule (report: ``validity``): under the noise rule, pixels whose predicted phase
+    sigma is above the bound leave the mask (``above_max_phase_sigma``).
+
+    The bound is ``max_phase_sigma``, or the phase sigma of a pixel at the modulation ratio's
+    threshold (0.2 x the 99th percentile of B) where that is larger: the noise rule adds dark
+    pixels with a clean phase and never drops what the ratio rule keeps in a noisy capture.
+    """
+    predictable = _predictable(state)
+    rule = options.noise_rule(predictable)
+    bound = options.max_phase_sigma if rule else None
+    unwrapped = state.unwrapped
+    if bound is not None and state.phase_sigma is not None:
+        ratio = RATIO_RULE_RATIO if options.min_modulation_ratio is None else options.min_modulation_ratio
+        bound = max(bound, _ratio_threshold_sigma(state.phase_sigma, ratio))
+    state.info["validity"] = {
+        "rule": "noise" if rule else "modulation ratio",
+        "min_modulation_ratio": options.modulation_ratio(predictable),
+        "max_phase_sigma_rad": None if bound is None else round(float(bound), 5),
+        "max_sigma_mm": options.max_sigma,
+    }
+    if bound is None or state.phase_sigma is None or unwrapped is None:
+        return
+    above = unwrapped.valid & ~(state.phase_sigma <= np.float32(bound))
+    state.info["above_max_phase_sigma"] = int(np.count_nonzero(above))
+    if above.any():
+        unwrapped.valid = unwrapped.valid & ~above
+        np.copyto(unwrapped.phase, np.float32(np.nan), where=above)  # the stage's own array
 
 
 def _predict_phase_sigma(state: SceneState) -> None:
-    """The capture's noise (report: ``noise_sigma_grey``) and each pixel's phase sigma at the phase's frequency.
+    """Each pixel's phase sigma at the phase's frequency, unless the frequency fusion predicted it already.
 
     Only for phase-shifted captures whose highest frequency kept its modulation B (with a
     calibration, or stage by stage); :mod:`processing.geometry.uncertainty` holds the model.
     """
     along = state.groups.along(state.axis)
     wrapped = state.wrapped
-    if state.frames is None or wrapped is None or not along or any(group.steps < 3 for group in along):
+    if state.phase_sigma is not None or state.frames is None or wrapped is None or not along:
+        return
+    if any(group.steps < 3 for group in along):
         return
     modulation = wrapped.modulation[-1] if wrapped.modulation else None
     if modulation is None:
         return
-    # the highest frequency's fit residual alone: ~16k sampled pixels pin sigma_I within 1 %
+    state.phase_sigma = phase_sigma(modulation, _noise_sigma(state), along[-1].steps)
+
+
+def _noise_sigma(state: SceneState) -> float:
+    """The capture's camera noise sigma_I in grey levels (report: ``noise_sigma_grey``), estimated once.
+
+    The highest phase-shifted frequency's fit residual alone: ~16k sampled pixels pin sigma_I within 1 %.
+    """
+    known = state.info.get("noise_sigma_grey")
+    if known is not None:
+        return float(known)
+    assert state.frames is not None
+    along = [g for g in state.groups.along(state.axis) if g.steps >= 3]
     fitted = [g for g in along if g.steps >= 4][-1:] or along
     fused = state.info.get("exposures")  # fused exposures: unit noise at every pixel by construction
     sigma_i = (
@@ -215,7 +293,29 @@ def _predict_phase_sigma(state: SceneState) -> None:
         )
     )
     state.info["noise_sigma_grey"] = round(sigma_i, 4)
-    state.phase_sigma = phase_sigma(modulation, sigma_i, along[-1].steps)
+    return sigma_i
+
+
+def _fusing(state: SceneState, options: ProcessOptions) -> bool:
+    """Whether every frequency goes into the absolute phase: two or more phase-shifted ones along the
+    axis, all of them phase-shifted, and ``--param frequency_fusion=false`` not given."""
+    along = state.groups.along(state.axis)
+    return (
+        options.params.get("frequency_fusion", True) is not False
+        and len(along) > 1
+        and all(group.steps >= 3 for group in along)
+    )
+
+
+def _note_fusion(state: SceneState, frequencies: Sequence[float], disagreeing: int, valid: np.ndarray) -> None:
+    """report.json's ``frequency_fusion`` entry (:mod:`processing.phase.frequency_fusion`)."""
+    state.info["frequency_fusion"] = {
+        "frequencies": [float(f) for f in frequencies],
+        "rule": "inverse predicted phase variance, each frequency scaled to the highest's units",
+        "disagreeing_pixels": int(disagreeing),
+        "disagreeing_fraction": round(disagreeing / max(1, int(np.count_nonzero(valid))), 6),
+        "off": "--param frequency_fusion=false",
+    }
 
 
 def _wrapped_phases(state: SceneState, options: ProcessOptions) -> None:
@@ -237,7 +337,7 @@ def _wrapped_phases(state: SceneState, options: ProcessOptions) -> None:
         out.phase.append(phase)
         out.modulation.append(amplitude)
         out.background.append(background)
-        out.valid &= shadow_mask(amplitude, background, min_ratio=options.modulation_ratio)
+        out.valid &= shadow_mask(amplitude, background, min_ratio=options.modulation_ratio(_predictable(state)))
     state.wrapped = out
     state.info["valid_after_modulation"] = float(out.valid.mean())
     _note_other_axis(state)
@@ -276,6 +376,7 @@ def _fused_pass(state: SceneState, options: ProcessOptions) -> bool:
     max_residual = float(options.params.get("max_residual", np.pi / 2))  # e.g. 3.14 for drifting beats
     check = method.name == "heterodyne" and convention_check.enabled(options)
     assert state.frames is not None
+    fuse = _noise_sigma(state) if _fusing(state, options) else None
     try:
         scan = fringe_pass(
             state.frames,
@@ -283,16 +384,23 @@ def _fused_pass(state: SceneState, options: ProcessOptions) -> bool:
             freqs,
             method.name,
             shifts=[np.asarray(group.shifts) for group in along],
-            min_ratio=options.modulation_ratio,
+            min_ratio=options.modulation_ratio(True),  # the pass runs on phase-shifted fringes only
             max_residual=max_residual,
-            keep_all=state.calibration is None or check,
+            # auto weighs its order changes against the lower frequencies' wrapped phases
+            keep_all=state.calibration is None or check or options.correction == "auto",
             orders=False,  # the corrections re-derive orders from the phases; nothing else reads them
             # A + B, the texture, instead of A and B apart (one map fewer) unless B is wanted for sigma
-            brightness=state.calibration is None,
+            brightness=state.calibration is None and (fuse is not None or not options.noise_rule(True)),
+            fuse_noise=fuse,
         )
     except ValueError:
         return False  # e.g. frequencies the method refuses: the stage-by-stage path reports it as before
     _keep_fused(state, options, scan, freqs, method.name, check)
+    if scan.sigma is not None:
+        assert state.unwrapped is not None  # _keep_fused set it
+        state.phase_sigma = scan.sigma
+        state.unwrapped.fused = True
+        _note_fusion(state, freqs, scan.disagreeing, scan.valid)
     state.info["fused_pass"] = "phase shifting, modulation mask and unwrapping in one float32 pass"
     _note_other_axis(state)
     return True
@@ -427,6 +535,30 @@ def _unwrap(state: SceneState, options: ProcessOptions) -> None:
         absolute=result.absolute,
         orders=result.orders,
     )
+    if result.absolute and _fusing(state, options):
+        _fuse_stage_by_stage(state)
+
+
+def _fuse_stage_by_stage(state: SceneState) -> None:
+    """Every frequency's wrapped phase into the unwrapped phase (the stage-by-stage twin of the fused pass's)."""
+    wrapped, unwrapped = state.wrapped, state.unwrapped
+    assert wrapped is not None and unwrapped is not None
+    maps = [wrapped.phase, wrapped.modulation]
+    if any(m is None for group in maps for m in group):
+        return
+    along = state.groups.along(state.axis)
+    fused = fuse_frequencies(
+        unwrapped.phase,
+        [p for p in wrapped.phase if p is not None],
+        wrapped.frequencies,
+        [m for m in wrapped.modulation if m is not None],
+        [group.steps for group in along],
+        _noise_sigma(state),
+    )
+    unwrapped.phase = fused.phase
+    unwrapped.fused = True
+    state.phase_sigma = fused.sigma
+    _note_fusion(state, wrapped.frequencies, fused.disagreeing, unwrapped.valid)
 
 
 def _rescue_rejected(

@@ -41,6 +41,7 @@ class UnwrappedPhase:
     method: str
     absolute: bool = True
     orders: np.ndarray | None = None
+    fused: bool = False  # every frequency went into the phase (processing.phase.frequency_fusion)
 
 
 @dataclass
@@ -59,6 +60,8 @@ class SceneState:
     notes: list[str] = field(default_factory=list)
     info: dict[str, Any] = field(default_factory=dict)
     calibration: Calibration | None = None
+    # valid pixels whose fringe orders the correction could not settle (``auto``), else None
+    unresolved: np.ndarray | None = None
     # predicted phase standard deviation (rad) per pixel at the unwrapped frequency (processing.geometry.uncertainty)
     phase_sigma: np.ndarray | None = None
     single_shot_reference: Any = None  # processing.unwrap.single_shot.SingleShotReference of a reference capture

@@ -10,6 +10,7 @@ A result directory (``rig process -o OUT``, the console's ``DATA/results/NAME``,
     wrapped.npy    wrapped phase per frequency (without a calibration)
     height.npy     heights in mm, NaN where invalid (with a calibration)
     uncertainty.npy  predicted height sigma in mm, NaN where invalid (with a calibration, phase shifting)
+    unresolved.npy   bool, valid pixels whose fringe orders no evidence settled (when the correction found any)
     exposure.npy   per pixel the exposure (us) that weighed most in the fused phase (captures at several exposures)
     + one file per output format asked for (with a calibration): :data:`FORMATS`
 
@@ -54,6 +55,7 @@ PREVIEW = "preview.png"
 WRAPPED = "wrapped.npy"
 HEIGHT = "height.npy"
 UNCERTAINTY = "uncertainty.npy"
+UNRESOLVED = "unresolved.npy"
 EXPOSURE = "exposure.npy"
 POINTS = "points.ply"
 MESH_PLY = "mesh.ply"
@@ -171,6 +173,7 @@ MEDIA_TYPES: dict[str, str] = {
     POINTS: OCTET,
     HEIGHT: OCTET,
     UNCERTAINTY: OCTET,
+    UNRESOLVED: OCTET,
     EXPOSURE: OCTET,
     PHASE: OCTET,
     MASK: OCTET,
@@ -276,6 +279,8 @@ def _write_files(
         preview = pool.submit(encode.write_preview, out / PREVIEW, shown, unit, title)
         written["phase"] = encode.write_array(out / PHASE, phase).name
         written["mask"] = encode.write_array(out / MASK, np.asarray(result.mask, dtype=bool)).name
+        if obj.unresolved is not None and obj.unresolved.any():
+            written["unresolved"] = encode.write_array(out / UNRESOLVED, obj.unresolved & result.mask).name
         if obj.exposure_map is not None:
             exposure = np.where(result.mask, obj.exposure_map, np.float32(np.nan)).astype(np.float32)
             written["exposure"] = encode.write_array(out / EXPOSURE, exposure).name

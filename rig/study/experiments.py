@@ -195,6 +195,8 @@ class PhaseCapture:
     truth: np.ndarray  # true absolute phase, NaN where unlit
     lit: np.ndarray
     frames: np.ndarray | None = None
+    # (frequency, wrapped phase) of every lower frequency, for auto's temporal evidence
+    lower: tuple[tuple[float, np.ndarray], ...] = ()
 
 
 def _render(

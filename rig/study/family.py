@@ -225,16 +225,20 @@ def capture(case: FamilyCase, height_mm: np.ndarray, rng: np.random.Generator) -
     wrapped = result.phase - TWO_PI * result.orders
     truth = synthesis.true_absolute_phase(mapping, geometry, top)
     lit = mapping.lit & np.isfinite(result.phase)
-    return PhaseCapture(result.phase, wrapped, result.orders, truth, lit)
+    lower = tuple((float(f), phi) for f, phi in zip(case.frequencies, phis) if f != top)
+    return PhaseCapture(result.phase, wrapped, result.orders, truth, lit, lower=lower)
 
 
-def corrected(method: str, capture_: PhaseCapture) -> np.ndarray:
+def corrected(method: str, capture_: PhaseCapture, frequency: float) -> np.ndarray:
     """Absolute phase after ``method`` as ``rig process`` applies it (auto skipped where fringes are too dense)."""
     if method == "oracle":
         return oracle_phase(capture_)
     if method == "auto" and undersampled_for_spatial_methods(fringe_step_rad(capture_.phase, capture_.lit, axis=1)):
         method = "none"
-    phase, _info = REGISTRY[method](capture_.phase, capture_.wrapped, mask=capture_.lit)
+    extra: dict[str, Any] = {}
+    if method == "auto" and capture_.lower:  # as rig process passes the capture's lower frequencies
+        extra = {"frequency": frequency, "lower_wrapped": capture_.lower}
+    phase, _info = REGISTRY[method](capture_.phase, capture_.wrapped, mask=capture_.lit, **extra)
     return phase
 
 
@@ -252,7 +256,7 @@ def evaluate(case: FamilyCase, methods: Sequence[str] = METHODS) -> dict[str, An
     seconds: dict[str, float] = {}
     for method in (*methods, "oracle"):
         tick = time.perf_counter()
-        h = heights(corrected(method, obj), corrected(method, ref), geometry, top)
+        h = heights(corrected(method, obj, top), corrected(method, ref, top), geometry, top)
         seconds[method] = time.perf_counter() - tick
         finite = mask & np.isfinite(h)
         value = nmse(h, height_mm, finite)

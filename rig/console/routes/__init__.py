@@ -8,7 +8,21 @@ from __future__ import annotations
 
 from fastapi import APIRouter
 
-from rig.console.routes import calibration, data, live, scan, settings, setup, verify
+from rig.console.routes import (
+    calibration,
+    calibration_figures,
+    calibration_import,
+    capture_views,
+    data,
+    docs,
+    live,
+    manage,
+    measure,
+    scan,
+    settings,
+    setup,
+    verify,
+)
 
 ROUTERS: tuple[APIRouter, ...] = (
     live.router,
@@ -16,6 +30,12 @@ ROUTERS: tuple[APIRouter, ...] = (
     scan.router,
     setup.router,
     data.router,
+    capture_views.router,
+    measure.router,
+    manage.router,
     calibration.router,
+    calibration_import.router,
+    calibration_figures.router,
     verify.router,
+    docs.router,
 )

@@ -6,6 +6,11 @@ export const clientId = crypto.randomUUID ? crypto.randomUUID() : String(Math.ra
 export const $ = (id) => document.getElementById(id);
 
 export async function api(method, path, body) {
+  try { return await request(method, path, body); } catch (e) { showError(e.message); throw e; }
+}
+
+// The same request without the page's error banner: for a refusal shown next to its field.
+export async function request(method, path, body) {
   const options = { method, headers: { "X-Console-Client": clientId } };
   if (body !== undefined) {
     options.headers["Content-Type"] = "application/json";
@@ -15,11 +20,7 @@ export async function api(method, path, body) {
   const text = await response.text();
   let data = null;
   try { data = text ? JSON.parse(text) : null; } catch (e) { data = { error: text }; }
-  if (!response.ok) {
-    const message = (data && data.error) || response.statusText;
-    showError(message);
-    throw new Error(message);
-  }
+  if (!response.ok) throw new Error((data && data.error) || response.statusText);
   return data;
 }
 

@@ -1,6 +1,7 @@
 // The Calibration view: the wizard (from the page's <template id="calibration-template">), its
 // prompts (a real rig asks the operator to move the plane), steps, progress and result.
-import { $, api } from "./api.js";
+import { $, api, request } from "./api.js";
+import { clearErrors, numberIn, numbersIn, showRefusal } from "./fields.js";
 
 function finishSteps(className) {
   document.querySelectorAll("#cal-steps li.current").forEach((li) => { li.className = className; });
@@ -40,14 +41,21 @@ export function calibrationJob(job) {
 }
 
 async function start() {
+  const fields = { name: $("cal-name"), heights_mm: $("cal-heights"), board_views: $("cal-views"), model: $("cal-model"), gamma_levels: $("cal-gamma") };
+  clearErrors(...Object.values(fields));
+  // the calibration plan's own checks name the command's options
+  Object.assign(fields, { "--heights": fields.heights_mm, "--model": fields.model, "--gamma": fields.gamma_levels });
+  const heights = numbersIn($("cal-heights"), "the plane heights in mm above the reference plane, separated by commas (e.g. 25, 50, 100)");
+  const views = numberIn($("cal-views"), "how many tilted board views to take (0 for none)");
+  const gamma = numberIn($("cal-gamma"), "the number of gamma ramp levels (0 for none)");
+  if (heights === null || views === null || gamma === null) return;
   $("cal-steps").replaceChildren();
   $("cal-result").textContent = "";
   delete $("cal-result").dataset.done;
-  const heights = $("cal-heights").value.split(",").map(Number);
-  await api("POST", "/api/calibrate", {
-    name: $("cal-name").value || null, heights_mm: heights, board_views: Number($("cal-views").value),
-    model: $("cal-model").value, gamma_levels: Number($("cal-gamma").value),
-  }).catch(() => {});
+  await request("POST", "/api/calibrate", {
+    name: $("cal-name").value || null, heights_mm: heights, board_views: views,
+    model: $("cal-model").value, gamma_levels: gamma,
+  }).catch((e) => showRefusal(e.message, fields, $("cal-start")));
 }
 
 export function buildWizard() {

@@ -21,6 +21,7 @@ export async function loadCaptures() {
   const names = results.results.map((r) => r.name);
   fillSelect($("compare-a"), names, $("compare-a").value || names[0] || "");
   fillSelect($("compare-b"), names, $("compare-b").value || names[1] || names[0] || "");
+  if (selected && !captures.captures.some((c) => c.name === selected)) selected = null; // renamed or deleted
   if (selected) await openCapture(selected);
 }
 

@@ -1,5 +1,6 @@
 // The live view: camera frames and their figures, camera and projector settings, device status.
 import { $, api, fillSelect } from "./api.js";
+import { sendCameraSetting } from "./fields.js";
 import { drawLive3d } from "./live3d.js";
 
 // A binary message: a 4-byte header length, the JSON header, then a live frame's JPEG or a live 3-D cloud.
@@ -81,8 +82,8 @@ function renderDevices(status) {
 
 export function bindSettings() {
   const put = (path, body) => api("PUT", path, body).catch(() => {});
-  $("exposure").onchange = () => put("/api/exposure", { exposure_us: Number($("exposure").value) });
-  $("gain").onchange = () => put("/api/exposure", { gain: Number($("gain").value) });
+  $("exposure").onchange = () => sendCameraSetting($("exposure"), "exposure_us", "an exposure time in microseconds (1 to 10000000)");
+  $("gain").onchange = () => sendCameraSetting($("gain"), "gain", "a gain of 0 or more");
   $("overlay").onchange = () => put("/api/live", { overlay: $("overlay").checked });
   $("live-mode").onchange = () => put("/api/live", { view: $("live-mode").value });
   for (const id of ["projector-pattern", "fringe-frequency", "fringe-phase", "fringe-axis", "grid-pitch"]) {

@@ -6,6 +6,10 @@ import { bindCaptures, captureJob, captureProgress, loadOptions } from "./captur
 import { buildWizard, calibrationJob, calibrationProgress, calibrationResult, showPrompt } from "./calibration.js";
 import { binaryMessage, bindSettings, showSettings } from "./live.js";
 import { bindLive3d, live3dError, showLive3d } from "./live3d.js";
+import { bindMeasure } from "./measure.js";
+import { bindManage, dataChanged } from "./manage.js";
+import { bindCalibrations, showCalibrations } from "./calibrations.js";
+import { bindCaptureLook } from "./capturelook.js";
 import { bindResult, openResult, resultSaved, showResult } from "./result.js";
 import { bindSetup, showSetup } from "./setup.js";
 import { buildVerify, showVerifyPrompt, verificationDone, verifyJob, verifyProgress } from "./verify.js";
@@ -29,6 +33,7 @@ function updateStatus(status) {
   $("verify-start").disabled = status.busy;
   $("stop-button").disabled = !(status.busy || status.jobs.length);
   showSettings(status);
+  showCalibrations(status.calibrations, status.calibration);
   showSetup(status);
   showLive3d(status);
   showPrompts(status.prompt);
@@ -87,6 +92,7 @@ const handlers = {
   prompt: (m) => showPrompts(m),
   calibration: (m) => calibrationResult(m),
   verification: (m) => verificationDone(m).catch(() => {}),
+  data: (m) => dataChanged(m),
   live3d: (m) => live3dError(m),
 };
 
@@ -124,6 +130,10 @@ function bind() {
   bindSetup();
   bindLive3d();
   bindResult();
+  bindMeasure();
+  bindManage();
+  bindCalibrations();
+  bindCaptureLook();
   bindCaptures();
   buildWizard();
   buildVerify();

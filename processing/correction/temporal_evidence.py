@@ -1,0 +1,256 @@
+"""Whether the other frequencies' wrapped phases support a change of fringe orders, blob by blob.
+
+Temporal unwrapping measured each pixel's fringe order from the lower frequencies of the capture;
+a spatial correction proposes other orders for some pixels. Any choice of orders predicts every
+lower frequency's wrapped phase: the absolute phase ``Phi = phi + 2 pi k`` at frequency ``f`` is
+``Phi f_l / f`` at ``f_l``. The squared misfit of that prediction, wrapped and summed over the
+lower frequencies, is (up to the noise variance) minus twice the log-likelihood of the orders.
+
+Over a blob of changed pixels, ``D`` (the misfit with the proposed orders minus that with the
+measured ones, summed over the blob) is compared with ``S``, what ``D`` is expected to be if the
+measured orders were right (each pixel's squared shift of the prediction, ``wrap(2 pi dk f_l / f)``
+squared). If the measured orders were wrong (noise pushed them past the decision boundary, the
+case corrections are for), the proposed orders fit about as well as the measured ones and ``D``
+lies near 0. Misfits are counted in units of each frequency's noise variance (the median misfit of
+the measured orders over the map, :func:`noise_weights`, or the blob's own where larger). The
+midpoint ``S / 2`` decides, with a margin of :data:`Z_MARGIN` standard errors (``2 sqrt(S)``):
+
+- ``D`` well above ``S / 2``: the other frequencies contradict the change (a spatial correction that
+  pooled across a real step or blurred an edge); the measured orders come back on the blob's pixels
+  whose own misfit says so (a blob can also hold pixels whose measured orders were wrong);
+- ``D`` well below: the change stands;
+- in between, where the blob's evidence cannot tell the two apart: the proposal (which the neighbours
+  supported) stays and the blob is reported unresolved;
+- ``S`` within the margin of 0 (changes by a whole cycle of every lower frequency, e.g. 64 orders of
+  1/8/64), below :data:`SEPARATION` noise deviations or below :data:`MIN_SHIFT_RAD`: the frequencies
+  cannot judge, and the change keeps what the neighbour evidence
+  (:mod:`processing.correction.order_evidence`) decided.
+
+Before judging, :func:`snap_to_lower_frequencies` moves changed pixels one order where the lower
+frequencies clearly fit the next order better.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from processing.angles import wrap_to_pi
+from processing.correction.order_evidence import label_blobs
+
+TWO_PI = 2.0 * np.pi
+# Standard errors between a blob's evidence and the decision threshold for a confident decision.
+Z_MARGIN = 3.0
+# A blob's lower frequencies judge it only where changing its orders shifts their predictions by more
+# than this many noise standard deviations (per pixel, root mean square): below it, the measured orders
+# are themselves likely wrong (the noise that misled the temporal unwrapping), and the evidence is
+# left to the neighbours.
+SEPARATION = 4.0
+# ... and only where that shift is more than this (radians, root mean square over the blob's pixels):
+# systematic phase errors that differ between frequencies (harmonics with few phase steps, mixed
+# pixels at edges) mislead the temporal unwrapping into smaller shifts, up to 0.8 rad on the develop
+# cases, where the measured orders then fit better than the right ones.
+MIN_SHIFT_RAD = 1.0
+
+
+def lower_frequency_misfit(
+    phase: np.ndarray,
+    frequency: float,
+    lower: Sequence[tuple[float, np.ndarray]],
+    weights: Sequence[float] | None = None,
+) -> np.ndarray:
+    """Sum over ``lower`` = ((f_l, wrapped phase at f_l), ...) of wrap(phase f_l / frequency - phi_l)^2
+    (each term times its ``weights`` entry, default 1)."""
+    out = np.zeros(phase.shape, dtype=np.float64)
+    for index, (f_low, wrapped_low) in enumerate(lower):
+        term = wrap_to_pi(phase * (float(f_low) / float(frequency)) - wrapped_low) ** 2
+        out += term if weights is None else weights[index] * term
+    return out
+
+
+def _order_shift(
+    delta_orders: np.ndarray,
+    frequency: float,
+    lower: Sequence[tuple[float, np.ndarray]],
+    weights: Sequence[float] | None = None,
+) -> np.ndarray:
+    """Squared shift of every lower frequency's prediction when the orders change by ``delta_orders``
+    (weighted as :func:`lower_frequency_misfit`)."""
+    out = np.zeros(delta_orders.shape, dtype=np.float64)
+    for index, (f_low, _wrapped) in enumerate(lower):
+        term = wrap_to_pi(TWO_PI * delta_orders * (float(f_low) / float(frequency))) ** 2
+        out += term if weights is None else weights[index] * term
+    return out
+
+
+def noise_weights(
+    measured: np.ndarray, valid: np.ndarray, frequency: float, lower: Sequence[tuple[float, np.ndarray]]
+) -> list[float]:
+    """1 / noise variance of each lower frequency's misfit with the measured orders (median over the valid
+    pixels / 0.455, the median of chi-square with one degree of freedom: robust to wrong orders)."""
+    at = measured[valid]
+    weights = []
+    for f_low, wrapped_low in lower:
+        term = wrap_to_pi(at * (float(f_low) / float(frequency)) - wrapped_low[valid]) ** 2
+        variance = float(np.median(term)) / 0.455 if term.size else 0.0
+        weights.append(1.0 / max(variance, 1e-12))
+    return weights
+
+
+def snap_to_lower_frequencies(
+    proposed: np.ndarray,
+    measured: np.ndarray,
+    valid: np.ndarray,
+    frequency: float,
+    lower: Sequence[tuple[float, np.ndarray]],
+    weights: Sequence[float] | None = None,
+) -> tuple[np.ndarray, int]:
+    """``proposed`` with each changed pixel moved one order up or down where the lower frequencies clearly say so.
+
+    A spatial correction knows the order only to within its neighbours': beside a height step close to
+    a whole fringe it can be one order off on a whole side of the step. The lower frequencies tell
+    neighbouring orders apart well wherever one order shifts their prediction by :data:`MIN_SHIFT_RAD`
+    or more (all drawn frequency sets but 29/32 and 1/8/64): a pixel changed by the correction takes
+    the order next to the proposed one if that fits them better by more than half that shift squared
+    (the likelihood midpoint, plus a quarter of the shift of margin). Returns the phase and how many
+    pixels moved.
+    """
+    with np.errstate(invalid="ignore"):
+        changed = valid & (np.abs(proposed - measured) > np.pi)
+    if not changed.any() or not lower:
+        return proposed, 0
+    lower_at = [(f, p[changed]) for f, p in lower]
+    at = proposed[changed]
+    best = lower_frequency_misfit(at, frequency, lower_at)
+    step = np.zeros(at.shape)
+    if weights is None:
+        weights = noise_weights(measured, valid, frequency, lower)
+    for delta in (-1.0, 1.0):
+        shift = float(_order_shift(np.full(1, delta), frequency, lower)[0])
+        separation = float(_order_shift(np.full(1, delta), frequency, lower, weights)[0])
+        if shift < MIN_SHIFT_RAD**2 or separation < SEPARATION**2:
+            continue
+        fits = lower_frequency_misfit(at + TWO_PI * delta, frequency, lower_at)
+        # and the new order must fit them within the noise (3 sigma a frequency): beside edges and
+        # where the lower phases are corrupted too, a better fit is not yet a good one
+        within = lower_frequency_misfit(at + TWO_PI * delta, frequency, lower_at, weights) <= 9.0 * len(lower)
+        better = within & (fits < best - shift / 2.0)
+        step[better] = delta
+        best = np.where(better, fits, best)
+    moved = int(np.count_nonzero(step))
+    if not moved:
+        return proposed, 0
+    out = proposed.copy()
+    out[changed] = at + TWO_PI * step
+    return out, moved
+
+
+@dataclass(frozen=True)
+class _PixelEvidence:
+    """Per changed pixel: noise-weighted misfits of both orders, the shift between them weighted and in rad^2."""
+
+    with_measured: np.ndarray
+    with_proposed: np.ndarray
+    shift: np.ndarray
+    shift_rad: np.ndarray
+
+    @classmethod
+    def of(
+        cls,
+        proposed: np.ndarray,
+        measured: np.ndarray,
+        frequency: float,
+        lower: Sequence[tuple[float, np.ndarray]],
+        weights: Sequence[float],
+    ) -> _PixelEvidence:
+        delta = np.rint((proposed - measured) / TWO_PI)
+        return cls(
+            lower_frequency_misfit(measured, frequency, lower, weights),
+            lower_frequency_misfit(proposed, frequency, lower, weights),
+            _order_shift(delta, frequency, lower, weights),
+            _order_shift(delta, frequency, lower),
+        )
+
+
+def keep_temporally_supported(
+    proposed: np.ndarray,
+    measured: np.ndarray,
+    valid: np.ndarray,
+    frequency: float,
+    lower: Sequence[tuple[float, np.ndarray]],
+    weights: Sequence[float] | None = None,
+) -> tuple[np.ndarray, np.ndarray, dict[str, int]]:
+    """``proposed`` where the lower frequencies do not contradict it; the unresolved pixels; blob counts.
+
+    Parameters
+    ----------
+    proposed, measured : (H, W) absolute phases at ``frequency`` with the same wrapped phase
+    valid : (H, W) bool
+    frequency : the frequency of both phases
+    lower : ((f_l, wrapped phase at f_l), ...), each (H, W), any 2 pi representation, finite where valid
+
+    Returns
+    -------
+    phase : (H, W) ``proposed`` with the contradicted pixels of contradicted blobs set back to ``measured``
+    unresolved : (H, W) bool, the ambiguous blobs' pixels (their proposed orders, which the neighbours
+        supported, stay)
+    counts : blobs ``kept``, ``reverted``, ``unresolved`` and ``undecidable`` (left to the neighbours)
+
+    Examples
+    --------
+    A ramp at 17 fringes whose 13-fringe phase confirms the measured orders; a proposal three
+    orders off on a patch goes back:
+
+    >>> import numpy as np
+    >>> from processing.angles import wrap_to_pi
+    >>> truth = np.tile(np.linspace(0.0, 60.0, 80), (60, 1))
+    >>> lower = [(13.0, wrap_to_pi(truth * 13.0 / 17.0))]
+    >>> proposed = truth.copy()
+    >>> proposed[20:24, 30:34] -= 3 * 2 * np.pi
+    >>> kept, unresolved, counts = keep_temporally_supported(proposed, truth, np.ones((60, 80), bool), 17.0, lower)
+    >>> bool(np.allclose(kept, truth)), counts["reverted"], int(unresolved.sum())
+    (True, 1, 0)
+    """
+    counts = {"kept": 0, "reverted": 0, "unresolved": 0, "undecidable": 0}
+    with np.errstate(invalid="ignore"):
+        changed = valid & (np.abs(proposed - measured) > np.pi)
+    if not changed.any() or not lower:
+        return proposed, np.zeros(valid.shape, dtype=bool), counts
+    count, labels = label_blobs(changed)
+    at = labels[changed]
+    if weights is None:  # misfits in units of each frequency's noise
+        weights = noise_weights(measured, valid, frequency, lower)
+    ev = _PixelEvidence.of(
+        proposed[changed], measured[changed], frequency, [(f, p[changed]) for f, p in lower], weights
+    )
+    difference = np.bincount(at, weights=ev.with_proposed - ev.with_measured, minlength=count)
+    expected = np.bincount(at, weights=ev.shift, minlength=count)
+    # the blob's own noise: the misfit of the better-fitting orders (dark or mixed pixels carry more)
+    noise = np.minimum(
+        np.bincount(at, weights=ev.with_measured, minlength=count),
+        np.bincount(at, weights=ev.with_proposed, minlength=count),
+    )
+    pixels = np.bincount(at, minlength=count)
+    undecidable = (expected <= SEPARATION**2 * np.maximum(noise, pixels * len(lower))) | (
+        np.bincount(at, weights=ev.shift_rad, minlength=count) < MIN_SHIFT_RAD**2 * pixels
+    )
+    margin = Z_MARGIN * 2.0 * np.sqrt(np.maximum(noise / np.maximum(pixels * len(lower), 1), 1.0) * expected)
+    contradicted = ~undecidable & (difference > expected / 2.0 + margin)
+    ambiguous = ~undecidable & ~contradicted & (difference >= expected / 2.0 - margin)
+    contradicted[0] = ambiguous[0] = undecidable[0] = False
+    counts["reverted"] = int(np.count_nonzero(contradicted[1:]))
+    counts["unresolved"] = int(np.count_nonzero(ambiguous[1:]))
+    counts["undecidable"] = int(np.count_nonzero(undecidable[1:]))
+    counts["kept"] = count - 1 - counts["reverted"] - counts["unresolved"] - counts["undecidable"]
+    # inside a contradicted blob, only the pixels whose own evidence contradicts the change go back
+    # (a blob can mix them with pixels whose measured orders were wrong)
+    own = (ev.shift_rad >= MIN_SHIFT_RAD**2) & (ev.with_proposed - ev.with_measured > ev.shift / 2.0)
+    own &= np.maximum(ev.with_measured, len(lower)) * SEPARATION**2 <= ev.shift
+    back_at = contradicted[at] & own
+    if not back_at.any():
+        return proposed, np.zeros(valid.shape, dtype=bool), counts
+    back = np.zeros(valid.shape, dtype=bool)
+    back[changed] = back_at
+    return np.where(back, measured, proposed), ambiguous[labels] & changed, counts

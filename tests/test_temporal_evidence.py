@@ -1,0 +1,87 @@
+"""Changes of fringe orders judged against the lower frequencies' wrapped phases (processing.correction.temporal_evidence)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from processing.angles import wrap_to_pi
+from processing.correction.temporal_evidence import (
+    keep_temporally_supported,
+    lower_frequency_misfit,
+    snap_to_lower_frequencies,
+)
+
+TWO_PI = 2.0 * np.pi
+TOP = 17.0  # a 13/17 pair: one order shifts the 13 prediction by 1.48 rad
+
+
+def _scene(
+    noise: float = 0.03, seed: int = 0, shape: tuple[int, int] = (60, 80)
+) -> tuple[np.ndarray, np.ndarray, list[tuple[float, np.ndarray]]]:
+    """True absolute phase at TOP with a step of one fringe and a bit (a hidden edge), its valid mask and the
+    noisy wrapped phase at 13 (the top phase is kept noise-free: its wrapped part is what every map shares)."""
+    rng = np.random.default_rng(seed)
+    rows, cols = np.mgrid[0 : shape[0], 0 : shape[1]].astype(np.float64)
+    truth = TWO_PI * cols / 12.0 + 0.01 * rows
+    truth[20:40, 30:60] += TWO_PI + 0.3
+    low = wrap_to_pi(truth * 13.0 / TOP + rng.normal(0.0, noise, shape))
+    return truth, np.ones(shape, dtype=bool), [(13.0, low)]
+
+
+def test_the_misfit_is_noise_with_the_true_orders_and_the_shift_squared_one_order_off() -> None:
+    truth, valid, lower = _scene(noise=0.0)
+    assert np.allclose(lower_frequency_misfit(truth, TOP, lower), 0.0, atol=1e-18)
+    off = lower_frequency_misfit(truth + TWO_PI, TOP, lower)
+    np.testing.assert_allclose(off, wrap_to_pi(np.full(1, TWO_PI * 13.0 / TOP))[0] ** 2, rtol=1e-9)
+
+
+def test_a_change_the_lower_frequency_contradicts_goes_back() -> None:
+    """The spatial proposal pooled across the step (one order off on the raised patch); the measurement had it right."""
+    truth, valid, lower = _scene()
+    proposed = truth.copy()
+    proposed[20:26, 30:36] -= 3 * TWO_PI  # three orders off on part of the patch: the snap cannot reach it
+    phase, unresolved, counts = keep_temporally_supported(proposed, truth, valid, TOP, lower)
+    np.testing.assert_array_equal(phase, truth)
+    assert counts["reverted"] == 1 and not unresolved.any()
+
+
+def test_a_change_of_noisy_measured_orders_is_left_to_the_neighbours() -> None:
+    """Where the lower frequency is as noisy as the shift, measured and proposed orders fit it alike: no verdict."""
+    truth, valid, lower = _scene(noise=1.2, seed=3)
+    measured = truth.copy()
+    measured[5:9, 5:9] += TWO_PI  # wrong temporal orders the spatial proposal fixed
+    phase, unresolved, counts = keep_temporally_supported(truth, measured, valid, TOP, lower)
+    np.testing.assert_array_equal(phase, truth)
+    assert counts["undecidable"] == 1 and counts["reverted"] == 0 and not unresolved.any()
+
+
+def test_right_changes_stand_where_the_measured_orders_misfit() -> None:
+    """Temporal errors that do not fit the lower frequency (an outlier there), fixed by the proposal: kept."""
+    truth, valid, lower = _scene()
+    measured = truth.copy()
+    measured[50:53, 10:14] += 4 * TWO_PI  # 13 x 4 orders = 52: the 13 prediction shifts by 2.22 rad
+    phase, _unresolved, counts = keep_temporally_supported(truth, measured, valid, TOP, lower)
+    np.testing.assert_array_equal(phase, truth)
+    assert counts["reverted"] == 0
+
+
+def test_a_proposal_one_order_off_moves_to_the_order_the_lower_frequency_fits() -> None:
+    truth, valid, lower = _scene()
+    measured = truth.copy()
+    measured[20:40, 30:60] += 5 * TWO_PI  # the temporal orders were wrong on the patch...
+    proposed = truth.copy()
+    proposed[20:40, 30:60] -= TWO_PI  # ...and the spatial proposal is one order off there
+    snapped, moved = snap_to_lower_frequencies(proposed, measured, valid, TOP, lower)
+    np.testing.assert_array_equal(snapped, truth)
+    assert moved == 20 * 30
+
+
+def test_the_snap_leaves_orders_the_lower_frequency_cannot_tell_apart() -> None:
+    """29/32: one order shifts the 29 prediction by 0.59 rad, below the shift the snap needs."""
+    rows, cols = np.mgrid[0:40, 0:50].astype(np.float64)
+    truth = TWO_PI * cols / 9.0
+    lower = [(29.0, wrap_to_pi(truth * 29.0 / 32.0))]
+    proposed = truth - TWO_PI
+    measured = truth + 11 * TWO_PI
+    snapped, moved = snap_to_lower_frequencies(proposed, measured, np.ones(truth.shape, bool), 32.0, lower)
+    assert moved == 0 and snapped is proposed
