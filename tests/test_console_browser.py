@@ -58,7 +58,8 @@ scene = "hemisphere"
 """
 
 
-LOADED_MS = 120_000  # how long a page waits for what it expects: a bound on a loaded 2-core machine, not a timing assertion
+# How long a page waits for what it expects: a bound on a loaded 2-core machine, not a timing assertion.
+LOADED_MS = 120_000
 VOLUME = "[volume]\ndepth_mm = 150.0\n"  # the exact calibration records no plane heights
 VERIFY_MPE = "1.5,0.4,0.4,1.5"  # PF,PS,SD,F in mm: what the 320x240 camera (pixels of ~1.4 mm) meets
 
