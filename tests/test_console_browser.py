@@ -19,9 +19,6 @@ a temporary folder (so that a test run leaves the committed pictures alone).
 from __future__ import annotations
 
 import contextlib
-import os
-import shutil
-import tempfile
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -29,24 +26,11 @@ from typing import Any
 
 import numpy as np
 import pytest
+from browser_harness import CHROMIUM, HEIGHT, WIDTH, playwright_api, shot
 from console_client import served
 
 from rig.config import load_config
 
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
-playwright_api = pytest.importorskip(
-    "playwright.sync_api", reason="playwright not installed (pip install -e '.[test]')"
-)
-if CHROMIUM is None:
-    pytest.skip("no chromium browser (apt-get install chromium)", allow_module_level=True)
-
-SCREENSHOTS = os.environ.get("RIG_SCREENSHOTS") == "1"
-SHOTS = (
-    Path(__file__).resolve().parent.parent / "docs" / "console"
-    if SCREENSHOTS
-    else Path(tempfile.gettempdir()) / "rig-console-screenshots"
-)
-WIDTH, HEIGHT = (640, 480) if SCREENSHOTS else (320, 240)
 RIG_TOML = f"""
 [camera]
 size = [{WIDTH}, {HEIGHT}]
@@ -124,11 +108,6 @@ def page(shared_page: Any) -> Any:
 def quick_scans(page: Any) -> None:
     """Scans from this page skip the fringe-order correction (tests where the result's accuracy is not the point)."""
     page.locator("#scan-correction").select_option("none")
-
-
-def shot(page: Any, name: str) -> None:
-    SHOTS.mkdir(parents=True, exist_ok=True)
-    page.screenshot(path=str(SHOTS / f"{name}.png"))
 
 
 def displayed_mean(page: Any) -> float:

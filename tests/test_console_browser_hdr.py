@@ -16,8 +16,8 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from browser_harness import CHROMIUM, playwright_api
 from console_client import served
-from test_console_browser import CHROMIUM, playwright_api
 
 from rig.config import load_config
 

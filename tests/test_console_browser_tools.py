@@ -21,33 +21,17 @@ from __future__ import annotations
 
 import csv
 import io
-import os
-import shutil
-import tempfile
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+from browser_harness import CHROMIUM, HEIGHT, WIDTH, playwright_api, shot
 from console_client import served
 
 from rig.config import load_config
 
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
-playwright_api = pytest.importorskip(
-    "playwright.sync_api", reason="playwright not installed (pip install -e '.[test]')"
-)
-if CHROMIUM is None:
-    pytest.skip("no chromium browser (apt-get install chromium)", allow_module_level=True)
-
-SCREENSHOTS = os.environ.get("RIG_SCREENSHOTS") == "1"
-SHOTS = (
-    Path(__file__).resolve().parent.parent / "docs" / "console"
-    if SCREENSHOTS
-    else Path(tempfile.gettempdir()) / "rig-console-screenshots"
-)
-WIDTH, HEIGHT = (640, 480) if SCREENSHOTS else (320, 240)
 BLOCK_MM = 25.0  # mock_devices.scenes.gauge_block's default height
 
 
@@ -146,11 +130,6 @@ def wait_finished(page: Any, before: int) -> None:
     page.wait_for_function(f"Number(document.querySelector('#measure-figures').dataset.count || 0) > {before}")
 
 
-def shot(page: Any, name: str) -> None:
-    SHOTS.mkdir(parents=True, exist_ok=True)
-    page.screenshot(path=str(SHOTS / f"{name}.png"), full_page=True)
-
-
 def test_region_statistics_give_the_step_height(page: Any, rig: dict[str, Any]) -> None:
     x0, y0, x1, y1 = rig["box"]
     top = measure(page, "roi", (x0 + 5, y0 + 5), (x1 - 5, y1 - 5))
@@ -176,7 +155,7 @@ def test_plane_fit_shows_the_flatness_of_the_floor_and_the_height_above_it(page:
     page.wait_for_function("document.querySelector('#measure-plane-caption').textContent.includes('above the plane')")
     high = float(page.locator("#measure-plane-caption").inner_text().split("..")[1].split()[0])
     assert high == pytest.approx(BLOCK_MM, abs=1.0)  # the block is the highest thing above the floor's plane
-    shot(page, "result-measure-plane")
+    shot(page, "result-measure-plane", full_page=True)
 
 
 def test_distance_across_the_block_is_its_width_and_across_its_edge_its_height(page: Any, rig: dict[str, Any]) -> None:
@@ -209,7 +188,7 @@ def test_histogram_and_profile_are_drawn_and_exported_as_csv(page: Any, rig: dic
     page.get_by_test_id("measure-chart").locator(".main-svg").first.wait_for()
     reply = csv_download(page)
     assert reply.headers["content-type"].startswith("text/csv") and reply.text().startswith("col,row,distance_mm")
-    shot(page, "result-measure-profile")
+    shot(page, "result-measure-profile", full_page=True)
 
 
 def test_a_point_off_the_map_is_refused_with_a_sentence(page: Any) -> None:
@@ -262,7 +241,7 @@ def test_a_result_deleted_in_the_page_comes_back_with_undo(page: Any, rig: dict[
     page.wait_for_function(f"!document.querySelector(\"#capture-results li[data-name='{result}']\")")
     assert page.request.get(rig["url"] + f"api/results/{result}").status == 404
     assert page.locator("#trash-list li").count() == 1
-    shot(page, "captures-trash")
+    shot(page, "captures-trash", full_page=True)
     page.get_by_test_id("undo").click()
     page.locator(f"#capture-results li[data-name='{result}']").wait_for()
     assert page.request.get(rig["url"] + f"api/results/{result}").status == 200
@@ -318,7 +297,7 @@ def test_calibrations_are_chosen_imported_and_deleted_in_the_page(page: Any, tmp
     page.get_by_test_id("import-button").click()
     page.locator("#calibrations-list li[data-name='slm']").wait_for()
     assert page.get_by_test_id("import-file-error").is_hidden()
-    shot(page, "calibration-manage")
+    shot(page, "calibration-manage", full_page=True)
     page.locator("#calibrations-list li[data-name='slm'] [data-testid=delete]").click()
     page.wait_for_function("!document.querySelector(\"#calibrations-list li[data-name='slm']\")")
     page.get_by_test_id("undo").click()
@@ -350,7 +329,7 @@ def test_the_api_page_lists_every_route_offline(browser_page: Any, rig: dict[str
         "flatness" in browser_page.locator("details[data-route='GET /api/results/{name}/measure/plane']").inner_text()
     )
     assert elsewhere == []
-    shot(browser_page, "api-docs")
+    shot(browser_page, "api-docs", full_page=True)
 
 
 # --------------------------------------------------------------------------- input errors
@@ -437,7 +416,7 @@ def test_a_captures_wrapped_phase_and_frames_are_shown(page: Any) -> None:
         "(() => { const i = document.querySelector('#look-image'); return i.dataset.shows === 'frames/0' && i.complete && i.naturalWidth > 0; })()"
     )
     assert page.eval_on_selector("#look-image", "i => [i.naturalWidth, i.naturalHeight]") == [WIDTH, HEIGHT]
-    shot(page, "captures-look")
+    shot(page, "captures-look", full_page=True)
 
 
 # --------------------------------------------------------------------------- calibration you can see
@@ -466,5 +445,5 @@ def test_a_calibration_shows_its_planes_gamma_and_board_detections(page: Any) ->
     )
     for rms in page.eval_on_selector_all("#calfig-boards figure", "fs => fs.map(f => f.dataset.rms)"):
         assert 0 <= float(rms) < 0.5  # px: the simulated views are sharp and the fit is exact
-    shot(page, "calibration-figures")
+    shot(page, "calibration-figures", full_page=True)
     page.locator("#calibrations-list li[data-name='cal'] [data-testid=use]").click()
