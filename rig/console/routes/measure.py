@@ -25,24 +25,35 @@ router = APIRouter(prefix="/api/results/{name}/measure", tags=["measure"])
 Format = Literal["json", "csv"]
 
 
-# One Query per parameter: FastAPI keeps per-parameter state on them, so they are never shared.
-def X() -> Any:
-    return Query(..., description="column of the map (pixels)")
+Point = tuple[float, float]
 
 
-def Y() -> Any:
-    return Query(..., description="row of the map (pixels)")
+def two_points(
+    x0: float = Query(..., description="column of the first point (pixels)"),
+    y0: float = Query(..., description="row of the first point (pixels)"),
+    x1: float = Query(..., description="column of the second point (pixels)"),
+    y1: float = Query(..., description="row of the second point (pixels)"),
+) -> tuple[Point, Point]:
+    """The two points of a profile or a distance, from the query."""
+    return (x0, y0), (x1, y1)
 
 
-def RX() -> Any:
-    return Query(None, description="region corner column (pixels); the whole map when the corners are left out")
+def region(
+    x0: float | None = Query(None, description="region corner column (pixels); the whole map when left out"),
+    y0: float | None = Query(None, description="region corner row (pixels)"),
+    x1: float | None = Query(None, description="the other corner's column (pixels)"),
+    y1: float | None = Query(None, description="the other corner's row (pixels)"),
+) -> list[float] | None:
+    """The region's corners from the query: all four, or none for the whole map."""
+    given = [c for c in (x0, y0, x1, y1) if c is not None]
+    if not given:
+        return None
+    if len(given) != 4:
+        raise RigError("region: give all four of x0, y0, x1, y1 (two corners), or none for the whole map")
+    return given
 
 
-def RY() -> Any:
-    return Query(None, description="region corner row (pixels)")
-
-
-def FORMAT() -> Any:
+def FORMAT() -> Any:  # a fresh Query per route: FastAPI keeps per-parameter state on it
     return Query("json", description="json, or csv for a file to download")
 
 
@@ -54,15 +65,6 @@ def surface_of(view: ResultView) -> measure.Surface:
 
 async def _surface(session: ConsoleSession, name: str) -> measure.Surface:
     return surface_of(await run_in_threadpool(session.result, name))
-
-
-def _corners(x0: float | None, y0: float | None, x1: float | None, y1: float | None) -> list[float] | None:
-    given = [c for c in (x0, y0, x1, y1) if c is not None]
-    if not given:
-        return None
-    if len(given) != 4:
-        raise RigError("region: give all four of x0, y0, x1, y1 (two corners), or none for the whole map")
-    return given
 
 
 def _reply(name: str, tool: str, figures: Any, fmt: Format) -> Any:
@@ -78,59 +80,47 @@ def _reply(name: str, tool: str, figures: Any, fmt: Format) -> Any:
 @router.get("/profile", summary="the map along a line from (x0, y0) to (x1, y1)")
 async def profile(
     name: str,
-    x0: float = X(),
-    y0: float = Y(),
-    x1: float = X(),
-    y1: float = Y(),
+    points: tuple[Point, Point] = Depends(two_points),
     format: Format = FORMAT(),
     session: ConsoleSession = Depends(session_of),
 ) -> Any:
     surface = await _surface(session, name)
-    return _reply(name, "profile", measure.line_profile(surface, (x0, y0), (x1, y1)), format)
+    return _reply(name, "profile", measure.line_profile(surface, *points), format)
 
 
 @router.get("/distance", summary="distances between the points (x0, y0) and (x1, y1): lateral, rise, 3-D")
 async def distance(
     name: str,
-    x0: float = X(),
-    y0: float = Y(),
-    x1: float = X(),
-    y1: float = Y(),
+    points: tuple[Point, Point] = Depends(two_points),
     format: Format = FORMAT(),
     session: ConsoleSession = Depends(session_of),
 ) -> Any:
     surface = await _surface(session, name)
-    return _reply(name, "distance", measure.point_distance(surface, (x0, y0), (x1, y1)), format)
+    return _reply(name, "distance", measure.point_distance(surface, *points), format)
 
 
 @router.get("/plane", summary="plane fitted to a region: flatness, rms, tilt")
 async def plane(
     name: str,
-    x0: float | None = RX(),
-    y0: float | None = RY(),
-    x1: float | None = RX(),
-    y1: float | None = RY(),
+    corners: list[float] | None = Depends(region),
     format: Format = FORMAT(),
     session: ConsoleSession = Depends(session_of),
 ) -> Any:
     surface = await _surface(session, name)
-    fit = await run_in_threadpool(measure.fit_plane, surface, _corners(x0, y0, x1, y1))
+    fit = await run_in_threadpool(measure.fit_plane, surface, corners)
     return _reply(name, "plane", fit, format)
 
 
 @router.get("/plane.png", summary="height above the plane fitted to a region, symmetric colour scale (X-Range)")
 async def plane_map(
     name: str,
-    x0: float | None = RX(),
-    y0: float | None = RY(),
-    x1: float | None = RX(),
-    y1: float | None = RY(),
+    corners: list[float] | None = Depends(region),
     session: ConsoleSession = Depends(session_of),
 ) -> Response:
     surface = await _surface(session, name)
 
     def draw() -> tuple[bytes, float]:
-        fit = measure.fit_plane(surface, _corners(x0, y0, x1, y1))
+        fit = measure.fit_plane(surface, corners)
         return difference_png(measure.height_above_plane(surface, fit))
 
     png, bound = await run_in_threadpool(draw)
@@ -140,29 +130,23 @@ async def plane_map(
 @router.get("/histogram", summary="histogram of the valid values of a region")
 async def histogram(
     name: str,
-    x0: float | None = RX(),
-    y0: float | None = RY(),
-    x1: float | None = RX(),
-    y1: float | None = RY(),
+    corners: list[float] | None = Depends(region),
     bins: int = Query(64, description="number of equal-width bins (1 to 4096)"),
     format: Format = FORMAT(),
     session: ConsoleSession = Depends(session_of),
 ) -> Any:
     surface = await _surface(session, name)
-    hist = await run_in_threadpool(measure.histogram, surface, _corners(x0, y0, x1, y1), bins)
+    hist = await run_in_threadpool(measure.histogram, surface, corners, bins)
     return _reply(name, "histogram", hist, format)
 
 
 @router.get("/roi", summary="statistics of the valid values of a region")
 async def roi(
     name: str,
-    x0: float | None = RX(),
-    y0: float | None = RY(),
-    x1: float | None = RX(),
-    y1: float | None = RY(),
+    corners: list[float] | None = Depends(region),
     format: Format = FORMAT(),
     session: ConsoleSession = Depends(session_of),
 ) -> Any:
     surface = await _surface(session, name)
-    stats = await run_in_threadpool(measure.region_stats, surface, _corners(x0, y0, x1, y1))
+    stats = await run_in_threadpool(measure.region_stats, surface, corners)
     return _reply(name, "roi", stats, format)
