@@ -19,18 +19,16 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from processing.phase.shifting import sample_stride
+from processing.phase.shifting import fit_residual_variance, sample_stride
 
 MAD_TO_SIGMA = 1.4826  # a normal distribution's sigma per median absolute deviation
 
 
 def _fit_residual_variance(sample: np.ndarray, shifts: np.ndarray | None) -> float:
-    """Mean of ``sum r^2 / (J - 3)`` of the least-squares sinusoid fit over the sample's pixels (J, P)."""
+    """Mean of :func:`~processing.phase.shifting.fit_residual_variance` over the sample's pixels (J, P)."""
     steps = sample.shape[0]
     delta = np.linspace(0.0, 2.0 * np.pi, steps, endpoint=False) if shifts is None else np.asarray(shifts, float)
-    design = np.column_stack([np.ones(steps), np.cos(delta), np.sin(delta)])  # (J, 3): either sign convention
-    residual = sample - design @ (np.linalg.pinv(design) @ sample)
-    per_pixel = np.einsum("jp,jp->p", residual, residual) / (steps - 3)
+    per_pixel = fit_residual_variance(sample, delta)
     return float(np.mean(per_pixel[np.isfinite(per_pixel)]))
 
 

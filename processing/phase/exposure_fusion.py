@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from processing.phase.shifting import sample_stride
+from processing.phase.shifting import fit_residual_variance, sample_stride
 
 QUANTISATION_VARIANCE = 1.0 / 12.0  # a grey level's rounding: the least noise an integer camera has
 
@@ -115,14 +115,6 @@ def _check_stack(stack: np.ndarray, exposures_us: Sequence[float]) -> tuple[np.n
     return frames, times
 
 
-def _fit_residuals(sample: np.ndarray, shifts: np.ndarray) -> np.ndarray:
-    """Per-pixel residual variance ``sum r^2 / (J - 3)`` of the sinusoid fit of a (J, P) sample."""
-    steps = sample.shape[0]
-    design = np.column_stack([np.ones(steps), np.cos(shifts), np.sin(shifts)])
-    residual = sample - design @ (np.linalg.pinv(design) @ sample)
-    return np.einsum("jp,jp->p", residual, residual) / (steps - 3)
-
-
 def noise_model(
     stack: np.ndarray,
     groups: Sequence[Sequence[int]],
@@ -160,7 +152,7 @@ def noise_model(
         for part in sample[:, list(indices)]:
             keep = np.all(part < saturation, axis=0)
             levels.append(part[:, keep].mean(axis=0))
-            variances.append(_fit_residuals(part[:, keep], np.asarray(delta, dtype=np.float64)))
+            variances.append(fit_residual_variance(part[:, keep], np.asarray(delta, dtype=np.float64)))
     if not levels:
         return NoiseModel(QUANTISATION_VARIANCE, 0.0)
     level, variance = np.concatenate(levels), np.concatenate(variances)

@@ -287,6 +287,15 @@ def sample_stride(shape: tuple[int, ...], samples: int = MODULATION_SAMPLES) -> 
     return stride
 
 
+def fit_residual_variance(sample: np.ndarray, shifts: np.ndarray) -> np.ndarray:
+    """Per-pixel residual variance ``sum r^2 / (J - 3)`` of the least-squares sinusoid fit of a
+    (J, P) sample with phase shifts ``shifts`` (J,): the camera noise where the fringes are sinusoidal."""
+    steps = sample.shape[0]
+    design = np.column_stack([np.ones(steps), np.cos(shifts), np.sin(shifts)])  # (J, 3): either sign convention
+    residual = sample - design @ (np.linalg.pinv(design) @ sample)
+    return np.einsum("jp,jp->p", residual, residual) / (steps - 3)
+
+
 def robust_high(sample: np.ndarray, fallback: np.ndarray | None = None) -> float:
     """99th percentile of the finite values of a modulation ``sample`` (else of ``fallback``'s)."""
     sub = sample[np.isfinite(sample)]
