@@ -123,25 +123,33 @@ def mend_spikes(
     ``misfit(values, spikes)`` (the misfit of candidate phases at the spike pixels with the lower
     frequencies, when given), else the one nearest the neighbours' median.
     """
-    rows, cols = phase.shape
-    padded = np.pad(np.where(valid, phase, np.nan), 1, constant_values=np.nan)
-    neighbours = np.stack(
-        [padded[1 + dy : 1 + dy + rows, 1 + dx : 1 + dx + cols] for dy, dx in ((-1, 0), (1, 0), (0, -1), (0, 1))]
-    )
-    with np.errstate(invalid="ignore"):
-        spike = valid & np.all(np.abs(neighbours - phase) > np.pi, axis=0)  # an invalid neighbour: no spike
-    if not spike.any():
+    ys, xs = _spike_pixels(phase, valid)
+    if not ys.size:
         return phase, 0
-    at = phase[spike]
-    around = neighbours[:, spike]  # (4, n)
+    at = phase[ys, xs]
+    # the four neighbours, up, down, left, right (all valid at a spike)
+    around = np.stack([phase[ys - 1, xs], phase[ys + 1, xs], phase[ys, xs - 1], phase[ys, xs + 1]])  # (4, n)
     candidates = at + TWO_PI * np.rint((around - at) / TWO_PI)  # the order of each neighbour's side
     support = (np.abs(candidates[:, None, :] - around[None, :, :]) <= np.pi).sum(axis=1)  # (4, n)
     if misfit is not None:
+        spike = np.zeros(valid.shape, dtype=bool)
+        spike[ys, xs] = True
         tie_break = np.stack([misfit(c, spike) for c in candidates])
     else:
         tie_break = np.abs(candidates - np.median(around, axis=0))
     score = np.where(support == support.max(axis=0), tie_break, np.inf)
     choice = np.argmin(score, axis=0)
     out = phase.copy()
-    out[spike] = candidates[choice, np.arange(at.size)]
+    out[ys, xs] = candidates[choice, np.arange(at.size)]
     return out, int(at.size)
+
+
+def _spike_pixels(phase: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rows and columns (row-major) of the valid pixels whose four neighbours are all valid and all more than
+    pi away: the steps between neighbours are taken once and each pixel reads the two on either side of it."""
+    with np.errstate(invalid="ignore"):
+        across = (np.abs(np.diff(phase, axis=1)) > np.pi) & valid[:, 1:] & valid[:, :-1]  # (H, W - 1)
+        down = (np.abs(np.diff(phase, axis=0)) > np.pi) & valid[1:, :] & valid[:-1, :]  # (H - 1, W)
+    inner = across[1:-1, 1:] & across[1:-1, :-1] & down[1:, 1:-1] & down[:-1, 1:-1]  # pixels off the border
+    ys, xs = np.nonzero(inner)
+    return ys + 1, xs + 1
