@@ -38,20 +38,47 @@ def label_blobs(mask: np.ndarray) -> tuple[int, np.ndarray]:
     return int(count), labels
 
 
-def breaks_per_blob(phase: np.ndarray, valid: np.ndarray, labels: np.ndarray, count: int) -> np.ndarray:
+def blob_edges(valid: np.ndarray, inside: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The 4-neighbour edges between valid pixels that touch a blob pixel (``inside``), along the rows and then
+    down the columns: (first pixels, second pixels) as flat indices, the second to the right of or below the first.
+
+    Edges away from every blob decide nothing, so the blob steps count the breaks on these only.
+    """
+    width = valid.shape[1]
+    flat_valid, flat_inside = np.ravel(valid), np.ravel(inside)
+    edges = []
+    for step in (1, width):  # along the rows on the flat map: no edge from a row's last pixel to the next row
+        pair = flat_inside[:-step] | flat_inside[step:]
+        pair &= flat_valid[:-step]
+        pair &= flat_valid[step:]
+        if step == 1:
+            pair[width - 1 :: width] = False
+        first = np.flatnonzero(pair)
+        edges.append((first, first + step))
+    return edges
+
+
+def breaks_per_blob(
+    phase: np.ndarray,
+    valid: np.ndarray,
+    labels: np.ndarray,
+    count: int,
+    edges: list[tuple[np.ndarray, np.ndarray]] | None = None,
+) -> np.ndarray:
     """Order breaks (|step| > pi between valid 4-neighbours) on the edges touching each blob of ``labels``.
 
-    An edge between two blobs counts for both; an edge inside a blob once. Label 0 (no blob) is
-    counted too and is meaningless.
+    An edge between two blobs counts for both; an edge inside a blob once. Label 0 (no blob) counts
+    the breaks on its edges to blobs and is meaningless. ``edges``: :func:`blob_edges` of ``valid``
+    and the blobs, taken once where several phases are counted on the same blobs.
     """
+    if edges is None:
+        edges = blob_edges(valid, labels != 0)
+    flat, flat_labels = np.ravel(phase), np.ravel(labels)
     out = np.zeros(count, dtype=np.int64)
-    for first, second in (
-        ((slice(None), slice(None, -1)), (slice(None), slice(1, None))),
-        ((slice(None, -1), slice(None)), (slice(1, None), slice(None))),
-    ):
+    for first, second in edges:
         with np.errstate(invalid="ignore"):
-            broken = valid[first] & valid[second] & (np.abs(phase[second] - phase[first]) > np.pi)
-        head, tail = labels[first][broken], labels[second][broken]
+            broken = np.abs(flat[second] - flat[first]) > np.pi
+        head, tail = flat_labels[first[broken]], flat_labels[second[broken]]
         out += np.bincount(head, minlength=count)
         out += np.bincount(tail[tail != head], minlength=count)
     return out
@@ -78,14 +105,22 @@ def keep_supported_changes(
     if not changed.any():
         return proposed, changed
     count, labels = label_blobs(changed)
-    with_proposal = breaks_per_blob(proposed, valid, labels, count)
-    with_measured = breaks_per_blob(measured, valid, labels, count)
+    edges = blob_edges(valid, changed)
+    with_proposal = breaks_per_blob(proposed, valid, labels, count, edges)
+    with_measured = breaks_per_blob(measured, valid, labels, count, edges)
     back = with_measured <= with_proposal
     tie = with_measured == with_proposal
     back[0] = tie[0] = False
     if not back.any():
         return proposed, np.zeros(valid.shape, dtype=bool)
-    return np.where(back[labels], measured, proposed), tie[labels]
+    # only the changed pixels carry a blob label: the others keep ``proposed`` and are resolved
+    at = np.flatnonzero(changed)
+    blob = np.ravel(labels)[at]
+    out = proposed.copy()
+    out.reshape(-1)[at[back[blob]]] = np.ravel(measured)[at[back[blob]]]
+    unresolved = np.zeros(valid.shape, dtype=bool)
+    unresolved.reshape(-1)[at[tie[blob]]] = True
+    return out, unresolved
 
 
 def unresolved_summary(unresolved: np.ndarray, valid: np.ndarray) -> dict[str, Any]:
