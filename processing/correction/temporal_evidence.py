@@ -251,6 +251,10 @@ def keep_temporally_supported(
     back_at = contradicted[at] & own
     if not back_at.any():
         return proposed, np.zeros(valid.shape, dtype=bool), counts
-    back = np.zeros(valid.shape, dtype=bool)
-    back[changed] = back_at
-    return np.where(back, measured, proposed), ambiguous[labels] & changed, counts
+    # only the changed pixels can go back or be unresolved: written there, not over the whole map
+    at_flat = np.flatnonzero(changed)
+    out = proposed.copy()
+    out.reshape(-1)[at_flat[back_at]] = np.ravel(measured)[at_flat[back_at]]
+    unresolved = np.zeros(valid.shape, dtype=bool)
+    unresolved.reshape(-1)[at_flat[ambiguous[at]]] = True
+    return out, unresolved, counts
