@@ -322,7 +322,7 @@ def _uncertainty(
     assert obj.unwrapped is not None
     sigma_phi = obj.phase_sigma
     if ref is not None and ref.phase_sigma is not None:
-        sigma_phi = np.sqrt(np.square(sigma_phi) + np.square(ref.phase_sigma))
+        sigma_phi = np.hypot(sigma_phi, ref.phase_sigma)  # one pass instead of four (within 1 ulp)
     height_of = functools.partial(_model_height, obj, ref, calibration)
     # the heights themselves as the forward difference's base, unless points move (stereo) or the
     # heights carry the spatial unwrapping's per-region offsets that the model call does not
