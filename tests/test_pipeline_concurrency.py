@@ -4,6 +4,7 @@ islands found beside the uncertainty map, against the same run on one thread and
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -33,9 +34,9 @@ def scan(tmp_path_factory: pytest.TempPathFactory) -> tuple[np.ndarray, Path, Pa
     return simulated.object_frames, paths.capture, paths.calibration
 
 
-def _run(scan: tuple[np.ndarray, Path, Path], **options: object) -> ProcessResult:
+def _run(scan: tuple[np.ndarray, Path, Path], **options: Any) -> ProcessResult:
     frames, capture, calibration = scan
-    return process(capture, calibration, ProcessOptions(correction="none", **options), frames=frames)  # type: ignore[arg-type]
+    return process(capture, calibration, ProcessOptions(correction="none", **options), frames=frames)
 
 
 def _same(a: ProcessResult, b: ProcessResult) -> None:
