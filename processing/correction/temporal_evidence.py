@@ -63,18 +63,9 @@ def lower_frequency_misfit(
 ) -> np.ndarray:
     """Sum over ``lower`` = ((f_l, wrapped phase at f_l), ...) of wrap(phase f_l / frequency - phi_l)^2
     (each term times its ``weights`` entry, default 1)."""
-    return _weighted_sum(_misfit_terms(phase, frequency, lower), weights, phase.shape)
-
-
-def _misfit_terms(phase: np.ndarray, frequency: float, lower: Sequence[tuple[float, np.ndarray]]) -> list[np.ndarray]:
-    """The terms of :func:`lower_frequency_misfit`, one per lower frequency, unweighted."""
-    return [wrap_to_pi(phase * (float(f_low) / float(frequency)) - wrapped_low) ** 2 for f_low, wrapped_low in lower]
-
-
-def _weighted_sum(terms: Sequence[np.ndarray], weights: Sequence[float] | None, shape: tuple[int, ...]) -> np.ndarray:
-    """Sum of ``terms`` (of ``shape``), each times its ``weights`` entry (default 1), accumulated in order from zero."""
-    out = np.zeros(shape, dtype=np.float64)
-    for index, term in enumerate(terms):
+    out = np.zeros(phase.shape, dtype=np.float64)
+    for index, (f_low, wrapped_low) in enumerate(lower):
+        term = wrap_to_pi(phase * (float(f_low) / float(frequency)) - wrapped_low) ** 2
         out += term if weights is None else weights[index] * term
     return out
 
@@ -141,11 +132,10 @@ def snap_to_lower_frequencies(
         separation = float(_order_shift(np.full(1, delta), frequency, lower, weights)[0])
         if shift < MIN_SHIFT_RAD**2 or separation < SEPARATION**2:
             continue
-        terms = _misfit_terms(at + TWO_PI * delta, frequency, lower_at)
-        fits = _weighted_sum(terms, None, at.shape)
+        fits = lower_frequency_misfit(at + TWO_PI * delta, frequency, lower_at)
         # and the new order must fit them within the noise (3 sigma a frequency): beside edges and
         # where the lower phases are corrupted too, a better fit is not yet a good one
-        within = _weighted_sum(terms, weights, at.shape) <= 9.0 * len(lower)
+        within = lower_frequency_misfit(at + TWO_PI * delta, frequency, lower_at, weights) <= 9.0 * len(lower)
         better = within & (fits < best - shift / 2.0)
         step[better] = delta
         best = np.where(better, fits, best)
