@@ -113,14 +113,21 @@ def keep_supported_changes(
     back[0] = tie[0] = False
     if not back.any():
         return proposed, np.zeros(valid.shape, dtype=bool)
-    # only the changed pixels carry a blob label: the others keep ``proposed`` and are resolved
-    at = np.flatnonzero(changed)
+    at = np.flatnonzero(changed)  # only the changed pixels carry a blob label
     blob = np.ravel(labels)[at]
+    return revert_changed(proposed, measured, at, back[blob], tie[blob])
+
+
+def revert_changed(
+    proposed: np.ndarray, measured: np.ndarray, at: np.ndarray, back: np.ndarray, unresolved: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """A copy of ``proposed`` with ``measured`` at the changed pixels ``at`` (flat indices) where ``back``, and
+    the mask of those where ``unresolved``: the evidence steps write only where orders changed, never the whole map."""
     out = proposed.copy()
-    out.reshape(-1)[at[back[blob]]] = np.ravel(measured)[at[back[blob]]]
-    unresolved = np.zeros(valid.shape, dtype=bool)
-    unresolved.reshape(-1)[at[tie[blob]]] = True
-    return out, unresolved
+    out.reshape(-1)[at[back]] = np.ravel(measured)[at[back]]
+    mask = np.zeros(proposed.shape, dtype=bool)
+    mask.reshape(-1)[at[unresolved]] = True
+    return out, mask
 
 
 def unresolved_summary(unresolved: np.ndarray, valid: np.ndarray) -> dict[str, Any]:

@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from processing.angles import wrap_to_pi
-from processing.correction.order_evidence import label_blobs
+from processing.correction.order_evidence import label_blobs, revert_changed
 
 TWO_PI = 2.0 * np.pi
 # Standard errors between a blob's evidence and the decision threshold for a confident decision.
@@ -251,10 +251,4 @@ def keep_temporally_supported(
     back_at = contradicted[at] & own
     if not back_at.any():
         return proposed, np.zeros(valid.shape, dtype=bool), counts
-    # only the changed pixels can go back or be unresolved: written there, not over the whole map
-    at_flat = np.flatnonzero(changed)
-    out = proposed.copy()
-    out.reshape(-1)[at_flat[back_at]] = np.ravel(measured)[at_flat[back_at]]
-    unresolved = np.zeros(valid.shape, dtype=bool)
-    unresolved.reshape(-1)[at_flat[ambiguous[at]]] = True
-    return out, unresolved, counts
+    return (*revert_changed(proposed, measured, np.flatnonzero(changed), back_at, ambiguous[at]), counts)
