@@ -46,7 +46,7 @@ def plane_axes(calibration: Calibration) -> dict[str, dict[str, float]]:
     axes = fields.get(AXES_KEY)
     if axes is None or calibration.model == POLYNOMIAL:
         complete = fitted in ("x", "y") and None not in top.values()
-        return {str(fitted): top} if complete else {}
+        return {str(fitted): {key: float(value) for key, value in top.items() if value is not None}} if complete else {}
     if not isinstance(axes, dict) or not axes or not set(axes) <= {"x", "y"}:
         raise CalibrationError(
             f"{calibration.where}: {AXES_KEY}: expected an object with keys x and/or y, found {_shown(axes)}"
@@ -77,7 +77,14 @@ def for_axis(calibration: Calibration, axis: str) -> Calibration:
     numbers = plane_axes(calibration).get(axis)
     if numbers is None or AXES_KEY not in calibration.extra or calibration.model == POLYNOMIAL:
         return calibration
-    return replace(calibration, **numbers, extra={**calibration.extra, "fringe_axis": axis})
+    return replace(
+        calibration,
+        l0_mm=numbers["l0_mm"],
+        d0_mm=numbers["d0_mm"],
+        f0_per_mm=numbers["f0_per_mm"],
+        f0_frequency=numbers["f0_frequency"],
+        extra={**calibration.extra, "fringe_axis": axis},
+    )
 
 
 def sensitivity_rad_per_mm(numbers: dict[str, float], frequency: float) -> float:

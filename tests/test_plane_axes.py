@@ -9,6 +9,7 @@ fitted on both axes (``axes``) or, as before, on one.
 
 from __future__ import annotations
 
+import json
 from dataclasses import replace
 from pathlib import Path
 
@@ -137,5 +138,44 @@ def test_a_malformed_axes_entry_is_refused_in_one_line(tmp_path: Path) -> None:
     calibration = read_calibration(paths.calibration)
     calibration.extra["axes"]["y"]["d0_mm"] = "far"
     write_calibration(paths.calibration, calibration)
-    with pytest.raises(CalibrationError, match=r"calibration.json: axes.y.d0_mm: expected a non-zero number, found 'far'"):
+    with pytest.raises(
+        CalibrationError, match=r"calibration.json: axes.y.d0_mm: expected a non-zero number, found 'far'"
+    ):
         process(paths.capture, paths.calibration, ProcessOptions(correction="none"))
+
+
+def test_a_session_with_fringes_on_both_axes_fits_each_axis(tmp_path: Path) -> None:
+    """`rig calibrate --from` on a stored reference-plane session of the vertical rig: each axis's own d0 and f0."""
+    from mock_devices import synth
+    from rig.calibrate.session import CalibrationPlan, compute
+    from rig.store.capture import write_capture
+
+    geometry = replace(demo_geometry(160, 120), baseline_angle_deg=BASELINE_ANGLE_DEG)
+    projector = {"width": geometry.projector_width, "height": geometry.projector_height}
+    appearance = synth.Appearance(ambient=0.05, snr_db=35.0)
+    rng = np.random.default_rng(18)
+    cal = tmp_path / "cal"
+
+    def store(height: float, where: Path, scene: str) -> None:
+        mapping = synth.projector_coordinates(np.full(geometry.camera_shape, height), geometry)
+        frames = synth.render_stack(PATTERNS, mapping, geometry, appearance, rng)
+        write_capture(where, frames, PATTERNS, projector, scene=scene)
+
+    store(0.0, cal / "reference", "reference")
+    for height in (25, 50, 100, 150):
+        store(float(height), cal / "planes" / f"plane-at-{height}mm", f"plane-at-{height}mm")
+    plan = CalibrationPlan(board=None, board_views=0, pixel_mm=geometry.pixel_mm)
+    (cal / "session.json").write_text(json.dumps(plan.to_json()))
+    report = compute(cal)
+    axes = read_calibration(cal).extra["axes"]
+    for axis in ("x", "y"):
+        assert axes[axis]["d0_mm"] == pytest.approx(geometry.baseline_share(axis), rel=0.02)
+        frequency = axes[axis]["f0_frequency"]
+        assert axes[axis]["f0_per_mm"] == pytest.approx(geometry.per_mm_along(axis, frequency), rel=0.01)
+    assert any("rig process takes the larger by default" in line for line in report.lines)
+    # and processing a scan with it takes the rows
+    scan = simulate_scan("hemisphere", geometry=geometry, patterns=PATTERNS, seed=19)
+    paths = write_simulated_scan(scan, tmp_path / "scan")
+    result = process(paths.capture, cal, ProcessOptions(correction="none"))
+    assert build_report(result)["methods"]["fringe_axis"] == "y"
+    assert height_rms(result, scan) < 0.2

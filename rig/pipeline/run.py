@@ -14,9 +14,9 @@ import numpy as np
 
 from calibration import models as calibration_models
 from calibration.errors import CalibrationError
+from calibration.plane_axes import for_axis
 from calibration.stereo import STEREO
 from calibration.store import Calibration, read_calibration
-from calibration.plane_axes import for_axis
 from processing.geometry.axis_fusion import FusedPoints, fuse_points
 from processing.geometry.uncertainty import height_sigma
 from rig.blas import rpca_blas
