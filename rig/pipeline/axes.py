@@ -107,7 +107,8 @@ def choose_axes(
         if set(captured) == {"x", "y"}:
             why += f", the only one it converts (it holds no fit along {'y' if fitted == 'x' else 'x'})"
         return AxisChoice((fitted,), why, requested)
-    return AxisChoice((captured[0],), "the first axis in the capture (the calibration names none)", requested)
+    why = "no calibration to choose by" if calibration is None else "the calibration names none"
+    return AxisChoice((captured[0],), f"the first axis in the capture ({why})", requested)
 
 
 def _check_both(calibration: Calibration | None, planes: dict[str, dict[str, float]], stereo: bool) -> None:
