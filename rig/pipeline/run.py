@@ -17,6 +17,7 @@ from calibration.errors import CalibrationError
 from calibration.plane_axes import for_axis
 from calibration.stereo import STEREO
 from calibration.store import Calibration, read_calibration
+from processing.concurrency import side_by_side
 from processing.geometry.axis_fusion import FusedPoints, fuse_points
 from processing.geometry.uncertainty import height_sigma
 from rig.blas import rpca_blas
@@ -187,23 +188,12 @@ def process(
         _run_scene(second, options, None, to_disk=False)
     notes: list[str] = []
     t0 = time.perf_counter()
-    height: np.ndarray | None
-    uncertainty: np.ndarray | None
-    points: np.ndarray | None
-    if second is not None and ref is not None:
-        height, points, mask, uncertainty = _height_both_planes(obj, second, notes)
-    elif second is not None:
-        assert calibration is not None
-        height, points, mask, uncertainty = _height_both(obj, second, calibration, notes)
-    else:
-        height, points, mask = _height(obj, ref, calibration, notes)
-        uncertainty = _uncertainty(obj, ref, calibration, mask, height, notes)
-        _note_conditioning(obj, calibration, points, options.axis, notes)
+    height, points, mask, uncertainty, islands = _heights(obj, second, ref, calibration, options, notes)
     _bound_uncertainty(obj, mask, height, uncertainty, options.max_sigma, notes)
     height_time = time.perf_counter() - t0
     if progress is not None:
         progress.step("height")
-    _drop_islands(obj, mask, height, options.min_island_fraction, notes)
+    _drop_islands(obj, mask, height, options.min_island_fraction, notes, islands)
     _check_some_valid(obj, calibration, mask)
     timings: dict[str, Any] = {"object": dict(obj.timings)}
     if ref is not None:
@@ -222,6 +212,35 @@ def process(
         point_grid=points,
         uncertainty=uncertainty,
     )
+
+
+def _heights(
+    obj: SceneState,
+    second: SceneState | None,
+    ref: SceneState | None,
+    calibration: Calibration | None,
+    options: ProcessOptions,
+    notes: list[str],
+) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """Heights, points, mask and sigma along one axis or both, and the islands when they were found
+    beside the sigma (one axis, nothing changing the mask between)."""
+    if second is not None and ref is not None:
+        return (*_height_both_planes(obj, second, notes), None)
+    if second is not None:
+        assert calibration is not None
+        return (*_height_both(obj, second, calibration, notes), None)
+    height, points, mask = _height(obj, ref, calibration, notes)
+    islands: np.ndarray | None = None
+    uncertainty: np.ndarray | None
+    if options.max_sigma is None:  # the mask the islands are found in is final: both side by side
+        uncertainty, islands = side_by_side(
+            lambda: _uncertainty(obj, ref, calibration, mask, height, notes),
+            lambda: _islands(mask, options.min_island_fraction),
+        )
+    else:
+        uncertainty = _uncertainty(obj, ref, calibration, mask, height, notes)
+    _note_conditioning(obj, calibration, points, options.axis, notes)
+    return height, points, mask, uncertainty, islands
 
 
 def _scenes(
@@ -325,7 +344,7 @@ def _uncertainty(
     assert obj.unwrapped is not None
     sigma_phi = obj.phase_sigma
     if ref is not None and ref.phase_sigma is not None:
-        sigma_phi = np.sqrt(np.square(sigma_phi) + np.square(ref.phase_sigma))
+        sigma_phi = np.hypot(sigma_phi, ref.phase_sigma)  # one pass instead of four (within 1 ulp)
     height_of = functools.partial(_model_height, obj, ref, calibration)
     # the heights themselves as the forward difference's base, unless points move (stereo) or the
     # heights carry the spatial unwrapping's per-region offsets that the model call does not
@@ -474,15 +493,32 @@ def _model_height(obj: SceneState, ref: SceneState | None, calibration: Calibrat
     )
 
 
-def _drop_islands(
-    obj: SceneState, mask: np.ndarray, height: np.ndarray | None, fraction: float, notes: list[str]
-) -> None:
-    """Drop (in place) valid regions under ``fraction`` of the largest: background specks."""
+def _islands(mask: np.ndarray, fraction: float) -> np.ndarray | None:
+    """The valid regions under ``fraction`` of the largest (None when ``fraction`` is 0: none dropped)."""
     if fraction <= 0:
-        return
+        return None
     from processing.correction.islands import island_mask
 
-    islands = island_mask(mask, fraction)
+    return island_mask(mask, fraction)
+
+
+def _drop_islands(
+    obj: SceneState,
+    mask: np.ndarray,
+    height: np.ndarray | None,
+    fraction: float,
+    notes: list[str],
+    islands: np.ndarray | None = None,
+) -> None:
+    """Drop (in place) valid regions under ``fraction`` of the largest: background specks.
+
+    ``islands``: :func:`_islands` of this ``mask`` when the caller found them already.
+    """
+    if fraction <= 0:
+        return
+    if islands is None:
+        islands = _islands(mask, fraction)
+        assert islands is not None
     dropped = int(np.count_nonzero(islands))
     obj.info["islands_dropped"] = dropped
     if not dropped:
