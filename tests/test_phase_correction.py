@@ -6,7 +6,13 @@ import numpy as np
 import pytest
 
 from benchmarks.correction_protocol import ProtocolCase, table41_case
-from processing.correction.phase_rpca import correct_phase_rpca, reorder_from_low_rank, restore_detail
+from processing.correction.phase_rpca import (
+    correct_phase_rpca,
+    keep_coherent_detail,
+    reorder_from_low_rank,
+    restore_detail,
+    update_coherent_detail,
+)
 from processing.correction.registry import CORRECTIONS, correct
 
 TWO_PI = 2.0 * np.pi
@@ -85,6 +91,27 @@ def test_restore_detail_keeps_structure_the_low_rank_part_misses() -> None:
     out = restore_detail(low_rank, measured, k_sigma=4.0)
     np.testing.assert_allclose(out[20:25, 40:45], measured[20:25, 40:45])
     assert np.mean(out == low_rank) > 0.99
+
+
+@pytest.mark.parametrize("changes", [0, 40, 3000])  # none; a few (near the changes only); many (the whole map)
+def test_detail_update_near_changed_orders_is_bit_identical_to_the_whole_map(changes: int) -> None:
+    rng = np.random.default_rng(changes)
+    rows, cols = 90, 120
+    estimate = np.add.outer(np.linspace(0.0, 3.0, rows), np.linspace(0.0, 40.0, cols))
+    valid = rng.random((rows, cols)) > 0.05  # holes in the mask
+    before = estimate + rng.normal(0.0, 0.05, estimate.shape)
+    before[30:36, 50:58] += 1.0  # structure the low-rank part misses
+    before[rng.random(before.shape) < 0.01] += TWO_PI  # lone wrong orders
+    after = before.copy()
+    where = rng.choice(rows * cols, changes, replace=False)
+    where = np.concatenate([where, [0, cols - 1, (rows - 1) * cols]]) if changes else where  # corners too
+    after.flat[where] += TWO_PI * rng.choice([-1.0, 1.0], where.size)
+    sigma = 0.05
+    previous = keep_coherent_detail(estimate, before, valid, 4.0, sigma)
+    whole = keep_coherent_detail(estimate, after, valid, 4.0, sigma)
+    updated = update_coherent_detail(previous, before, estimate, after, valid, 4.0, sigma)
+    assert updated.tobytes() == whole.tobytes()
+    assert changes == 0 or np.count_nonzero(~np.isclose(whole, previous) & valid) > 0  # the changes matter
 
 
 def test_shadows_stay_invalid_and_do_not_disturb_the_rest(case: ProtocolCase) -> None:

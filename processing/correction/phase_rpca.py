@@ -317,16 +317,77 @@ def keep_coherent_detail(
     size = np.abs(residual)
     mean = _box_sum_3x3(residual) / 9.0
     departing = _box_count_3x3(size > 2.0 * sigma)
-    coherent = (np.abs(mean) > k_sigma * sigma / 3.0) & (departing >= 3)
     # A lone departure far beyond any noise (2 k_sigma sigma) is structure too (a one-pixel
     # feature, fringes too dense for L), unless the measured pixel breaks with its neighbours
-    # (a wrong order left in it).
-    lone = size > 2.0 * k_sigma * sigma  # rare: the order-break test runs at these pixels only
+    # (a wrong order left in it). Rare: the order-break test runs at these pixels only.
+    coherent, lone = _departures(size, mean, departing, k_sigma, sigma)
     rows, cols = np.divmod(np.flatnonzero(lone), lone.shape[1])
     lone[rows, cols] = ~order_breaks_at(measured, valid, rows, cols)
     out = np.where(valid & (coherent | lone), measured, estimate)
     np.copyto(out, np.nan, where=invalid)
     return out
+
+
+# Share of the map near changed orders from which :func:`update_coherent_detail` recomputes the whole map
+# instead (gathering 9 neighbours per pixel costs more than one streaming pass there).
+UPDATE_WHOLE_FROM = 1.0 / 16.0
+
+
+def update_coherent_detail(
+    previous_out: np.ndarray,
+    previous_measured: np.ndarray,
+    estimate: np.ndarray,
+    measured: np.ndarray,
+    valid: np.ndarray,
+    k_sigma: float,
+    sigma: float,
+) -> np.ndarray:
+    """:func:`keep_coherent_detail` of ``measured``, given ``previous_out`` = the same of ``previous_measured``.
+
+    A pixel's result reads the maps within its 3 x 3 neighbourhood only, so it is recomputed at the pixels
+    within one of a change only, from their 9 neighbours gathered and summed in the order of the whole-map
+    pass (rows, then columns, in float32): bit-identical to it, at a cost that follows the changes.
+    """
+    height, width = valid.shape
+    rows, cols = np.divmod(np.flatnonzero(valid & (measured != previous_measured)), width)
+    if not rows.size:
+        return previous_out
+    offsets = np.arange(-1, 2)
+    near_rows = np.clip(rows[:, None, None] + offsets[None, :, None], 0, height - 1)
+    near_cols = np.clip(cols[:, None, None] + offsets[None, None, :], 0, width - 1)
+    near = np.unique((near_rows * width + near_cols).ravel())
+    if near.size >= UPDATE_WHOLE_FROM * valid.size:
+        return keep_coherent_detail(estimate, measured, valid, k_sigma, sigma)
+    ys, xs = np.divmod(near, width)
+
+    def residual_at(dy: int, dx: int) -> np.ndarray:
+        """measured - estimate in float32 at the pixels' neighbour (dy, dx), 0 off the map or the mask."""
+        y, x = ys + dy, xs + dx
+        inside = (y >= 0) & (y < height) & (x >= 0) & (x < width)
+        y, x = np.clip(y, 0, height - 1), np.clip(x, 0, width - 1)
+        residual = np.subtract(measured[y, x], estimate[y, x], out=np.empty(y.size, np.float32), casting="same_kind")
+        np.copyto(residual, np.float32(0.0), where=~(inside & valid[y, x]))
+        return residual
+
+    box = [[residual_at(dy, dx) for dx in (-1, 0, 1)] for dy in (-1, 0, 1)]
+    across = [row[0] + row[1] + row[2] for row in box]
+    departing = [[(np.abs(value) > 2.0 * sigma).view(np.uint8) for value in row] for row in box]
+    count = sum(value for row in departing for value in row)
+    coherent, lone = _departures(np.abs(box[1][1]), (across[0] + across[1] + across[2]) / 9.0, count, k_sigma, sigma)
+    lone[lone] = ~order_breaks_at(measured, valid, ys[lone], xs[lone])
+    here_valid = valid[ys, xs]
+    values = np.where(here_valid & (coherent | lone), measured[ys, xs], estimate[ys, xs])
+    values[~here_valid] = np.nan
+    out = previous_out.copy()
+    out[ys, xs] = values
+    return out
+
+
+def _departures(
+    size: np.ndarray, mean: np.ndarray, departing: np.ndarray, k_sigma: float, sigma: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`restore_detail`'s rules: the coherent departures, and the lone ones (before their order-break test)."""
+    return (np.abs(mean) > k_sigma * sigma / 3.0) & (departing >= 3), size > 2.0 * k_sigma * sigma
 
 
 def _box_sum_3x3(values: np.ndarray) -> np.ndarray:

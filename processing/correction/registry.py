@@ -43,6 +43,7 @@ from processing.correction.phase_rpca import (
     phase_pair,
     reorder_from_low_rank,
     settle_orders,
+    update_coherent_detail,
 )
 from processing.correction.region_orders import pool_region_orders
 from processing.correction.temporal_evidence import (
@@ -310,12 +311,14 @@ def _restore_detail(
     Returns the phase, the unresolved pixels, how many orders changed and the lower frequencies' blob counts.
     """
     reordered, unresolved, counts = _supported_orders(maps, found.maps[chosen], temporal)
-    reuse = chosen == "regions" and found.pooled_detail is not None and reordered is found.maps[chosen]
+    pooled_detail = found.pooled_detail
     out, changed = side_by_side(
-        lambda: (
-            found.pooled_detail
-            if reuse
-            else keep_coherent_detail(found.low_rank, reordered, maps.valid, maps.k_sigma, maps.sigma)
+        lambda: (  # step 6 ran alongside step 3 on the pooled orders: redone only where the orders differ
+            keep_coherent_detail(found.low_rank, reordered, maps.valid, maps.k_sigma, maps.sigma)
+            if pooled_detail is None
+            else update_coherent_detail(
+                pooled_detail, found.maps["regions"], found.low_rank, reordered, maps.valid, maps.k_sigma, maps.sigma
+            )
         ),
         lambda: int(np.count_nonzero(maps.valid & (np.abs(reordered - maps.phase) > np.pi))),
     )
