@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from processing.angles import wrap_to_pi
+from processing.correction import region_orders
 from processing.correction.region_orders import (
     _beyond_wrapped,
     _window_majority,
@@ -103,7 +105,11 @@ def _brute_window_majority(orders, labels, rows, cols, radius):
     return np.array(winners), np.array(support)
 
 
-def test_window_majority_matches_a_per_pixel_count_with_ties_borders_and_regions() -> None:
+@pytest.mark.parametrize("count_cells", [region_orders._COUNT_CELLS, 0])  # counting the votes; sorting them
+def test_window_majority_matches_a_per_pixel_count_with_ties_borders_and_regions(
+    count_cells: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(region_orders, "_COUNT_CELLS", count_cells)
     rng = np.random.default_rng(3)
     orders = rng.integers(-3, 4, size=(23, 31)).astype(np.int32)  # many ties in a 5 x 5 window
     labels = (rng.random((23, 31)) < 0.7).astype(np.int32) + (np.arange(31) >= 15).astype(np.int32) * 2

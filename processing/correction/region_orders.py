@@ -35,6 +35,9 @@ TWO_PI = 2.0 * np.pi
 NEIGHBOURS = ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1))
 _NO_VOTE = np.iinfo(np.int32).min
 _CHUNK = 1 << 15  # re-voted pixels per gathered block: (chunk, window) int32 stays ~10 MiB
+# Largest (chunk, orders) count table :func:`_window_majority` tallies by counting (64 MiB of int64), beyond
+# which (spans over 255 orders) it sorts each window instead.
+_COUNT_CELLS = 1 << 23
 
 
 def region_cut(wrapped_phase: np.ndarray, valid: np.ndarray) -> float:
@@ -171,8 +174,9 @@ def _window_majority(
     Returns the winners (ties: the smaller order) and their vote counts (0, and winner
     ``_NO_VOTE``, where the window holds no vote). A window pixel's region and order are
     packed into one code (label x span + order offset), so each window is one strided copy;
-    the sorted windows are scanned with the window position as the leading axis, where
-    numpy's running maximum and maximum are vectorised across pixels.
+    its votes are counted per order in one bincount (:func:`_count_majority`), or, for spans too
+    wide to count, the sorted windows are scanned with the window position as the leading axis,
+    where numpy's running maximum and maximum are vectorised across pixels.
     """
 
     side = 2 * radius + 1
@@ -190,6 +194,7 @@ def _window_majority(
     small = np.int16 if size * (span + 1) + span < 1 << 15 else np.int64
     unsigned = np.uint64 if code_type == np.int64 else np.uint32
     position = np.arange(size, dtype=small)[:, None]
+    counting = (span + 1) * _CHUNK <= _COUNT_CELLS
     winners = np.full(rows.size, _NO_VOTE, dtype=np.int64)
     support = np.zeros(rows.size, dtype=np.int64)
     for start in range(0, rows.size, _CHUNK):
@@ -199,6 +204,11 @@ def _window_majority(
         # Any other region's pixel (negative, or beyond span as unsigned) becomes span, sorted last.
         value = np.empty(window.shape, dtype=small)
         np.minimum(window.view(unsigned), unsigned(span), out=value, casting="unsafe")
+        if counting:  # few orders: count each pixel's votes per order, the first largest count wins
+            votes, best = _count_majority(value, span)
+            support[start : start + r.size] = votes
+            winners[start : start + r.size] = np.where(votes > 0, best + low, _NO_VOTE)
+            continue
         value.sort(axis=1)
         value = np.ascontiguousarray(value.T)  # (size, pixels)
         # Length of the run each sorted entry ends (the longest run is the majority) ...
@@ -218,6 +228,18 @@ def _window_majority(
         support[start : start + r.size] = votes
         winners[start : start + r.size] = np.where(votes > 0, span - key % (span + 1) + low, _NO_VOTE)
     return winners, support
+
+
+def _count_majority(value: np.ndarray, span: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per row of ``value`` (order offsets in [0, span], span = another region's pixel): the largest count
+    of one offset below ``span`` and that offset (ties: the smaller), from one bincount over all rows."""
+    pixels = value.shape[0]
+    cells = value.astype(np.intp)
+    cells += (np.arange(pixels, dtype=np.intp) * (span + 1))[:, None]
+    counts = np.bincount(cells.ravel(), minlength=pixels * (span + 1)).reshape(pixels, span + 1)
+    counts[:, span] = 0
+    best = counts.argmax(axis=1)
+    return counts[np.arange(pixels), best], best
 
 
 def order_break_pixels(phase: np.ndarray) -> np.ndarray:
