@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from processing.denoise.rpca import robust_noise_sigma, rpca_adm, rpca_ialm
+from processing.denoise.rpca import finite_median, robust_noise_sigma, rpca_adm, rpca_ialm
 from processing.denoise.svd import SubspaceState, singular_value_threshold
 
 
@@ -149,3 +149,9 @@ def test_adm_bad_input_names_the_argument(kwargs: dict, name: str) -> None:
 def test_zero_matrix_is_its_own_decomposition() -> None:
     result = rpca_ialm(np.zeros((4, 6)))
     assert result.converged and result.rank == 0 and not result.low_rank.any()
+
+
+@pytest.mark.parametrize("size", [1, 2, 7, 10_000, 10_001])
+def test_finite_median_equals_numpy_median_to_the_bit(size: int) -> None:
+    values = np.random.default_rng(size).standard_normal(size) ** 2  # the squared misfits it is taken of
+    assert finite_median(values) == float(np.median(values))

@@ -39,6 +39,7 @@ import numpy as np
 
 from processing.angles import wrap_to_pi
 from processing.correction.order_evidence import label_blobs, revert_changed
+from processing.denoise.rpca import finite_median
 
 TWO_PI = 2.0 * np.pi
 # Standard errors between a blob's evidence and the decision threshold for a confident decision.
@@ -94,7 +95,7 @@ def noise_weights(
     weights = []
     for f_low, wrapped_low in lower:
         term = wrap_to_pi(at * (float(f_low) / float(frequency)) - wrapped_low[valid]) ** 2
-        variance = float(np.median(term)) / 0.455 if term.size else 0.0
+        variance = finite_median(term) / 0.455 if term.size else 0.0
         weights.append(1.0 / max(variance, 1e-12))
     return weights
 

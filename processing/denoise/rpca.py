@@ -172,13 +172,14 @@ def noise_sigma_from_second_differences(seconds: Iterable[np.ndarray], wrap: boo
         if wrap:
             second = wrap_to_pi(second)
         if second.size:
-            mad = _median(np.abs(second - _median(second)))
+            mad = finite_median(np.abs(second - finite_median(second)))
             estimates.append(1.4826 * mad / np.sqrt(6.0))
     return min(estimates) if estimates else 0.0
 
 
-def _median(values: np.ndarray) -> float:
-    """``np.median`` of a 1-D array without NaN, by one partition (np.median partitions twice)."""
+def finite_median(values: np.ndarray) -> float:
+    """``np.median`` of a 1-D array without NaN, by one partition (np.median partitions twice): the same value,
+    half the time on a map's worth of pixels."""
     middle = values.size // 2
     part = np.partition(values, middle)
     if values.size % 2:
