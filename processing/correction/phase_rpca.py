@@ -412,6 +412,69 @@ def decimated_low_rank(
     return low_rank, result, _bent_pixels(result.low_rank, factor, phase.shape, bend)
 
 
+# Largest block-solve rank :func:`refit_full_resolution` refits: its four products cost 8 x rank flops per
+# pixel, and a surface of higher rank is no longer the smooth scene whose edges the blocks blurred.
+REFIT_MAX_RANK = 24
+
+
+def refit_full_resolution(
+    low_rank: np.ndarray,
+    blocks: np.ndarray,
+    factor: int,
+    measured: np.ndarray,
+    valid: np.ndarray,
+    rank: int,
+    outlier: float,
+) -> np.ndarray:
+    """The block solve's low-rank surface, refitted at full resolution where that fits ``measured`` better.
+
+    Block means blur what changes within a block (a step's edge, a ramp's kink), which ch. 4 at full
+    resolution keeps. Here the ``rank`` factors of the solved ``blocks`` are interpolated to pixels and
+    refitted to ``measured`` by alternating least squares (columns, then rows; pixels outside ``valid`` take
+    the interpolated surface), twice, the second time with the pixels more than ``outlier`` radians off the
+    first refit replaced by it: products of the map with ``rank`` vectors, not a full-resolution solve. Each valid pixel then keeps the surface whose
+    3 x 3 mean residual to ``measured`` is smaller, so structure the refit spreads along rows or columns
+    (an object the low rank cannot hold) stays out. ``low_rank`` unchanged where ``rank`` is 0 or above
+    :data:`REFIT_MAX_RANK`.
+    """
+    rank = min(int(rank), *blocks.shape)
+    if not 0 < rank <= REFIT_MAX_RANK:
+        return low_rank
+    u, s, vt = np.linalg.svd(np.asarray(blocks, dtype=np.float64), full_matrices=False)
+    rows = _interpolate_factors(u[:, :rank] * s[:rank], factor, measured.shape[0])
+    cols = _interpolate_factors(vt[:rank].T, factor, measured.shape[1])
+    target = np.where(valid, measured, rows @ cols.T).astype(np.float32)
+    for _ in range(2):
+        cols = _least_squares_factor(rows, target.T @ rows)
+        rows = _least_squares_factor(cols, target @ cols)
+        refit = rows @ cols.T
+        # what departs from the refit far beyond the noise (an object the low rank cannot hold) is left out
+        # of the second round, so the refit does not spread it along its rows and columns
+        np.copyto(target, refit, where=np.abs(target - refit) > outlier)
+    refit = refit.astype(np.float64)
+    outside = ~valid
+    refit_residual = np.subtract(measured, refit, dtype=np.float32)
+    block_residual = np.subtract(measured, low_rank, dtype=np.float32)
+    np.copyto(refit_residual, np.float32(0.0), where=outside)
+    np.copyto(block_residual, np.float32(0.0), where=outside)
+    better = np.abs(_box_sum_3x3(refit_residual)) < np.abs(_box_sum_3x3(block_residual))
+    return np.where(valid & better, refit, low_rank)
+
+
+def _interpolate_factors(factors: np.ndarray, factor: int, length: int) -> np.ndarray:
+    """(blocks, r) factors of a block solution linearly interpolated to ``length`` pixels (float32)."""
+    centres = (np.arange(factors.shape[0]) + 0.5) * factor - 0.5
+    pixels = np.arange(length, dtype=np.float64)
+    return np.stack([np.interp(pixels, centres, column) for column in factors.T], axis=1).astype(np.float32)
+
+
+def _least_squares_factor(fixed: np.ndarray, products: np.ndarray) -> np.ndarray:
+    """The other factor of ``target ~ fixed @ other.T`` given ``products = target.T @ fixed`` (ridge-regularised)."""
+    gram = (fixed.T @ fixed).astype(np.float64)
+    gram += np.eye(len(gram)) * (1e-9 * np.trace(gram) + 1e-30)
+    return np.linalg.solve(gram, products.T.astype(np.float64)).T.astype(np.float32)
+
+
 def _bent_pixels(blocks: np.ndarray, factor: int, shape: tuple[int, int], bend: float) -> np.ndarray:
     """Pixels of the blocks (and their 8 neighbours) where the block surface bends by more than ``bend``."""
     bent = np.zeros(blocks.shape, dtype=bool)

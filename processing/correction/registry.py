@@ -41,6 +41,7 @@ from processing.correction.phase_rpca import (
     order_breaks,
     phase_noise_and_breaks,
     phase_pair,
+    refit_full_resolution,
     reorder_from_low_rank,
     settle_orders,
 )
@@ -307,12 +308,28 @@ def _restore_detail(
     Returns the phase, the unresolved pixels, how many orders changed and the lower frequencies' blob counts.
     """
     reordered, unresolved, counts = _supported_orders(maps, found.maps[chosen], temporal)
-    reuse = chosen == "regions" and found.pooled_detail is not None and reordered is found.maps[chosen]
+    low_rank = found.low_rank
+    if maps.decimate > 1:  # what the block means blurred, refitted at full resolution where it fits better
+        low_rank = refit_full_resolution(
+            low_rank,
+            found.result.low_rank,
+            maps.decimate,
+            reordered,
+            maps.valid,
+            found.result.rank,
+            outlier=2.0 * maps.k_sigma * maps.sigma,
+        )
+    reuse = (
+        chosen == "regions"
+        and found.pooled_detail is not None
+        and reordered is found.maps[chosen]
+        and low_rank is found.low_rank
+    )
     out, changed = side_by_side(
         lambda: (
             found.pooled_detail
             if reuse
-            else keep_coherent_detail(found.low_rank, reordered, maps.valid, maps.k_sigma, maps.sigma)
+            else keep_coherent_detail(low_rank, reordered, maps.valid, maps.k_sigma, maps.sigma)
         ),
         lambda: int(np.count_nonzero(maps.valid & (np.abs(reordered - maps.phase) > np.pi))),
     )
