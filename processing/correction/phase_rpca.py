@@ -440,25 +440,32 @@ def refit_full_resolution(
     rank = min(int(rank), *blocks.shape)
     if not 0 < rank <= REFIT_MAX_RANK:
         return low_rank
-    u, s, vt = np.linalg.svd(np.asarray(blocks, dtype=np.float64), full_matrices=False)
-    rows = _interpolate_factors(u[:, :rank] * s[:rank], factor, measured.shape[0])
-    cols = _interpolate_factors(vt[:rank].T, factor, measured.shape[1])
-    target = np.where(valid, measured, rows @ cols.T).astype(np.float32)
-    for _ in range(2):
+    grid = np.asarray(blocks, dtype=np.float64)
+    # any rank-``rank`` factors of the blocks will do (ALS refits both): an orthonormal basis of their
+    # columns, from their product with fixed random vectors (exact for a matrix of that rank), is cheaper
+    # than their SVD
+    basis, _ = np.linalg.qr(grid @ np.random.default_rng(0).standard_normal((grid.shape[1], rank)))
+    rows = _interpolate_factors(basis, factor, measured.shape[0])
+    cols = _interpolate_factors(grid.T @ basis, factor, measured.shape[1])
+    target = np.where(valid, measured.astype(np.float32), rows @ cols.T)
+    for round_ in range(2):
         cols = _least_squares_factor(rows, target.T @ rows)
         rows = _least_squares_factor(cols, target @ cols)
         refit = rows @ cols.T
-        # what departs from the refit far beyond the noise (an object the low rank cannot hold) is left out
-        # of the second round, so the refit does not spread it along its rows and columns
-        np.copyto(target, refit, where=np.abs(target - refit) > outlier)
-    refit = refit.astype(np.float64)
-    outside = ~valid
-    refit_residual = np.subtract(measured, refit, dtype=np.float32)
-    block_residual = np.subtract(measured, low_rank, dtype=np.float32)
-    np.copyto(refit_residual, np.float32(0.0), where=outside)
-    np.copyto(block_residual, np.float32(0.0), where=outside)
-    better = np.abs(_box_sum_3x3(refit_residual)) < np.abs(_box_sum_3x3(block_residual))
-    return np.where(valid & better, refit, low_rank)
+        if round_ == 0:
+            # what departs from the refit far beyond the noise (an object the low rank cannot hold) is left
+            # out of the second round, so the refit does not spread it along its rows and columns
+            np.copyto(target, refit, where=np.abs(target - refit) > outlier)
+    # 3 x 3 mean residuals of both surfaces (0 outside ``valid``), float32
+    inside = np.where(valid, measured, refit).astype(np.float32)
+    block = np.where(valid, low_rank, refit).astype(np.float32)
+    better = valid & (np.abs(_box_sum(inside - refit)) < np.abs(_box_sum(inside - block)))
+    return np.where(better, refit, low_rank)
+
+
+def _box_sum(values: np.ndarray) -> np.ndarray:
+    """:func:`_box_sum_3x3` of a float32 map by OpenCV's box filter (several times faster)."""
+    return cv2.boxFilter(values, -1, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT)
 
 
 def _interpolate_factors(factors: np.ndarray, factor: int, length: int) -> np.ndarray:
