@@ -61,7 +61,7 @@ def test_the_study_calls_auto_with_the_captures_lower_frequencies_as_rig_process
 
     case = family.draw_case(6)  # 13/17, 555 x 400
     capture = family.capture(case, family.scene_heights(case), np.random.default_rng(case.seed))
-    seen: dict[str, object] = {}
+    seen: dict[str, Any] = {}
     real = experiments.CORRECTIONS["auto"]
 
     def spy(*args: Any, **kwargs: Any) -> Any:
