@@ -7,7 +7,11 @@ load hits all rows alike):
   memory (``frames=``) with its calibration: manifest and calibration read, the reference plane
   from the reference cache (processed once, as every scan after the first finds it), the stages
   (the fused pass, correction none), eq. 1.15 and the mask: what ``rig process --correction none``
-  computes between decoding the PNGs and writing the outputs;
+  computes between decoding the PNGs and writing the outputs; its fused pass and its
+  independent steps on :data:`processing.concurrency.THREADS` threads (two on a machine with two
+  cores or more);
+- ``rig pipeline, correction none, 1 thread``: the same with ``processing.concurrency.THREADS``
+  set to 1 (as in rig's batch workers): everything in the calling thread;
 - ``rig pipeline, default``: the same with the default correction (``auto``);
 - ``fused kernel``: :func:`processing.unwrap.fused_pass.fringe_pass` (phase shifting of both
   frequencies, modulation mask and Ding's two-frequency unwrapping in one float32 pass, OpenCV's
@@ -50,6 +54,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.measure import cpu_description, interleaved, load_line, print_table  # noqa: E402
 from mock_devices import scenes, synth  # noqa: E402
+from processing import concurrency  # noqa: E402
 from processing.geometry.height import phase_to_height  # noqa: E402
 from processing.phase.shifting import phase_shift, shadow_mask  # noqa: E402
 from processing.unwrap.fused_pass import fringe_pass  # noqa: E402
@@ -131,12 +136,20 @@ def main(argv: list[str] | None = None) -> int:
     workdir = tempfile.TemporaryDirectory(prefix="bench-pipeline-")
     paths = write_simulated_scan(scan, Path(workdir.name) / "scan")
 
-    def pipeline(correction: str) -> np.ndarray:
-        result = process(paths.capture, paths.calibration, ProcessOptions(correction=correction), frames=obj)
+    def pipeline(correction: str, threads: int | None = None) -> np.ndarray:
+        saved = concurrency.THREADS
+        concurrency.THREADS = saved if threads is None else threads
+        try:
+            result = process(paths.capture, paths.calibration, ProcessOptions(correction=correction), frames=obj)
+        finally:
+            concurrency.THREADS = saved
         assert result.height is not None
         return result.height
 
-    rows: dict[str, Callable[[], object]] = {"rig pipeline in memory, correction none": lambda: pipeline("none")}
+    rows: dict[str, Callable[[], object]] = {
+        "rig pipeline in memory, correction none": lambda: pipeline("none"),
+        "rig pipeline in memory, correction none, 1 thread": lambda: pipeline("none", threads=1),
+    }
     if not args.no_auto:
         rows[f"rig pipeline in memory, default ({DEFAULT_CORRECTION})"] = lambda: pipeline(DEFAULT_CORRECTION)
     rows.update(

@@ -166,7 +166,7 @@ def test_brightness_and_no_orders_keep_the_same_phase_and_one_map_for_two() -> N
         np.testing.assert_allclose(a, b, rtol=1e-6)
 
 
-def test_large_image_uses_several_blocks_and_thread_ranges_cover_it() -> None:
+def test_large_image_uses_several_blocks_and_threads_share_them() -> None:
     """Blocks of 16k pixels with a partial last one: the same result as the stage functions everywhere."""
     stack, groups, _, _ = _scan([7, 8])
     tall = np.concatenate([stack] * 3, axis=1)  # 360 x 160 = 57600 pixels: 3 full blocks and a partial one

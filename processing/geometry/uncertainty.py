@@ -84,15 +84,17 @@ def height_sigma(
 ) -> np.ndarray:
     """Height (or point) standard deviation per pixel: |d h / d Phi| sigma_phi, float32.
 
-    ``height_of(phase)`` returns (H, W) heights or (H, W, 3) points in mm; its derivative is a
-    difference over ``step`` radians (the models are smooth at that scale): forward from
-    ``base`` = ``height_of(phase)`` when the caller has it (one model evaluation), else central;
-    the length of the point displacement for points.
+    ``height_of(phase)`` returns (H, W) heights or (H, W, 3) points in mm, a new array each call
+    (the difference is written into it); its derivative is a difference over ``step`` radians (the
+    models are smooth at that scale): forward from ``base`` = ``height_of(phase)`` when the caller
+    has it (one model evaluation), else central; the length of the point displacement for points.
     """
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         ahead = np.asarray(height_of(phase + np.float32(step)))
         behind = np.asarray(height_of(phase - np.float32(step))) if base is None else np.asarray(base)
-        change = np.subtract(ahead, behind, dtype=np.float32)
+        # into the model's own float32 array when it is one: a fresh full-size map costs more to fault in than to fill
+        reuse = ahead.dtype == np.float32 and ahead.flags.writeable and ahead.shape == np.broadcast(ahead, behind).shape
+        change = np.subtract(ahead, behind, out=ahead) if reuse else np.subtract(ahead, behind, dtype=np.float32)
         if change.ndim == np.ndim(phase) + 1:
             change = np.sqrt(np.einsum("...k,...k->...", change, change))
         np.abs(change, out=change)

@@ -30,7 +30,7 @@ from __future__ import annotations
 import itertools
 import math
 import threading
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from functools import lru_cache
@@ -397,13 +397,26 @@ def _temporal_kernel(
 
 
 def _run_blocks(plan: _Plan, out: _Outputs, pixels: int, threads: int) -> None:
-    """The plan over every pixel, on ``threads`` threads sharing the blocks."""
-    bounds = _thread_ranges(pixels, threads)
-    if len(bounds) == 1:
-        plan.run(out, *bounds[0])
+    """The plan over every pixel, on ``threads`` threads (this one among them) taking the next block in turn.
+
+    Blocks are handed out one at a time rather than in fixed halves: on a machine whose cores
+    are busy with other work, a thread the OS pauses holds up no block another thread could take.
+    """
+    starts = iter(range(0, pixels, BLOCK))
+    workers = max(1, min(threads, math.ceil(pixels / BLOCK)))
+    if workers == 1:
+        plan.run(out, lambda: next(starts, None), pixels)
         return
-    with ThreadPoolExecutor(len(bounds)) as pool:
-        for future in [pool.submit(plan.run, out, start, stop) for start, stop in bounds]:
+    lock = threading.Lock()
+
+    def take() -> int | None:
+        with lock:
+            return next(starts, None)
+
+    with ThreadPoolExecutor(workers - 1) as pool:
+        futures = [pool.submit(plan.run, out, take, pixels) for _ in range(workers - 1)]
+        plan.run(out, take, pixels)
+        for future in futures:
             future.result()
 
 
@@ -418,14 +431,6 @@ def _sampled_high(flat: np.ndarray, spec: _Group, shape: tuple[int, int], cv2: A
     everything = np.ascontiguousarray(flat[spec.rows], dtype=np.float32)  # rare: NaN throughout the subsample
     coeffs = spec.weights @ everything
     return robust_high(_magnitude_into(coeffs[1], coeffs[2], np.empty(coeffs.shape[1], dtype=np.float32), cv2))
-
-
-def _thread_ranges(pixels: int, threads: int) -> list[tuple[int, int]]:
-    """Contiguous pixel ranges, whole blocks each, one per thread (fewer for small images)."""
-    blocks = math.ceil(pixels / BLOCK)
-    parts = max(1, min(threads, blocks))
-    edges = [min(pixels, round(blocks * i / parts) * BLOCK) for i in range(parts + 1)]
-    return [(a, b) for a, b in itertools.pairwise(edges) if b > a]
 
 
 @dataclass
@@ -498,12 +503,15 @@ class _Plan:
     background_nonnegative: bool  # unsigned frames and non-negative A weights
     fusion: _Fusion | None = None
 
-    def run(self, out: _Outputs, start: int, stop: int) -> None:
-        """Blocks of [start, stop): scratch buffers are this call's own, outputs disjoint slices."""
-        size = min(BLOCK, stop - start)
+    def run(self, out: _Outputs, take: Callable[[], int | None], pixels: int) -> None:
+        """The blocks whose first pixels ``take`` hands out, until it gives None.
+
+        Scratch buffers are this thread's own; each block writes its own slices of the outputs.
+        """
+        size = min(BLOCK, pixels)
         scratch = _Scratch.reused(self.specs, size)
-        for begin in range(start, stop, BLOCK):
-            end = min(begin + BLOCK, stop)
+        while (begin := take()) is not None:
+            end = min(begin + BLOCK, pixels)
             self._block(out, begin, end, scratch if end - begin == size else _Scratch.allocate(self.specs, end - begin))
 
     def _block(self, out: _Outputs, begin: int, end: int, scratch: _Scratch) -> None:

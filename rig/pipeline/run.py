@@ -16,6 +16,7 @@ from calibration import models as calibration_models
 from calibration.errors import CalibrationError
 from calibration.stereo import STEREO
 from calibration.store import Calibration, read_calibration
+from processing.concurrency import side_by_side
 from processing.geometry.axis_fusion import fuse_points
 from processing.geometry.uncertainty import height_sigma
 from rig.blas import rpca_blas
@@ -175,6 +176,7 @@ def process(
         _run_scene(second, options, None, to_disk=False)
     notes: list[str] = []
     t0 = time.perf_counter()
+    islands: np.ndarray | None = None  # found beside the uncertainty when nothing changes the mask between
     height: np.ndarray | None
     uncertainty: np.ndarray | None
     points: np.ndarray | None
@@ -183,13 +185,19 @@ def process(
         height, points, mask, uncertainty = _height_both(obj, second, calibration, notes)
     else:
         height, points, mask = _height(obj, ref, calibration, notes)
-        uncertainty = _uncertainty(obj, ref, calibration, mask, height, notes)
+        if options.max_sigma is None:  # the mask the islands are found in is final: both side by side
+            uncertainty, islands = side_by_side(
+                lambda: _uncertainty(obj, ref, calibration, mask, height, notes),
+                lambda: _islands(mask, options.min_island_fraction),
+            )
+        else:
+            uncertainty = _uncertainty(obj, ref, calibration, mask, height, notes)
         _note_conditioning(obj, calibration, points, options.axis, notes)
     _bound_uncertainty(obj, mask, height, uncertainty, options.max_sigma, notes)
     height_time = time.perf_counter() - t0
     if progress is not None:
         progress.step("height")
-    _drop_islands(obj, mask, height, options.min_island_fraction, notes)
+    _drop_islands(obj, mask, height, options.min_island_fraction, notes, islands)
     _check_some_valid(obj, calibration, mask)
     timings: dict[str, Any] = {"object": dict(obj.timings)}
     if ref is not None:
@@ -314,7 +322,7 @@ def _uncertainty(
     assert obj.unwrapped is not None
     sigma_phi = obj.phase_sigma
     if ref is not None and ref.phase_sigma is not None:
-        sigma_phi = np.sqrt(np.square(sigma_phi) + np.square(ref.phase_sigma))
+        sigma_phi = np.hypot(sigma_phi, ref.phase_sigma)  # one pass instead of four (within 1 ulp)
     height_of = functools.partial(_model_height, obj, ref, calibration)
     # the heights themselves as the forward difference's base, unless points move (stereo) or the
     # heights carry the spatial unwrapping's per-region offsets that the model call does not
@@ -416,15 +424,32 @@ def _model_height(obj: SceneState, ref: SceneState | None, calibration: Calibrat
     )
 
 
-def _drop_islands(
-    obj: SceneState, mask: np.ndarray, height: np.ndarray | None, fraction: float, notes: list[str]
-) -> None:
-    """Drop (in place) valid regions under ``fraction`` of the largest: background specks."""
+def _islands(mask: np.ndarray, fraction: float) -> np.ndarray | None:
+    """The valid regions under ``fraction`` of the largest (None when ``fraction`` is 0: none dropped)."""
     if fraction <= 0:
-        return
+        return None
     from processing.correction.islands import island_mask
 
-    islands = island_mask(mask, fraction)
+    return island_mask(mask, fraction)
+
+
+def _drop_islands(
+    obj: SceneState,
+    mask: np.ndarray,
+    height: np.ndarray | None,
+    fraction: float,
+    notes: list[str],
+    islands: np.ndarray | None = None,
+) -> None:
+    """Drop (in place) valid regions under ``fraction`` of the largest: background specks.
+
+    ``islands``: :func:`_islands` of this ``mask`` when the caller found them already.
+    """
+    if fraction <= 0:
+        return
+    if islands is None:
+        islands = _islands(mask, fraction)
+        assert islands is not None
     dropped = int(np.count_nonzero(islands))
     obj.info["islands_dropped"] = dropped
     if not dropped:

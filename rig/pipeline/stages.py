@@ -21,6 +21,7 @@ from calibration import models as calibration_models
 from calibration.camera import undistort_stack
 from calibration.errors import CalibrationError
 from calibration.store import Calibration
+from processing import concurrency
 from processing.denoise.frames import rpca_denoise_stack
 from processing.geometry.uncertainty import noise_sigma, phase_sigma
 from processing.phase.convention import gray_offset, heterodyne_offset
@@ -392,6 +393,7 @@ def _fused_pass(state: SceneState, options: ProcessOptions) -> bool:
             # A + B, the texture, instead of A and B apart (one map fewer) unless B is wanted for sigma
             brightness=state.calibration is None and (fuse is not None or not options.noise_rule(True)),
             fuse_noise=fuse,
+            threads=concurrency.THREADS,  # the blocks on both cores (1 in rig's batch workers)
         )
     except ValueError:
         return False  # e.g. frequencies the method refuses: the stage-by-stage path reports it as before
