@@ -19,6 +19,7 @@ from calibration.store import Calibration, read_calibration
 from processing.concurrency import side_by_side
 from processing.geometry.axis_fusion import fuse_points
 from processing.geometry.uncertainty import height_sigma
+from processing.phase.shifting import root_sum_square
 from rig.blas import rpca_blas
 from rig.errors import ProcessingError
 from rig.pipeline import reference_cache
@@ -322,7 +323,7 @@ def _uncertainty(
     assert obj.unwrapped is not None
     sigma_phi = obj.phase_sigma
     if ref is not None and ref.phase_sigma is not None:
-        sigma_phi = np.hypot(sigma_phi, ref.phase_sigma)  # one pass instead of four (within 1 ulp)
+        sigma_phi = root_sum_square(sigma_phi, ref.phase_sigma)
     height_of = functools.partial(_model_height, obj, ref, calibration)
     # the heights themselves as the forward difference's base, unless points move (stereo) or the
     # heights carry the spatial unwrapping's per-region offsets that the model call does not
