@@ -12,6 +12,10 @@ every row once, in turn, so a change of load hits all rows alike):
 - ``rpca-phase (correction only)``: plain ch. 4 RPCA, for scale;
 - ``none path + auto``: the two together, what ``rig process`` computes by default.
 
+The corrections run with single-threaded BLAS, as ``rig process`` runs its correction stage
+(``rig.blas.rpca_blas``): multi-threaded OpenBLAS spends most of a small block solve's time
+synchronising its threads when the cores are busy.
+
 Per row: median wall time, its spread over the runs (min - max), the median CPU time, and
 ``row / none``: the median over runs of the row's time divided by the none path's time in the
 same run (min - max). The header gives the CPU, its SIMD level and the load average before and
@@ -41,6 +45,7 @@ from mock_devices import scenes, synth  # noqa: E402
 from processing.correction.registry import correct_auto, correct_rpca_phase  # noqa: E402
 from processing.geometry.height import phase_to_height  # noqa: E402
 from processing.unwrap.fused_pass import fringe_pass  # noqa: E402
+from rig.blas import rpca_blas  # noqa: E402
 from rig.hardware.synthesis import simulate_scan  # noqa: E402
 
 TWO_PI = 2.0 * np.pi
@@ -65,15 +70,26 @@ def simulate(case: str, seed: int = 0):
 def auto_pipeline(stack, frequencies, reference_phase, geometry) -> np.ndarray:
     """fringe_pass (keeping the lower frequency's wrapped phase), ``auto`` on the object's phase, eq. 1.15 (float32)."""
     scan = fringe_pass(stack, GROUPS, frequencies, "two-frequency", keep_all=True)
-    phase, _ = correct_auto(
-        scan.phase.astype(np.float64),
-        scan.wrapped[-1].astype(np.float64),
-        mask=scan.valid,
-        frequency=frequencies[1],
-        lower_wrapped=[(frequencies[0], scan.wrapped[0])],
-    )
+    with rpca_blas():  # as rig process runs the correction stage
+        phase, _ = correct_auto(
+            scan.phase.astype(np.float64),
+            scan.wrapped[-1].astype(np.float64),
+            mask=scan.valid,
+            frequency=frequencies[1],
+            lower_wrapped=[(frequencies[0], scan.wrapped[0])],
+        )
     delta = (phase - reference_phase).astype(np.float32)
     return phase_to_height(delta, geometry.l0_mm, geometry.d0_mm, geometry.per_mm(frequencies[1]), dtype=np.float32)
+
+
+def as_correction_stage(correction: Callable[[], object]) -> Callable[[], object]:
+    """``correction`` run as ``rig process`` runs its correction stage: with single-threaded BLAS."""
+
+    def run() -> object:
+        with rpca_blas():
+            return correction()
+
+    return run
 
 
 def _stats(values: list[float]) -> str:
@@ -89,8 +105,8 @@ def run_case(case: str, runs: int) -> None:
     evidence = {"frequency": freqs[1], "lower_wrapped": [(freqs[0], scan.wrapped[0])]}
     rows: dict[str, Callable[[], object]] = {
         "none path (fringe_pass + eq. 1.15)": lambda: fused_pipeline(obj, freqs, reference_phase, geometry),
-        "auto (correction only)": lambda: correct_auto(phase, wrapped, mask=valid, **evidence),
-        "rpca-phase (correction only)": lambda: correct_rpca_phase(phase, wrapped, mask=valid),
+        "auto (correction only)": as_correction_stage(lambda: correct_auto(phase, wrapped, mask=valid, **evidence)),
+        "rpca-phase (correction only)": as_correction_stage(lambda: correct_rpca_phase(phase, wrapped, mask=valid)),
         "none path + auto": lambda: auto_pipeline(obj, freqs, reference_phase, geometry),
     }
     times = interleaved(rows, runs)
@@ -105,7 +121,8 @@ def run_case(case: str, runs: int) -> None:
         print(f"{name:38s} {_stats(walls):>30s} {cpu:8.4f} {spread:>34s}")
     truth = synth.true_absolute_phase(obj_map, geometry, freqs[1])
     lit = obj_map.lit & valid
-    corrected, info = correct_auto(phase, wrapped, mask=valid, **evidence)
+    with rpca_blas():
+        corrected, info = correct_auto(phase, wrapped, mask=valid, **evidence)
     before = int(np.sum(np.abs(phase - truth)[lit] > np.pi))
     after = int(np.sum(np.abs(corrected - truth)[lit] > np.pi))
     print(

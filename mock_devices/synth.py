@@ -1,8 +1,8 @@
 """Fringe synthesiser: what a camera sees of a height-map scene under projected patterns.
 
 The rig follows the thesis' reference-plane geometry (ch. 1): camera and projector pupils at
-``l0`` above the plane, signed baseline ``d0`` along x, fringes of ``f0`` cycles/mm on the plane
-for the ``f0_frequency`` pattern. The camera looks straight down with ``pixel_mm`` per pixel on
+``l0`` above the plane, signed baseline ``d0`` along x (or turned by ``baseline_angle_deg``
+towards y), fringes of ``f0`` cycles/mm on the plane for the ``f0_frequency`` pattern. The camera looks straight down with ``pixel_mm`` per pixel on
 the plane; the projector covers a wider footprint than the camera's view (``margin``) so that
 temporal unwrapping stays unique, unless a test asks for the edge case.
 
@@ -41,6 +41,9 @@ class RigGeometry:
     projector_width: int = 912
     projector_height: int = 1140
     view_offset_px: float | None = None  # projector u of the camera's left edge on the plane
+    # direction of the baseline from the x axis: a height moves the projector coordinate by its
+    # d0 cos(angle) share along x and its d0 sin(angle) share along y (0: along x alone)
+    baseline_angle_deg: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("l0_mm", "f0_per_mm", "f0_frequency", "pixel_mm"):
@@ -65,6 +68,16 @@ class RigGeometry:
     def per_mm(self, frequency: float) -> float:
         """Fringe frequency on the plane (cycles/mm) of a sinusoid with ``frequency`` fringes."""
         return self.f0_per_mm * float(frequency) / self.f0_frequency
+
+    def baseline_share(self, axis: str) -> float:
+        """The baseline's signed component (mm) along ``axis``: the d0 the fringes along it see."""
+        angle = np.deg2rad(self.baseline_angle_deg)
+        return float(self.d0_mm * (np.cos(angle) if axis == "x" else np.sin(angle)))
+
+    def per_mm_along(self, axis: str, frequency: float) -> float:
+        """Fringe frequency on the plane (cycles/mm) of a sinusoid along ``axis`` with ``frequency`` fringes."""
+        extent = self.projector_width if axis == "x" else self.projector_height
+        return self.projector_px_per_mm * float(frequency) / extent
 
     def with_camera(self, width: int, height: int) -> RigGeometry:
         return replace(self, camera_width=width, camera_height=height)
@@ -157,12 +170,16 @@ def projector_coordinates(height_mm: np.ndarray, geometry: RigGeometry, clip_to_
     x_mm = (np.arange(g.camera_width) + 0.5) * g.pixel_mm
     u_reference = offset + x_mm * px_per_mm
     delta_phase = height_to_phase(h, g.l0_mm, g.d0_mm, g.f0_per_mm)
-    u = u_reference[None, :] + delta_phase * g.projector_width / (2.0 * np.pi * g.f0_frequency)
+    angle = np.deg2rad(g.baseline_angle_deg)
+    shift_px = delta_phase * g.projector_width / (2.0 * np.pi * g.f0_frequency)  # along the baseline
+    u = u_reference[None, :] + shift_px * np.cos(angle)
     view_h_mm = g.camera_height * g.pixel_mm
     y_mm = (np.arange(g.camera_height) + 0.5) * g.pixel_mm
     v_row = (g.projector_height - view_h_mm * px_per_mm) / 2.0 + y_mm * px_per_mm
-    v = np.broadcast_to(v_row[:, None], h.shape).copy()
-    lit = ~projector_shadow(u, g.d0_mm)
+    v = v_row[:, None] + shift_px * np.sin(angle)
+    lit = ~projector_shadow(u, g.baseline_share("x"))
+    if g.baseline_angle_deg:  # shadows cast along the columns too
+        lit &= ~projector_shadow(v.T, g.baseline_share("y")).T
     if clip_to_projector:
         lit &= (u >= 0) & (u < g.projector_width) & (v >= 0) & (v < g.projector_height)
     return ProjectorMap(u=u, v=v, lit=lit, height_mm=h)

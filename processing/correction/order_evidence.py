@@ -38,20 +38,47 @@ def label_blobs(mask: np.ndarray) -> tuple[int, np.ndarray]:
     return int(count), labels
 
 
-def breaks_per_blob(phase: np.ndarray, valid: np.ndarray, labels: np.ndarray, count: int) -> np.ndarray:
+def blob_edges(valid: np.ndarray, inside: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The 4-neighbour edges between valid pixels that touch a blob pixel (``inside``), along the rows and then
+    down the columns: (first pixels, second pixels) as flat indices, the second to the right of or below the first.
+
+    Edges away from every blob decide nothing, so the blob steps count the breaks on these only.
+    """
+    width = valid.shape[1]
+    flat_valid, flat_inside = np.ravel(valid), np.ravel(inside)
+    edges = []
+    for step in (1, width):  # along the rows on the flat map: no edge from a row's last pixel to the next row
+        pair = flat_inside[:-step] | flat_inside[step:]
+        pair &= flat_valid[:-step]
+        pair &= flat_valid[step:]
+        if step == 1:
+            pair[width - 1 :: width] = False
+        first = np.flatnonzero(pair)
+        edges.append((first, first + step))
+    return edges
+
+
+def breaks_per_blob(
+    phase: np.ndarray,
+    valid: np.ndarray,
+    labels: np.ndarray,
+    count: int,
+    edges: list[tuple[np.ndarray, np.ndarray]] | None = None,
+) -> np.ndarray:
     """Order breaks (|step| > pi between valid 4-neighbours) on the edges touching each blob of ``labels``.
 
-    An edge between two blobs counts for both; an edge inside a blob once. Label 0 (no blob) is
-    counted too and is meaningless.
+    An edge between two blobs counts for both; an edge inside a blob once. Label 0 (no blob) counts
+    the breaks on its edges to blobs and is meaningless. ``edges``: :func:`blob_edges` of ``valid``
+    and the blobs, taken once where several phases are counted on the same blobs.
     """
+    if edges is None:
+        edges = blob_edges(valid, labels != 0)
+    flat, flat_labels = np.ravel(phase), np.ravel(labels)
     out = np.zeros(count, dtype=np.int64)
-    for first, second in (
-        ((slice(None), slice(None, -1)), (slice(None), slice(1, None))),
-        ((slice(None, -1), slice(None)), (slice(1, None), slice(None))),
-    ):
+    for first, second in edges:
         with np.errstate(invalid="ignore"):
-            broken = valid[first] & valid[second] & (np.abs(phase[second] - phase[first]) > np.pi)
-        head, tail = labels[first][broken], labels[second][broken]
+            broken = np.abs(flat[second] - flat[first]) > np.pi
+        head, tail = flat_labels[first[broken]], flat_labels[second[broken]]
         out += np.bincount(head, minlength=count)
         out += np.bincount(tail[tail != head], minlength=count)
     return out
@@ -78,14 +105,29 @@ def keep_supported_changes(
     if not changed.any():
         return proposed, changed
     count, labels = label_blobs(changed)
-    with_proposal = breaks_per_blob(proposed, valid, labels, count)
-    with_measured = breaks_per_blob(measured, valid, labels, count)
+    edges = blob_edges(valid, changed)
+    with_proposal = breaks_per_blob(proposed, valid, labels, count, edges)
+    with_measured = breaks_per_blob(measured, valid, labels, count, edges)
     back = with_measured <= with_proposal
     tie = with_measured == with_proposal
     back[0] = tie[0] = False
     if not back.any():
         return proposed, np.zeros(valid.shape, dtype=bool)
-    return np.where(back[labels], measured, proposed), tie[labels]
+    at = np.flatnonzero(changed)  # only the changed pixels carry a blob label
+    blob = np.ravel(labels)[at]
+    return revert_changed(proposed, measured, at, back[blob], tie[blob])
+
+
+def revert_changed(
+    proposed: np.ndarray, measured: np.ndarray, at: np.ndarray, back: np.ndarray, unresolved: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """A copy of ``proposed`` with ``measured`` at the changed pixels ``at`` (flat indices) where ``back``, and
+    the mask of those where ``unresolved``: the evidence steps write only where orders changed, never the whole map."""
+    out = proposed.copy()
+    out.reshape(-1)[at[back]] = np.ravel(measured)[at[back]]
+    mask = np.zeros(proposed.shape, dtype=bool)
+    mask.reshape(-1)[at[unresolved]] = True
+    return out, mask
 
 
 def unresolved_summary(unresolved: np.ndarray, valid: np.ndarray) -> dict[str, Any]:
@@ -123,25 +165,33 @@ def mend_spikes(
     ``misfit(values, spikes)`` (the misfit of candidate phases at the spike pixels with the lower
     frequencies, when given), else the one nearest the neighbours' median.
     """
-    rows, cols = phase.shape
-    padded = np.pad(np.where(valid, phase, np.nan), 1, constant_values=np.nan)
-    neighbours = np.stack(
-        [padded[1 + dy : 1 + dy + rows, 1 + dx : 1 + dx + cols] for dy, dx in ((-1, 0), (1, 0), (0, -1), (0, 1))]
-    )
-    with np.errstate(invalid="ignore"):
-        spike = valid & np.all(np.abs(neighbours - phase) > np.pi, axis=0)  # an invalid neighbour: no spike
-    if not spike.any():
+    ys, xs = _spike_pixels(phase, valid)
+    if not ys.size:
         return phase, 0
-    at = phase[spike]
-    around = neighbours[:, spike]  # (4, n)
+    at = phase[ys, xs]
+    # the four neighbours, up, down, left, right (all valid at a spike)
+    around = np.stack([phase[ys - 1, xs], phase[ys + 1, xs], phase[ys, xs - 1], phase[ys, xs + 1]])  # (4, n)
     candidates = at + TWO_PI * np.rint((around - at) / TWO_PI)  # the order of each neighbour's side
     support = (np.abs(candidates[:, None, :] - around[None, :, :]) <= np.pi).sum(axis=1)  # (4, n)
     if misfit is not None:
+        spike = np.zeros(valid.shape, dtype=bool)
+        spike[ys, xs] = True
         tie_break = np.stack([misfit(c, spike) for c in candidates])
     else:
         tie_break = np.abs(candidates - np.median(around, axis=0))
     score = np.where(support == support.max(axis=0), tie_break, np.inf)
     choice = np.argmin(score, axis=0)
     out = phase.copy()
-    out[spike] = candidates[choice, np.arange(at.size)]
+    out[ys, xs] = candidates[choice, np.arange(at.size)]
     return out, int(at.size)
+
+
+def _spike_pixels(phase: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rows and columns (row-major) of the valid pixels whose four neighbours are all valid and all more than
+    pi away: the steps between neighbours are taken once and each pixel reads the two on either side of it."""
+    with np.errstate(invalid="ignore"):
+        across = (np.abs(np.diff(phase, axis=1)) > np.pi) & valid[:, 1:] & valid[:, :-1]  # (H, W - 1)
+        down = (np.abs(np.diff(phase, axis=0)) > np.pi) & valid[1:, :] & valid[:-1, :]  # (H - 1, W)
+    inner = across[1:-1, 1:] & across[1:-1, :-1] & down[1:, 1:-1] & down[:-1, 1:-1]  # pixels off the border
+    ys, xs = np.nonzero(inner)
+    return ys + 1, xs + 1

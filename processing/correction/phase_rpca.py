@@ -322,7 +322,7 @@ def keep_coherent_detail(
     # feature, fringes too dense for L), unless the measured pixel breaks with its neighbours
     # (a wrong order left in it).
     lone = size > 2.0 * k_sigma * sigma  # rare: the order-break test runs at these pixels only
-    rows, cols = np.nonzero(lone)
+    rows, cols = np.divmod(np.flatnonzero(lone), lone.shape[1])
     lone[rows, cols] = ~order_breaks_at(measured, valid, rows, cols)
     out = np.where(valid & (coherent | lone), measured, estimate)
     np.copyto(out, np.nan, where=invalid)

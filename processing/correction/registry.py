@@ -270,11 +270,14 @@ def _supported_orders(
     keep_supported_changes`) and then the lower frequencies (:func:`~processing.correction.temporal_evidence.
     keep_temporally_supported`) support them, order spikes mended (:func:`~processing.correction.order_evidence.
     mend_spikes`); the unresolved pixels of both; what each step did."""
-    reordered, unresolved = keep_supported_changes(proposed, maps.phase, maps.valid)
+    (reordered, unresolved), weights = side_by_side(  # the noise weights read the measured phase only
+        lambda: keep_supported_changes(proposed, maps.phase, maps.valid),
+        lambda: None if temporal is None else noise_weights(maps.phase, maps.valid, temporal.frequency, temporal.lower),
+    )
     counts: dict[str, int] = {}
     misfit = None
     if temporal is not None:
-        weights = noise_weights(maps.phase, maps.valid, temporal.frequency, temporal.lower)
+        assert weights is not None
         snapped, moved = snap_to_lower_frequencies(
             reordered, maps.phase, maps.valid, temporal.frequency, temporal.lower, weights
         )

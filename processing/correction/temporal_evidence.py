@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from processing.angles import wrap_to_pi
-from processing.correction.order_evidence import label_blobs
+from processing.correction.order_evidence import label_blobs, revert_changed
 
 TWO_PI = 2.0 * np.pi
 # Standard errors between a blob's evidence and the decision threshold for a confident decision.
@@ -251,6 +251,4 @@ def keep_temporally_supported(
     back_at = contradicted[at] & own
     if not back_at.any():
         return proposed, np.zeros(valid.shape, dtype=bool), counts
-    back = np.zeros(valid.shape, dtype=bool)
-    back[changed] = back_at
-    return np.where(back, measured, proposed), ambiguous[labels] & changed, counts
+    return (*revert_changed(proposed, measured, np.flatnonzero(changed), back_at, ambiguous[at]), counts)

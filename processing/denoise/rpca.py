@@ -138,9 +138,17 @@ def masked_second_differences(d: np.ndarray, mask: np.ndarray | None = None) -> 
     if mask is not None:
         arr = np.where(np.asarray(mask, dtype=bool), arr, np.nan)
     rows, cols = arr.shape
-    along = arr[:, 2:] - 2.0 * arr[:, 1:-1] + arr[:, :-2] if cols >= 3 else np.empty((rows, 0))
-    down = arr[2:, :] - 2.0 * arr[1:-1, :] + arr[:-2, :] if rows >= 3 else np.empty((0, cols))
+    along = _second_difference(arr[:, 2:], arr[:, 1:-1], arr[:, :-2]) if cols >= 3 else np.empty((rows, 0))
+    down = _second_difference(arr[2:, :], arr[1:-1, :], arr[:-2, :]) if rows >= 3 else np.empty((0, cols))
     return along, down
+
+
+def _second_difference(after: np.ndarray, middle: np.ndarray, before: np.ndarray) -> np.ndarray:
+    """``after - 2 middle + before``, evaluated in that order in one buffer (the same rounding, one array)."""
+    out = np.multiply(middle, 2.0)
+    np.subtract(after, out, out=out)
+    out += before
+    return out
 
 
 def robust_noise_sigma(d: np.ndarray, mask: np.ndarray | None = None, wrap: bool = False) -> float:

@@ -55,6 +55,7 @@ from calibration.gamma import (
     ripple_table_from_plane,
 )
 from calibration.geometry import MIN_HEIGHTS, fit_f0, fit_l0_d0, lit_interior, pixel_mm_from_corners
+from calibration.plane_axes import sensitivity_rad_per_mm
 from calibration.polynomial import COEFFICIENTS_FILE, POLYNOMIAL, fit_polynomial
 from calibration.reference import REFERENCE_DIR, check_same_patterns
 from calibration.stereo import (
@@ -339,11 +340,12 @@ class CalibrationReport:
     lines: list[str]
 
 
-def _absolute_phase(path: Path) -> tuple[np.ndarray, float, str, list[dict[str, Any]]]:
-    """Absolute phase (NaN invalid), its frequency, fringe axis and the patterns of a capture."""
+def _absolute_phase(path: Path, axis: str | None = None) -> tuple[np.ndarray, float, str, list[dict[str, Any]]]:
+    """Absolute phase (NaN invalid), its frequency, fringe axis (``axis``; default the first captured)
+    and the patterns of a capture."""
     from rig.api import ProcessOptions, process
 
-    result = process(path, options=ProcessOptions(correction="none"))  # the fits see the measured phase
+    result = process(path, options=ProcessOptions(correction="none", axis=axis))  # the fits see the measured phase
     unwrapped = result.object.unwrapped
     if unwrapped is None or not unwrapped.absolute:
         raise CalibrationError(
@@ -498,6 +500,9 @@ def compute_calibration(
     extra.update({k: v for k, v in fit.as_fields().items() if k not in ("l0_mm", "d0_mm", "f0_per_mm")})
     extra["uncertainty"]["f0_per_mm"] = f0.f0_std_per_mm
     extra["fringe_axis"] = axis
+    if plan.model == REFERENCE_PLANE:
+        first = {"l0_mm": fit.l0_mm, "d0_mm": fit.d0_mm, "f0_per_mm": f0.f0_per_mm, "f0_frequency": frequency}
+        _fit_other_axis(directory, plan, camera, pixel_mm, computed, note, axis, first)
     if plan.model == POLYNOMIAL:
         poly = fit_polynomial(heights, deltas, frequency, degree=plan.degree)
         computed.arrays[COEFFICIENTS_FILE] = poly.coefficients
@@ -592,6 +597,39 @@ def _pixel_mm_on_plane(
     return pixel_mm
 
 
+def _fit_other_axis(
+    directory: Path,
+    plan: CalibrationPlan,
+    camera: CameraCalibration | None,
+    pixel_mm: float,
+    computed: ComputedCalibration,
+    note: Callable[[str], None],
+    axis: str,
+    numbers: dict[str, float],
+) -> None:
+    """With fringes on both axes in the captures, the other axis's own l0, d0, f0 (``axes``, see
+    calibration.plane_axes): each axis sees its own share of the baseline, and `rig process` takes the
+    more sensitive one. A fit that fails (a baseline with no share along that axis) leaves one axis."""
+    other = "y" if axis == "x" else "x"
+    patterns = read_capture(directory / REFERENCE_DIR, verify=False).patterns
+    if not any(p.get("kind") == "sinusoid" and p.get("axis", "x") == other for p in patterns):
+        return
+    scratch = ComputedCalibration(Calibration(model=plan.model), [], directory)  # its ripple table is not kept
+    try:
+        fit, f0, frequency, _, _, _ = _fit_planes(directory, plan, camera, pixel_mm, scratch, note, axis=other)
+    except CalibrationError as exc:
+        computed.lines.append(f"fringes along {other}: not fitted ({exc}); processing converts {axis} only")
+        return
+    theirs = {"l0_mm": fit.l0_mm, "d0_mm": fit.d0_mm, "f0_per_mm": f0.f0_per_mm, "f0_frequency": frequency}
+    computed.calibration.extra["axes"] = {axis: numbers, other: theirs}
+    per_mm = {name: sensitivity_rad_per_mm(n, n["f0_frequency"]) for name, n in ((axis, numbers), (other, theirs))}
+    computed.lines.append(
+        f"fringes along {other}: l0 = {fit.l0_mm:.3f} mm, d0 = {fit.d0_mm:.3f} mm; sensitivity 2 pi f0 |d0| / l0 "
+        f"{per_mm[axis]:.3g} rad/mm along {axis}, {per_mm[other]:.3g} along {other} (at each axis's fitted "
+        "frequency): rig process takes the larger by default"
+    )
+
+
 def _fit_planes(
     directory: Path,
     plan: CalibrationPlan,
@@ -599,8 +637,10 @@ def _fit_planes(
     pixel_mm: float,
     computed: ComputedCalibration,
     note: Callable[[str], None],
+    axis: str | None = None,
 ) -> tuple[Any, Any, float, str, list[float], list[np.ndarray]]:
-    """f0 on the reference plane, then l0 and d0 from the planes' phase differences to it.
+    """f0 on the reference plane, then l0 and d0 from the planes' phase differences to it, along ``axis``
+    (default the first axis captured).
 
     Returns the l0/d0 fit, the f0 fit, the fringe frequency and axis, the heights and the phase differences.
     """
@@ -608,15 +648,15 @@ def _fit_planes(
     undistort = camera is not None and camera.distortion_significant
 
     def phase_of(path: Path) -> tuple[np.ndarray, float, str, list[dict[str, Any]]]:
-        phase, frequency, axis, patterns = _absolute_phase(path)
+        phase, frequency, fitted_axis, patterns = _absolute_phase(path, axis)
         phase = lit_interior(phase)  # fits use lit, modulated pixels only: not the footprint's partly lit edge
         if undistort:
             assert camera is not None
             phase = undistort_map(phase, camera.camera_matrix, camera.distortion)
-        return phase, frequency, axis, patterns
+        return phase, frequency, fitted_axis, patterns
 
-    note("calibrate: reference plane")
-    reference, frequency, axis, patterns = phase_of(directory / REFERENCE_DIR)
+    note("calibrate: reference plane" + (f" (fringes along {axis})" if axis else ""))
+    reference, frequency, fitted_axis, patterns = phase_of(directory / REFERENCE_DIR)
     planes = _planes(directory)
     if len(planes) < MIN_HEIGHTS:
         raise CalibrationError(
@@ -640,7 +680,7 @@ def _fit_planes(
         f0_std_per_mm=f0.f0_std_per_mm,
         flatness_tolerance_mm=plan.flatness_tolerance_mm if plan.model == REFERENCE_PLANE else None,
     )
-    return fit, f0, frequency, axis, heights, deltas
+    return fit, f0, frequency, fitted_axis, heights, deltas
 
 
 def _ripple(reference: np.ndarray, frequency: float, computed: ComputedCalibration) -> tuple[Any, bool]:

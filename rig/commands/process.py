@@ -155,9 +155,10 @@ def add_processing_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--axis",
         choices=("x", "y", "both"),
-        help="fringe axis to use when a capture has both; both: each pixel triangulated from both projector "
-        "coordinates (camera-projector calibration). Default: both with a camera-projector calibration, else "
-        "the calibration's fringe_axis, else the first",
+        help="fringe axis to use when a capture has both; both: each pixel from both axes (camera-projector "
+        "calibration, or reference-plane calibration fitted on both). Default: both with a camera-projector "
+        "calibration; the axis with the larger sensitivity 2 pi f0 |d0| / l0 with a reference-plane calibration "
+        "fitted on both; else the calibration's fringe_axis, else the first",
     )
     parser.add_argument(
         "--no-undistort",

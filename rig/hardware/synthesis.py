@@ -113,17 +113,38 @@ def demo_geometry(width: int = 640, height: int = 480) -> synth.RigGeometry:
 
 
 def exact_calibration(
-    geometry: synth.RigGeometry, reference: str = "reference", extra: dict[str, Any] | None = None
+    geometry: synth.RigGeometry,
+    reference: str = "reference",
+    extra: dict[str, Any] | None = None,
+    axes: Sequence[str] = (),
 ) -> Calibration:
-    """The reference-plane calibration that ``geometry`` is exactly (what `rig calibrate` estimates)."""
+    """The reference-plane calibration that ``geometry`` is exactly (what `rig calibrate` estimates).
+
+    ``axes``: the fringe axes it was fitted on, each with its own share of the baseline and its
+    fringe frequency on the plane (calibration.plane_axes), the first one's at the top level and
+    as ``fringe_axis``; none (the default): the x axis's numbers, naming no axis.
+    """
+    numbers = {
+        axis: {
+            "l0_mm": geometry.l0_mm,
+            "d0_mm": geometry.baseline_share(axis),
+            "f0_per_mm": geometry.per_mm_along(axis, geometry.f0_frequency),
+            "f0_frequency": float(geometry.f0_frequency),
+        }
+        for axis in axes
+    }
+    fields = dict(extra or {})
+    if numbers:
+        fields.update({"fringe_axis": axes[0], "axes": numbers})
+    top = numbers[axes[0]] if numbers else {"d0_mm": geometry.d0_mm, "f0_per_mm": geometry.f0_per_mm}
     return Calibration(
         l0_mm=geometry.l0_mm,
-        d0_mm=geometry.d0_mm,
-        f0_per_mm=geometry.f0_per_mm,
+        d0_mm=top["d0_mm"],
+        f0_per_mm=top["f0_per_mm"],
         f0_frequency=float(geometry.f0_frequency),
         pixel_mm=geometry.pixel_mm,
         reference=reference,
-        extra=dict(extra or {}),
+        extra=fields,
     )
 
 
@@ -140,6 +161,7 @@ class SimulatedScan:
     reference_map: synth.ProjectorMap
     description: dict[str, Any] = field(default_factory=dict)
     object_patterns: list[dict[str, Any]] | None = None  # the object's, when taken at several exposures
+    calibrated_axes: tuple[str, ...] = ()  # exact_calibration's axes (none: the x axis, naming none)
 
     @property
     def lit(self) -> np.ndarray:
@@ -148,7 +170,9 @@ class SimulatedScan:
 
     def calibration(self, reference: str = "reference") -> Calibration:
         """The exact calibration of the simulated rig (reference-plane model)."""
-        return exact_calibration(self.geometry, reference, extra={"simulation": dict(self.description)})
+        return exact_calibration(
+            self.geometry, reference, extra={"simulation": dict(self.description)}, axes=self.calibrated_axes
+        )
 
 
 def simulate_scan(

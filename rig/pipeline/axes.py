@@ -1,18 +1,22 @@
 """Which fringe axis (or both) a capture is processed along, why, and how well each is conditioned.
 
 A capture may hold sinusoids along x (vertical fringes, coding projector columns) and along y
-(horizontal fringes, coding rows). What each carries depends on the rig: a camera-projector
-(stereo) model measures depth through the projector coordinate that the baseline moves, so on a
-rig with a mostly vertical baseline the column fringes carry metres of depth per projector pixel
-and the row fringes fractions of a millimetre. The rule (:func:`choose_axes`):
+(horizontal fringes, coding rows). What each carries depends on the rig: on a rig with a mostly
+vertical baseline the column fringes carry metres of depth per projector pixel and the row fringes
+fractions of a millimetre. The rule (:func:`choose_axes`):
 
-- ``--axis x`` or ``y``: that axis; with a stereo model the report gives its depth per projector
-  pixel, and a note warns when it is :data:`ILL_CONDITIONED_RATIO` times the other axis's or more;
-- ``--axis both``: every pixel triangulated from both projector coordinates (stereo model only);
+- ``--axis x`` or ``y``: that axis; the report gives each axis's depth (height) per projector
+  pixel, and a note warns when the chosen one's is :data:`ILL_CONDITIONED_RATIO` times the other
+  axis's or more;
+- ``--axis both``: every pixel from both axes, a camera-projector (stereo) model triangulating it
+  from both projector coordinates, a reference-plane model fitted on both axes taking the
+  inverse-variance mean of the two heights; refused in one line with any other calibration;
 - default: the only axis the capture has; with both captured and a stereo model, both
-  (:mod:`processing.geometry.axis_fusion`); with a reference-plane or polynomial model, the axis
-  the calibration was fitted on (``fringe_axis``), which is the one whose phase it converts to
-  height; otherwise the first axis in the capture, as before.
+  (:mod:`processing.geometry.axis_fusion`); with a reference-plane model fitted on both axes, the
+  axis with the larger sensitivity ``2 pi f0 |d0| / l0`` at its highest captured frequency
+  (:mod:`calibration.plane_axes`); with a reference-plane or polynomial model fitted on one axis,
+  that axis (``fringe_axis``), the one whose phase it converts to height; otherwise the first axis
+  in the capture, as before.
 
 The choice and its reason go to report.json (``methods.fringe_axis``, ``methods.axis_choice``)
 and to the summary line.
@@ -24,6 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from calibration.plane_axes import height_per_projector_pixel_mm, plane_axes, sensitivity_rad_per_mm
 from calibration.stereo import STEREO
 from calibration.store import Calibration
 from processing.geometry.axis_fusion import depth_per_projector_pixel
@@ -67,13 +72,9 @@ def choose_axes(
     if not captured:
         raise ProcessingError(f"{where}: no sinusoid pattern: nothing to compute a phase from")
     stereo = calibration is not None and calibration.model == STEREO
+    planes = plane_axes(calibration) if calibration is not None else {}
     if requested == "both":
-        if not stereo:
-            model = "no calibration" if calibration is None else f"the {calibration.model!r} calibration"
-            raise ProcessingError(
-                f"--axis both: triangulating from both projector coordinates needs a camera-projector (stereo) "
-                f"calibration; {model} converts one axis's phase; choose --axis x or y"
-            )
+        _check_both(calibration, planes, stereo)
         missing = [a for a in ("x", "y") if a not in captured]
         if missing:
             raise ProcessingError(f"--axis both: {where} has no sinusoid patterns along {missing[0]}")
@@ -89,10 +90,64 @@ def choose_axes(
             "coordinates, weighted by their predicted noise",
             requested,
         )
-    if calibration is not None and calibration.to_dict().get("fringe_axis") in captured:
-        fitted = str(calibration.to_dict()["fringe_axis"])
-        return AxisChoice((fitted,), f"the axis the {calibration.model!r} calibration was fitted on", requested)
-    return AxisChoice((captured[0],), "the first axis in the capture (the calibration names none)", requested)
+    if calibration is not None and len(planes) == 2 and {"x", "y"} <= set(captured):
+        sensitivity = plane_sensitivities(calibration, groups)
+        best = max(sensitivity, key=lambda axis: sensitivity[axis])
+        other = "y" if best == "x" else "x"
+        return AxisChoice(
+            (best,),
+            f"the larger sensitivity of the reference-plane calibration's two axes (2 pi f0 |d0| / l0 at the "
+            f"highest captured frequency): {sensitivity[best]:.3g} rad/mm along {best} against "
+            f"{sensitivity[other]:.3g} along {other}",
+            requested,
+        )
+    if calibration is not None and len(planes) == 1 and next(iter(planes)) in captured:
+        fitted = next(iter(planes))
+        why = f"the axis the {calibration.model!r} calibration was fitted on"
+        if set(captured) == {"x", "y"}:
+            why += f", the only one it converts (it holds no fit along {'y' if fitted == 'x' else 'x'})"
+        return AxisChoice((fitted,), why, requested)
+    why = "no calibration to choose by" if calibration is None else "the calibration names none"
+    return AxisChoice((captured[0],), f"the first axis in the capture ({why})", requested)
+
+
+def _check_both(calibration: Calibration | None, planes: dict[str, dict[str, float]], stereo: bool) -> None:
+    """``--axis both`` needs a stereo model or a reference-plane model fitted on both axes (ProcessingError)."""
+    if stereo or len(planes) == 2:
+        return
+    if calibration is None:
+        model = "no calibration converts a phase to height"
+    elif planes:
+        model = (
+            f"{calibration.where} converts fringes along {next(iter(planes))} only (the {calibration.model!r} model "
+            "needs its own fit of each axis: calibrate with fringes on both axes)"
+        )
+    else:
+        model = f"the {calibration.model!r} calibration names no fitted axis"
+    raise ProcessingError(
+        f"--axis both: needs a camera-projector (stereo) calibration or a reference-plane calibration fitted on "
+        f"both axes; {model}; choose --axis x or y"
+    )
+
+
+def plane_sensitivities(calibration: Calibration, groups: PatternGroups) -> dict[str, float]:
+    """Each captured axis's sensitivity (rad per mm of height) at its highest frequency (reference-plane model)."""
+    planes = plane_axes(calibration)
+    out = {}
+    for axis, numbers in planes.items():
+        frequencies = [g.frequency for g in [*groups.sinusoids, *groups.single_shot] if g.axis == axis]
+        if frequencies:
+            out[axis] = sensitivity_rad_per_mm(numbers, max(frequencies))
+    return out
+
+
+def plane_conditioning(calibration: Calibration, projector_size: tuple[int, int]) -> dict[str, float]:
+    """Height (mm) per projector pixel near the reference plane along each axis the calibration converts."""
+    extents = {"x": projector_size[0], "y": projector_size[1]}
+    return {
+        axis: round(height_per_projector_pixel_mm(numbers, extents[axis]), 4)
+        for axis, numbers in plane_axes(calibration).items()
+    }
 
 
 def _phase_shifted_both(groups: PatternGroups) -> bool:

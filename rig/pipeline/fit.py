@@ -8,7 +8,8 @@ both values, the likely cause and the fix:
   plane, polynomial) against the capture's camera;
 * projector extent along the fringe axis: phases are counted in fringes across the projector,
   so a capture imported without ``--projector-width`` decodes to wrong projector columns;
-* fringe axis: the axis the calibration was fitted on (``fringe_axis``) against the capture's;
+* fringe axis: the axes the calibration was fitted on (``fringe_axis``, or ``axes`` for a
+  reference-plane model fitted on both) against the one processed;
 * patterns and frequencies: the reference-plane capture must use the capture's patterns;
 * units: lengths that are implausibly short for millimetres (a translation or distance written
   in metres);
@@ -22,6 +23,7 @@ from typing import Any
 
 from calibration.errors import CalibrationError
 from calibration.models import units_problem
+from calibration.plane_axes import plane_axes
 from calibration.stereo import STEREO
 from calibration.store import Calibration
 from rig.errors import CaptureError, ConfigError
@@ -67,8 +69,9 @@ def check_fit(capture: Capture, calibration: Calibration, axis: str, reference: 
                 f"{projector[0]}x{projector[1]} (fringes are counted across the projector {name}, so every "
                 f"depth would be wrong); {_size_fix(capture, flag, expected_extent)}"
             )
-    fitted_axis = fields.get("fringe_axis")
-    if fitted_axis in ("x", "y") and fitted_axis != axis:
+    fitted = plane_axes(calibration)
+    if fitted and axis not in fitted:
+        fitted_axis = next(iter(fitted))
         raise CalibrationError(
             f"{capture.manifest_path}: fringe axis: {axis} does not fit {where} fringe_axis {fitted_axis} "
             f"(the calibration was fitted on fringes along {fitted_axis}); fix: process with --axis {fitted_axis} "

@@ -16,16 +16,26 @@ import numpy as np
 
 from calibration import models as calibration_models
 from calibration.errors import CalibrationError
+from calibration.plane_axes import for_axis
 from calibration.stereo import STEREO
 from calibration.store import Calibration, read_calibration
 from processing.concurrency import side_by_side
-from processing.geometry.axis_fusion import fuse_points
+from processing.geometry.axis_fusion import FusedPoints, fuse_points
 from processing.geometry.uncertainty import height_ahead, height_sigma
 from processing.phase.shifting import root_sum_square
 from rig.blas import rpca_blas
 from rig.errors import ProcessingError
 from rig.pipeline import reference_cache
-from rig.pipeline.axes import AXES, AxisChoice, captured_axes, choose_axes, conditioning_note, stereo_conditioning
+from rig.pipeline.axes import (
+    AXES,
+    AxisChoice,
+    captured_axes,
+    choose_axes,
+    conditioning_note,
+    plane_conditioning,
+    plane_sensitivities,
+    stereo_conditioning,
+)
 from rig.pipeline.corrections import REGISTRY as CORRECTIONS
 from rig.pipeline.fit import check_fit, refuse_kept_distortion
 from rig.pipeline.plan import (
@@ -175,29 +185,13 @@ def process(
         progress.begin(total_steps(ref is not None))
     for state in ([ref] if ref is not None else []) + [obj]:
         _run_scene(state, options, progress, to_disk=reference_cache_to_disk and state is ref)
-    if second is not None:  # its stages are not among the progress steps announced
+    if second is not None:  # its stages (and its reference plane's) are not among the progress steps announced
+        if second.reference is not None:
+            _run_scene(second.reference, options, None, to_disk=reference_cache_to_disk)
         _run_scene(second, options, None, to_disk=False)
     notes: list[str] = []
     t0 = time.perf_counter()
-    islands: np.ndarray | None = None  # found beside the uncertainty when nothing changes the mask between
-    height: np.ndarray | None
-    uncertainty: np.ndarray | None
-    points: np.ndarray | None
-    if second is not None:
-        assert calibration is not None
-        height, points, mask, uncertainty = _height_both(obj, second, calibration, notes)
-    else:
-        (height, points, mask), start = side_by_side(  # the model a step ahead needs no heights
-            lambda: _height(obj, ref, calibration, notes), lambda: _uncertainty_start(obj, ref, calibration)
-        )
-        if options.max_sigma is None:  # the mask the islands are found in is final: both side by side
-            uncertainty, islands = side_by_side(
-                lambda: _uncertainty(obj, start, mask, height),
-                lambda: _islands(mask, options.min_island_fraction),
-            )
-        else:
-            uncertainty = _uncertainty(obj, start, mask, height)
-        _note_conditioning(obj, calibration, points, options.axis, notes)
+    height, points, mask, uncertainty, islands = _heights(obj, second, ref, calibration, options, notes)
     _bound_uncertainty(obj, mask, height, uncertainty, options.max_sigma, notes)
     height_time = time.perf_counter() - t0
     if progress is not None:
@@ -223,6 +217,37 @@ def process(
     )
 
 
+def _heights(
+    obj: SceneState,
+    second: SceneState | None,
+    ref: SceneState | None,
+    calibration: Calibration | None,
+    options: ProcessOptions,
+    notes: list[str],
+) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """Heights, points, mask and sigma along one axis or both, and the islands when they were found
+    beside the sigma (one axis, nothing changing the mask between)."""
+    if second is not None and ref is not None:
+        return (*_height_both_planes(obj, second, notes), None)
+    if second is not None:
+        assert calibration is not None
+        return (*_height_both(obj, second, calibration, notes), None)
+    (height, points, mask), start = side_by_side(  # the model a step ahead needs no heights
+        lambda: _height(obj, ref, calibration, notes), lambda: _uncertainty_start(obj, ref, calibration)
+    )
+    islands: np.ndarray | None = None
+    uncertainty: np.ndarray | None
+    if options.max_sigma is None:  # the mask the islands are found in is final: both side by side
+        uncertainty, islands = side_by_side(
+            lambda: _uncertainty(obj, start, mask, height),
+            lambda: _islands(mask, options.min_island_fraction),
+        )
+    else:
+        uncertainty = _uncertainty(obj, start, mask, height)
+    _note_conditioning(obj, calibration, points, options.axis, notes)
+    return height, points, mask, uncertainty, islands
+
+
 def _scenes(
     capture: Capture, calibration_path: str | Path | None, options: ProcessOptions
 ) -> tuple[SceneState, SceneState | None, SceneState | None, Calibration | None]:
@@ -239,19 +264,16 @@ def _scenes(
     if calibration is not None:
         for axis in choice.axes:  # everything the two share must fit, along every processed axis
             check_fit(capture, calibration, axis, reference_capture)
-    obj = _scene("object", capture, choice.axes[0], grouped)
-    obj.calibration = calibration
+    scenes = [_scene("object", capture, axis, grouped) for axis in choice.axes]
+    for state in scenes:
+        # a reference-plane model fitted on both axes converts each with that axis's own numbers
+        state.calibration = None if calibration is None else for_axis(calibration, state.axis)
+        if reference_capture is not None:
+            state.reference = _scene("reference", reference_capture, state.axis)
+            state.reference.calibration = state.calibration
+    obj, second = scenes[0], (scenes[1] if len(scenes) == 2 else None)
     obj.info["axis_choice"] = {"axis": choice.name, "why": choice.why}
-    second = None
-    if len(choice.axes) == 2:
-        second = _scene("object", capture, choice.axes[1], grouped)
-        second.calibration = calibration
-    if reference_capture is None:
-        return obj, second, None, calibration
-    ref = _scene("reference", reference_capture, obj.axis)
-    ref.calibration = calibration
-    obj.reference = ref
-    return obj, second, ref, calibration
+    return obj, second, obj.reference, obj.calibration
 
 
 def _run_scene(state: SceneState, options: ProcessOptions, progress: Any, to_disk: bool) -> None:
@@ -383,10 +405,18 @@ def _bound_uncertainty(
 def _note_conditioning(
     obj: SceneState, calibration: Calibration | None, points: np.ndarray | None, requested: str | None, notes: list[str]
 ) -> None:
-    """Stereo model: each axis's depth per projector pixel in the report; a warning for an ill-conditioned choice."""
-    if calibration is None or calibration.model != STEREO or points is None:
+    """Each axis's depth per projector pixel in the report (stereo model; reference-plane model fitted on
+    both axes, with each axis's sensitivity); a warning for an ill-conditioned choice."""
+    if calibration is None:
         return
-    per_pixel = stereo_conditioning(calibration, points)
+    if calibration.model == STEREO and points is not None:
+        per_pixel = stereo_conditioning(calibration, points)
+    elif len(per_pixel := plane_conditioning(calibration, obj.capture.projector_size)) == 2:
+        obj.info["sensitivity_rad_per_mm"] = {
+            axis: round(value, 4) for axis, value in plane_sensitivities(calibration, obj.groups).items()
+        }
+    else:
+        return
     obj.info["depth_per_projector_pixel_mm"] = per_pixel
     note = conditioning_note(AxisChoice((obj.axis,), "", requested), per_pixel)
     if note is not None:
@@ -417,19 +447,58 @@ def _height_both(
     mask = np.isfinite(height) & np.isfinite(fused.sigma)
     np.copyto(height, np.float32(np.nan), where=~mask)
     uncertainty = np.where(mask, fused.sigma, np.float32(np.nan)).astype(np.float32)
-    obj.info["axis_fusion"] = {
-        "both_axes_pixels": fused.combined,
-        "x_only_pixels": fused.alone[0],
-        "y_only_pixels": fused.alone[1],
-        "disagreeing_pixels": fused.disagreeing,
-        "rule": "inverse-variance mean of the two points on each camera ray; where they disagree beyond "
-        "6 sigma, no point (nothing tells which axis is right)",
-    }
+    obj.info["axis_fusion"] = _fusion_info(fused, "the two points on each camera ray")
     obj.info["other_axis"] = second.info
     obj.info["depth_per_projector_pixel_mm"] = stereo_conditioning(calibration, fused.points)
     if any(state.phase_sigma is None for state in (obj, second)):
         notes.append("--axis both: no phase noise predicted; the axes are weighted by their geometry alone")
     return height, fused.points, mask, uncertainty
+
+
+def _height_both_planes(
+    obj: SceneState, second: SceneState, notes: list[str]
+) -> tuple[np.ndarray, None, np.ndarray, np.ndarray]:
+    """Heights, mask and sigma of a reference-plane capture converted along both axes.
+
+    Each axis's heights (with its own l0, d0, f0 and reference phase) and predicted sigma, combined
+    by the inverse-variance mean of :func:`processing.geometry.axis_fusion.fuse_points`; without a
+    predicted phase noise, each axis is weighted by its height per projector pixel alone.
+    """
+    assert obj.calibration is not None
+    per_pixel = plane_conditioning(obj.calibration, obj.capture.projector_size)
+    heights, sigmas = [], []
+    for state in (obj, second):
+        assert state.calibration is not None
+        height, _, mask = _height(state, state.reference, state.calibration, notes)
+        assert height is not None  # a calibration gives heights
+        sigma = _uncertainty(state, _uncertainty_start(state, state.reference, state.calibration), mask, height)
+        if sigma is None:
+            sigma = np.where(mask, np.float32(per_pixel[state.axis]), np.float32(np.nan))
+        heights.append(height[..., None])
+        sigmas.append(sigma)
+    fused = fuse_points(heights, sigmas)
+    height = fused.points[..., 0].astype(np.float32)
+    mask = np.isfinite(height) & np.isfinite(fused.sigma)
+    np.copyto(height, np.float32(np.nan), where=~mask)
+    uncertainty = np.where(mask, fused.sigma, np.float32(np.nan)).astype(np.float32)
+    obj.info["axis_fusion"] = _fusion_info(fused, "the two heights of each pixel")
+    obj.info["other_axis"] = second.info
+    obj.info["depth_per_projector_pixel_mm"] = per_pixel
+    if any(state.phase_sigma is None for state in (obj, second)):
+        notes.append("--axis both: no phase noise predicted; the axes are weighted by their geometry alone")
+    return height, None, mask, uncertainty
+
+
+def _fusion_info(fused: FusedPoints, what: str) -> dict[str, Any]:
+    """report.json's ``axis_fusion``: the pixels from both axes, from one alone, and where they disagree."""
+    return {
+        "both_axes_pixels": fused.combined,
+        "x_only_pixels": fused.alone[0],
+        "y_only_pixels": fused.alone[1],
+        "disagreeing_pixels": fused.disagreeing,
+        "rule": f"inverse-variance mean of {what}; where they disagree beyond "
+        "6 sigma, no point (nothing tells which axis is right)",
+    }
 
 
 def _absolute(state: SceneState) -> bool:

@@ -345,9 +345,9 @@ def _wrapped_phases(state: SceneState, options: ProcessOptions) -> None:
 
 
 def _note_other_axis(state: SceneState) -> None:
-    """Say which sinusoids along the other axis the phase stage left unused."""
+    """Say which sinusoids along the other axis the phase stage left unused (none when both axes are processed)."""
     other = sorted({g.frequency for g in state.groups.sinusoids if g.axis != state.axis})
-    if other:
+    if other and state.info.get("axis_choice", {}).get("axis") != "both":
         state.notes.append(f"sinusoids along the other axis (frequencies {other}) not used; choose them with --axis")
 
 
