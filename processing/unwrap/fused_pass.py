@@ -286,16 +286,13 @@ def fringe_pass(
         combination of every group's (:mod:`processing.phase.frequency_fusion`), ``sigma`` its
         predicted standard deviation. None: the highest frequency's phase alone.
     thresholds : sequence of float, optional
-        Each group's modulation threshold as :func:`modulation_thresholds` gives it for the same
-        frames, groups, shifts and ratio (computed beside other work, e.g. the noise estimate);
-        None: derived here.
+        :func:`modulation_thresholds` of the same frames, groups, shifts and ratio; None: derived here.
 
     Returns
     -------
     FringePass
-        Within ``ANGLE_TOLERANCE`` (OpenCV) or float32 rounding (numpy) of the float64 stage
-        functions; fringe orders equal theirs except where the unwrapping index sits on a
-        rounding boundary (phase errors at the method's tolerance).
+        Within ``ANGLE_TOLERANCE`` (OpenCV) or float32 rounding (numpy) of the float64 stage functions;
+        fringe orders equal theirs except where the unwrapping index sits on a rounding boundary.
     """
     stack = _validate.real_array(frames, "frames", ndim=3)
     count, height, width = stack.shape
@@ -311,9 +308,7 @@ def fringe_pass(
     nonnegative = np.issubdtype(stack.dtype, np.unsignedinteger) and all((s.weights[0] >= 0).all() for s in specs)
     plan = _Plan(flat, specs, thresholds, ratio, kept, kernel, used, tables, cv2, nonnegative, fusion)
     _run_blocks(plan, out, flat.shape[1], threads)
-    result = _result(out, freqs, method, kept, thresholds, used, (height, width))
-    result.disagreeing = 0 if fusion is None else sum(fusion.disagreeing)
-    return result
+    return _result(out, freqs, method, kept, thresholds, used, (height, width), fusion)
 
 
 def modulation_thresholds(
@@ -371,8 +366,9 @@ def _result(
     thresholds: list[float],
     used: list[int],
     shape: tuple[int, int],
+    fusion: _Fusion | None,
 ) -> FringePass:
-    """The pass's flat outputs as (H, W) maps."""
+    """The pass's flat outputs as (H, W) maps, with the fusion's count of disagreeing pixels."""
     return FringePass(
         frequencies=freqs,
         method=method,
@@ -388,6 +384,7 @@ def _result(
         phase_frequency=freqs[used[-1]] if used else freqs[-1],
         brightness=[m.reshape(shape) for m in out.brightness],
         sigma=None if out.sigma is None else out.sigma.reshape(shape),
+        disagreeing=0 if fusion is None else sum(fusion.disagreeing),
     )
 
 
