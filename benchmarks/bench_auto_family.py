@@ -62,12 +62,21 @@ def parse_cases(text: str) -> list[int]:
     return out
 
 
-def _run_one(args: tuple[int, bool]) -> dict[str, Any]:
+def _run_one(args: tuple[int, bool, tuple[str, ...]]) -> dict[str, Any]:
     from threadpoolctl import threadpool_limits
 
-    index, held_out = args
+    index, held_out, methods = args
     with threadpool_limits(1):
-        return evaluate(draw_case(index, held_out))
+        return evaluate(draw_case(index, held_out), methods)
+
+
+def _methods(text: str) -> tuple[str, ...]:
+    """``--methods`` -> the methods in :data:`METHODS` order, ``auto`` and ``none`` always included."""
+    asked = {m.strip() for m in text.split(",") if m.strip()}
+    unknown = asked - set(METHODS)
+    if unknown:
+        raise SystemExit(f"--methods: expected some of {', '.join(METHODS)}, found {', '.join(sorted(unknown))}")
+    return tuple(m for m in METHODS if m in asked | {"auto", "none"})
 
 
 def _fmt(value: float) -> str:
@@ -85,7 +94,7 @@ def table(results: Sequence[dict[str, Any]]) -> list[str]:
         "| method | median | 90th percentile | worst |",
         "| --- | --- | --- | --- |",
     ]
-    for method in METHODS:
+    for method in (m for m in METHODS if all(m in c for c in per_case)):
         med, p90, worst = distribution([c[method] for c in per_case])
         lines.append(f"| {method} | {_fmt(med)} | {_fmt(p90)} | {_fmt(worst)} |")
     auto = [c["auto"] for c in per_case]
@@ -101,7 +110,7 @@ def table(results: Sequence[dict[str, Any]]) -> list[str]:
     ]
     for result, c in zip(results, per_case):
         scores = result["nmse"]
-        single = min(("vote", "rpca-orders", "rpca-phase", "none"), key=lambda m: scores[m])
+        single = min((m for m in ("vote", "rpca-orders", "rpca-phase", "none") if m in scores), key=scores.__getitem__)
         lines.append(
             f"| {result['description']} | {result['wrong_fraction']:.1%} | {_fmt(c['auto'])} | "
             f"{_fmt(c['auto/best'])} | {_fmt(c['auto/none'])} | {single} | {result['total_seconds']:.1f} |"
@@ -117,6 +126,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--save", type=Path, help="append each case's result to this JSON-lines file")
     parser.add_argument("--report", type=Path, nargs="+", help="print the table of saved parts, compute nothing")
     parser.add_argument("--markdown", type=Path, help="with --report: also write the table here")
+    parser.add_argument(
+        "--methods",
+        default=",".join(METHODS),
+        help="comma-separated methods to run (auto always; the table scores only those run)",
+    )
     parser.add_argument("--estimate", action="store_true", help="time the first case, project the others")
     args = parser.parse_args(argv)
     if args.report:
@@ -127,10 +141,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             args.markdown.write_text("\n".join([*HEADER, "", *lines]) + "\n")
         return 0
     indices = parse_cases(args.cases)
+    methods = _methods(args.methods)
     cases = [draw_case(i, args.held_out) for i in indices]
     load_before = os.getloadavg()
     if args.estimate:
-        first = _run_one((indices[0], args.held_out))
+        first = _run_one((indices[0], args.held_out, methods))
         pixels = [c.width * c.height for c in cases]
         total = first["total_seconds"] * sum(pixels) / pixels[0]
         print(
@@ -141,7 +156,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     results = []
     start = time.perf_counter()
     with ProcessPoolExecutor(max_workers=max(args.jobs, 1)) as pool:
-        for result in pool.map(_run_one, [(i, args.held_out) for i in indices]):
+        for result in pool.map(_run_one, [(i, args.held_out, methods) for i in indices]):
             results.append(result)
             c = ratios(result)
             print(

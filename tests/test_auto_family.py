@@ -6,6 +6,8 @@ here three small develop cases keep auto honest against the oracle and against n
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 
@@ -48,3 +50,46 @@ def test_auto_within_twice_the_oracle_and_never_worse_than_none(index: int) -> N
     assert np.isfinite(scores["oracle"]) and scores["oracle"] > 0
     assert scores["auto"] <= 2.0 * scores["oracle"], result["description"]
     assert scores["auto"] <= scores["none"] * (1 + 1e-9), result["description"]
+
+
+def test_the_study_calls_auto_with_the_captures_lower_frequencies_as_rig_process_does(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """``rig process`` passes auto the frequency it corrects and the lower frequencies' wrapped phases; the
+    study (and so the family) must call it the same way, or it measures another ``auto``."""
+    from rig.study import experiments
+
+    case = family.draw_case(6)  # 13/17, 555 x 400
+    capture = family.capture(case, family.scene_heights(case), np.random.default_rng(case.seed))
+    seen: dict[str, Any] = {}
+    real = experiments.CORRECTIONS["auto"]
+
+    def spy(*args: Any, **kwargs: Any) -> Any:
+        seen.update(kwargs)
+        return real(*args, **kwargs)
+
+    monkeypatch.setitem(experiments.CORRECTIONS, "auto", spy)
+    out = experiments.correct("auto", capture)
+    assert seen["frequency"] == 17.0
+    lower = seen["lower_wrapped"]
+    assert [f for f, _ in lower] == [13.0] and lower[0][1] is capture.lower[0][1]
+    expected, info = real(
+        capture.phase, capture.wrapped, mask=capture.lit, frequency=17.0, lower_wrapped=list(capture.lower)
+    )
+    assert "lower-frequency-evidence" in info["steps"]
+    np.testing.assert_array_equal(out, expected)
+
+    # two_frequency_capture, the study's own captures, carry the lower frequency too
+    geometry = experiments.RIG.geometry(64)
+    pair = experiments.two_frequency_capture(np.zeros((64, 64)), geometry, (5, 8), 6, 25.0, np.random.default_rng(1))
+    assert pair.frequency == 8.0 and [f for f, _ in pair.lower] == [5.0]
+    assert pair.lower[0][1].shape == (64, 64)
+
+
+def test_auto_keeps_the_sharp_edges_of_a_smooth_scene_as_ch4_does() -> None:
+    """Failure class (a): on a staircase (a low-rank scene) ch. 4 at full resolution beat auto's 4 x 4 block
+    solve by 2.3x (the blocks blur the treads' edges); the full-resolution refit must bring auto to it."""
+    result = family.evaluate(family.draw_case(53), methods=("none", "rpca-phase", "auto"))  # 1107 x 706
+    scores = result["nmse"]
+    assert scores["auto"] <= 1.1 * scores["rpca-phase"], result["description"]
+    assert scores["auto"] <= 0.05 * scores["oracle"], result["description"]

@@ -412,6 +412,76 @@ def decimated_low_rank(
     return low_rank, result, _bent_pixels(result.low_rank, factor, phase.shape, bend)
 
 
+# Largest block-solve rank :func:`refit_full_resolution` refits: its four products cost 8 x rank flops per
+# pixel, and a surface of higher rank is no longer the smooth scene whose edges the blocks blurred.
+REFIT_MAX_RANK = 24
+
+
+def refit_full_resolution(
+    low_rank: np.ndarray,
+    blocks: np.ndarray,
+    factor: int,
+    measured: np.ndarray,
+    valid: np.ndarray,
+    rank: int,
+    outlier: float,
+) -> np.ndarray:
+    """The block solve's low-rank surface, refitted at full resolution where that fits ``measured`` better.
+
+    Block means blur what changes within a block (a step's edge, a ramp's kink), which ch. 4 at full
+    resolution keeps. Here the ``rank`` factors of the solved ``blocks`` are interpolated to pixels and
+    refitted to ``measured`` by alternating least squares (columns, then rows; pixels outside ``valid`` take
+    the interpolated surface), twice, the second time with the pixels more than ``outlier`` radians off the
+    first refit replaced by it: products of the map with ``rank`` vectors, not a full-resolution solve. Each valid pixel then keeps the surface whose
+    3 x 3 mean residual to ``measured`` is smaller, so structure the refit spreads along rows or columns
+    (an object the low rank cannot hold) stays out. ``low_rank`` unchanged where ``rank`` is 0 or above
+    :data:`REFIT_MAX_RANK`.
+    """
+    rank = min(int(rank), *blocks.shape)
+    if not 0 < rank <= REFIT_MAX_RANK:
+        return low_rank
+    grid = np.asarray(blocks, dtype=np.float64)
+    # any rank-``rank`` factors of the blocks will do (ALS refits both): an orthonormal basis of their
+    # columns, from their product with fixed random vectors (exact for a matrix of that rank), is cheaper
+    # than their SVD
+    basis, _ = np.linalg.qr(grid @ np.random.default_rng(0).standard_normal((grid.shape[1], rank)))
+    rows = _interpolate_factors(basis, factor, measured.shape[0])
+    cols = _interpolate_factors(grid.T @ basis, factor, measured.shape[1])
+    target = np.where(valid, measured.astype(np.float32), rows @ cols.T)
+    for round_ in range(2):
+        cols = _least_squares_factor(rows, target.T @ rows)
+        rows = _least_squares_factor(cols, target @ cols)
+        refit = rows @ cols.T
+        if round_ == 0:
+            # what departs from the refit far beyond the noise (an object the low rank cannot hold) is left
+            # out of the second round, so the refit does not spread it along its rows and columns
+            np.copyto(target, refit, where=np.abs(target - refit) > outlier)
+    # 3 x 3 mean residuals of both surfaces (0 outside ``valid``), float32
+    inside = np.where(valid, measured, refit).astype(np.float32)
+    block = np.where(valid, low_rank, refit).astype(np.float32)
+    better = valid & (np.abs(_box_sum(inside - refit)) < np.abs(_box_sum(inside - block)))
+    return np.where(better, refit, low_rank)
+
+
+def _box_sum(values: np.ndarray) -> np.ndarray:
+    """:func:`_box_sum_3x3` of a float32 map by OpenCV's box filter (several times faster)."""
+    return cv2.boxFilter(values, -1, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT)
+
+
+def _interpolate_factors(factors: np.ndarray, factor: int, length: int) -> np.ndarray:
+    """(blocks, r) factors of a block solution linearly interpolated to ``length`` pixels (float32)."""
+    centres = (np.arange(factors.shape[0]) + 0.5) * factor - 0.5
+    pixels = np.arange(length, dtype=np.float64)
+    return np.stack([np.interp(pixels, centres, column) for column in factors.T], axis=1).astype(np.float32)
+
+
+def _least_squares_factor(fixed: np.ndarray, products: np.ndarray) -> np.ndarray:
+    """The other factor of ``target ~ fixed @ other.T`` given ``products = target.T @ fixed`` (ridge-regularised)."""
+    gram = (fixed.T @ fixed).astype(np.float64)
+    gram += np.eye(len(gram)) * (1e-9 * np.trace(gram) + 1e-30)
+    return np.linalg.solve(gram, products.T.astype(np.float64)).T.astype(np.float32)
+
+
 def _bent_pixels(blocks: np.ndarray, factor: int, shape: tuple[int, int], bend: float) -> np.ndarray:
     """Pixels of the blocks (and their 8 neighbours) where the block surface bends by more than ``bend``."""
     bent = np.zeros(blocks.shape, dtype=bool)

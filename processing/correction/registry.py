@@ -41,6 +41,7 @@ from processing.correction.phase_rpca import (
     order_breaks,
     phase_noise_and_breaks,
     phase_pair,
+    refit_full_resolution,
     reorder_from_low_rank,
     settle_orders,
 )
@@ -236,7 +237,9 @@ def _add_low_rank_orders(maps: _AutoMaps, found: _Candidates) -> np.ndarray:
     found.misfit = misfit
     candidate = found.maps["regions+low-rank"] = np.where(misfit, pooled, proposed)
     found.pooled_detail, found.breaks["regions+low-rank"] = side_by_side(
-        lambda: keep_coherent_detail(found.low_rank, pooled, valid, maps.k_sigma, maps.sigma),
+        lambda: (  # after a block solve step 6 restores detail around the refitted L instead
+            None if maps.decimate > 1 else keep_coherent_detail(found.low_rank, pooled, valid, maps.k_sigma, maps.sigma)
+        ),
         lambda: order_breaks(candidate, valid),
     )
     return proposed
@@ -310,12 +313,28 @@ def _restore_detail(
     Returns the phase, the unresolved pixels, how many orders changed and the lower frequencies' blob counts.
     """
     reordered, unresolved, counts = _supported_orders(maps, found.maps[chosen], temporal)
-    reuse = chosen == "regions" and found.pooled_detail is not None and reordered is found.maps[chosen]
+    low_rank = found.low_rank
+    if maps.decimate > 1:  # what the block means blurred, refitted at full resolution where it fits better
+        low_rank = refit_full_resolution(
+            low_rank,
+            found.result.low_rank,
+            maps.decimate,
+            reordered,
+            maps.valid,
+            found.result.rank,
+            outlier=2.0 * maps.k_sigma * maps.sigma,
+        )
+    reuse = (
+        chosen == "regions"
+        and found.pooled_detail is not None
+        and reordered is found.maps[chosen]
+        and low_rank is found.low_rank
+    )
     out, changed = side_by_side(
         lambda: (
             found.pooled_detail
             if reuse
-            else keep_coherent_detail(found.low_rank, reordered, maps.valid, maps.k_sigma, maps.sigma)
+            else keep_coherent_detail(low_rank, reordered, maps.valid, maps.k_sigma, maps.sigma)
         ),
         lambda: int(np.count_nonzero(maps.valid & (np.abs(reordered - maps.phase) > np.pi))),
     )
@@ -396,7 +415,10 @@ def correct_auto(
        clearly fit, a blob they clearly contradict goes back to the measured orders, one they cannot
        tell is reported unresolved (``info["evidence"]`` counts the blobs). Last, lone order spikes
        take their neighbours' order (:func:`~processing.correction.order_evidence.mend_spikes`);
-    6. keep L (denoised) except where the result departs from it coherently beyond the noise
+    6. after a block solve, refit L at full resolution (:func:`~processing.correction.phase_rpca.
+       refit_full_resolution`: its factors refitted to the kept orders' phase by least squares, used
+       where they fit it better; the blocks blur a step's or a ramp's edge, ch. 4 at full resolution does
+       not); keep L (denoised) except where the result departs from it coherently beyond the noise
        (:func:`~processing.correction.phase_rpca.restore_detail`, ``k_sigma`` standard deviations
        of the 3 x 3 mean residual), and never where L lies a fringe or more from the kept orders.
 
@@ -441,7 +463,7 @@ def _auto_info(
     steps = ["pool-region-orders", "rpca-phase", "reorder-if-consistent"]
     steps += ["settle-orders"] if len(found.maps) > 2 else []
     steps += ["keep-supported-changes"] + (["lower-frequency-evidence"] if extra["temporal"] else [])
-    steps += ["mend-spikes", "restore-detail"]
+    steps += ["mend-spikes"] + (["refit-full-resolution"] if maps.decimate > 1 else []) + ["restore-detail"]
     return _solver_info(
         "auto",
         parameters,

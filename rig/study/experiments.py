@@ -36,6 +36,7 @@ import numpy as np
 
 from processing.correction.orders import postprocess_orders
 from processing.correction.registry import DECIMATE_FROM, DECIMATION
+from processing.correction.sampling import fringe_step_rad, undersampled_for_spatial_methods
 from processing.correction.voting import vote_row_orders
 from processing.denoise.frames import rpca_denoise_stack
 from processing.geometry.height import nmse, phase_mse, phase_to_height
@@ -197,6 +198,7 @@ class PhaseCapture:
     frames: np.ndarray | None = None
     # (frequency, wrapped phase) of every lower frequency, for auto's temporal evidence
     lower: tuple[tuple[float, np.ndarray], ...] = ()
+    frequency: float | None = None  # the frequency ``phase`` is at, as the correction stage passes it
 
 
 def _render(
@@ -238,6 +240,8 @@ def two_frequency_capture(
         synthesis.true_absolute_phase(mapping, geometry, f2),
         mapping.lit,
         stack if keep_frames else None,
+        lower=((float(f1), phi1),),
+        frequency=float(f2),
     )
 
 
@@ -256,7 +260,7 @@ def single_frequency_capture(
     wrapped = np.mod(phase_shift(frames).phase, TWO_PI)
     truth = synthesis.true_absolute_phase(mapping, geometry, frequency)
     orders = np.rint((np.nan_to_num(truth) - wrapped) / TWO_PI).astype(np.int64)
-    return PhaseCapture(wrapped + TWO_PI * orders, wrapped, orders, truth, mapping.lit, stack)
+    return PhaseCapture(wrapped + TWO_PI * orders, wrapped, orders, truth, mapping.lit, stack, frequency=frequency)
 
 
 def oracle_phase(capture: PhaseCapture) -> np.ndarray:
@@ -269,16 +273,30 @@ def correct(key: str, capture: PhaseCapture, **params: Any) -> np.ndarray:
     """Absolute phase of ``capture`` after the :data:`METHODS` entry ``key`` (NaN outside the lit pixels).
 
     ``oracle`` is the study's yardstick (:func:`oracle_phase`); every other key is a method of the
-    correction registry, called as the correction stage calls it; ``params`` override the entry's.
+    correction registry, called as ``rig process``'s correction stage calls it (its frequency, and for
+    ``auto`` the lower frequencies' wrapped phases; ``auto`` skipped where fringes are too dense for it,
+    :func:`auto_too_dense`); ``params`` override the entry's.
     """
     if key == "oracle":
         return oracle_phase(capture)
     _, registry_name, entry_params = METHODS[key]
     assert registry_name is not None
+    if registry_name == "auto" and auto_too_dense(capture):
+        registry_name, entry_params = "none", {}
+    inputs: dict[str, Any] = {}
+    if capture.frequency is not None:
+        inputs["frequency"] = capture.frequency
+    if registry_name == "auto" and capture.frequency is not None:
+        inputs["lower_wrapped"] = list(capture.lower)
     phase, _info = CORRECTIONS[registry_name](
-        capture.phase, capture.wrapped, mask=capture.lit, **{**entry_params, **params}
+        capture.phase, capture.wrapped, mask=capture.lit, **inputs, **{**entry_params, **params}
     )
     return phase
+
+
+def auto_too_dense(capture: PhaseCapture) -> bool:
+    """Whether ``rig process`` would skip ``auto`` on this capture (fringes too dense along x)."""
+    return undersampled_for_spatial_methods(fringe_step_rad(capture.phase, capture.lit, axis=1))
 
 
 def corrected_phases(capture: PhaseCapture, methods: Sequence[str]) -> dict[str, tuple[np.ndarray, float]]:
@@ -861,7 +879,10 @@ def write_report(out: Path, config: StudyConfig, rows: Rows, figures: list[tuple
         "re-derivation as a fallback where pooling leaves more breaks than the measured phase; each blob of "
         "pixels whose order the winner changes keeps the change only if it leaves fewer order breaks on the "
         "blob's edges than the measured orders (as many either way: the measured orders stay and the blob is "
-        "reported unresolved); finally L, except "
+        "reported unresolved); with the lower frequencies' wrapped phases (passed as rig process passes them) "
+        "the kept changes are then weighed against them; after a block solve L is refitted at full resolution "
+        "(its factors by least squares on the kept orders' phase, used where they fit it better); finally L, "
+        "except "
         "where the result departs from it coherently beyond the noise (3 x 3 mean residual above 4 of its "
         "standard deviations) or lies a fringe or more from the kept orders, where the measured phase with its "
         "corrected order is kept. Why: ch. 4 alone "

@@ -23,14 +23,12 @@ from typing import Any
 
 import numpy as np
 
-from processing.correction.sampling import fringe_step_rad, undersampled_for_spatial_methods
 from processing.geometry.height import nmse
 from processing.phase.shifting import phase_shift
 from processing.unwrap.temporal import unwrap_heterodyne, unwrap_hierarchical, unwrap_two_frequency
 from rig.hardware import synthesis
 from rig.hardware.synthesis import Appearance, RigGeometry
-from rig.pipeline.corrections import REGISTRY
-from rig.study.experiments import PhaseCapture, heights, oracle_phase
+from rig.study.experiments import PhaseCapture, correct, heights
 
 TWO_PI = 2.0 * np.pi
 DEVELOP_SEED = 20_000  # cases develop i are drawn from seed DEVELOP_SEED + i
@@ -226,20 +224,12 @@ def capture(case: FamilyCase, height_mm: np.ndarray, rng: np.random.Generator) -
     truth = synthesis.true_absolute_phase(mapping, geometry, top)
     lit = mapping.lit & np.isfinite(result.phase)
     lower = tuple((float(f), phi) for f, phi in zip(case.frequencies, phis) if f != top)
-    return PhaseCapture(result.phase, wrapped, result.orders, truth, lit, lower=lower)
+    return PhaseCapture(result.phase, wrapped, result.orders, truth, lit, lower=lower, frequency=float(top))
 
 
-def corrected(method: str, capture_: PhaseCapture, frequency: float) -> np.ndarray:
-    """Absolute phase after ``method`` as ``rig process`` applies it (auto skipped where fringes are too dense)."""
-    if method == "oracle":
-        return oracle_phase(capture_)
-    if method == "auto" and undersampled_for_spatial_methods(fringe_step_rad(capture_.phase, capture_.lit, axis=1)):
-        method = "none"
-    extra: dict[str, Any] = {}
-    if method == "auto" and capture_.lower:  # as rig process passes the capture's lower frequencies
-        extra = {"frequency": frequency, "lower_wrapped": capture_.lower}
-    phase, _info = REGISTRY[method](capture_.phase, capture_.wrapped, mask=capture_.lit, **extra)
-    return phase
+def corrected(method: str, capture_: PhaseCapture) -> np.ndarray:
+    """Absolute phase after ``method`` as ``rig process`` applies it (:func:`rig.study.experiments.correct`)."""
+    return correct(method, capture_)
 
 
 def evaluate(case: FamilyCase, methods: Sequence[str] = METHODS) -> dict[str, Any]:
@@ -256,7 +246,7 @@ def evaluate(case: FamilyCase, methods: Sequence[str] = METHODS) -> dict[str, An
     seconds: dict[str, float] = {}
     for method in (*methods, "oracle"):
         tick = time.perf_counter()
-        h = heights(corrected(method, obj, top), corrected(method, ref, top), geometry, top)
+        h = heights(corrected(method, obj), corrected(method, ref), geometry, top)
         seconds[method] = time.perf_counter() - tick
         finite = mask & np.isfinite(h)
         value = nmse(h, height_mm, finite)
