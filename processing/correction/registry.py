@@ -324,6 +324,7 @@ def _restore_detail(
             maps.valid,
             found.result.rank,
             outlier=2.0 * maps.k_sigma * maps.sigma,
+            noise=maps.sigma,
         )
     pooled_detail = found.pooled_detail if low_rank is found.low_rank else None
     out, changed = side_by_side(
