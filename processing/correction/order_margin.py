@@ -1,0 +1,98 @@
+"""Where the measured fringe orders cannot vouch for the orders a correction keeps: a vote margin per piece.
+
+Temporal unwrapping gives every pixel its own noisy guess of the fringe order; a spatial correction
+keeps one order per fringe and overrules the guesses that disagree. Where most guesses agree with
+the kept order the evidence is decisive; where the lower frequencies barely tell orders apart (a
+close coprime pair such as 29/32, whose ambiguous orders shift the lower frequency's prediction by
+0.2 rad) half the guesses or more can be wrong, and the kept order then rests on spatial continuity
+alone: a confident-looking surface that can be wrong over whole patches.
+
+The guesses are pooled over pieces of one fringe: the pixels of one kept order inside a
+:data:`TILE` x :data:`TILE` square (the square :func:`~processing.correction.region_orders.
+pool_region_orders` votes over; a fringe region has one order, so a piece lies on one fringe). In a
+piece, ``a`` guesses agree with the kept order and ``b`` name the most frequent other order. If
+both orders were equally likely per pixel (the evidence undecided), ``a - b`` would be a sign test's
+difference with standard deviation ``sqrt(a + b)``; the piece is decided when
+
+    a - b >= Z_MARGIN sqrt(a + b)
+
+or when no guess in it disagrees (``b = 0``: nothing contradicts the kept order). Every other piece
+is unresolved, whether its guesses favour another order or split too evenly to favour any. The rule
+has no tuned constant: :data:`Z_MARGIN` is the same 3 standard errors as the lower-frequency blob
+test (:mod:`processing.correction.temporal_evidence`).
+
+It reports, it never changes an order.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from processing.correction.temporal_evidence import TWO_PI, Z_MARGIN
+
+# Side of the square pieces are cut from (pixels), as pool_region_orders' tiles.
+TILE = 16
+
+
+def undecided_orders(kept: np.ndarray, measured: np.ndarray, wrapped: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """(H, W) bool: the valid pixels whose piece's measured orders do not decide the kept order.
+
+    Parameters
+    ----------
+    kept : (H, W) absolute phase after the correction (its order is ``rint((kept - wrapped) / 2 pi)``)
+    measured : (H, W) absolute phase as temporally unwrapped
+    wrapped : (H, W) wrapped phase both were unwrapped from
+    valid : (H, W) bool, where all three are finite
+
+    Examples
+    --------
+    A fringe 40 pixels wide whose measured orders are right on the left half and split 50/50 between
+    the kept order and the next one on the right half:
+
+    >>> import numpy as np
+    >>> wrapped = np.zeros((32, 40))
+    >>> kept = wrapped + 2 * np.pi * 3
+    >>> measured = kept.copy()
+    >>> measured[:, 20:][::2] += 2 * np.pi
+    >>> undecided = undecided_orders(kept, measured, wrapped, np.ones((32, 40), bool))
+    >>> bool(undecided[:, :16].any()), bool(undecided[:, 32:].all())
+    (False, True)
+    """
+    rows, cols = valid.shape
+    where = np.flatnonzero(valid)
+    out = np.zeros(valid.shape, dtype=bool)
+    if where.size == 0:
+        return out
+    flat_wrapped = wrapped.ravel()[where]
+    order = np.rint((kept.ravel()[where] - flat_wrapped) / TWO_PI).astype(np.int64)
+    offset = np.rint((measured.ravel()[where] - kept.ravel()[where]) / TWO_PI).astype(np.int64)
+    if not offset.any():
+        return out
+    across = -(-cols // TILE)
+    tile = (where // cols // TILE) * across + (where % cols) // TILE
+    order -= order.min()
+    key = tile * (int(order.max()) + 1) + order
+    piece, count = _compact(key)
+    agree = np.bincount(piece, weights=offset == 0, minlength=count)
+    others = offset != 0
+    span = int(np.abs(offset[others]).max())
+    # the most frequent other order of each piece
+    tally = np.bincount(
+        piece[others] * (2 * span + 1) + offset[others] + span, minlength=count * (2 * span + 1)
+    ).reshape(count, 2 * span + 1)
+    runner_up = tally.max(axis=1)
+    decided = (runner_up == 0) | (agree - runner_up >= Z_MARGIN * np.sqrt(agree + runner_up))
+    out.ravel()[where] = ~decided[piece]
+    return out
+
+
+def _compact(key: np.ndarray) -> tuple[np.ndarray, int]:
+    """``key`` renumbered 0 .. count - 1 (same order), and count: a lookup table where keys are few."""
+    size = int(key.max()) + 1
+    if size > 1 << 24:
+        unique, inverse = np.unique(key, return_inverse=True)
+        return inverse, unique.size
+    used = np.zeros(size, dtype=bool)
+    used[key] = True
+    compact = np.cumsum(used, dtype=np.int64) - 1
+    return compact[key], int(compact[-1]) + 1
