@@ -31,6 +31,7 @@ import numpy as np
 from processing.concurrency import side_by_side
 from processing.correction.method import CorrectionMethod, Result
 from processing.correction.order_evidence import keep_supported_changes, mend_spikes, unresolved_summary
+from processing.correction.order_margin import undecided_orders
 from processing.correction.orders import correct_orders_rpca
 from processing.correction.phase_rpca import (
     accept_if_consistent,
@@ -446,6 +447,9 @@ def correct_auto(
     found = _candidate_orders(maps, pooled, measured_breaks)
     chosen = min(found.breaks, key=found.breaks.__getitem__)  # ties: the first
     out, unresolved, changed, evidence = _restore_detail(maps, found, chosen, temporal)
+    undecided = undecided_orders(out, phase, wrapped, valid)  # reported only: the orders stay
+    evidence["vote_undecided_pixels"] = int(np.count_nonzero(undecided))
+    unresolved = unresolved | undecided
     extra = {"unresolved": unresolved, "changed": changed, "evidence": evidence, "temporal": temporal is not None}
     return out, _auto_info(maps, found, chosen, start, frequency, extra)
 
