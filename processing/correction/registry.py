@@ -422,6 +422,10 @@ def correct_auto(
        not); keep L (denoised) except where the result departs from it coherently beyond the noise
        (:func:`~processing.correction.phase_rpca.restore_detail`, ``k_sigma`` standard deviations
        of the 3 x 3 mean residual), and never where L lies a fringe or more from the kept orders.
+    7. report as unresolved too the pieces of a fringe whose measured orders' vote does not decide the
+       kept order (:func:`~processing.correction.order_margin.undecided_orders`; ``info["evidence"]
+       ["vote_undecided_pixels"]``): where the lower frequencies barely tell orders apart, most measured
+       orders can be wrong and the kept ones rest on continuity alone. The phase does not change.
 
     Why step 5: the fewest breaks over the whole map let pooling across a real height step trade
     a few wrong orders for fewer breaks elsewhere (up to 34x worse than no correction on drawn cases);
