@@ -78,11 +78,13 @@ def undecided_orders(kept: np.ndarray, measured: np.ndarray, wrapped: np.ndarray
     piece, count = _compact(tile[sampled] * (int(order.max()) + 1) + order)
     agree = np.bincount(piece, weights=~others, minlength=count)
     span = int(np.abs(offset[others]).max())
-    # the most frequent other order of each piece
-    tally = np.bincount(
-        piece[others] * (2 * span + 1) + offset[others] + span, minlength=count * (2 * span + 1)
-    ).reshape(count, 2 * span + 1)
-    runner_up = tally.max(axis=1)
+    # the votes for the most frequent other order of each piece: tallied per (piece, offset) pair present
+    of_other = piece[others]
+    pair, pairs = _compact(of_other * (2 * span + 1) + offset[others] + span)
+    piece_of_pair = np.zeros(pairs, dtype=np.int64)
+    piece_of_pair[pair] = of_other
+    runner_up = np.zeros(count)
+    np.maximum.at(runner_up, piece_of_pair, np.bincount(pair, minlength=pairs))
     decided = (runner_up == 0) | (agree - runner_up >= Z_MARGIN * np.sqrt(agree + runner_up))
     undecided = np.zeros(sampled.shape, dtype=bool)
     undecided[sampled] = ~decided[piece]
