@@ -9,7 +9,7 @@ import pytest
 
 from mock_devices import scenes, synth
 from processing.phase.shifting import phase_shift, sample_stride, shadow_mask
-from processing.unwrap.fused_pass import ANGLE_TOLERANCE, fringe_pass, wrapped_angle
+from processing.unwrap.fused_pass import ANGLE_TOLERANCE, fringe_pass, modulation_thresholds, wrapped_angle
 from processing.unwrap.temporal import (
     unwrap_heterodyne,
     unwrap_hierarchical,
@@ -214,6 +214,22 @@ def test_threshold_matches_shadow_mask_definition() -> None:
         modulation = phase_shift(stack[g]).modulation
         sample = modulation.reshape(-1)[:: sample_stride(modulation.shape)]
         assert threshold == pytest.approx(0.3 * np.percentile(sample, 99.0), rel=1e-5)
+
+
+def test_thresholds_computed_apart_give_the_same_pass() -> None:
+    """modulation_thresholds (the pipeline runs it beside the noise estimate) is the pass's own derivation."""
+    stack, groups, _, _ = _scan([15, 16], scene="steps", snr_db=25.0)
+    shifts = [np.linspace(0.0, TWO_PI, 6, endpoint=False) + 0.3] * 2
+    apart = modulation_thresholds(stack, groups, shifts, min_ratio=0.25)
+    inside = fringe_pass(stack, groups, [15, 16], "two-frequency", shifts=shifts, min_ratio=0.25, fuse_noise=1.5)
+    given = fringe_pass(
+        stack, groups, [15, 16], "two-frequency", shifts=shifts, min_ratio=0.25, fuse_noise=1.5, thresholds=apart
+    )
+    assert apart == inside.thresholds == given.thresholds
+    for name in ("phase", "sigma", "valid", "modulated"):
+        np.testing.assert_array_equal(getattr(given, name), getattr(inside, name))
+    with pytest.raises(ValueError, match="thresholds"):
+        fringe_pass(stack, groups, [15, 16], "two-frequency", thresholds=apart[:1])
 
 
 @pytest.mark.parametrize(

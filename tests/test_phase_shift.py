@@ -12,6 +12,7 @@ from processing.phase.shifting import (
     PhaseShiftResult,
     phase_shift,
     quality_map,
+    root_sum_square,
     shadow_mask,
     shift_weights,
     wrapped_phase,
@@ -182,3 +183,16 @@ def test_quality_map_is_data_modulation() -> None:
     # Lit: fringe amplitude 0.5 over offset 0.5 + ambient 0.1 -> 0.5 / 0.6; shadow: noise only.
     assert abs(np.median(gamma[mapping.lit]) - 0.5 / 0.6) < 0.02
     assert np.median(gamma[~mapping.lit]) < 0.2
+
+
+def test_root_sum_square_is_within_one_and_a_half_ulp_of_the_float64_value() -> None:
+    rng = np.random.default_rng(21)
+    first = (rng.lognormal(-3.0, 2.0, 100_000) * rng.choice([-1.0, 1.0], 100_000)).astype(np.float32)
+    second = rng.lognormal(-3.0, 2.0, 100_000).astype(np.float32)
+    first[:3], second[:3] = [np.nan, 0.0, 3.0], [1.0, np.nan, 4.0]
+    result = root_sum_square(first, second)
+    exact = np.hypot(first.astype(np.float64), second.astype(np.float64))
+    assert result.dtype == np.float32
+    assert np.isnan(result[:2]).all() and result[2] == 5.0
+    ulp = np.spacing(exact[3:].astype(np.float32))
+    assert np.max(np.abs(result[3:] - exact[3:]) / ulp) <= 1.5  # squares, sum and root each rounded

@@ -324,6 +324,7 @@ def _restore_detail(
             maps.valid,
             found.result.rank,
             outlier=2.0 * maps.k_sigma * maps.sigma,
+            noise=maps.sigma,
         )
     reuse = (
         chosen == "regions"

@@ -75,12 +75,27 @@ def phase_sigma(modulation: np.ndarray, sigma_i: float, steps: int) -> np.ndarra
         return np.divide(scale, np.asarray(modulation, dtype=np.float32))
 
 
+DIFFERENCE_STEP = 1e-2  # rad: the models are smooth at this scale, and float32 phases resolve it
+
+
+def height_ahead(
+    height_of: Callable[[np.ndarray], np.ndarray], phase: np.ndarray, step: float = DIFFERENCE_STEP
+) -> np.ndarray:
+    """``height_of(phase + step)``: the model's side of :func:`height_sigma`'s difference.
+
+    It does not need the heights themselves, so a caller can evaluate it beside them.
+    """
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        return np.asarray(height_of(phase + np.float32(step)))
+
+
 def height_sigma(
     height_of: Callable[[np.ndarray], np.ndarray],
     phase: np.ndarray,
     sigma_phi: np.ndarray,
-    step: float = 1e-2,
+    step: float = DIFFERENCE_STEP,
     base: np.ndarray | None = None,
+    ahead: np.ndarray | None = None,
 ) -> np.ndarray:
     """Height (or point) standard deviation per pixel: |d h / d Phi| sigma_phi, float32.
 
@@ -88,9 +103,11 @@ def height_sigma(
     (the difference is written into it); its derivative is a difference over ``step`` radians (the
     models are smooth at that scale): forward from ``base`` = ``height_of(phase)`` when the caller
     has it (one model evaluation), else central; the length of the point displacement for points.
+    ``ahead``: :func:`height_ahead` of the same arguments when the caller evaluated it already
+    (it is then written into).
     """
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        ahead = np.asarray(height_of(phase + np.float32(step)))
+        ahead = height_ahead(height_of, phase, step) if ahead is None else ahead
         behind = np.asarray(height_of(phase - np.float32(step))) if base is None else np.asarray(base)
         # into the model's own float32 array when it is one: a fresh full-size map costs more to fault in than to fill
         reuse = ahead.dtype == np.float32 and ahead.flags.writeable and ahead.shape == np.broadcast(ahead, behind).shape

@@ -243,6 +243,7 @@ def fringe_pass(
     orders: bool = True,
     brightness: bool = False,
     fuse_noise: float | None = None,
+    thresholds: Sequence[float] | None = None,
 ) -> FringePass:
     """Wrapped phases, modulation mask and (optionally) temporal unwrapping in one pass.
 
@@ -284,13 +285,14 @@ def fringe_pass(
         Camera noise sigma_I (grey levels): with a method, the phase becomes the noise-weighted
         combination of every group's (:mod:`processing.phase.frequency_fusion`), ``sigma`` its
         predicted standard deviation. None: the highest frequency's phase alone.
+    thresholds : sequence of float, optional
+        :func:`modulation_thresholds` of the same frames, groups, shifts and ratio; None: derived here.
 
     Returns
     -------
     FringePass
-        Within ``ANGLE_TOLERANCE`` (OpenCV) or float32 rounding (numpy) of the float64 stage
-        functions; fringe orders equal theirs except where the unwrapping index sits on a
-        rounding boundary (phase errors at the method's tolerance).
+        Within ``ANGLE_TOLERANCE`` (OpenCV) or float32 rounding (numpy) of the float64 stage functions;
+        fringe orders equal theirs except where the unwrapping index sits on a rounding boundary.
     """
     stack = _validate.real_array(frames, "frames", ndim=3)
     count, height, width = stack.shape
@@ -299,16 +301,36 @@ def fringe_pass(
     cv2 = _backend(opencv)
     kernel, used, tables = _temporal_kernel(method, freqs, max_residual, cv2)
     flat = stack.reshape(count, -1)
-    specs, thresholds = _group_specs(flat, lists, shifts, ratio, (height, width), cv2)
+    specs, thresholds = _group_specs(flat, lists, shifts, ratio, (height, width), cv2, thresholds)
     kept = list(range(len(lists))) if keep_all else [len(lists) - 1]
     fusion = None if fuse_noise is None or method is None or len(lists) < 2 else _Fusion(freqs, lists, fuse_noise)
     out = _Outputs.allocate(flat.shape[1], len(kept), method is not None, orders, brightness, fusion is not None)
     nonnegative = np.issubdtype(stack.dtype, np.unsignedinteger) and all((s.weights[0] >= 0).all() for s in specs)
     plan = _Plan(flat, specs, thresholds, ratio, kept, kernel, used, tables, cv2, nonnegative, fusion)
     _run_blocks(plan, out, flat.shape[1], threads)
-    result = _result(out, freqs, method, kept, thresholds, used, (height, width))
-    result.disagreeing = 0 if fusion is None else sum(fusion.disagreeing)
-    return result
+    return _result(out, freqs, method, kept, thresholds, used, (height, width), fusion)
+
+
+def modulation_thresholds(
+    frames: np.ndarray,
+    groups: Sequence[Sequence[int]],
+    shifts: Sequence[np.ndarray | None] | None = None,
+    min_ratio: float = 0.2,
+    opencv: bool = True,
+) -> list[float]:
+    """Each group's modulation-mask threshold as :func:`fringe_pass` derives it (its ``thresholds``).
+
+    ``min_ratio`` x the 99th percentile of the modulation B over a regular subsample of about 16k
+    pixels (the tiniest float32 at least). Arguments as :func:`fringe_pass`'s. Computed apart so
+    that a caller can run it beside other work that the pass waits for.
+    """
+    stack = _validate.real_array(frames, "frames", ndim=3)
+    count, height, width = stack.shape
+    lists = _check_groups(groups, count)
+    _check_shifts(shifts, len(lists))
+    ratio = _checked_ratio(min_ratio)
+    flat = stack.reshape(count, -1)
+    return _group_specs(flat, lists, shifts, ratio, (height, width), _backend(opencv))[1]
 
 
 def _group_specs(
@@ -318,12 +340,20 @@ def _group_specs(
     ratio: float,
     shape: tuple[int, int],
     cv2: Any | None,
+    thresholds: Sequence[float] | None = None,
 ) -> tuple[list[_Group], list[float]]:
-    """Each group's frame rows and float32 weights, and its modulation mask's threshold (from the subsample)."""
+    """Each group's frame rows and float32 weights, and its modulation mask's threshold (from the subsample).
+
+    ``thresholds``: the thresholds when the caller has them (checked, not derived again).
+    """
     specs = [
         _Group(_rows(g), shift_weights(len(g), None if shifts is None else shifts[k]).astype(np.float32))
         for k, g in enumerate(lists)
     ]
+    if thresholds is not None:
+        if len(thresholds) != len(specs):
+            raise ValueError(f"thresholds: expected {len(specs)} (one per group), found {len(thresholds)}")
+        return specs, [_validate.finite_float(t, f"thresholds[{k}]", minimum=0.0) for k, t in enumerate(thresholds)]
     tiny = float(np.finfo(np.float32).tiny)
     return specs, [max(ratio * _sampled_high(flat, spec, shape, cv2), tiny) for spec in specs]
 
@@ -336,8 +366,9 @@ def _result(
     thresholds: list[float],
     used: list[int],
     shape: tuple[int, int],
+    fusion: _Fusion | None,
 ) -> FringePass:
-    """The pass's flat outputs as (H, W) maps."""
+    """The pass's flat outputs as (H, W) maps, with the fusion's count of disagreeing pixels."""
     return FringePass(
         frequencies=freqs,
         method=method,
@@ -353,6 +384,7 @@ def _result(
         phase_frequency=freqs[used[-1]] if used else freqs[-1],
         brightness=[m.reshape(shape) for m in out.brightness],
         sigma=None if out.sigma is None else out.sigma.reshape(shape),
+        disagreeing=0 if fusion is None else sum(fusion.disagreeing),
     )
 
 
@@ -370,14 +402,20 @@ def _checked_groups(
     ]
     if len(freqs) != len(lists):
         raise ValueError(f"frequencies: expected {len(lists)} (one per group), found {len(freqs)}")
-    if shifts is not None and len(shifts) != len(lists):
-        raise ValueError(
-            f"shifts: expected {len(lists)} entries (one per group, None for uniform), found {len(shifts)}"
-        )
+    _check_shifts(shifts, len(lists))
+    return lists, freqs, _checked_ratio(min_ratio)
+
+
+def _check_shifts(shifts: Sequence[np.ndarray | None] | None, groups: int) -> None:
+    if shifts is not None and len(shifts) != groups:
+        raise ValueError(f"shifts: expected {groups} entries (one per group, None for uniform), found {len(shifts)}")
+
+
+def _checked_ratio(min_ratio: float) -> float:
     ratio = _validate.finite_float(min_ratio, "min_ratio", minimum=0.0, strict=True)
     if ratio > 1.0:
         raise ValueError(f"min_ratio: expected a fraction in (0, 1], found {min_ratio!r}")
-    return lists, freqs, ratio
+    return ratio
 
 
 def _temporal_kernel(

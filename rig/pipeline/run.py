@@ -7,6 +7,8 @@ import functools
 import logging
 import time
 from collections import OrderedDict
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -19,7 +21,8 @@ from calibration.stereo import STEREO
 from calibration.store import Calibration, read_calibration
 from processing.concurrency import side_by_side
 from processing.geometry.axis_fusion import FusedPoints, fuse_points
-from processing.geometry.uncertainty import height_sigma
+from processing.geometry.uncertainty import height_ahead, height_sigma
+from processing.phase.shifting import root_sum_square
 from rig.blas import rpca_blas
 from rig.errors import ProcessingError
 from rig.pipeline import reference_cache
@@ -229,16 +232,18 @@ def _heights(
     if second is not None:
         assert calibration is not None
         return (*_height_both(obj, second, calibration, notes), None)
-    height, points, mask = _height(obj, ref, calibration, notes)
+    (height, points, mask), start = side_by_side(  # the model a step ahead needs no heights
+        lambda: _height(obj, ref, calibration, notes), lambda: _uncertainty_start(obj, ref, calibration)
+    )
     islands: np.ndarray | None = None
     uncertainty: np.ndarray | None
     if options.max_sigma is None:  # the mask the islands are found in is final: both side by side
         uncertainty, islands = side_by_side(
-            lambda: _uncertainty(obj, ref, calibration, mask, height, notes),
+            lambda: _uncertainty(obj, start, mask, height),
             lambda: _islands(mask, options.min_island_fraction),
         )
     else:
-        uncertainty = _uncertainty(obj, ref, calibration, mask, height, notes)
+        uncertainty = _uncertainty(obj, start, mask, height)
     _note_conditioning(obj, calibration, points, options.axis, notes)
     return height, points, mask, uncertainty, islands
 
@@ -327,29 +332,51 @@ def _height(
     return height32, points, mask
 
 
-def _uncertainty(
-    obj: SceneState,
-    ref: SceneState | None,
-    calibration: Calibration | None,
-    mask: np.ndarray,
-    height: np.ndarray | None,
-    notes: list[str],
-) -> np.ndarray | None:
-    """Predicted height sigma (mm, NaN where invalid).
+@dataclass
+class _UncertaintyStart:
+    """The uncertainty map's inputs that do not need the heights (found beside them)."""
+
+    sigma_phi: np.ndarray  # the object's and the reference's phase sigma in quadrature
+    height_of: Callable[[np.ndarray], np.ndarray]
+    forward: bool  # a forward difference from the heights themselves (else central)
+    ahead: np.ndarray | None  # the model at phase + step, for the forward difference
+
+
+def _uncertainty_start(
+    obj: SceneState, ref: SceneState | None, calibration: Calibration | None
+) -> _UncertaintyStart | None:
+    """The combined phase sigma and the model's heights a step ahead (None: no uncertainty map).
 
     The object's and the reference's phase sigma add in quadrature (docs/uncertainty.md).
     """
-    if calibration is None or height is None or obj.phase_sigma is None:
+    if calibration is None or obj.phase_sigma is None:
         return None
     assert obj.unwrapped is not None
     sigma_phi = obj.phase_sigma
     if ref is not None and ref.phase_sigma is not None:
-        sigma_phi = np.hypot(sigma_phi, ref.phase_sigma)  # one pass instead of four (within 1 ulp)
+        sigma_phi = root_sum_square(sigma_phi, ref.phase_sigma)
     height_of = functools.partial(_model_height, obj, ref, calibration)
     # the heights themselves as the forward difference's base, unless points move (stereo) or the
     # heights carry the spatial unwrapping's per-region offsets that the model call does not
     forward = calibration.model != "stereo" and obj.unwrapped.absolute and (ref is None or _absolute(ref))
-    uncertainty = height_sigma(height_of, obj.unwrapped.phase, sigma_phi, base=height if forward else None)
+    ahead = height_ahead(height_of, obj.unwrapped.phase) if forward else None
+    return _UncertaintyStart(sigma_phi, height_of, forward, ahead)
+
+
+def _uncertainty(
+    obj: SceneState, start: _UncertaintyStart | None, mask: np.ndarray, height: np.ndarray | None
+) -> np.ndarray | None:
+    """Predicted height sigma (mm, NaN where invalid) from :func:`_uncertainty_start`'s inputs and the heights."""
+    if start is None or height is None:
+        return None
+    assert obj.unwrapped is not None
+    uncertainty = height_sigma(
+        start.height_of,
+        obj.unwrapped.phase,
+        start.sigma_phi,
+        base=height if start.forward else None,
+        ahead=start.ahead,
+    )
     np.copyto(uncertainty, np.float32(np.nan), where=~mask)
     return uncertainty
 
@@ -444,7 +471,7 @@ def _height_both_planes(
         assert state.calibration is not None
         height, _, mask = _height(state, state.reference, state.calibration, notes)
         assert height is not None  # a calibration gives heights
-        sigma = _uncertainty(state, state.reference, state.calibration, mask, height, notes)
+        sigma = _uncertainty(state, _uncertainty_start(state, state.reference, state.calibration), mask, height)
         if sigma is None:
             sigma = np.where(mask, np.float32(per_pixel[state.axis]), np.float32(np.nan))
         heights.append(height[..., None])

@@ -27,7 +27,7 @@ from processing.geometry.uncertainty import noise_sigma, phase_sigma
 from processing.phase.convention import gray_offset, heterodyne_offset
 from processing.phase.frequency_fusion import fuse_frequencies
 from processing.phase.shifting import phase_shift, sample_stride, shadow_mask
-from processing.unwrap.fused_pass import FringePass, fringe_pass
+from processing.unwrap.fused_pass import FringePass, fringe_pass, modulation_thresholds
 from processing.unwrap.neighbour_rescue import rescue
 from rig.blas import rpca_blas
 from rig.errors import ProcessingError
@@ -377,15 +377,23 @@ def _fused_pass(state: SceneState, options: ProcessOptions) -> bool:
     max_residual = float(options.params.get("max_residual", np.pi / 2))  # e.g. 3.14 for drifting beats
     check = method.name == "heterodyne" and convention_check.enabled(options)
     assert state.frames is not None
-    fuse = _noise_sigma(state) if _fusing(state, options) else None
+    frames, groups, shifts = state.frames, [group.indices for group in along], [np.asarray(g.shifts) for g in along]
+    ratio = options.modulation_ratio(True)  # the pass runs on phase-shifted fringes only
+    fusing = _fusing(state, options)
     try:
+        # the mask's thresholds and the noise (both from subsamples) are independent: side by side
+        thresholds, fuse = concurrency.side_by_side(
+            lambda: modulation_thresholds(frames, groups, shifts, ratio),
+            lambda: _noise_sigma(state) if fusing else None,
+        )
         scan = fringe_pass(
-            state.frames,
-            [group.indices for group in along],
+            frames,
+            groups,
             freqs,
             method.name,
-            shifts=[np.asarray(group.shifts) for group in along],
-            min_ratio=options.modulation_ratio(True),  # the pass runs on phase-shifted fringes only
+            shifts=shifts,
+            min_ratio=ratio,
+            thresholds=thresholds,
             max_residual=max_residual,
             # auto weighs its order changes against the lower frequencies' wrapped phases
             keep_all=state.calibration is None or check or options.correction == "auto",
