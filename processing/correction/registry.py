@@ -31,6 +31,7 @@ import numpy as np
 from processing.concurrency import side_by_side
 from processing.correction.method import CorrectionMethod, Result
 from processing.correction.order_evidence import keep_supported_changes, mend_spikes, unresolved_summary
+from processing.correction.order_margin import undecided_orders
 from processing.correction.orders import correct_orders_rpca
 from processing.correction.phase_rpca import (
     accept_if_consistent,
@@ -420,6 +421,10 @@ def correct_auto(
        not); keep L (denoised) except where the result departs from it coherently beyond the noise
        (:func:`~processing.correction.phase_rpca.restore_detail`, ``k_sigma`` standard deviations
        of the 3 x 3 mean residual), and never where L lies a fringe or more from the kept orders.
+    7. report as unresolved too the pieces of a fringe whose measured orders' vote does not decide the
+       kept order (:func:`~processing.correction.order_margin.undecided_orders`; ``info["evidence"]
+       ["vote_undecided_pixels"]``): where the lower frequencies barely tell orders apart, most measured
+       orders can be wrong and the kept ones rest on continuity alone. The phase does not change.
 
     Why step 5: the fewest breaks over the whole map let pooling across a real height step trade
     a few wrong orders for fewer breaks elsewhere (up to 34x worse than no correction on drawn cases);
@@ -445,6 +450,9 @@ def correct_auto(
     found = _candidate_orders(maps, pooled, measured_breaks)
     chosen = min(found.breaks, key=found.breaks.__getitem__)  # ties: the first
     out, unresolved, changed, evidence = _restore_detail(maps, found, chosen, temporal)
+    undecided = undecided_orders(out, phase, wrapped, valid)  # reported only: the orders stay
+    evidence["vote_undecided_pixels"] = int(np.count_nonzero(undecided))
+    unresolved = unresolved | undecided
     extra = {"unresolved": unresolved, "changed": changed, "evidence": evidence, "temporal": temporal is not None}
     return out, _auto_info(maps, found, chosen, start, frequency, extra)
 
