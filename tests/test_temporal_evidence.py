@@ -85,3 +85,20 @@ def test_the_snap_leaves_orders_the_lower_frequency_cannot_tell_apart() -> None:
     measured = truth + 11 * TWO_PI
     snapped, moved = snap_to_lower_frequencies(proposed, measured, np.ones(truth.shape, bool), 32.0, lower)
     assert moved == 0 and snapped is proposed
+
+
+def test_a_proposal_two_orders_off_moves_where_one_order_is_too_small_a_shift() -> None:
+    """29/32 beside an edge: the proposal two orders off (1.18 rad at 29) goes back to the order the 29 phase fits,
+    whether the measured orders were right or eleven orders off (0.2 rad: the pair's own ambiguity)."""
+    rng = np.random.default_rng(5)
+    rows, cols = np.mgrid[0:40, 0:50].astype(np.float64)
+    truth = TWO_PI * cols / 9.0 + 0.01 * rows
+    lower = [(29.0, wrap_to_pi(truth * 29.0 / 32.0 + rng.normal(0.0, 0.07, truth.shape)))]
+    measured = truth.copy()
+    measured[:, 25:] += 11 * TWO_PI
+    proposed = truth.copy()
+    proposed[10:14, 20:30] -= 2 * TWO_PI  # straddles the right and the wrong measured orders
+    proposed[30:33, 5:9] += 2 * TWO_PI
+    snapped, moved = snap_to_lower_frequencies(proposed, measured, np.ones(truth.shape, bool), 32.0, lower)
+    np.testing.assert_allclose(snapped, truth, rtol=0.0, atol=1e-9)
+    assert moved == 4 * 10 + 3 * 4
