@@ -411,7 +411,7 @@ def correct_auto(
        the (H, W) bool mask, an array that ``rig process`` writes to unresolved.npy, not to the report).
        With ``lower_wrapped`` ((frequency, wrapped phase) of the capture's lower frequencies, and
        ``frequency``), the kept changes are then weighed against them
-       (:mod:`processing.correction.temporal_evidence`): a pixel one order off moves to the order they
+       (:mod:`processing.correction.temporal_evidence`): a pixel one or two orders off moves to the order they
        clearly fit, a blob they clearly contradict goes back to the measured orders, one they cannot
        tell is reported unresolved (``info["evidence"]`` counts the blobs). Last, lone order spikes
        take their neighbours' order (:func:`~processing.correction.order_evidence.mend_spikes`);

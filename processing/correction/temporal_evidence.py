@@ -26,8 +26,8 @@ midpoint ``S / 2`` decides, with a margin of :data:`Z_MARGIN` standard errors (`
   cannot judge, and the change keeps what the neighbour evidence
   (:mod:`processing.correction.order_evidence`) decided.
 
-Before judging, :func:`snap_to_lower_frequencies` moves changed pixels one order where the lower
-frequencies clearly fit the next order better.
+Before judging, :func:`snap_to_lower_frequencies` moves changed pixels one or two orders where the lower
+frequencies clearly fit that order better.
 """
 
 from __future__ import annotations
@@ -112,15 +112,16 @@ def snap_to_lower_frequencies(
     lower: Sequence[tuple[float, np.ndarray]],
     weights: Sequence[float] | None = None,
 ) -> tuple[np.ndarray, int]:
-    """``proposed`` with each changed pixel moved one order up or down where the lower frequencies clearly say so.
+    """``proposed`` with each changed pixel moved one or two orders where the lower frequencies clearly say so.
 
     A spatial correction knows the order only to within its neighbours': beside a height step close to
     a whole fringe it can be one order off on a whole side of the step. The lower frequencies tell
     neighbouring orders apart well wherever one order shifts their prediction by :data:`MIN_SHIFT_RAD`
     or more (all drawn frequency sets but 29/32 and 1/8/64): a pixel changed by the correction takes
     the order next to the proposed one if that fits them better by more than half that shift squared
-    (the likelihood midpoint, plus a quarter of the shift of margin). Returns the phase and how many
-    pixels moved.
+    (the likelihood midpoint, plus a quarter of the shift of margin). Where one order shifts them too little
+    (29/32, 1/8/64), two orders may not (:data:`SNAP_STEPS`): each step is tried against the proposed order's
+    fit, and the best-fitting step that passes is taken. Returns the phase and how many pixels moved.
     """
     with np.errstate(invalid="ignore"):
         changed = valid & (np.abs(proposed - measured) > np.pi)
