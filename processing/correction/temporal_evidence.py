@@ -142,6 +142,8 @@ def snap_to_lower_frequencies(
         # and the new order must fit them within the noise (3 sigma a frequency): beside edges and
         # where the lower phases are corrupted too, a better fit is not yet a good one
         within = lower_frequency_misfit(at + TWO_PI * delta, frequency, lower_at, weights) <= 9.0 * len(lower)
+        if abs(delta) > 1:
+            within &= _two_order_step_allowed(at, measured[changed], delta, frequency, lower_at, weights)
         better = within & (fits < original - shift / 2.0) & (fits < best)
         step[better] = delta
         best = np.where(better, fits, best)
@@ -151,6 +153,38 @@ def snap_to_lower_frequencies(
     out = proposed.copy()
     out[changed] = at + TWO_PI * step
     return out, moved
+
+
+def _two_order_step_allowed(
+    proposed: np.ndarray,
+    measured: np.ndarray,
+    delta: float,
+    frequency: float,
+    lower: Sequence[tuple[float, np.ndarray]],
+    weights: Sequence[float],
+) -> np.ndarray:
+    """Where a step of ``delta`` (two orders) neither misfits one lower frequency nor hides a change from
+    :func:`keep_temporally_supported`: two orders can land a whole cycle of a middle frequency off (1/8/64 six
+    orders off moved to eight), which the other frequencies' sum forgives and the judgement of the change
+    then cannot see, where it would have sent the proposed order back to the measured one."""
+    target = proposed + TWO_PI * delta
+    allowed = _fits_each_frequency(target, frequency, lower, weights)
+    before = np.rint((proposed - measured) / TWO_PI)
+    after = before + delta
+    judged_before = _order_shift(before, frequency, lower) >= MIN_SHIFT_RAD**2
+    judged_after = _order_shift(after, frequency, lower) >= MIN_SHIFT_RAD**2
+    return allowed & ~(judged_before & ~judged_after & (after != 0))
+
+
+def _fits_each_frequency(
+    phase: np.ndarray, frequency: float, lower: Sequence[tuple[float, np.ndarray]], weights: Sequence[float]
+) -> np.ndarray:
+    """Whether ``phase`` fits every lower frequency within 3 noise deviations (a sum over them can hide
+    one that contradicts it: 1/8/64 six orders off moved to eight fits the 8 phase and misfits the 1 phase)."""
+    out = np.ones(phase.shape, dtype=bool)
+    for index, entry in enumerate(lower):
+        out &= lower_frequency_misfit(phase, frequency, [entry], [weights[index]]) <= 9.0
+    return out
 
 
 @dataclass(frozen=True)
