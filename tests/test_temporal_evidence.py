@@ -95,7 +95,7 @@ def test_a_proposal_two_orders_off_moves_where_one_order_is_too_small_a_shift() 
     truth = TWO_PI * cols / 9.0 + 0.01 * rows
     lower = [(29.0, wrap_to_pi(truth * 29.0 / 32.0 + rng.normal(0.0, 0.07, truth.shape)))]
     measured = truth.copy()
-    measured[:, 25:] += 11 * TWO_PI
+    measured[:, 25:] -= 11 * TWO_PI  # nine orders from the proposal there: 0.98 rad, a change nothing judges
     proposed = truth.copy()
     proposed[10:14, 20:30] -= 2 * TWO_PI  # straddles the right and the wrong measured orders
     proposed[30:33, 5:9] += 2 * TWO_PI
