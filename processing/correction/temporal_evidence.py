@@ -121,7 +121,9 @@ def snap_to_lower_frequencies(
     the order next to the proposed one if that fits them better by more than half that shift squared
     (the likelihood midpoint, plus a quarter of the shift of margin). Where one order shifts them too little
     (29/32, 1/8/64), two orders may not (:data:`SNAP_STEPS`): each step is tried against the proposed order's
-    fit, and the best-fitting step that passes is taken. Returns the phase and how many pixels moved.
+    fit, and the best-fitting step that passes is taken; a two-order step also only where every lower frequency
+    fits the new order and it leaves no change :func:`keep_temporally_supported` could judge unjudgeable
+    (:func:`_two_order_step_allowed`). Returns the phase and how many pixels moved.
     """
     with np.errstate(invalid="ignore"):
         changed = valid & (np.abs(proposed - measured) > np.pi)
