@@ -54,9 +54,10 @@ SEPARATION = 4.0
 # pixels at edges) mislead the temporal unwrapping into smaller shifts, up to 0.8 rad on the develop
 # cases, where the measured orders then fit better than the right ones.
 MIN_SHIFT_RAD = 1.0
-# Order steps :func:`snap_to_lower_frequencies` tries, each only where its shift clears both bounds above:
-# where one order shifts the lower frequencies' predictions too little (29/32: 0.59 rad, 1/8/64: 0.79 rad),
-# two orders may not (1.18 rad, 1.57 rad), and pooling beside an edge of 29/32 leaves pixels two orders off.
+# Order steps :func:`snap_to_lower_frequencies` tries, each only where its shift clears both bounds above, two
+# orders only where one order does not: where one order shifts the lower frequencies' predictions too little
+# (29/32: 0.59 rad, 1/8/64: 0.79 rad), two orders may not (1.18 rad, 1.57 rad), and pooling beside an edge
+# of 29/32 leaves pixels two orders off.
 SNAP_STEPS = (-1.0, 1.0, -2.0, 2.0)
 
 
@@ -120,10 +121,9 @@ def snap_to_lower_frequencies(
     or more (all drawn frequency sets but 29/32 and 1/8/64): a pixel changed by the correction takes
     the order next to the proposed one if that fits them better by more than half that shift squared
     (the likelihood midpoint, plus a quarter of the shift of margin). Where one order shifts them too little
-    (29/32, 1/8/64), two orders may not (:data:`SNAP_STEPS`): each step is tried against the proposed order's
-    fit, and the best-fitting step that passes is taken; a two-order step also only where every lower frequency
-    fits the new order and it leaves no change :func:`keep_temporally_supported` could judge unjudgeable
-    (:func:`_two_order_step_allowed`). Returns the phase and how many pixels moved.
+    (29/32, 1/8/64), two orders may not (:data:`SNAP_STEPS`), tried the same way; a two-order step also only
+    where every lower frequency fits the new order and it leaves no change :func:`keep_temporally_supported`
+    could judge unjudgeable (:func:`_two_order_step_allowed`). Returns the phase and how many pixels moved.
     """
     with np.errstate(invalid="ignore"):
         changed = valid & (np.abs(proposed - measured) > np.pi)
@@ -131,22 +131,24 @@ def snap_to_lower_frequencies(
         return proposed, 0
     lower_at = [(f, p[changed]) for f, p in lower]
     at = proposed[changed]
-    best = original = lower_frequency_misfit(at, frequency, lower_at)
+    best = lower_frequency_misfit(at, frequency, lower_at)
+    one_order_judged = False
     step = np.zeros(at.shape)
     if weights is None:
         weights = noise_weights(measured, valid, frequency, lower)
     for delta in SNAP_STEPS:
         shift = float(_order_shift(np.full(1, delta), frequency, lower)[0])
         separation = float(_order_shift(np.full(1, delta), frequency, lower, weights)[0])
-        if shift < MIN_SHIFT_RAD**2 or separation < SEPARATION**2:
+        if shift < MIN_SHIFT_RAD**2 or separation < SEPARATION**2 or (abs(delta) > 1 and one_order_judged):
             continue
+        one_order_judged |= abs(delta) == 1
         fits = lower_frequency_misfit(at + TWO_PI * delta, frequency, lower_at)
         # and the new order must fit them within the noise (3 sigma a frequency): beside edges and
         # where the lower phases are corrupted too, a better fit is not yet a good one
         within = lower_frequency_misfit(at + TWO_PI * delta, frequency, lower_at, weights) <= 9.0 * len(lower)
         if abs(delta) > 1:
             within &= _two_order_step_allowed(at, measured[changed], delta, frequency, lower_at, weights)
-        better = within & (fits < original - shift / 2.0) & (fits < best)
+        better = within & (fits < best - shift / 2.0)
         step[better] = delta
         best = np.where(better, fits, best)
     moved = int(np.count_nonzero(step))
