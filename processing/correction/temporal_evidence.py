@@ -122,8 +122,10 @@ def snap_to_lower_frequencies(
         changed = valid & (np.abs(proposed - measured) > np.pi)
     if not changed.any() or not lower:
         return proposed, 0
-    lower_at = [(f, p[changed]) for f, p in lower]
-    at = proposed[changed]
+    # flat indices, not the mask: gathering by a scattered boolean mask costs several times more
+    where = np.flatnonzero(changed)
+    lower_at = [(f, np.ravel(p)[where]) for f, p in lower]
+    at = np.ravel(proposed)[where]
     best = lower_frequency_misfit(at, frequency, lower_at)
     step = np.zeros(at.shape)
     if weights is None:
@@ -144,7 +146,7 @@ def snap_to_lower_frequencies(
     if not moved:
         return proposed, 0
     out = proposed.copy()
-    out[changed] = at + TWO_PI * step
+    out.reshape(-1)[where] = at + TWO_PI * step
     return out, moved
 
 
@@ -220,11 +222,17 @@ def keep_temporally_supported(
     if not changed.any() or not lower:
         return proposed, np.zeros(valid.shape, dtype=bool), counts
     count, labels = label_blobs(changed)
-    at = labels[changed]
+    # flat indices, not the mask: gathering by a scattered boolean mask costs several times more
+    where = np.flatnonzero(changed)
+    at = np.ravel(labels)[where]
     if weights is None:  # misfits in units of each frequency's noise
         weights = noise_weights(measured, valid, frequency, lower)
     ev = _PixelEvidence.of(
-        proposed[changed], measured[changed], frequency, [(f, p[changed]) for f, p in lower], weights
+        np.ravel(proposed)[where],
+        np.ravel(measured)[where],
+        frequency,
+        [(f, np.ravel(p)[where]) for f, p in lower],
+        weights,
     )
     difference = np.bincount(at, weights=ev.with_proposed - ev.with_measured, minlength=count)
     expected = np.bincount(at, weights=ev.shift, minlength=count)
@@ -252,4 +260,4 @@ def keep_temporally_supported(
     back_at = contradicted[at] & own
     if not back_at.any():
         return proposed, np.zeros(valid.shape, dtype=bool), counts
-    return (*revert_changed(proposed, measured, np.flatnonzero(changed), back_at, ambiguous[at]), counts)
+    return (*revert_changed(proposed, measured, where, back_at, ambiguous[at]), counts)
