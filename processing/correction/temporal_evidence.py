@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from processing.angles import wrap_to_pi
-from processing.correction.order_evidence import label_blobs, revert_changed
+from processing.correction.order_evidence import changed_orders, label_blobs, revert_changed
 from processing.denoise.rpca import finite_median
 
 TWO_PI = 2.0 * np.pi
@@ -118,8 +118,7 @@ def snap_to_lower_frequencies(
     (the likelihood midpoint, plus a quarter of the shift of margin). Returns the phase and how many
     pixels moved.
     """
-    with np.errstate(invalid="ignore"):
-        changed = valid & (np.abs(proposed - measured) > np.pi)
+    changed = changed_orders(proposed, measured, valid)
     if not changed.any() or not lower:
         return proposed, 0
     # flat indices, not the mask: gathering by a scattered boolean mask costs several times more
@@ -217,8 +216,7 @@ def keep_temporally_supported(
     (True, 1, 0)
     """
     counts = {"kept": 0, "reverted": 0, "unresolved": 0, "undecidable": 0}
-    with np.errstate(invalid="ignore"):
-        changed = valid & (np.abs(proposed - measured) > np.pi)
+    changed = changed_orders(proposed, measured, valid)
     if not changed.any() or not lower:
         return proposed, np.zeros(valid.shape, dtype=bool), counts
     count, labels = label_blobs(changed)
