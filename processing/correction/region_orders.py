@@ -353,20 +353,13 @@ def pool_region_orders(
     steps = _steps(phi)
     core, labels, count = _fringe_regions(steps, valid, _region_cut(steps, valid) if cut is None else cut, bend)
     labels, core, count = _drop_small_regions(labels, core, count, min_votes)
-    # Full-map arithmetic in place: every temporary map of 1024 x 768 costs about 1 ms to fill.
     with np.errstate(invalid="ignore"):
-        estimate = np.subtract(phase, phi)
-        estimate /= TWO_PI
-        np.rint(estimate, out=estimate)
-    np.copyto(estimate, 0.0, where=~valid)
-    orders = estimate.astype(np.int32)
+        orders = np.where(valid, np.rint((phase - phi) / TWO_PI), 0.0).astype(np.int32)
     if count > 1:
         pieces, piece_count = _tile_pieces(labels, core, count, tile)
         winners, sizes = _tally(pieces[core], orders[core], piece_count)
         voted = core & (sizes >= min_votes)[pieces]
-        out = np.multiply(winners[pieces], TWO_PI)
-        out += phi
-        np.copyto(out, np.nan, where=~voted)
+        out = np.where(voted, phi + TWO_PI * winners[pieces], np.nan)
         # Squares that disagree with a neighbour may straddle a hidden edge: vote them pixel by pixel.
         suspect_piece = np.zeros(piece_count, dtype=bool)
         suspect_piece[pieces[order_break_pixels(out) & voted]] = True
