@@ -424,7 +424,7 @@ def correct_auto(
        take their neighbours' order (:func:`~processing.correction.order_evidence.mend_spikes`);
     6. after a block solve, refit L at full resolution (:func:`~processing.correction.phase_rpca.
        refit_full_resolution`: its factors refitted to the kept orders' phase by least squares, used
-       where they fit it better; the blocks blur a step's or a ramp's edge, ch. 4 at full resolution does
+       where they fit it better by more than the noise; the blocks blur a step's or a ramp's edge, ch. 4 at full resolution does
        not); keep L (denoised) except where the result departs from it coherently beyond the noise
        (:func:`~processing.correction.phase_rpca.restore_detail`, ``k_sigma`` standard deviations
        of the 3 x 3 mean residual), and never where L lies a fringe or more from the kept orders.
