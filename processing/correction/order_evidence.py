@@ -38,6 +38,17 @@ def label_blobs(mask: np.ndarray) -> tuple[int, np.ndarray]:
     return int(count), labels
 
 
+def changed_orders(proposed: np.ndarray, measured: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """The valid pixels whose orders differ, ``valid & (|proposed - measured| > pi)``, with one temporary
+    (the expression as written allocates three maps: a quarter of the cost of the blob steps' setup)."""
+    difference = np.subtract(proposed, measured)
+    np.abs(difference, out=difference)
+    with np.errstate(invalid="ignore"):
+        changed = np.greater(difference, np.pi)
+    changed &= valid
+    return changed
+
+
 def blob_edges(valid: np.ndarray, inside: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
     """The 4-neighbour edges between valid pixels that touch a blob pixel (``inside``), along the rows and then
     down the columns: (first pixels, second pixels) as flat indices, the second to the right of or below the first.
@@ -100,8 +111,7 @@ def keep_supported_changes(
         than with the measured orders set back to ``measured``
     unresolved : (H, W) bool, the pixels of blobs with as many breaks either way
     """
-    with np.errstate(invalid="ignore"):
-        changed = valid & (np.abs(proposed - measured) > np.pi)
+    changed = changed_orders(proposed, measured, valid)
     if not changed.any():
         return proposed, changed
     count, labels = label_blobs(changed)

@@ -30,7 +30,12 @@ import numpy as np
 
 from processing.concurrency import side_by_side
 from processing.correction.method import CorrectionMethod, Result
-from processing.correction.order_evidence import keep_supported_changes, mend_spikes, unresolved_summary
+from processing.correction.order_evidence import (
+    changed_orders,
+    keep_supported_changes,
+    mend_spikes,
+    unresolved_summary,
+)
 from processing.correction.order_margin import undecided_orders
 from processing.correction.orders import correct_orders_rpca
 from processing.correction.phase_rpca import (
@@ -336,11 +341,13 @@ def _restore_detail(
                 pooled_detail, found.maps["regions"], low_rank, reordered, maps.valid, maps.k_sigma, maps.sigma
             )
         ),
-        lambda: int(np.count_nonzero(maps.valid & (np.abs(reordered - maps.phase) > np.pi))),
+        lambda: int(np.count_nonzero(changed_orders(reordered, maps.phase, maps.valid))),
     )
     assert out is not None
     # L only denoises: where it lies a fringe or more from the kept orders, the measured phase stays
-    off = np.abs(out - reordered) > np.pi
+    off = np.subtract(out, reordered)
+    np.abs(off, out=off)  # in place: a fresh full map costs as much as the arithmetic
+    off = off > np.pi
     if off.any():
         out = np.where(off, reordered, out)
     return out, unresolved, changed, counts
@@ -417,7 +424,7 @@ def correct_auto(
        take their neighbours' order (:func:`~processing.correction.order_evidence.mend_spikes`);
     6. after a block solve, refit L at full resolution (:func:`~processing.correction.phase_rpca.
        refit_full_resolution`: its factors refitted to the kept orders' phase by least squares, used
-       where they fit it better; the blocks blur a step's or a ramp's edge, ch. 4 at full resolution does
+       where they fit it better by more than the noise; the blocks blur a step's or a ramp's edge, ch. 4 at full resolution does
        not); keep L (denoised) except where the result departs from it coherently beyond the noise
        (:func:`~processing.correction.phase_rpca.restore_detail`, ``k_sigma`` standard deviations
        of the 3 x 3 mean residual), and never where L lies a fringe or more from the kept orders.

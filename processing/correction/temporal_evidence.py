@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from processing.angles import wrap_to_pi
-from processing.correction.order_evidence import label_blobs, revert_changed
+from processing.correction.order_evidence import changed_orders, label_blobs, revert_changed
 from processing.denoise.rpca import finite_median
 
 TWO_PI = 2.0 * np.pi
@@ -125,12 +125,13 @@ def snap_to_lower_frequencies(
     where every lower frequency fits the new order and it leaves no change :func:`keep_temporally_supported`
     could judge unjudgeable (:func:`_two_order_step_allowed`). Returns the phase and how many pixels moved.
     """
-    with np.errstate(invalid="ignore"):
-        changed = valid & (np.abs(proposed - measured) > np.pi)
+    changed = changed_orders(proposed, measured, valid)
     if not changed.any() or not lower:
         return proposed, 0
-    lower_at = [(f, p[changed]) for f, p in lower]
-    at = proposed[changed]
+    # flat indices, not the mask: gathering by a scattered boolean mask costs several times more
+    where = np.flatnonzero(changed)
+    lower_at = [(f, np.ravel(p)[where]) for f, p in lower]
+    at = np.ravel(proposed)[where]
     best = lower_frequency_misfit(at, frequency, lower_at)
     one_order_judged = False
     step = np.zeros(at.shape)
@@ -155,7 +156,7 @@ def snap_to_lower_frequencies(
     if not moved:
         return proposed, 0
     out = proposed.copy()
-    out[changed] = at + TWO_PI * step
+    out.reshape(-1)[where] = at + TWO_PI * step
     return out, moved
 
 
@@ -258,16 +259,21 @@ def keep_temporally_supported(
     (True, 1, 0)
     """
     counts = {"kept": 0, "reverted": 0, "unresolved": 0, "undecidable": 0}
-    with np.errstate(invalid="ignore"):
-        changed = valid & (np.abs(proposed - measured) > np.pi)
+    changed = changed_orders(proposed, measured, valid)
     if not changed.any() or not lower:
         return proposed, np.zeros(valid.shape, dtype=bool), counts
     count, labels = label_blobs(changed)
-    at = labels[changed]
+    # flat indices, not the mask: gathering by a scattered boolean mask costs several times more
+    where = np.flatnonzero(changed)
+    at = np.ravel(labels)[where]
     if weights is None:  # misfits in units of each frequency's noise
         weights = noise_weights(measured, valid, frequency, lower)
     ev = _PixelEvidence.of(
-        proposed[changed], measured[changed], frequency, [(f, p[changed]) for f, p in lower], weights
+        np.ravel(proposed)[where],
+        np.ravel(measured)[where],
+        frequency,
+        [(f, np.ravel(p)[where]) for f, p in lower],
+        weights,
     )
     difference = np.bincount(at, weights=ev.with_proposed - ev.with_measured, minlength=count)
     expected = np.bincount(at, weights=ev.shift, minlength=count)
@@ -295,4 +301,4 @@ def keep_temporally_supported(
     back_at = contradicted[at] & own
     if not back_at.any():
         return proposed, np.zeros(valid.shape, dtype=bool), counts
-    return (*revert_changed(proposed, measured, np.flatnonzero(changed), back_at, ambiguous[at]), counts)
+    return (*revert_changed(proposed, measured, where, back_at, ambiguous[at]), counts)
