@@ -148,7 +148,7 @@ def snap_to_lower_frequencies(
         # where the lower phases are corrupted too, a better fit is not yet a good one
         within = lower_frequency_misfit(at + TWO_PI * delta, frequency, lower_at, weights) <= 9.0 * len(lower)
         if abs(delta) > 1:
-            within &= _two_order_step_allowed(at, measured[changed], delta, frequency, lower_at, weights)
+            within &= _two_order_step_allowed(at, np.ravel(measured)[where], delta, frequency, lower_at, weights)
         better = within & (fits < best - shift / 2.0)
         step[better] = delta
         best = np.where(better, fits, best)
