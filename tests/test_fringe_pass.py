@@ -9,6 +9,7 @@ import pytest
 
 from mock_devices import scenes, synth
 from processing.phase.shifting import phase_shift, sample_stride, shadow_mask
+from processing.unwrap import fused_pass
 from processing.unwrap.fused_pass import ANGLE_TOLERANCE, fringe_pass, modulation_thresholds, wrapped_angle
 from processing.unwrap.temporal import (
     unwrap_heterodyne,
@@ -166,8 +167,9 @@ def test_brightness_and_no_orders_keep_the_same_phase_and_one_map_for_two() -> N
         np.testing.assert_allclose(a, b, rtol=1e-6)
 
 
-def test_large_image_uses_several_blocks_and_threads_share_them() -> None:
+def test_large_image_uses_several_blocks_and_threads_share_them(monkeypatch: pytest.MonkeyPatch) -> None:
     """Blocks of 16k pixels with a partial last one: the same result as the stage functions everywhere."""
+    monkeypatch.setattr(fused_pass, "BLOCK", 16384)  # several blocks on a small image
     stack, groups, _, _ = _scan([7, 8])
     tall = np.concatenate([stack] * 3, axis=1)  # 360 x 160 = 57600 pixels: 3 full blocks and a partial one
     fused = fringe_pass(tall, groups, [7, 8], "two-frequency", threads=2)

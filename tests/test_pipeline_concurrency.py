@@ -12,12 +12,19 @@ import pytest
 from mock_devices import synth
 from processing import concurrency
 from processing.correction.islands import island_mask
+from processing.unwrap import fused_pass
 from rig.hardware.synthesis import demo_geometry, simulate_scan, write_simulated_scan
 from rig.pipeline.plan import ProcessOptions
 from rig.pipeline.result import ProcessResult
 from rig.pipeline.run import process
 
 FRACTION = ProcessOptions().min_island_fraction
+
+
+@pytest.fixture(autouse=True)
+def small_blocks(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Blocks of 16k pixels, so the small capture below spans five and the threads share them."""
+    monkeypatch.setattr(fused_pass, "BLOCK", 16384)
 
 
 @pytest.fixture(scope="module")

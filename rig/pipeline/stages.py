@@ -29,7 +29,7 @@ from processing.phase.frequency_fusion import fuse_frequencies
 from processing.phase.shifting import phase_shift, sample_stride, shadow_mask
 from processing.unwrap.fused_pass import FringePass, fringe_pass, modulation_thresholds
 from processing.unwrap.neighbour_rescue import rescue
-from rig.blas import rpca_blas
+from rig.blas import kernel_blas, rpca_blas
 from rig.errors import ProcessingError
 from rig.pipeline import convention_check
 from rig.pipeline.corrections import stage_correction
@@ -386,23 +386,24 @@ def _fused_pass(state: SceneState, options: ProcessOptions) -> bool:
             lambda: modulation_thresholds(frames, groups, shifts, ratio),
             lambda: _noise_sigma(state) if fusing else None,
         )
-        scan = fringe_pass(
-            frames,
-            groups,
-            freqs,
-            method.name,
-            shifts=shifts,
-            min_ratio=ratio,
-            thresholds=thresholds,
-            max_residual=max_residual,
-            # auto weighs its order changes against the lower frequencies' wrapped phases
-            keep_all=state.calibration is None or check or options.correction == "auto",
-            orders=False,  # the corrections re-derive orders from the phases; nothing else reads them
-            # A + B, the texture, instead of A and B apart (one map fewer) unless B is wanted for sigma
-            brightness=state.calibration is None and (fuse is not None or not options.noise_rule(True)),
-            fuse_noise=fuse,
-            threads=concurrency.THREADS,  # the blocks on both cores (1 in rig's batch workers)
-        )
+        with kernel_blas():  # the blocks' small products: a second BLAS thread only synchronises
+            scan = fringe_pass(
+                frames,
+                groups,
+                freqs,
+                method.name,
+                shifts=shifts,
+                min_ratio=ratio,
+                thresholds=thresholds,
+                max_residual=max_residual,
+                # auto weighs its order changes against the lower frequencies' wrapped phases
+                keep_all=state.calibration is None or check or options.correction == "auto",
+                orders=False,  # the corrections re-derive orders from the phases; nothing else reads them
+                # A + B, the texture, instead of A and B apart (one map fewer) unless B is wanted for sigma
+                brightness=state.calibration is None and (fuse is not None or not options.noise_rule(True)),
+                fuse_noise=fuse,
+                threads=concurrency.THREADS,  # the blocks on both cores (1 in rig's batch workers)
+            )
     except ValueError:
         return False  # e.g. frequencies the method refuses: the stage-by-stage path reports it as before
     _keep_fused(state, options, scan, freqs, method.name, check)
