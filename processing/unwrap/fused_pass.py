@@ -4,9 +4,9 @@ unwrapping, fused block by block in float32.
 Done stage by stage (:func:`processing.phase.shifting.phase_shift` per frequency, then
 :func:`processing.phase.shifting.shadow_mask` and :mod:`processing.unwrap.temporal`), a two-frequency
 six-step 1024 x 768 capture writes float64 phase, background and modulation maps of every
-frequency to memory and reads them back several times. Here each block of pixels (16k, a few
-hundred KiB of float32 temporaries that stay in the CPU cache) goes from the raw frames to its
-absolute phase in one visit::
+frequency to memory and reads them back several times. Here each block of pixels (64k, a few MiB
+of float32 temporaries reused from block to block) goes from the raw frames to its absolute phase in
+one visit::
 
     frames (N_i, P) --weights (3, N_i)--> A, B cos phi, B sin phi      one small product per frequency
     -> wrapped phase phi in [0, 2 pi), modulation B, the modulation mask of each frequency
@@ -44,7 +44,10 @@ from processing.phase.shifting import robust_high, sample_stride, shift_weights
 from processing.unwrap.temporal import TEMPORAL_METHODS, TurnKernel, pair_table, turn_kernel
 
 TWO_PI = 2.0 * np.pi
-BLOCK = 65536  # pixels per block
+# Pixels per block. Each block is tens of numpy and OpenCV calls: at 16k pixels their per-call overhead
+# and the GIL hand-overs between two threads took a third of the pass; 32k and 128k were slower than
+# 64k too (the in-memory pipeline of benchmarks/bench_pipeline.py on the 2-core development machine).
+BLOCK = 65536
 ANGLE_TOLERANCE = 2.0e-4  # rad: bound on |angle - exact angle| of the OpenCV path (measured max 1.7e-4)
 _TOP = np.nextafter(np.float32(TWO_PI), np.float32(0.0))  # largest float32 below 2 pi: angles in [0, 2 pi)
 _BELOW_ONE = np.nextafter(np.float32(1.0), np.float32(0.0))
@@ -664,7 +667,7 @@ class _Scratch:
     def reused(cls, specs: Sequence[_Group], size: int) -> _Scratch:
         """This thread's buffers for blocks of ``size`` pixels, kept from the last pass of the same layout.
 
-        A pass allocates about 100 bytes of scratch per block pixel (1.5 MiB for two six-step
+        A pass allocates about 100 bytes of scratch per block pixel (6 MiB for two six-step
         frequencies); fresh pages cost more to fault in than the blocks take to compute.
         """
         layout = (size, tuple(s.weights.shape[1] for s in specs))
