@@ -444,14 +444,8 @@ def _height_both(
         sigmas.append(height_sigma(height_of, state.unwrapped.phase, np.asarray(phase_sigma, dtype=np.float32)))
     fused = fuse_points(points, sigmas)
     height = calibration_models.stereo_model(calibration).heights(fused.points).astype(np.float32)
-    mask = np.isfinite(height) & np.isfinite(fused.sigma)
-    np.copyto(height, np.float32(np.nan), where=~mask)
-    uncertainty = np.where(mask, fused.sigma, np.float32(np.nan)).astype(np.float32)
-    obj.info["axis_fusion"] = _fusion_info(fused, "the two points on each camera ray")
-    obj.info["other_axis"] = second.info
-    obj.info["depth_per_projector_pixel_mm"] = stereo_conditioning(calibration, fused.points)
-    if any(state.phase_sigma is None for state in (obj, second)):
-        notes.append("--axis both: no phase noise predicted; the axes are weighted by their geometry alone")
+    per_pixel = stereo_conditioning(calibration, fused.points)
+    mask, uncertainty = _fused_axes(obj, second, fused, height, "the two points on each camera ray", per_pixel, notes)
     return height, fused.points, mask, uncertainty
 
 
@@ -478,15 +472,30 @@ def _height_both_planes(
         sigmas.append(sigma)
     fused = fuse_points(heights, sigmas)
     height = fused.points[..., 0].astype(np.float32)
+    mask, uncertainty = _fused_axes(obj, second, fused, height, "the two heights of each pixel", per_pixel, notes)
+    return height, None, mask, uncertainty
+
+
+def _fused_axes(
+    obj: SceneState,
+    second: SceneState,
+    fused: FusedPoints,
+    height: np.ndarray,
+    what: str,
+    per_pixel: dict[str, float],
+    notes: list[str],
+) -> tuple[np.ndarray, np.ndarray]:
+    """Mask and sigma of heights fused from both axes (``height`` set NaN outside the mask, in place), and
+    what the report says of the fusion: ``axis_fusion``, the other axis's stages, each axis's conditioning."""
     mask = np.isfinite(height) & np.isfinite(fused.sigma)
     np.copyto(height, np.float32(np.nan), where=~mask)
     uncertainty = np.where(mask, fused.sigma, np.float32(np.nan)).astype(np.float32)
-    obj.info["axis_fusion"] = _fusion_info(fused, "the two heights of each pixel")
+    obj.info["axis_fusion"] = _fusion_info(fused, what)
     obj.info["other_axis"] = second.info
     obj.info["depth_per_projector_pixel_mm"] = per_pixel
     if any(state.phase_sigma is None for state in (obj, second)):
         notes.append("--axis both: no phase noise predicted; the axes are weighted by their geometry alone")
-    return height, None, mask, uncertainty
+    return mask, uncertainty
 
 
 def _fusion_info(fused: FusedPoints, what: str) -> dict[str, Any]:
