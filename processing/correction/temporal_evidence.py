@@ -202,6 +202,20 @@ class _PixelEvidence:
     shift_rad: np.ndarray
 
     @classmethod
+    def at(
+        cls,
+        where: np.ndarray,
+        proposed: np.ndarray,
+        measured: np.ndarray,
+        frequency: float,
+        lower: Sequence[tuple[float, np.ndarray]],
+        weights: Sequence[float],
+    ) -> _PixelEvidence:
+        """:meth:`of` the pixels at the flat indices ``where`` of (H, W) maps."""
+        lower_at = [(f, np.ravel(p)[where]) for f, p in lower]
+        return cls.of(np.ravel(proposed)[where], np.ravel(measured)[where], frequency, lower_at, weights)
+
+    @classmethod
     def of(
         cls,
         proposed: np.ndarray,
@@ -268,13 +282,7 @@ def keep_temporally_supported(
     at = np.ravel(labels)[where]
     if weights is None:  # misfits in units of each frequency's noise
         weights = noise_weights(measured, valid, frequency, lower)
-    ev = _PixelEvidence.of(
-        np.ravel(proposed)[where],
-        np.ravel(measured)[where],
-        frequency,
-        [(f, np.ravel(p)[where]) for f, p in lower],
-        weights,
-    )
+    ev = _PixelEvidence.at(where, proposed, measured, frequency, lower, weights)
     difference = np.bincount(at, weights=ev.with_proposed - ev.with_measured, minlength=count)
     expected = np.bincount(at, weights=ev.shift, minlength=count)
     # the blob's own noise: the misfit of the better-fitting orders (dark or mixed pixels carry more)
