@@ -131,6 +131,20 @@ def test_max_sigma_keeps_the_pixels_under_the_bound(tmp_path: Path) -> None:
     assert np.sqrt(np.mean(error**2)) < 1.0
 
 
+def test_a_max_sigma_no_pixel_meets_is_refused_naming_the_bound(capsys, tmp_path: Path) -> None:
+    """Not "no pixel has a finite height with this calibration": the bound removed them, and the line says so."""
+    paths = write_simulated_scan(_scan(30.0, 24), tmp_path / "scan")
+    out = tmp_path / "out"
+    argv = ["process", str(paths.capture), "--calibration", str(paths.calibration), "-o", str(out), "-q"]
+    assert main([*argv, "--max-sigma", "1e-6"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].count("--max-sigma 1e-06 mm") == 1, err
+    smallest = float(err[0].split("smallest ")[1].split(" mm")[0])
+    assert smallest > 1e-6  # the smallest predicted sigma, above the bound
+    assert "finite height" not in err[0] and not out.exists()
+    assert main([*argv, "--max-sigma", str(smallest * 1.01)]) == 0  # just above it: some pixels are kept
+
+
 def test_outputs_carry_the_uncertainty(capsys, tmp_path: Path) -> None:
     scan = _scan(30.0, 24)
     paths = write_simulated_scan(scan, tmp_path / "scan")

@@ -389,13 +389,21 @@ def _bound_uncertainty(
     max_sigma: float | None,
     notes: list[str],
 ) -> None:
-    """With ``max_sigma`` the pixels whose predicted sigma is above it leave the mask (in place)."""
+    """With ``max_sigma`` the pixels whose predicted sigma is above it leave the mask (in place); a bound
+    that no valid pixel meets is refused (ProcessingError), naming the smallest sigma predicted."""
     if max_sigma is None:
         return
     if uncertainty is None or height is None:
         notes.append("--max-sigma: no uncertainty predicted for this capture (phase-shifted fringes needed)")
         return
     above = mask & ~(uncertainty <= np.float32(max_sigma))
+    if above.any() and not (mask & ~above).any():  # a bound no pixel meets: say so, not "no finite height"
+        sigma = uncertainty[above]
+        raise ProcessingError(
+            f"--max-sigma {max_sigma:g} mm: every one of the {int(above.sum())} valid pixels has a larger predicted "
+            f"height sigma (smallest {np.nanmin(sigma):.3g} mm, median {np.nanmedian(sigma):.3g} mm); "
+            "raise the bound or leave it out"
+        )
     obj.info["above_max_sigma"] = int(np.count_nonzero(above))
     mask &= ~above
     np.copyto(height, np.float32(np.nan), where=above)
