@@ -338,8 +338,8 @@ class _UncertaintyStart:
 
     sigma_phi: np.ndarray  # the object's and the reference's phase sigma in quadrature
     height_of: Callable[[np.ndarray], np.ndarray]
-    forward: bool  # a forward difference from the heights themselves (else central)
-    ahead: np.ndarray | None  # the model at phase + step, for the forward difference
+    # the model at phase + step for a forward difference from the heights themselves (None: central)
+    ahead: np.ndarray | None
 
 
 def _uncertainty_start(
@@ -360,7 +360,7 @@ def _uncertainty_start(
     # heights carry the spatial unwrapping's per-region offsets that the model call does not
     forward = calibration.model != "stereo" and obj.unwrapped.absolute and (ref is None or _absolute(ref))
     ahead = height_ahead(height_of, obj.unwrapped.phase) if forward else None
-    return _UncertaintyStart(sigma_phi, height_of, forward, ahead)
+    return _UncertaintyStart(sigma_phi, height_of, ahead)
 
 
 def _uncertainty(
@@ -374,7 +374,7 @@ def _uncertainty(
         start.height_of,
         obj.unwrapped.phase,
         start.sigma_phi,
-        base=height if start.forward else None,
+        base=None if start.ahead is None else height,
         ahead=start.ahead,
     )
     np.copyto(uncertainty, np.float32(np.nan), where=~mask)
