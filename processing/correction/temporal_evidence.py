@@ -134,6 +134,7 @@ def snap_to_lower_frequencies(
     at = np.ravel(proposed)[where]
     best = lower_frequency_misfit(at, frequency, lower_at)
     one_order_judged = False
+    measured_at: np.ndarray | None = None  # gathered once, by the two-order guard alone
     step = np.zeros(at.shape)
     if weights is None:
         weights = noise_weights(measured, valid, frequency, lower)
@@ -148,7 +149,8 @@ def snap_to_lower_frequencies(
         # where the lower phases are corrupted too, a better fit is not yet a good one
         within = lower_frequency_misfit(at + TWO_PI * delta, frequency, lower_at, weights) <= 9.0 * len(lower)
         if abs(delta) > 1:
-            within &= _two_order_step_allowed(at, np.ravel(measured)[where], delta, frequency, lower_at, weights)
+            measured_at = np.ravel(measured)[where] if measured_at is None else measured_at
+            within &= _two_order_step_allowed(at, measured_at, delta, frequency, lower_at, weights)
         better = within & (fits < best - shift / 2.0)
         step[better] = delta
         best = np.where(better, fits, best)
