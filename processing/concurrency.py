@@ -1,9 +1,15 @@
-"""Two independent whole-map steps run side by side.
+"""Two independent whole-map steps run side by side, or one task on several threads at once.
 
 numpy releases the GIL in its loops, so two steps that each take milliseconds over a full map
 overlap on two cores (measured: the noise estimate and the region pooling of ``auto``, 17 and
 60 ms alone, take 75 ms together instead of 89 on a 2-core machine). Fine-grained work does not
 gain: calls of a few microseconds spend their time handing the GIL over.
+
+The helper threads are kept for the life of the process, not started per call: a thread keeps
+its thread-local buffers (the fused pass's block scratch) and its allocator arena from one call
+to the next. A thread started per call allocated its buffers afresh each time, and once other
+threads of the process had taken over the arena it left (an OpenMP pool of another library, for
+one), those pages were faulted in again: ~250-750 page faults per pipeline run, measured.
 """
 
 from __future__ import annotations
@@ -29,16 +35,26 @@ def available_cpus() -> int:
 # Threads for side-by-side steps: 1 runs everything in the caller's thread (rig's Dask workers
 # set it: they already run one worker per core).
 THREADS = min(2, available_cpus())
+# Most helper threads one call of on_threads() uses (the kept pool grows to what calls ask, up to this).
+MAX_HELPERS = 32
+_HELPER_PREFIX = "processing-side"
 _pool: ThreadPoolExecutor | None = None
 _pool_lock = threading.Lock()
+
+Result = TypeVar("Result")
 
 
 def _executor() -> ThreadPoolExecutor:
     global _pool
     with _pool_lock:
         if _pool is None:
-            _pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="processing-side")
+            _pool = ThreadPoolExecutor(max_workers=MAX_HELPERS, thread_name_prefix=_HELPER_PREFIX)
         return _pool
+
+
+def _on_helper() -> bool:
+    """Whether this is one of the kept helper threads (whose nested calls run here, not wait on the pool)."""
+    return threading.current_thread().name.startswith(_HELPER_PREFIX)
 
 
 def side_by_side(first: Callable[[], First], second: Callable[[], Second]) -> tuple[First, Second]:
@@ -48,7 +64,7 @@ def side_by_side(first: Callable[[], First], second: Callable[[], Second]) -> tu
     raise). With :data:`THREADS` = 1, or called from the helper thread itself, they run one
     after the other in this thread.
     """
-    if THREADS <= 1 or threading.current_thread().name.startswith("processing-side"):
+    if THREADS <= 1 or _on_helper():
         return first(), second()
     future = _executor().submit(second)
     try:
@@ -57,3 +73,24 @@ def side_by_side(first: Callable[[], First], second: Callable[[], Second]) -> tu
         future.exception()  # wait: the second step must not outlive the call
         raise
     return result, future.result()
+
+
+def on_threads(task: Callable[[], Result], count: int) -> list[Result]:
+    """``task()`` run at once in this thread and on ``count - 1`` kept helper threads; every result, this thread's first.
+
+    For work that the calls share out among themselves (e.g. blocks taken from a common queue).
+    All calls run to the end; an exception is raised here once they have (this thread's first).
+    Called from a helper thread, or with ``count`` 1, it runs once, here.
+    """
+    helpers = 0 if _on_helper() else max(0, min(int(count), MAX_HELPERS + 1) - 1)
+    if helpers == 0:
+        return [task()]
+    pool = _executor()
+    futures = [pool.submit(task) for _ in range(helpers)]
+    try:
+        mine = task()
+    except BaseException:
+        for future in futures:
+            future.exception()  # wait: no call may outlive this one
+        raise
+    return [mine, *(future.result() for future in futures)]

@@ -31,14 +31,13 @@ import itertools
 import math
 import threading
 from collections.abc import Callable, Sequence
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import Any
 
 import numpy as np
 
-from processing import _validate
+from processing import _validate, concurrency
 from processing.phase.frequency_fusion import fuse_frequencies
 from processing.phase.shifting import robust_high, sample_stride, shift_weights
 from processing.unwrap.temporal import TEMPORAL_METHODS, TurnKernel, pair_table, turn_kernel
@@ -442,6 +441,8 @@ def _run_blocks(plan: _Plan, out: _Outputs, pixels: int, threads: int) -> None:
 
     Blocks are handed out one at a time rather than in fixed halves: on a machine whose cores
     are busy with other work, a thread the OS pauses holds up no block another thread could take.
+    The other threads are :mod:`processing.concurrency`'s kept helpers, whose block scratch
+    stays allocated from pass to pass.
     """
     starts = iter(range(0, pixels, BLOCK))
     workers = max(1, min(threads, math.ceil(pixels / BLOCK)))
@@ -454,11 +455,7 @@ def _run_blocks(plan: _Plan, out: _Outputs, pixels: int, threads: int) -> None:
         with lock:
             return next(starts, None)
 
-    with ThreadPoolExecutor(workers - 1) as pool:
-        futures = [pool.submit(plan.run, out, take, pixels) for _ in range(workers - 1)]
-        plan.run(out, take, pixels)
-        for future in futures:
-            future.result()
+    concurrency.on_threads(lambda: plan.run(out, take, pixels), workers)
 
 
 def _sampled_high(flat: np.ndarray, spec: _Group, shape: tuple[int, int], cv2: Any | None) -> float:
