@@ -19,9 +19,12 @@ the same uint8 stack:
 Phase error: RMS and median |error| of the absolute phase at the highest frequency against the
 simulated truth, over the lit pixels both decode, per seed. Speed: interleaved runs (run i times
 every row once), median and spread, CPU time, and ``peer/this`` per run against the peer's
-``precise`` decode. The peer needs ``fringes`` (``pip install fringes``: it pulls OpenCV with GUI
-libraries, so a separate environment, with this repository on the path); without it the peer rows
-are skipped and said so.
+``precise`` decode. Each timed call starts 50 ms after the previous one ended: numba's OpenMP
+threads (GNU libgomp) keep both cores busy spin-waiting for 3-5 ms after each of the peer's
+decodes, which the row timed next would otherwise pay for (measured: 4 ms of CPU in the 2 ms
+after a decode, none after 5 ms; ``OMP_WAIT_POLICY=passive`` removes it). The peer needs
+``fringes`` (``pip install fringes``: it pulls OpenCV with GUI libraries, so a separate
+environment, with this repository on the path); without it the peer rows are skipped and said so.
 
     python benchmarks/bench_fringes_peer.py [--runs 7] [--seeds 0 1 2] [--snr-db 30]
 """
@@ -52,6 +55,7 @@ from rig.pipeline.run import process  # noqa: E402
 
 FREQUENCIES = (15, 16)
 PEER = "fringes decode (precise)"
+SETTLE_S = 0.05  # pause before each timed call: the peer's OpenMP threads stop spinning (docstring)
 
 
 def peer_decoder(mode: str) -> Any | None:
@@ -146,7 +150,7 @@ def main(argv: list[str] | None = None) -> int:
     rows.update({name: (lambda d=d: peer_phase(d, frames)) for name, d in available.items()})
     load_before = os.getloadavg()
     print(f"timing {args.runs} interleaved runs of {len(rows)} rows ...", file=sys.stderr)
-    times = interleaved(rows, args.runs)
+    times = interleaved(rows, args.runs, settle=SETTLE_S)
     load_after = os.getloadavg()
     print("12 uint8 frames 1024x768 (2 frequencies x 6 steps), in memory, single process")
     for line in cpu_description():

@@ -13,8 +13,14 @@ from collections.abc import Callable, Mapping, Sequence
 Sample = tuple[float, float]
 
 
-def interleaved(funcs: Mapping[str, Callable[[], object]], runs: int, warm_up: bool = True) -> dict[str, list[Sample]]:
+def interleaved(
+    funcs: Mapping[str, Callable[[], object]], runs: int, warm_up: bool = True, settle: float = 0.0
+) -> dict[str, list[Sample]]:
     """(wall, CPU) seconds of each function, interleaved run by run so load changes hit all rows alike.
+
+    ``settle``: seconds to sleep before each timed call, so that threads a row left spinning (an
+    OpenMP pool waits actively for a few milliseconds after its work) do not run on the cores the
+    next row is timed on.
 
     CPU time is the process's (all its threads): on a machine shared with other jobs it is less
     sensitive to their load than the wall clock. Rows that run a child process time it themselves
@@ -26,6 +32,8 @@ def interleaved(funcs: Mapping[str, Callable[[], object]], runs: int, warm_up: b
             func()  # caches, look-up tables, first page faults, lazy imports
     for _ in range(runs):
         for name, func in funcs.items():
+            if settle > 0:
+                time.sleep(settle)
             wall, cpu = time.perf_counter(), time.process_time()
             out = func()
             measured = (time.perf_counter() - wall, time.process_time() - cpu)
