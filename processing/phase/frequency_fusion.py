@@ -29,8 +29,10 @@ Everything is element-wise: the functions take maps or flat blocks of any shape 
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -108,9 +110,7 @@ def fuse_frequencies(
     unit = 1.0 / agreement if agreement >= _MIN_SCALED_BOUND else 1.0
     bound = agreement * unit  # c^2 2 sigma_I^2 in the weights' unit
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        b_top = np.asarray(modulation[-1], dtype=np.float32)
-        top_weight = np.multiply(b_top, b_top)
-        top_weight *= _constant(steps[-1] * unit)  # w_K = J_K B_K^2
+        top_weight = _scaled_square(modulation[-1], steps[-1] * unit)  # w_K = J_K B_K^2
         total, shift, agreeing = top_weight, None, None  # sum_k w_k; sum_k w_k (Phi_K^(k) - Phi_K)
         for k in range(count - 1):
             weight, offset, agrees = _lower_frequency(
@@ -129,11 +129,39 @@ def fuse_frequencies(
             shift /= total
             phase = np.add(base, shift, out=out if out is not None else shift)
         sigma = np.divide(_constant(noise * unit), total, out=sigma_out if sigma_out is not None else total)
-        np.sqrt(sigma, out=sigma)
+        _sqrt_into(sigma)
     if agreeing is None:
         return FusedPhase(phase, sigma, 0)
     finite = base.size - int(np.count_nonzero(np.isnan(base)))
     return FusedPhase(phase, sigma, finite - int(np.count_nonzero(agreeing)))
+
+
+def _scaled_square(values: np.ndarray, scale: float) -> np.ndarray:
+    """``scale`` x values^2 as a new float32 array: OpenCV's scaled product, one pass instead of two."""
+    v = np.ascontiguousarray(values, dtype=np.float32)
+    out = np.empty(v.shape, dtype=np.float32)
+    if v.size:
+        flat = v.reshape(-1)
+        _cv2().multiply(flat, flat, out.reshape(-1), scale=float(scale))
+    return out
+
+
+def _sqrt_into(values: np.ndarray) -> None:
+    """Square root of a float32 array in place (OpenCV's vectorised root: about half numpy's time, the same
+    correctly rounded values)."""
+    if values.size and values.flags.c_contiguous:
+        flat = values.reshape(-1)
+        _cv2().sqrt(flat, flat)
+    else:
+        np.sqrt(values, out=values)
+
+
+@functools.cache
+def _cv2() -> Any:
+    """The cv2 module (a dependency), imported on first use."""
+    import cv2
+
+    return cv2
 
 
 def _constant(value: float) -> np.ndarray:
@@ -166,9 +194,7 @@ def _lower_frequency(
     np.rint(offset, out=turns)
     offset -= turns
     offset *= _constant(TWO_PI * ratio)  # in radians of the highest frequency
-    b = np.asarray(modulation, dtype=np.float32)
-    weight = np.multiply(b, b)
-    weight *= _constant(steps / ratio**2)  # w_k = J_k B_k^2 (f_k / f_K)^2
+    weight = _scaled_square(modulation, steps / ratio**2)  # w_k = J_k B_k^2 (f_k / f_K)^2
     square = np.multiply(offset, offset, out=turns)
     agrees = np.less(square, _PI_SQUARED)  # under half a fringe of the highest frequency
     square *= weight
