@@ -68,19 +68,31 @@ def _backend(opencv: bool) -> Any | None:
 
 
 def _angle_into(
-    cos_part: np.ndarray, sin_part: np.ndarray, out: np.ndarray, cv2: Any | None, below_two_pi: bool = True
+    cos_part: np.ndarray,
+    sin_part: np.ndarray,
+    out: np.ndarray,
+    cv2: Any | None,
+    below_two_pi: bool = True,
+    finite: bool = False,
 ) -> np.ndarray:
     """atan2(sin, cos) of float32 vectors into ``out`` in [0, 2 pi]; NaN stays NaN.
 
     ``below_two_pi`` moves 2 pi itself (float32 rounding of tiny negative angles) just below it,
     so that the angle is a wrapped phase in [0, 2 pi); a look-up index does not need it.
+    ``finite``: the inputs hold no NaN (integer frames), so OpenCV's ``min`` may do that (15 us per
+    64k pixels against numpy's 35-50 us; the same values, but it would turn a NaN into the bound).
     """
     if cv2 is not None:
         cv2.phase(cos_part, sin_part, angle=out)
     else:
         np.arctan2(sin_part, cos_part, out=out)
         np.add(out, np.float32(TWO_PI), out=out, where=out < 0)
-    return np.minimum(out, _TOP, out=out) if below_two_pi else out
+    if not below_two_pi:
+        return out
+    if cv2 is not None and finite:
+        cv2.min(out, float(_TOP), dst=out)
+        return out
+    return np.minimum(out, _TOP, out=out)
 
 
 def _magnitude_into(cos_part: np.ndarray, sin_part: np.ndarray, out: np.ndarray, cv2: Any | None) -> np.ndarray:
@@ -540,6 +552,10 @@ class _Plan:
     cv2: Any | None
     background_nonnegative: bool  # unsigned frames and non-negative A weights
     fusion: _Fusion | None = None
+    finite_frames: bool = field(init=False)  # integer frames: no NaN anywhere in the blocks' coefficients
+
+    def __post_init__(self) -> None:
+        self.finite_frames = bool(np.issubdtype(self.flat.dtype, np.integer))
 
     def run(self, out: _Outputs, take: Callable[[], int | None], pixels: int) -> None:
         """The blocks whose first pixels ``take`` hands out, until it gives None.
@@ -565,7 +581,8 @@ class _Plan:
             np.matmul(spec.weights, frames, out=coeffs)
             slot = self.kept.index(g) if g in self.kept else -1
             angle = out.wrapped[slot][window] if slot >= 0 else scratch.angle[g]
-            angles.append(_angle_into(coeffs[1], coeffs[2], angle, cv2, below_two_pi=slot >= 0 or self.tables is None))
+            below = slot >= 0 or self.tables is None
+            angles.append(_angle_into(coeffs[1], coeffs[2], angle, cv2, below_two_pi=below, finite=self.finite_frames))
             modulation = out.modulation[slot][window] if slot >= 0 and out.modulation else scratch.modulation[g]
             amplitudes.append(_magnitude_into(coeffs[1], coeffs[2], modulation, cv2))
             if slot >= 0 and out.brightness:
