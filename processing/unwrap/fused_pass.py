@@ -575,9 +575,9 @@ class _Plan:
         angles: list[np.ndarray] = []
         amplitudes: list[np.ndarray] = []
         for g, spec in enumerate(self.specs):
-            frames = scratch.frames[g]
+            frames = scratch.frames[: spec.weights.shape[1]]
             np.copyto(frames, self.flat[spec.rows, window], casting="unsafe")
-            coeffs = scratch.coeffs[g]
+            coeffs = scratch.coeffs
             np.matmul(spec.weights, frames, out=coeffs)
             slot = self.kept.index(g) if g in self.kept else -1
             angle = out.wrapped[slot][window] if slot >= 0 else scratch.angle[g]
@@ -666,10 +666,15 @@ _SCRATCH = threading.local()
 
 @dataclass
 class _Scratch:
-    """Per-thread block buffers, reused from block to block."""
+    """Per-thread block buffers, reused from block to block.
 
-    frames: list[np.ndarray]
-    coeffs: list[np.ndarray]
+    One frame buffer and one coefficient buffer serve every group in turn (a group's coefficients are
+    read only before the next group's frames come in): the block's working set stays smaller, and
+    the next group's frames are written into cache lines the last group's left warm.
+    """
+
+    frames: np.ndarray  # (most steps of a group, pixels)
+    coeffs: np.ndarray  # (3, pixels)
     angle: list[np.ndarray]
     modulation: list[np.ndarray]
     level: np.ndarray
@@ -696,8 +701,8 @@ class _Scratch:
             return np.empty(size, dtype=dtype)
 
         return cls(
-            frames=[np.empty((s.weights.shape[1], size), dtype=np.float32) for s in specs],
-            coeffs=[np.empty((3, size), dtype=np.float32) for _ in specs],
+            frames=np.empty((max(s.weights.shape[1] for s in specs), size), dtype=np.float32),
+            coeffs=np.empty((3, size), dtype=np.float32),
             angle=[vector() for _ in specs],
             modulation=[vector() for _ in specs],
             level=vector(),
