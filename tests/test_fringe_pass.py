@@ -152,6 +152,22 @@ def test_opencv_and_numpy_paths_agree_and_threads_change_nothing() -> None:
     np.testing.assert_allclose(a.modulation[0], c.modulation[0], rtol=1e-6)
 
 
+def test_integer_frames_bound_with_opencv_as_float_frames_do_with_numpy() -> None:
+    """uint8 frames take OpenCV's min and max for the angle and mask bounds (no NaN possible); the same values
+    as float32 frames, which keep numpy's NaN-propagating bounds."""
+    stack, groups, _, _ = _scan([7, 8], snr_db=20.0)
+    kwargs = {"keep_all": True, "fuse_noise": 2.0, "min_ratio": 0.8}  # a bound that decides many pixels
+    integer = fringe_pass(stack, groups, [7, 8], "two-frequency", **kwargs)
+    floating = fringe_pass(stack.astype(np.float32), groups, [7, 8], "two-frequency", **kwargs)
+    assert 0.05 < np.mean(~integer.modulated) < 0.95  # the mask's bound decides pixels either way
+    np.testing.assert_array_equal(integer.modulated, floating.modulated)
+    np.testing.assert_array_equal(integer.valid, floating.valid)
+    for a, b in zip(integer.wrapped, floating.wrapped, strict=True):
+        assert a.max() < TWO_PI and b.max() < TWO_PI
+        np.testing.assert_allclose(a, b, rtol=1e-6)  # BLAS may round a block's product in the last bit
+    np.testing.assert_allclose(integer.phase, floating.phase, rtol=1e-6)
+
+
 def test_brightness_and_no_orders_keep_the_same_phase_and_one_map_for_two() -> None:
     stack, groups, _, _ = _scan([7, 8], snr_db=30.0)
     full = fringe_pass(stack, groups, [7, 8], "two-frequency", keep_all=True)
