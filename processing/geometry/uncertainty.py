@@ -19,6 +19,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from processing._aligned import aligned_empty
 from processing.phase.shifting import fit_residual_variance, sample_stride
 
 MAD_TO_SIGMA = 1.4826  # a normal distribution's sigma per median absolute deviation
@@ -89,7 +90,7 @@ def combined_phase_sigma(first: np.ndarray, second: np.ndarray) -> np.ndarray:
     b = np.ascontiguousarray(second, dtype=np.float32)
     if a.shape != b.shape:
         raise ValueError(f"second: expected the shape {a.shape} of first, found {b.shape}")
-    out = np.empty(a.shape, dtype=np.float32)
+    out = aligned_empty(a.shape)  # the same values wherever the allocator puts it (processing._aligned)
     if out.size:
         cv2.magnitude(a.reshape(-1), b.reshape(-1), out.reshape(-1))
     return out

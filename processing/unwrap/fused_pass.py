@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 
 from processing import _validate, concurrency
+from processing._aligned import aligned_empty
 from processing.phase.frequency_fusion import fuse_frequencies
 from processing.phase.shifting import robust_high, sample_stride, shift_weights
 from processing.unwrap.temporal import TEMPORAL_METHODS, TurnKernel, pair_table, turn_kernel
@@ -481,12 +482,12 @@ def _sampled_high(flat: np.ndarray, spec: _Group, shape: tuple[int, int], cv2: A
     stride = sample_stride(shape)
     sample = np.ascontiguousarray(flat[spec.rows, ::stride], dtype=np.float32)  # only the sampled columns copied
     coeffs = spec.weights @ sample
-    modulation = _magnitude_into(coeffs[1], coeffs[2], np.empty(coeffs.shape[1], dtype=np.float32), cv2)
+    modulation = _magnitude_into(coeffs[1], coeffs[2], aligned_empty(coeffs.shape[1]), cv2)
     if np.isfinite(modulation).any():
         return robust_high(modulation)
     everything = np.ascontiguousarray(flat[spec.rows], dtype=np.float32)  # rare: NaN throughout the subsample
     coeffs = spec.weights @ everything
-    return robust_high(_magnitude_into(coeffs[1], coeffs[2], np.empty(coeffs.shape[1], dtype=np.float32), cv2))
+    return robust_high(_magnitude_into(coeffs[1], coeffs[2], aligned_empty(coeffs.shape[1]), cv2))
 
 
 @dataclass
@@ -517,7 +518,10 @@ class _Outputs:
         # a few big blocks instead of many 3 MiB ones keep the allocator from returning them to
         # the system between runs (fresh pages cost more to touch than the pass to compute).
         per_group = 2 if brightness else 3
-        maps = np.empty((per_group * kept + (1 if unwrapping else 0) + (1 if fusing else 0), pixels), dtype=np.float32)
+        # Every row starts aligned (processing._aligned: OpenCV's magnitude writes into them; blocks of BLOCK
+        # pixels keep the alignment), so rows are padded to whole 64-byte lines.
+        count = per_group * kept + (1 if unwrapping else 0) + (1 if fusing else 0)
+        maps = aligned_empty((count, -(-pixels // 16) * 16))[:, :pixels]
         rows = list(maps)
         sigma = rows.pop() if fusing else None
         return cls(
@@ -704,11 +708,11 @@ class _Scratch:
     @classmethod
     def allocate(cls, specs: Sequence[_Group], size: int) -> _Scratch:
         def vector(dtype: type = np.float32) -> np.ndarray:
-            return np.empty(size, dtype=dtype)
+            return aligned_empty(size, dtype)  # see processing._aligned
 
         return cls(
-            frames=np.empty((max(s.weights.shape[1] for s in specs), size), dtype=np.float32),
-            coeffs=np.empty((3, size), dtype=np.float32),
+            frames=aligned_empty((max(s.weights.shape[1] for s in specs), size)),
+            coeffs=aligned_empty((3, size)),
             angle=[vector() for _ in specs],
             modulation=[vector() for _ in specs],
             level=vector(),
