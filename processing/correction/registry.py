@@ -53,6 +53,7 @@ from processing.correction.phase_rpca import (
     update_coherent_detail,
 )
 from processing.correction.region_orders import pool_region_orders
+from processing.correction.surface_orders import arbitrate_low_rank_orders
 from processing.correction.temporal_evidence import (
     keep_temporally_supported,
     lower_frequency_misfit,
@@ -275,11 +276,11 @@ def _candidate_orders(maps: _AutoMaps, pooled: np.ndarray, measured_breaks: int)
 
 def _supported_orders(
     maps: _AutoMaps, proposed: np.ndarray, temporal: _Temporal | None
-) -> tuple[np.ndarray, np.ndarray, dict[str, int]]:
+) -> tuple[np.ndarray, np.ndarray, dict[str, int], list[float] | None]:
     """Step 5: the proposed orders where their neighbours (:func:`~processing.correction.order_evidence.
     keep_supported_changes`) and then the lower frequencies (:func:`~processing.correction.temporal_evidence.
     keep_temporally_supported`) support them, order spikes mended (:func:`~processing.correction.order_evidence.
-    mend_spikes`); the unresolved pixels of both; what each step did."""
+    mend_spikes`); the unresolved pixels of both; what each step did; the lower frequencies' noise weights."""
     (reordered, unresolved), weights = side_by_side(  # the noise weights read the measured phase only
         lambda: keep_supported_changes(proposed, maps.phase, maps.valid),
         lambda: None if temporal is None else noise_weights(maps.phase, maps.valid, temporal.frequency, temporal.lower),
@@ -298,7 +299,7 @@ def _supported_orders(
         counts["moved_one_order"] = moved
         misfit = _spike_misfit(temporal, weights)
     reordered, counts["spikes_mended"] = mend_spikes(reordered, maps.valid, misfit)
-    return reordered, unresolved, counts
+    return reordered, unresolved, counts, weights
 
 
 def _spike_misfit(temporal: _Temporal, weights: list[float]) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
@@ -319,7 +320,7 @@ def _restore_detail(
 
     Returns the phase, the unresolved pixels, how many orders changed and the lower frequencies' blob counts.
     """
-    reordered, unresolved, counts = _supported_orders(maps, found.maps[chosen], temporal)
+    reordered, unresolved, counts, weights = _supported_orders(maps, found.maps[chosen], temporal)
     low_rank = found.low_rank
     if maps.decimate > 1:  # what the block means blurred, refitted at full resolution where it fits better
         low_rank = refit_full_resolution(
@@ -332,6 +333,7 @@ def _restore_detail(
             outlier=2.0 * maps.k_sigma * maps.sigma,
             noise=maps.sigma,
         )
+    reordered, unresolved = _arbitrate_with_low_rank(maps, reordered, unresolved, low_rank, temporal, weights, counts)
     pooled_detail = found.pooled_detail if low_rank is found.low_rank else None
     out, changed = side_by_side(
         lambda: (  # step 6 ran alongside step 3 on the pooled orders: redone only where the orders differ
@@ -351,6 +353,25 @@ def _restore_detail(
     if off.any():
         out = np.where(off, reordered, out)
     return out, unresolved, changed, counts
+
+
+def _arbitrate_with_low_rank(
+    maps: _AutoMaps,
+    reordered: np.ndarray,
+    unresolved: np.ndarray,
+    low_rank: np.ndarray,
+    temporal: _Temporal | None,
+    weights: list[float] | None,
+    counts: dict[str, int],
+) -> tuple[np.ndarray, np.ndarray]:
+    """Step 6a: L's orders on the blobs where they leave fewer order breaks than the kept ones and the lower
+    frequencies do not contradict them (:func:`~processing.correction.surface_orders.arbitrate_low_rank_orders`);
+    ties the lower frequencies cannot judge are added to the unresolved pixels."""
+    frequency, lower = (temporal.frequency, temporal.lower) if temporal is not None else (None, [])
+    reordered, tied, counts["low_rank_orders_taken"] = arbitrate_low_rank_orders(
+        reordered, low_rank, maps.wrapped, maps.valid, frequency, lower, weights
+    )
+    return reordered, unresolved | tied
 
 
 @dataclass(frozen=True)
