@@ -17,12 +17,13 @@ The pixels where L's re-derived orders ``rint((L - phi) / 2 pi)`` differ from th
   minus that with the kept ones summed over the blob, against ``S``, what ``D`` is if the kept orders
   are right (:mod:`processing.correction.temporal_evidence`).
 
-A blob takes L's orders only if they leave fewer breaks and the lower frequencies do not contradict
+A blob takes L's orders where they leave fewer breaks and the lower frequencies do not contradict
 them (``D`` above ``S / 2`` by :data:`~processing.correction.temporal_evidence.Z_MARGIN` standard
-errors, ``2 sqrt(S)``: the same test, in the same noise units, step 5 reverts a blob by). A change must
-earn its place: ties keep the kept orders. Blobs where the breaks tie and the lower frequencies cannot
-tell the two apart either (``S`` below :data:`~processing.correction.temporal_evidence.SEPARATION`
-squared noise variances a pixel) are reported unresolved.
+errors, ``2 sqrt(S)``: the same test, in the same noise units, step 5 reverts a blob by), or where the
+breaks tie and the lower frequencies clearly favour them (``D`` below ``S / 2`` by the same margin, on a
+blob whose ``S`` clears :data:`~processing.correction.temporal_evidence.SEPARATION` squared noise
+variances a pixel). A change must earn its place: every other blob keeps the kept orders, and a blob
+whose breaks tie and whose lower frequencies decide nothing either way is reported unresolved.
 """
 
 from __future__ import annotations
@@ -83,14 +84,14 @@ def arbitrate_low_rank_orders(
     with_kept = breaks_per_blob(kept, valid, labels, count, edges)
     at = np.flatnonzero(differ)
     blob = np.ravel(labels)[at]
-    contradicted = np.zeros(count, dtype=bool)
-    undecidable = np.ones(count, dtype=bool)
+    contradicted = favoured = np.zeros(count, dtype=bool)
     if lower and frequency is not None:
-        contradicted, undecidable = _lower_frequency_verdict(
+        contradicted, favoured = _lower_frequency_verdict(
             np.ravel(alternative)[at], np.ravel(kept)[at], blob, count, at, frequency, lower, weights
         )
-    take = (fewer < with_kept) & ~contradicted
-    tie = (fewer == with_kept) & undecidable
+    tie = fewer == with_kept
+    take = ((fewer < with_kept) & ~contradicted) | (tie & favoured)
+    tie &= ~favoured & ~contradicted
     take[0] = tie[0] = False
     out = kept
     moved = int(np.count_nonzero(take[blob]))
@@ -115,7 +116,9 @@ def _lower_frequency_verdict(
     lower: Sequence[tuple[float, np.ndarray]],
     weights: Sequence[float] | None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Per blob: whether the lower frequencies contradict L's orders, and whether they cannot judge the blob."""
+    """Per blob: whether the lower frequencies contradict L's orders, and whether they clearly favour them (only
+    where the blob's shift clears :data:`~processing.correction.temporal_evidence.SEPARATION` noise deviations a
+    pixel: a verdict for a change needs the frequencies to tell the orders apart, one against it does not)."""
     lower_at = [(f_low, np.ravel(wrapped_low)[at]) for f_low, wrapped_low in lower]
     difference = lower_frequency_misfit(alternative, frequency, lower_at, weights)
     difference -= lower_frequency_misfit(kept, frequency, lower_at, weights)
@@ -126,6 +129,6 @@ def _lower_frequency_verdict(
     d = np.bincount(blob, weights=difference, minlength=count)
     s = np.bincount(blob, weights=shift, minlength=count)
     pixels = np.bincount(blob, minlength=count)
-    contradicted = d > s / 2.0 + Z_MARGIN * 2.0 * np.sqrt(s)
-    undecidable = s <= SEPARATION**2 * pixels * len(lower)
-    return contradicted, undecidable
+    margin = Z_MARGIN * 2.0 * np.sqrt(s)
+    favoured = (s > SEPARATION**2 * pixels * len(lower)) & (d < s / 2.0 - margin)
+    return d > s / 2.0 + margin, favoured
