@@ -364,9 +364,9 @@ def _arbitrate_with_low_rank(
     weights: list[float] | None,
     counts: dict[str, int],
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Step 6a: L's orders on the blobs where they leave fewer order breaks than the kept ones and the lower
+    """Step 6a: L's orders on the blobs where they clearly leave fewer order breaks than the kept ones and the lower
     frequencies do not contradict them (:func:`~processing.correction.surface_orders.arbitrate_low_rank_orders`);
-    ties the lower frequencies do not decide are added to the unresolved pixels."""
+    the blobs nothing decides are added to the unresolved pixels."""
     frequency, lower = (temporal.frequency, temporal.lower) if temporal is not None else (None, [])
     reordered, tied, counts["low_rank_orders_taken"] = arbitrate_low_rank_orders(
         reordered, low_rank, maps.wrapped, maps.valid, frequency, lower, weights
@@ -448,9 +448,10 @@ def correct_auto(
        where they fit it better by more than the noise; the blocks blur a step's or a ramp's edge, ch. 4 at full resolution does
        not); then, with or without a block solve, where L's re-derived orders differ from the kept ones, judge each
        blob of them by what needs no truth (:func:`~processing.correction.surface_orders.arbitrate_low_rank_orders`):
-       L's orders where they leave fewer order breaks on the blob's edges and the lower frequencies do not
-       contradict them, or as many and the lower frequencies clearly favour them
-       (``info["evidence"]["low_rank_orders_taken"]``, pixels); a tie nothing decides is reported unresolved;
+       L's orders where they leave at most half the order breaks on the blob's edges and the lower frequencies
+       do not contradict them, or no more and the lower frequencies clearly favour them
+       (``info["evidence"]["low_rank_orders_taken"]``, pixels); a blob where L leaves no more breaks and
+       nothing decides is reported unresolved;
        keep L (denoised) except where the result departs from it coherently beyond the noise
        (:func:`~processing.correction.phase_rpca.restore_detail`, ``k_sigma`` standard deviations
        of the 3 x 3 mean residual), and never where L lies a fringe or more from the kept orders.
