@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from processing.concurrency import side_by_side
+from processing.correction.broken_pixels import mend_broken_pixels
 from processing.correction.method import CorrectionMethod, Result
 from processing.correction.order_evidence import (
     changed_orders,
@@ -334,6 +335,7 @@ def _restore_detail(
             noise=maps.sigma,
         )
     reordered, unresolved = _arbitrate_with_low_rank(maps, reordered, unresolved, low_rank, temporal, weights, counts)
+    reordered = _mend_broken_pixels(maps, reordered, temporal, weights, counts)
     pooled_detail = found.pooled_detail if low_rank is found.low_rank else None
     out, changed = side_by_side(
         lambda: (  # step 6 ran alongside step 3 on the pooled orders: redone only where the orders differ
@@ -372,6 +374,20 @@ def _arbitrate_with_low_rank(
         reordered, low_rank, maps.wrapped, maps.valid, frequency, lower, weights
     )
     return reordered, unresolved | tied
+
+
+def _mend_broken_pixels(
+    maps: _AutoMaps,
+    reordered: np.ndarray,
+    temporal: _Temporal | None,
+    weights: list[float] | None,
+    counts: dict[str, int],
+) -> np.ndarray:
+    """Step 6b: pixels whose order breaks with three or four neighbours take the order more of them support, where
+    the lower frequencies fit it no worse (:func:`~processing.correction.broken_pixels.mend_broken_pixels`)."""
+    misfit = None if temporal is None or weights is None else _spike_misfit(temporal, weights)
+    reordered, counts["broken_pixels_mended"] = mend_broken_pixels(reordered, maps.valid, misfit)
+    return reordered
 
 
 @dataclass(frozen=True)
@@ -417,18 +433,16 @@ def correct_auto(
 ) -> Result:
     """The most accurate method measured: region-pooled orders, ch. 4 RPCA, measured detail restored.
 
-    1. pool the fringe orders over 2-D fringe regions (:func:`~processing.correction.region_orders.
-       pool_region_orders`: one order per region that no wrapped-phase jump or kink crosses,
-       voted per 16 x 16 square, re-voted pixel by pixel where squares disagree);
-    2. L = low-rank part of that phase (stable inexact ALM, thesis ch. 4, stopped at the noise
-       level of :func:`~processing.correction.phase_rpca.phase_noise_sigma`, blind to order errors),
-       solved on 4 x 4 block means from :data:`DECIMATE_FROM` pixels on (``decimate``) and
-       interpolated back; the measured phase is used instead if pooling left more order breaks;
-    3. candidate order maps (only if the pooled orders still break somewhere): the pooled
-       orders; the pooled orders where L misfits the wrapped phase (|wrap(phi - L)| > pi / 2
-       nearby, or an edge the block solve blurred) and L's re-derived orders elsewhere; only if
-       both leave more order breaks than the measured phase (fringes too dense to pool), also
-       L's orders guarded where L misfits by the measured phase or by Ding's row vote, then
+    1. pool the fringe orders over 2-D fringe regions (:func:`~processing.correction.region_orders.pool_region_orders`:
+       one order per region no wrapped-phase jump or kink crosses, voted per 16 x 16 square, re-voted pixel by pixel);
+    2. L = low-rank part of that phase (stable inexact ALM, thesis ch. 4, stopped at the noise level of
+       :func:`~processing.correction.phase_rpca.phase_noise_sigma`, blind to order errors), solved on 4 x 4 block
+       means from :data:`DECIMATE_FROM` pixels on (``decimate``) and interpolated back; the measured phase is used
+       instead if pooling left more order breaks;
+    3. candidate order maps (only if the pooled orders still break somewhere): the pooled orders; the pooled orders
+       where L misfits the wrapped phase (|wrap(phi - L)| > pi / 2 nearby, or an edge the block solve blurred) and
+       L's re-derived orders elsewhere; only if both leave more order breaks than the measured phase (fringes too
+       dense to pool), also L's orders guarded where L misfits by the measured phase or by Ding's row vote, then
        settled from their neighbours (the earlier ``auto``);
     4. keep the candidate with fewest order breaks (second differences beyond pi, truth-free);
     5. judge its changes blob by blob against the measured orders
@@ -443,18 +457,14 @@ def correct_auto(
        clearly fit, a blob they clearly contradict goes back to the measured orders, one they cannot
        tell is reported unresolved (``info["evidence"]`` counts the blobs). Last, lone order spikes
        take their neighbours' order (:func:`~processing.correction.order_evidence.mend_spikes`);
-    6. after a block solve, refit L at full resolution (:func:`~processing.correction.phase_rpca.
-       refit_full_resolution`: its factors refitted to the kept orders' phase by least squares, used
-       where they fit it better by more than the noise; the blocks blur a step's or a ramp's edge, ch. 4 at full resolution does
-       not); then, with or without a block solve, where L's re-derived orders differ from the kept ones, judge each
-       blob of them by what needs no truth (:func:`~processing.correction.surface_orders.arbitrate_low_rank_orders`):
-       L's orders where they leave at most half the order breaks on the blob's edges and the lower frequencies
-       do not contradict them, or no more and the lower frequencies clearly favour them
-       (``info["evidence"]["low_rank_orders_taken"]``, pixels); a blob where L leaves no more breaks and
-       nothing decides is reported unresolved;
-       keep L (denoised) except where the result departs from it coherently beyond the noise
-       (:func:`~processing.correction.phase_rpca.restore_detail`, ``k_sigma`` standard deviations
-       of the 3 x 3 mean residual), and never where L lies a fringe or more from the kept orders.
+    6. after a block solve, refit L at full resolution (:func:`~processing.correction.phase_rpca.refit_full_resolution`:
+       its factors refitted to the kept orders' phase by least squares, used where they fit it better by more than the
+       noise; the blocks blur a step's or a ramp's edge, ch. 4 at full resolution does not); weigh L's orders against
+       the kept ones blob by blob (:mod:`~processing.correction.surface_orders`; ``info["evidence"]
+       ["low_rank_orders_taken"]``), move pixels breaking with three or four neighbours
+       (:mod:`~processing.correction.broken_pixels`); keep L (denoised) except where the result departs from it
+       coherently beyond the noise (:func:`~processing.correction.phase_rpca.restore_detail`, ``k_sigma`` standard
+       deviations of the 3 x 3 mean residual), and never where L lies a fringe or more from the kept orders.
     7. report as unresolved too the pieces of a fringe whose measured orders' vote does not decide the
        kept order (:func:`~processing.correction.order_margin.undecided_orders`; ``info["evidence"]
        ["vote_undecided_pixels"]``): where the lower frequencies barely tell orders apart, most measured
@@ -463,10 +473,7 @@ def correct_auto(
     Why step 5: the fewest breaks over the whole map let pooling across a real height step trade
     a few wrong orders for fewer breaks elsewhere (up to 34x worse than no correction on drawn cases);
     the neighbours cannot see a blob on a step of a whole number of fringes, the lower frequencies can
-    (develop cases with no wrong temporal order, 1.5x - 390x worse than none without them). Why the
-    arbitration in step 6: step 5 judges a blob as a whole, so a blob mixing right and wrong changes can
-    go back to wrong measured orders or keep a wrong proposal at an object's edge, where L, fitted to the
-    whole map, is right (develop-57: 0.82x -> 0.011x the oracle; develop-37 79x -> 27x).
+    (develop cases with no wrong temporal order, 1.5x - 390x worse than none without them).
 
     Measured (``rig study``, 1000 x 1000, seeds 0-2, NMSE_h): isolated objects, f = (18, 25), 18 dB, a
     quarter of the orders wrong: 3.2e-4 - 4.3e-4, 0.26 - 0.34x the true orders' (``rpca-phase``
@@ -508,7 +515,7 @@ def _auto_info(
     steps += ["settle-orders"] if len(found.maps) > 2 else []
     steps += ["keep-supported-changes"] + (["lower-frequency-evidence"] if extra["temporal"] else [])
     steps += ["mend-spikes"] + (["refit-full-resolution"] if maps.decimate > 1 else [])
-    steps += ["arbitrate-low-rank-orders", "restore-detail"]
+    steps += ["arbitrate-low-rank-orders", "mend-broken-pixels", "restore-detail"]
     return _solver_info(
         "auto",
         parameters,
