@@ -1,11 +1,13 @@
-"""Benchmark: what auto's arbitration with its low-rank orders (step 6a) costs, on the maps of bench_auto.py.
+"""Benchmark: what auto's steps 6a - 6b cost, on the maps of bench_auto.py.
 
-``auto`` judges the blobs where its low-rank surface's orders differ from the kept ones
-(:func:`processing.correction.surface_orders.arbitrate_low_rank_orders`). Per case of
-``benchmarks/bench_auto.py`` (1024 x 768, with the lower frequency's wrapped phase), interleaved runs
-time, in CPU seconds of this process: ``correct_auto`` as it is, ``correct_auto`` with step 6a
-replaced by a pass-through, and step 6a alone inside the first; the ratio is step 6a over ``auto``
-without it (median of the runs). Single-threaded BLAS, as ``rig process`` runs the correction.
+``auto`` judges the blobs where its low-rank surface's orders differ from the kept ones (step 6a,
+:func:`processing.correction.surface_orders.arbitrate_low_rank_orders`) and moves the pixels a fringe or
+more off three or four neighbours (step 6b, :func:`processing.correction.broken_pixels.mend_broken_pixels`).
+Per case of ``benchmarks/bench_auto.py`` (1024 x 768, with the lower frequency's wrapped phase),
+interleaved runs time, in CPU seconds of this process: ``correct_auto`` as it is, ``correct_auto`` with
+both steps replaced by pass-throughs, and the two steps alone inside the first; the ratio is the steps
+over ``auto`` without them (median of the runs). Single-threaded BLAS, as ``rig process`` runs the
+correction.
 
     python benchmarks/bench_auto_arbitration.py [--runs 9]
 """
@@ -44,36 +46,38 @@ def run_case(case: str, runs: int) -> None:
     scan = fringe_pass(obj, GROUPS, freqs, "two-frequency", keep_all=True)
     phase, wrapped, valid = scan.phase.astype(np.float64), scan.wrapped[-1].astype(np.float64), scan.valid
     evidence = {"frequency": freqs[1], "lower_wrapped": [(freqs[0], scan.wrapped[0])]}
-    step = registry._arbitrate_with_low_rank
+    arbitrate, mend = registry._arbitrate_with_low_rank, registry._mend_broken_pixels
     step_seconds: list[float] = []
 
-    def timed_step(*args: Any, **kwargs: Any) -> Any:
-        start = time.process_time()
-        out = step(*args, **kwargs)
-        step_seconds.append(time.process_time() - start)
-        return out
+    def timed(step: Callable[..., Any]) -> Callable[..., Any]:
+        def run(*args: Any, **kwargs: Any) -> Any:
+            start = time.process_time()
+            out = step(*args, **kwargs)
+            step_seconds.append(time.process_time() - start)
+            return out
 
-    def pass_through(_maps: Any, reordered: np.ndarray, unresolved: np.ndarray, *_args: Any) -> Any:
-        return reordered, unresolved
+        return run
 
     def auto() -> Any:
         return registry.correct_auto(phase, wrapped, mask=valid, **evidence)
 
-    with_step, without = [], []
+    with_steps, without = [], []
     try:
         with rpca_blas():
             for _ in range(runs):
-                registry._arbitrate_with_low_rank = timed_step
-                with_step.append(_cpu(auto))
-                registry._arbitrate_with_low_rank = pass_through
+                registry._arbitrate_with_low_rank, registry._mend_broken_pixels = timed(arbitrate), timed(mend)
+                with_steps.append(_cpu(auto))
+                registry._arbitrate_with_low_rank = lambda _maps, reordered, unresolved, *_: (reordered, unresolved)
+                registry._mend_broken_pixels = lambda _maps, reordered, *_: reordered
                 without.append(_cpu(auto))
     finally:
-        registry._arbitrate_with_low_rank = step
-    ratios = [s / w for s, w in zip(step_seconds, without, strict=True)]
+        registry._arbitrate_with_low_rank, registry._mend_broken_pixels = arbitrate, mend
+    steps = [a + b for a, b in zip(step_seconds[::2], step_seconds[1::2], strict=True)]
+    ratios = [s / w for s, w in zip(steps, without, strict=True)]
     print(
-        f"{label}: auto {statistics.median(with_step):.4f} s CPU, without step 6a {statistics.median(without):.4f} s, "
-        f"step 6a {statistics.median(step_seconds):.4f} s = {statistics.median(ratios):.1%} of auto without it "
-        f"({min(ratios):.1%} - {max(ratios):.1%})"
+        f"{label}: auto {statistics.median(with_steps):.4f} s CPU, without steps 6a - 6b "
+        f"{statistics.median(without):.4f} s; the steps {statistics.median(steps):.4f} s = "
+        f"{statistics.median(ratios):.1%} of auto without them ({min(ratios):.1%} - {max(ratios):.1%})"
     )
 
 

@@ -33,9 +33,7 @@ def test_a_patch_of_wrong_kept_orders_takes_the_surface_orders() -> None:
     kept = truth.copy()
     kept[10:13, 20:23] -= 2 * TWO_PI
     valid = np.ones(SHAPE, dtype=bool)
-    out, unresolved, moved = arbitrate_low_rank_orders(
-        kept, truth + 0.3, wrap_to_pi(truth), valid, F_HIGH, _lower(truth), WEIGHTS
-    )
+    out, unresolved, moved = arbitrate_low_rank_orders(kept, truth + 0.3, valid, F_HIGH, _lower(truth), WEIGHTS)
     np.testing.assert_allclose(out, truth)
     assert moved == 9 and not unresolved.any()
 
@@ -47,14 +45,11 @@ def test_a_patch_a_whole_number_of_fringes_proud_stays_where_the_lower_frequenci
     truth = background.copy()
     truth[10:16, 20:26] += 3 * TWO_PI
     valid = np.ones(SHAPE, dtype=bool)
-    wrapped = wrap_to_pi(truth)
-    out, unresolved, moved = arbitrate_low_rank_orders(
-        truth, background, wrapped, valid, F_HIGH, _lower(truth), WEIGHTS
-    )
+    out, unresolved, moved = arbitrate_low_rank_orders(truth, background, valid, F_HIGH, _lower(truth), WEIGHTS)
     np.testing.assert_array_equal(out, truth)
     assert moved == 0 and not unresolved.any()
     # without the lower frequencies the breaks alone decide, and L's orders win
-    out, _, moved = arbitrate_low_rank_orders(truth, background, wrapped, valid)
+    out, _, moved = arbitrate_low_rank_orders(truth, background, valid)
     assert moved == 36
     np.testing.assert_allclose(out, background)
 
@@ -74,7 +69,7 @@ def _column_beside_a_step() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def test_a_column_either_order_fits_is_unresolved_and_the_kept_order_stays() -> None:
     right, _, surface = _column_beside_a_step()
     valid = np.ones(SHAPE, dtype=bool)
-    out, unresolved, moved = arbitrate_low_rank_orders(right, surface, wrap_to_pi(right), valid)
+    out, unresolved, moved = arbitrate_low_rank_orders(right, surface, valid)
     np.testing.assert_array_equal(out, right)
     assert moved == 0
     assert unresolved[:, 25].all() and unresolved.sum() == SHAPE[0]
@@ -83,14 +78,10 @@ def test_a_column_either_order_fits_is_unresolved_and_the_kept_order_stays() -> 
 def test_a_tie_the_lower_frequencies_clearly_decide_takes_their_side() -> None:
     kept, truth, surface = _column_beside_a_step()
     valid = np.ones(SHAPE, dtype=bool)
-    out, unresolved, moved = arbitrate_low_rank_orders(
-        kept, surface, wrap_to_pi(kept), valid, F_HIGH, _lower(truth), WEIGHTS
-    )
+    out, unresolved, moved = arbitrate_low_rank_orders(kept, surface, valid, F_HIGH, _lower(truth), WEIGHTS)
     np.testing.assert_allclose(out, truth)
     assert moved == SHAPE[0] and not unresolved.any()
     # and where they say the kept order is right, it stays, decided: not unresolved
-    out, unresolved, moved = arbitrate_low_rank_orders(
-        kept, surface, wrap_to_pi(kept), valid, F_HIGH, _lower(kept), WEIGHTS
-    )
+    out, unresolved, moved = arbitrate_low_rank_orders(kept, surface, valid, F_HIGH, _lower(kept), WEIGHTS)
     np.testing.assert_array_equal(out, kept)
     assert moved == 0 and not unresolved.any()

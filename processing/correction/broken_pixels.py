@@ -39,7 +39,8 @@ def mend_broken_pixels(
     phase : (H, W) absolute phase (orders differ by whole fringes only)
     valid : (H, W) bool
     misfit : optional ``misfit(values, where)``, the lower frequencies' misfit of candidate phases at the
-        pixels of the (H, W) mask ``where`` (row-major order); without it the neighbours decide alone
+        pixels of the (H, W) mask ``where`` (row-major order along the last axis of ``values``, which may
+        stack several candidates); without it the neighbours decide alone
 
     Returns the phase and how many pixel moves were made.
 
@@ -70,14 +71,36 @@ def mend_broken_pixels(
 
 def _broken_pixels(phase: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Rows and columns (row-major) of the valid pixels off the border with four valid neighbours, three or four of
-    them more than pi away."""
+    them more than pi away.
+
+    On the flat map, where every shift is a contiguous slice (a 2-D slice off the first column is strided and costs
+    twice as much): pixel ``p`` steps ``across[p - 1]`` to its left, ``across[p]`` to its right, ``down[p - W]``
+    up and ``down[p]`` down. Only pixels whose four neighbours are valid count, so no step needs its own validity
+    test; the first and last columns, where the flat map wraps a row, are dropped at the end.
+    """
+    rows, cols = phase.shape
+    flat, flat_valid = np.ravel(phase), np.ravel(valid)
+    across = _breaks(flat[1:], flat[:-1])
+    down = _breaks(flat[cols:], flat[:-cols])
+    inner = rows * cols - 2 * cols  # the pixels of rows 1 .. H - 2, from flat index W on
+    left, right = across[cols - 1 : cols - 1 + inner], across[cols : cols + inner]
+    up, below = down[:inner], down[cols : cols + inner]
+    # three or four of four: both of one pair and at least one of the other
+    broken = (left & right & (up | below)) | (up & below & (left | right))
+    for start in (cols, cols - 1, cols + 1, 0, 2 * cols):  # the pixel, left, right, up, down
+        broken &= flat_valid[start : start + inner]
+    at = np.flatnonzero(broken) + cols
+    ys, xs = at // cols, at % cols
+    keep = (xs > 0) & (xs < cols - 1)
+    return ys[keep], xs[keep]
+
+
+def _breaks(second: np.ndarray, first: np.ndarray) -> np.ndarray:
+    """|second - first| > pi, with one float temporary (NaN: False)."""
+    step = np.subtract(second, first)
+    np.abs(step, out=step)
     with np.errstate(invalid="ignore"):
-        across = (np.abs(np.diff(phase, axis=1)) > np.pi) & valid[:, 1:] & valid[:, :-1]  # (H, W - 1)
-        down = (np.abs(np.diff(phase, axis=0)) > np.pi) & valid[1:, :] & valid[:-1, :]  # (H - 1, W)
-    breaks = across[1:-1, 1:].astype(np.int8) + across[1:-1, :-1] + down[1:, 1:-1] + down[:-1, 1:-1]
-    inner = valid[1:-1, 1:-1] & valid[:-2, 1:-1] & valid[2:, 1:-1] & valid[1:-1, :-2] & valid[1:-1, 2:]
-    ys, xs = np.nonzero(inner & (breaks >= 3))
-    return ys + 1, xs + 1
+        return np.greater(step, np.pi)
 
 
 def _next_to(ys: np.ndarray, xs: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -117,9 +140,9 @@ def _mend_at(
     else:
         where = np.zeros(valid.shape, dtype=bool)
         where[ys, xs] = True  # ys, xs are row-major: the mask's order
-        fits = np.stack([misfit(c, where) for c in candidates])
-        choice = np.argmin(np.where(support == best, fits, np.inf), axis=0)
-        moved &= fits[choice, index] <= misfit(at, where)
+        fits = misfit(np.vstack([candidates, at[None, :]]), where)  # the lower phases gathered once for all five
+        choice = np.argmin(np.where(support == best, fits[:4], np.inf), axis=0)
+        moved &= fits[choice, index] <= fits[4]
     out = phase.copy()
     out[ys[moved], xs[moved]] = candidates[choice, index][moved]
     return out, moved

@@ -371,7 +371,7 @@ def _arbitrate_with_low_rank(
     the blobs nothing decides are added to the unresolved pixels."""
     frequency, lower = (temporal.frequency, temporal.lower) if temporal is not None else (None, [])
     reordered, tied, counts["low_rank_orders_taken"] = arbitrate_low_rank_orders(
-        reordered, low_rank, maps.wrapped, maps.valid, frequency, lower, weights
+        reordered, low_rank, maps.valid, frequency, lower, weights
     )
     return reordered, unresolved | tied
 

@@ -46,7 +46,6 @@ TWO_PI = 2.0 * np.pi
 def arbitrate_low_rank_orders(
     kept: np.ndarray,
     low_rank: np.ndarray,
-    wrapped: np.ndarray,
     valid: np.ndarray,
     frequency: float | None = None,
     lower: Sequence[tuple[float, np.ndarray]] = (),
@@ -56,9 +55,8 @@ def arbitrate_low_rank_orders(
 
     Parameters
     ----------
-    kept : (H, W) absolute phase with the kept orders (``wrapped`` plus whole fringes)
+    kept : (H, W) absolute phase with the kept orders (the measured wrapped phase plus whole fringes)
     low_rank : (H, W) low-rank estimate L of the absolute phase
-    wrapped : (H, W) wrapped phase both come from (any 2 pi representation)
     valid : (H, W) bool, where all three are finite
     frequency, lower, weights : the phases' frequency, ((f_l, wrapped phase at f_l), ...) and each lower
         frequency's 1 / noise variance (:func:`~processing.correction.temporal_evidence.noise_weights`);
@@ -70,19 +68,22 @@ def arbitrate_low_rank_orders(
 
     >>> import numpy as np
     >>> truth = np.tile(np.linspace(0.0, 40.0, 50), (30, 1))
-    >>> wrapped = np.angle(np.exp(1j * truth))
     >>> kept = truth.copy()
     >>> kept[10:12, 20:22] += 2 * np.pi
-    >>> out, unresolved, moved = arbitrate_low_rank_orders(kept, truth, wrapped, np.ones((30, 50), bool))
+    >>> out, unresolved, moved = arbitrate_low_rank_orders(kept, truth, np.ones((30, 50), bool))
     >>> bool(np.allclose(out, truth)), moved, int(unresolved.sum())
     (True, 4, 0)
     """
-    with np.errstate(invalid="ignore"):
-        alternative = wrapped + TWO_PI * np.rint((low_rank - wrapped) / TWO_PI)
-    differ = changed_orders(alternative, kept, valid)
+    # kept and L's orders share the wrapped phase: they differ where |L - kept| > pi, and L's phase there is kept
+    # plus the whole fringes nearest L (only those pixels are computed: a full map costs more than the step)
+    differ = changed_orders(low_rank, kept, valid)
     none = np.zeros(valid.shape, dtype=bool)
     if not differ.any():
         return kept, none, 0
+    alternative = kept.copy()
+    changed = np.flatnonzero(differ)
+    at_kept = np.ravel(kept)[changed]
+    alternative.reshape(-1)[changed] = at_kept + TWO_PI * np.rint((np.ravel(low_rank)[changed] - at_kept) / TWO_PI)
     count, labels = label_blobs(differ)
     edges = blob_edges(valid, differ)
     with_surface = breaks_per_blob(alternative, valid, labels, count, edges)
