@@ -411,14 +411,35 @@ def block_means(values: np.ndarray, valid: np.ndarray, factor: int) -> tuple[np.
     rows, cols = values.shape
     down, across = -(-rows // factor), -(-cols // factor)
     data = np.zeros((down * factor, across * factor), dtype=np.float32)
-    count = np.zeros(data.shape, dtype=np.float32)
-    data[:rows, :cols] = np.where(valid, values, 0.0)
+    count = np.zeros(data.shape, dtype=np.uint8)
+    with np.errstate(over="ignore", invalid="ignore"):  # what lies outside ``valid`` is overwritten by 0
+        np.copyto(data[:rows, :cols], values, casting="same_kind")
+    np.copyto(data[:rows, :cols], np.float32(0.0), where=~valid)
     count[:rows, :cols] = valid
-    sums = data.reshape(down, factor, across, factor).sum(axis=(1, 3))
-    counts = count.reshape(down, factor, across, factor).sum(axis=(1, 3))
+    sums = _block_sums(data, factor, np.float32)
+    counts = _block_sums(count, factor, np.uint16).astype(np.float32)  # whole numbers: exact either way
     with np.errstate(invalid="ignore", divide="ignore"):
         means = np.where(counts > 0, sums / counts, 0.0).astype(np.float32)
     return means, counts > 0
+
+
+def _block_sums(data: np.ndarray, factor: int, dtype: type) -> np.ndarray:
+    """Sums of the ``factor`` x ``factor`` blocks of ``data`` (sides multiples of ``factor``) in ``dtype``.
+
+    Bit-identical to ``data.reshape(down, factor, across, factor).sum(axis=(1, 3))`` in float32: numpy adds
+    each block row's values left to right and then the rows, top to bottom, onto 0 (one tiny inner loop per
+    block row there; a few strided passes over the map here).
+    """
+    rows, cols = data.shape
+    by_row = data.reshape(rows, cols // factor, factor)
+    row_sums = by_row[:, :, 0].astype(dtype)
+    for k in range(1, factor):
+        row_sums += by_row[:, :, k]
+    blocks = row_sums.reshape(rows // factor, factor, cols // factor)
+    out = np.zeros((rows // factor, cols // factor), dtype=dtype)
+    for k in range(factor):
+        out += blocks[:, k, :]
+    return out
 
 
 def upsample_blocks(blocks: np.ndarray, factor: int, shape: tuple[int, int]) -> np.ndarray:
@@ -469,7 +490,8 @@ def decimated_low_rank(
     means, inside = block_means(phase, valid, factor)
     filled = fill_shadows(means, inside)
     result = rpca_ialm(filled, tau=tau, svd=svd, stable=True, noise_sigma=noise_sigma / factor, dtype=np.float32)
-    low_rank = np.where(valid, upsample_blocks(result.low_rank, factor, phase.shape).astype(np.float64), np.nan)
+    low_rank = upsample_blocks(result.low_rank, factor, phase.shape).astype(np.float64)
+    np.copyto(low_rank, np.nan, where=~valid)
     return low_rank, result, _bent_pixels(result.low_rank, factor, phase.shape, bend)
 
 
