@@ -45,6 +45,7 @@ from processing.correction.phase_rpca import (
     keep_coherent_detail,
     low_rank_misfit,
     order_breaks,
+    order_breaks_since,
     phase_noise_and_breaks,
     phase_pair,
     refit_full_resolution,
@@ -247,7 +248,7 @@ def _add_low_rank_orders(maps: _AutoMaps, found: _Candidates) -> np.ndarray:
         lambda: (  # after a block solve step 6 restores detail around the refitted L instead
             None if maps.decimate > 1 else keep_coherent_detail(found.low_rank, pooled, valid, maps.k_sigma, maps.sigma)
         ),
-        lambda: order_breaks(candidate, valid),
+        lambda: order_breaks_since(candidate, pooled, found.breaks["regions"], valid),
     )
     return proposed
 
