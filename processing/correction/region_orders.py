@@ -104,15 +104,14 @@ def fringe_regions(
 def _fringe_regions(
     steps: tuple[np.ndarray, np.ndarray], valid: np.ndarray, cut: float, bend: float
 ) -> tuple[np.ndarray, np.ndarray, int]:
-    """:func:`fringe_regions` from the :func:`_steps` of the masked wrapped phase (one float scratch map for
+    """:func:`fringe_regions` from the :func:`_steps` of the masked wrapped phase (two float scratch maps for
     every test: a fresh map per test costs as much as its arithmetic)."""
     down, across = steps
     rows, cols = valid.shape
-    scratch = np.empty(2 * rows * cols)
+    scratch = (np.empty(rows * cols), np.empty(rows * cols))
 
     def buffer(shape: tuple[int, int], second: bool = False) -> np.ndarray:
-        start = rows * cols if second else 0
-        return scratch[start : start + shape[0] * shape[1]].reshape(shape)
+        return scratch[int(second)][: shape[0] * shape[1]].reshape(shape)
 
     step = np.zeros(valid.shape, dtype=bool)
     np.greater(np.abs(across, out=buffer(across.shape)), cut, out=step[:, :-1])
