@@ -133,8 +133,14 @@ def reorder_from_low_rank(
     (H, W) float64, NaN outside the mask
     """
     estimate, wrapped, valid = phase_pair(low_rank_phase, wrapped_phase, mask, ("low_rank_phase", "wrapped_phase"))
+    out = np.subtract(estimate, wrapped)  # the expression in one buffer: the same values, one map instead of five
+    out /= TWO_PI
     with np.errstate(invalid="ignore"):
-        return np.where(valid, wrapped + TWO_PI * np.rint((estimate - wrapped) / TWO_PI), np.nan)
+        np.rint(out, out=out)
+        out *= TWO_PI
+        out += wrapped
+    np.copyto(out, np.nan, where=~valid)
+    return out
 
 
 def phase_pair(
@@ -229,7 +235,8 @@ def low_rank_misfit(
     (a misfit band sweeps through multiples of 2 pi, where single pixels look fine).
     """
     residual = wrap_to_pi(wrapped_phase - low_rank_phase)
-    bad = valid & ~(np.abs(np.nan_to_num(residual, nan=np.pi)) < limit)
+    bad = ~(np.abs(residual, out=residual) < limit)  # NaN (no estimate) misfits too
+    bad &= valid
     return valid & _dilate_3x3(bad)
 
 
@@ -443,8 +450,9 @@ def _box_sum_3x3(values: np.ndarray) -> np.ndarray:
 
 
 def _box_count_3x3(mask: np.ndarray) -> np.ndarray:
-    """True pixels in each pixel's 3 x 3 neighbourhood (uint8: at most 9), as :func:`_box_sum_3x3`."""
-    return _box_sum_3x3(mask.view(np.uint8))
+    """True pixels in each pixel's 3 x 3 neighbourhood (uint8: at most 9), as :func:`_box_sum_3x3`: whole numbers,
+    exact in any order of summation, so OpenCV's box filter counts them."""
+    return cv2.boxFilter(mask.view(np.uint8), -1, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT)
 
 
 def block_means(values: np.ndarray, valid: np.ndarray, factor: int) -> tuple[np.ndarray, np.ndarray]:
