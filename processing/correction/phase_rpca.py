@@ -485,7 +485,7 @@ def _block_sums(data: np.ndarray, factor: int, dtype: type) -> np.ndarray:
     """
     rows, cols = data.shape
     by_row = data.reshape(rows, cols // factor, factor)
-    row_sums = by_row[:, :, 0].astype(dtype)
+    row_sums: np.ndarray = by_row[:, :, 0].astype(dtype)
     for k in range(1, factor):
         row_sums += by_row[:, :, k]
     blocks = row_sums.reshape(rows // factor, factor, cols // factor)
