@@ -46,6 +46,7 @@ from processing.correction.phase_rpca import (
     keep_coherent_detail,
     low_rank_misfit,
     order_breaks,
+    order_breaks_since,
     phase_noise_and_breaks,
     phase_pair,
     refit_full_resolution,
@@ -249,7 +250,7 @@ def _add_low_rank_orders(maps: _AutoMaps, found: _Candidates) -> np.ndarray:
         lambda: (  # after a block solve step 6 restores detail around the refitted L instead
             None if maps.decimate > 1 else keep_coherent_detail(found.low_rank, pooled, valid, maps.k_sigma, maps.sigma)
         ),
-        lambda: order_breaks(candidate, valid),
+        lambda: order_breaks_since(candidate, pooled, found.breaks["regions"], valid),
     )
     return proposed
 
@@ -413,7 +414,7 @@ def _temporal_inputs(
             raise ValueError(f"lower_wrapped: expected frequencies in (0, {frequency:g}), found {f_low:g}")
         if wrapped_low.shape != valid.shape:
             raise ValueError(f"lower_wrapped at {f_low:g}: expected shape {valid.shape}, found {wrapped_low.shape}")
-        if not np.isfinite(wrapped_low[valid]).all():
+        if (valid & ~np.isfinite(wrapped_low)).any():  # whole-map tests: gathering the valid pixels costs more
             return None  # a lower map with holes inside the mask (pixels the pass did not keep): no evidence
         lower.append((float(f_low), np.where(valid, wrapped_low, 0.0)))
     return _Temporal(float(frequency), lower)
