@@ -150,15 +150,22 @@ def unresolved_summary(unresolved: np.ndarray, valid: np.ndarray) -> dict[str, A
     total = max(int(np.count_nonzero(valid)), 1)
     regions: list[list[int]] = []
     if pixels:
-        import cv2
-
-        count, _labels, stats, _centres = cv2.connectedComponentsWithStats(
-            unresolved.view(np.uint8), connectivity=8, ltype=cv2.CV_32S
-        )
-        order = np.argsort(-stats[1:, cv2.CC_STAT_AREA], kind="stable")[:LISTED_REGIONS] + 1
-        for label in order:
-            left, top, width, height, area = (int(v) for v in stats[label])
-            regions.append([top, left, top + height - 1, left + width - 1, area])
+        count, labels = label_blobs(unresolved)  # OpenCV's statistics cost 10x the labelling: taken here instead
+        at = np.flatnonzero(unresolved)  # the labelled pixels
+        label = np.ravel(labels)[at]
+        area = np.bincount(label, minlength=count)
+        order = np.argsort(-area[1:], kind="stable")[:LISTED_REGIONS] + 1
+        listed = np.zeros(count, dtype=bool)
+        listed[order] = True
+        rows, cols = np.divmod(at[listed[label]], unresolved.shape[1])
+        label = label[listed[label]]
+        box = np.zeros((4, count), dtype=np.int64)  # top, left, bottom, right
+        box[:2] = np.iinfo(np.int64).max
+        np.minimum.at(box[0], label, rows)
+        np.minimum.at(box[1], label, cols)
+        np.maximum.at(box[2], label, rows)
+        np.maximum.at(box[3], label, cols)
+        regions = [[*(int(v) for v in box[:, index]), int(area[index])] for index in order]
     return {"pixels": pixels, "fraction": round(pixels / total, 6), "regions": regions}
 
 
@@ -198,10 +205,19 @@ def mend_spikes(
 
 def _spike_pixels(phase: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Rows and columns (row-major) of the valid pixels whose four neighbours are all valid and all more than
-    pi away: the steps between neighbours are taken once and each pixel reads the two on either side of it."""
+    pi away: the steps along the rows are taken once over the map, and the steps up and down only at the few
+    pixels that break with both their left and right neighbours."""
     with np.errstate(invalid="ignore"):
-        across = (np.abs(np.diff(phase, axis=1)) > np.pi) & valid[:, 1:] & valid[:, :-1]  # (H, W - 1)
-        down = (np.abs(np.diff(phase, axis=0)) > np.pi) & valid[1:, :] & valid[:-1, :]  # (H - 1, W)
-    inner = across[1:-1, 1:] & across[1:-1, :-1] & down[1:, 1:-1] & down[:-1, 1:-1]  # pixels off the border
-    ys, xs = np.nonzero(inner)
-    return ys + 1, xs + 1
+        step = np.diff(phase, axis=1)
+        across = np.abs(step, out=step) > np.pi
+        across &= valid[:, 1:]
+        across &= valid[:, :-1]  # (H, W - 1)
+        sides = across[1:-1, 1:] & across[1:-1, :-1]  # pixels off the border
+        ys, xs = np.divmod(np.flatnonzero(sides), sides.shape[1])
+        ys += 1
+        xs += 1
+        here = phase[ys, xs]
+        keep = valid[ys - 1, xs] & valid[ys + 1, xs]
+        keep &= np.abs(phase[ys - 1, xs] - here) > np.pi
+        keep &= np.abs(phase[ys + 1, xs] - here) > np.pi
+    return ys[keep], xs[keep]

@@ -133,8 +133,14 @@ def reorder_from_low_rank(
     (H, W) float64, NaN outside the mask
     """
     estimate, wrapped, valid = phase_pair(low_rank_phase, wrapped_phase, mask, ("low_rank_phase", "wrapped_phase"))
+    out = np.subtract(estimate, wrapped)  # the expression in one buffer: the same values, one map instead of five
+    out /= TWO_PI
     with np.errstate(invalid="ignore"):
-        return np.where(valid, wrapped + TWO_PI * np.rint((estimate - wrapped) / TWO_PI), np.nan)
+        np.rint(out, out=out)
+        out *= TWO_PI
+        out += wrapped
+    np.copyto(out, np.nan, where=~valid)
+    return out
 
 
 def phase_pair(
@@ -229,7 +235,8 @@ def low_rank_misfit(
     (a misfit band sweeps through multiples of 2 pi, where single pixels look fine).
     """
     residual = wrap_to_pi(wrapped_phase - low_rank_phase)
-    bad = valid & ~(np.abs(np.nan_to_num(residual, nan=np.pi)) < limit)
+    bad = ~(np.abs(residual, out=residual) < limit)  # NaN (no estimate) misfits too
+    bad &= valid
     return valid & _dilate_3x3(bad)
 
 
@@ -266,6 +273,51 @@ def order_breaks(phase: np.ndarray, valid: np.ndarray) -> int:
     candidates of one map).
     """
     return _count_breaks(masked_second_differences(phase, valid))
+
+
+# Share of the map that may differ from the previous map for :func:`order_breaks_since` to recount only near it.
+RECOUNT_WHOLE_FROM = 1.0 / 16.0
+
+
+def order_breaks_since(phase: np.ndarray, previous: np.ndarray, previous_breaks: int, valid: np.ndarray) -> int:
+    """:func:`order_breaks` of ``phase``, given ``previous_breaks`` = :func:`order_breaks` of ``previous``.
+
+    A second difference reads three neighbours, so only those that read a valid pixel where the two maps
+    differ can change: they are recounted on both maps, in the arithmetic of the whole-map count (the same
+    integer), at a cost that follows the differences (a candidate order map differs from the pooled one at
+    a few hundred pixels).
+    """
+    differ = np.flatnonzero((phase != previous) & valid)
+    if differ.size >= RECOUNT_WHOLE_FROM * valid.size:
+        return order_breaks(phase, valid)
+    height, width = valid.shape
+    rows, cols = np.divmod(differ, width)
+    back = np.arange(3)[None, :]  # a pixel is read by the second differences starting 0, 1 and 2 before it
+    breaks = int(previous_breaks)
+    for step, length in ((1, width), (width, height)):  # along the rows, then down the columns
+        if length < 3:
+            continue
+        if step == 1:
+            first = rows[:, None] * width + np.clip(cols[:, None] - back, 0, width - 3)
+        else:
+            first = np.clip(rows[:, None] - back, 0, height - 3) * width + cols[:, None]
+        first = np.unique(first)  # clipped starts read no differing pixel: they count alike on both maps
+        breaks += _count_breaks_at(np.ravel(phase), np.ravel(valid), first, step)
+        breaks -= _count_breaks_at(np.ravel(previous), np.ravel(valid), first, step)
+    return breaks
+
+
+def _count_breaks_at(flat: np.ndarray, flat_valid: np.ndarray, first: np.ndarray, step: int) -> int:
+    """Second differences beyond pi of the flat map at ``first``, ``first + step``, ``first + 2 step`` (NaN
+    unless all three are valid), as :func:`processing.denoise.rpca.masked_second_differences` computes them."""
+    before, middle, after = (
+        np.where(flat_valid[at], flat[at], np.nan) for at in (first, first + step, first + 2 * step)
+    )
+    second = np.multiply(middle, 2.0)
+    np.subtract(after, second, out=second)
+    second += before
+    with np.errstate(invalid="ignore"):
+        return int(np.count_nonzero(np.abs(second) > np.pi))
 
 
 def _count_breaks(seconds: tuple[np.ndarray, np.ndarray]) -> int:
@@ -398,8 +450,9 @@ def _box_sum_3x3(values: np.ndarray) -> np.ndarray:
 
 
 def _box_count_3x3(mask: np.ndarray) -> np.ndarray:
-    """True pixels in each pixel's 3 x 3 neighbourhood (uint8: at most 9), as :func:`_box_sum_3x3`."""
-    return _box_sum_3x3(mask.view(np.uint8))
+    """True pixels in each pixel's 3 x 3 neighbourhood (uint8: at most 9), as :func:`_box_sum_3x3`: whole numbers,
+    exact in any order of summation, so OpenCV's box filter counts them."""
+    return cv2.boxFilter(mask.view(np.uint8), -1, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT)
 
 
 def block_means(values: np.ndarray, valid: np.ndarray, factor: int) -> tuple[np.ndarray, np.ndarray]:
@@ -411,14 +464,35 @@ def block_means(values: np.ndarray, valid: np.ndarray, factor: int) -> tuple[np.
     rows, cols = values.shape
     down, across = -(-rows // factor), -(-cols // factor)
     data = np.zeros((down * factor, across * factor), dtype=np.float32)
-    count = np.zeros(data.shape, dtype=np.float32)
-    data[:rows, :cols] = np.where(valid, values, 0.0)
+    count = np.zeros(data.shape, dtype=np.uint8)
+    with np.errstate(over="ignore", invalid="ignore"):  # what lies outside ``valid`` is overwritten by 0
+        np.copyto(data[:rows, :cols], values, casting="same_kind")
+    np.copyto(data[:rows, :cols], np.float32(0.0), where=~valid)
     count[:rows, :cols] = valid
-    sums = data.reshape(down, factor, across, factor).sum(axis=(1, 3))
-    counts = count.reshape(down, factor, across, factor).sum(axis=(1, 3))
+    sums = _block_sums(data, factor, np.float32)
+    counts = _block_sums(count, factor, np.uint16).astype(np.float32)  # whole numbers: exact either way
     with np.errstate(invalid="ignore", divide="ignore"):
         means = np.where(counts > 0, sums / counts, 0.0).astype(np.float32)
     return means, counts > 0
+
+
+def _block_sums(data: np.ndarray, factor: int, dtype: type) -> np.ndarray:
+    """Sums of the ``factor`` x ``factor`` blocks of ``data`` (sides multiples of ``factor``) in ``dtype``.
+
+    Bit-identical to ``data.reshape(down, factor, across, factor).sum(axis=(1, 3))`` in float32: numpy adds
+    each block row's values left to right and then the rows, top to bottom, onto 0 (one tiny inner loop per
+    block row there; a few strided passes over the map here).
+    """
+    rows, cols = data.shape
+    by_row = data.reshape(rows, cols // factor, factor)
+    row_sums: np.ndarray = by_row[:, :, 0].astype(dtype)
+    for k in range(1, factor):
+        row_sums += by_row[:, :, k]
+    blocks = row_sums.reshape(rows // factor, factor, cols // factor)
+    out = np.zeros((rows // factor, cols // factor), dtype=dtype)
+    for k in range(factor):
+        out += blocks[:, k, :]
+    return out
 
 
 def upsample_blocks(blocks: np.ndarray, factor: int, shape: tuple[int, int]) -> np.ndarray:
@@ -469,7 +543,8 @@ def decimated_low_rank(
     means, inside = block_means(phase, valid, factor)
     filled = fill_shadows(means, inside)
     result = rpca_ialm(filled, tau=tau, svd=svd, stable=True, noise_sigma=noise_sigma / factor, dtype=np.float32)
-    low_rank = np.where(valid, upsample_blocks(result.low_rank, factor, phase.shape).astype(np.float64), np.nan)
+    low_rank = upsample_blocks(result.low_rank, factor, phase.shape).astype(np.float64)
+    np.copyto(low_rank, np.nan, where=~valid)
     return low_rank, result, _bent_pixels(result.low_rank, factor, phase.shape, bend)
 
 
@@ -520,7 +595,8 @@ def refit_full_resolution(
     basis, _ = np.linalg.qr(grid @ np.random.default_rng(0).standard_normal((grid.shape[1], rank)))
     rows = _interpolate_factors(basis, factor, measured.shape[0])
     cols = _interpolate_factors(grid.T @ basis, factor, measured.shape[1])
-    target = np.where(valid, measured.astype(np.float32), rows @ cols.T)
+    measured_32 = measured.astype(np.float32)
+    target = np.where(valid, measured_32, rows @ cols.T)
     for round_ in range(2):
         cols = _least_squares_factor(rows, target.T @ rows)
         rows = _least_squares_factor(cols, target @ cols)
@@ -528,15 +604,19 @@ def refit_full_resolution(
         if round_ == 0:
             # what departs from the refit far beyond the noise (an object the low rank cannot hold) is left
             # out of the second round, so the refit does not spread it along its rows and columns
-            np.copyto(target, refit, where=np.abs(target - refit) > outlier)
+            departure = np.subtract(target, refit)
+            np.copyto(target, refit, where=np.abs(departure, out=departure) > outlier)
     # residuals of both surfaces (0 outside ``valid``), float32, compared as 3 x 3 sums of absolute values
-    inside = np.where(valid, measured, refit).astype(np.float32)
-    block = np.where(valid, low_rank, refit).astype(np.float32)
+    # (each map cast to float32 before it is chosen from: the same values, half the memory traffic)
+    inside = np.where(valid, measured_32, refit)
+    block = np.where(valid, low_rank.astype(np.float32), refit)
     margin = REFIT_MARGIN * 3.0 * float(noise)
     # where neither surface holds the scene (beyond ``outlier``), the block surface stays for the detail
     # restore to judge, as without the refit (develop-33's tall objects: 0.087 -> 0.025 x the oracle)
-    misfit = np.abs(inside - refit)
-    better = valid & (misfit <= outlier) & (_box_sum(misfit) + margin < _box_sum(np.abs(inside - block)))
+    misfit = np.subtract(inside, refit)
+    np.abs(misfit, out=misfit)
+    np.subtract(inside, block, out=block)
+    better = valid & (misfit <= outlier) & (_box_sum(misfit) + margin < _box_sum(np.abs(block, out=block)))
     return np.where(better, refit, low_rank)
 
 

@@ -29,6 +29,7 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
 from processing.angles import wrap_to_pi
+from processing.denoise.rpca import finite_median
 
 TWO_PI = 2.0 * np.pi
 # The 8 neighbours, as (row, column) offsets.
@@ -59,11 +60,29 @@ def _region_cut(steps: tuple[np.ndarray, np.ndarray], valid: np.ndarray) -> floa
     typical = 0.0
     for axis, step in enumerate(steps):
         pair = valid[1:, :] & valid[:-1, :] if axis == 0 else valid[:, 1:] & valid[:, :-1]
-        chosen = step[pair]
-        if chosen.size:
-            sample = np.abs(wrap_to_pi(chosen[:: max(1, chosen.size // 100_000)]))
-            typical = max(typical, float(np.median(sample)))
+        sample = _spaced_selection(step, pair, 100_000)
+        if sample.size:
+            typical = max(typical, finite_median(np.abs(wrap_to_pi(sample))))
     return float(np.clip(2.0 * typical, np.pi / 2, np.pi))
+
+
+def _spaced_selection(values: np.ndarray, selected: np.ndarray, target: int) -> np.ndarray:
+    """``values[selected][:: max(1, n // target)]`` (n selected entries), gathering only the entries kept.
+
+    The r-th selected entry lies at position r + (the unselected entries before it), counted from the few
+    unselected ones: most pixels are valid, so this reads far less than selecting them all.
+    """
+    skipped = np.flatnonzero(~selected)
+    count = selected.size - skipped.size
+    if not count:
+        return np.empty(0, dtype=values.dtype)
+    stride = max(1, count // target)
+    ranks = np.arange(0, count, stride)
+    # selected entries before each unselected one; those at or below a rank lie before its entry
+    before = skipped - np.arange(skipped.size)
+    first_rank_after = -(-before // stride)  # the first rank index at or above each
+    passed = np.cumsum(np.bincount(first_rank_after, minlength=ranks.size + 1)[: ranks.size])
+    return values.reshape(-1)[ranks + passed]
 
 
 def fringe_regions(
@@ -85,36 +104,43 @@ def fringe_regions(
 def _fringe_regions(
     steps: tuple[np.ndarray, np.ndarray], valid: np.ndarray, cut: float, bend: float
 ) -> tuple[np.ndarray, np.ndarray, int]:
-    """:func:`fringe_regions` from the :func:`_steps` of the masked wrapped phase."""
-
+    """:func:`fringe_regions` from the :func:`_steps` of the masked wrapped phase (two float scratch maps for
+    every test: a fresh map per test costs as much as its arithmetic)."""
     down, across = steps
+    rows, cols = valid.shape
+    scratch = (np.empty(rows * cols), np.empty(rows * cols))
+
+    def buffer(shape: tuple[int, int], second: bool = False) -> np.ndarray:
+        return scratch[int(second)][: shape[0] * shape[1]].reshape(shape)
+
     step = np.zeros(valid.shape, dtype=bool)
-    step[:, :-1] = np.abs(across) > cut
-    step[:-1, :] |= np.abs(down) > cut
+    np.greater(np.abs(across, out=buffer(across.shape)), cut, out=step[:, :-1])
+    step[:-1, :] |= np.abs(down, out=buffer(down.shape)) > cut
     # A kink: the wrapped slope changes by more than ``bend`` (second difference, wrapped).
-    step[:, 1:-1] |= _beyond_wrapped(np.diff(across, axis=1), bend)
-    step[1:-1, :] |= _beyond_wrapped(np.diff(down, axis=0), bend)
+    kink = np.subtract(across[:, 1:], across[:, :-1], out=buffer((rows, cols - 2)))
+    step[:, 1:-1] |= _beyond_wrapped(kink, bend, buffer(kink.shape, second=True))
+    kink = np.subtract(down[1:, :], down[:-1, :], out=buffer((rows - 2, cols)))
+    step[1:-1, :] |= _beyond_wrapped(kink, bend, buffer(kink.shape, second=True))
     core = valid & ~step
     count, labels = cv2.connectedComponents(core.view(np.uint8), connectivity=4, ltype=cv2.CV_32S)
     return core, labels, int(count)
 
 
-def _beyond_wrapped(values: np.ndarray, bound: float) -> np.ndarray:
+def _beyond_wrapped(values: np.ndarray, bound: float, scratch: np.ndarray | None = None) -> np.ndarray:
     """``|wrap_to_pi(values)| > bound`` for ``bound`` < pi, wrapping only the values beyond it.
 
     Below pi in magnitude the wrap is the identity, so a value within the bound stays within;
-    only the others (a few per cent: the fringe jumps) are wrapped and tested again.
+    only the others (a few per cent: the fringe jumps) are wrapped and tested again. ``scratch``: a
+    map of ``values``' shape for the magnitudes.
     """
-    beyond = np.abs(values) > bound
+    beyond = np.abs(values, out=scratch) > bound
     at = np.flatnonzero(beyond)
     beyond.reshape(-1)[at] = np.abs(wrap_to_pi(values.reshape(-1)[at])) > bound
     return beyond
 
 
-def _drop_small_regions(
-    labels: np.ndarray, core: np.ndarray, count: int, min_size: int
-) -> tuple[np.ndarray, np.ndarray, int]:
-    """Regions of fewer than ``min_size`` pixels removed from ``core`` (label 0), the rest relabelled 1 .. n.
+def _drop_small_regions(labels: np.ndarray, count: int, min_size: int) -> tuple[np.ndarray, int]:
+    """Regions of fewer than ``min_size`` pixels removed (label 0), the rest relabelled 1 .. n.
 
     Such a region can hold no square with ``min_size`` votes, so it never votes; noisy maps have
     thousands of them (kinks cut by noise), which would otherwise size every per-region table.
@@ -123,28 +149,28 @@ def _drop_small_regions(
     big = areas >= min_size
     big[0] = False
     relabel = (np.cumsum(big) * big).astype(np.int32)
-    kept = relabel[labels]
-    return kept, core & (kept > 0), int(relabel.max()) + 1
+    return relabel[labels], int(relabel.max()) + 1
 
 
-def _tile_pieces(labels: np.ndarray, core: np.ndarray, count: int, tile: int) -> tuple[np.ndarray, int]:
-    """Each region cut into ``tile`` x ``tile`` squares: compact piece labels (0 outside ``core``)."""
+def _tile_pieces(labels: np.ndarray, count: int, tile: int) -> tuple[np.ndarray, int]:
+    """Each region cut into ``tile`` x ``tile`` squares: compact piece labels (0 where ``labels`` is 0: outside
+    every region). Keys and pieces are taken over the whole map, no pixel gathered or scattered by a mask."""
     rows, cols = labels.shape
     across, down = -(-cols // tile), -(-rows // tile)
-    tiles = (np.arange(rows, dtype=np.int32)[:, None] // tile) * across + (
-        np.arange(cols, dtype=np.int32)[None, :] // tile
-    )
-    key = (
-        labels[core].astype(np.int64 if count * down * across >= 1 << 31 else np.int32) * (down * across) + tiles[core]
-    )
-    pieces = np.zeros(labels.shape, dtype=np.int32)
-    if count * down * across <= 1 << 24:
-        used = np.zeros(count * down * across, dtype=bool)
+    per_label = down * across
+    key = labels.astype(np.int64) if count * per_label >= 1 << 31 else labels.copy()
+    key *= per_label
+    key += (np.arange(rows, dtype=key.dtype) // tile * across)[:, None]
+    key += (np.arange(cols, dtype=key.dtype) // tile)[None, :]
+    if count * per_label <= 1 << 24:
+        used = np.zeros(count * per_label, dtype=bool)
         used[key] = True
+        used[:per_label] = False  # label 0's squares: outside every region, piece 0
         compact = np.cumsum(used, dtype=np.int32)
-        pieces[core] = compact[key]
-        return pieces, int(compact[-1]) + 1
-    unique, inverse = np.unique(key, return_inverse=True)
+        return compact[key], int(compact[-1]) + 1
+    core = labels > 0
+    pieces = np.zeros(labels.shape, dtype=np.int32)
+    unique, inverse = np.unique(key[core], return_inverse=True)
     pieces[core] = inverse + 1
     return pieces, unique.size + 1
 
@@ -154,7 +180,10 @@ def _tally(pieces: np.ndarray, orders: np.ndarray, count: int) -> tuple[np.ndarr
     low = int(orders.min())
     span = int(orders.max()) - low + 1
     if count * span <= 1 << 25:
-        tally = np.bincount(pieces * span + (orders - low), minlength=count * span).reshape(count, span)
+        cells = pieces * span  # below 2 ** 25
+        cells += orders
+        cells -= low
+        tally = np.bincount(cells.ravel(), minlength=count * span).reshape(count, span)
         return np.argmax(tally, axis=1) + low, tally.sum(axis=1)
     key = pieces.astype(np.int64) * span + (orders - low)
     unique, votes = np.unique(key, return_counts=True)
@@ -163,7 +192,7 @@ def _tally(pieces: np.ndarray, orders: np.ndarray, count: int) -> tuple[np.ndarr
     first = np.r_[True, piece_of[order][1:] != piece_of[order][:-1]]
     winners = np.zeros(count, dtype=np.int64)
     winners[piece_of[order][first]] = unique[order][first] % span + low
-    return winners, np.bincount(pieces, minlength=count)
+    return winners, np.bincount(pieces.ravel(), minlength=count)
 
 
 def _window_majority(
@@ -279,24 +308,28 @@ def fill_from_neighbours(
     Each pass, a pixel with a finite 8-neighbour takes phi + 2 pi round((Phi_q - phi) / 2 pi)
     from the neighbour q whose wrapped phase is closest to its own (most likely the same
     surface); pixels reached by no pass stay NaN. ``phase`` is filled in place and returned.
+    Neighbours are read at flat offsets (clipped to the map); only the few pixels on the map's
+    border test which of their neighbours lie beyond it.
     """
     height, width = phase.shape
     work = phase if phase.flags.c_contiguous else np.ascontiguousarray(phase)  # flat writes reach it
     flat, flat_phi = work.reshape(-1), np.ravel(wrapped_phase)
-    ys, xs = np.divmod(np.flatnonzero(todo & np.isnan(work)), width)  # np.nonzero's order, 3x faster
+    at = np.flatnonzero(todo & np.isnan(work))
     for _ in range(passes):
-        if not ys.size:
+        if not at.size:
             break
-        at = ys * width + xs
+        ys, xs = np.divmod(at, width)
+        rim = np.flatnonzero((ys == 0) | (ys == height - 1) | (xs == 0) | (xs == width - 1))
         phi = flat_phi[at]
         best = np.full(at.size, np.nan)
         distance = np.full(at.size, np.inf)
         for dy, dx in NEIGHBOURS:
-            y, x = ys + dy, xs + dx
-            inside = (y >= 0) & (y < height) & (x >= 0) & (x < width)
-            near = np.where(inside, y * width + x, 0)  # beyond the border: no value (NaN below)
-            value = np.where(inside, flat[near], np.nan)
-            gap = np.abs(wrap_to_pi(flat_phi[near] - phi))  # meaningless where value is NaN, never used
+            near = at + (dy * width + dx)
+            value = flat.take(near, mode="clip")
+            if rim.size:  # beyond the border: no value
+                y, x = ys[rim] + dy, xs[rim] + dx
+                value[rim[(y < 0) | (y >= height) | (x < 0) | (x >= width)]] = np.nan
+            gap = np.abs(wrap_to_pi(flat_phi.take(near, mode="clip") - phi))  # meaningless where value is NaN
             closer = (gap < distance) & np.isfinite(value)
             np.copyto(best, value, where=closer)
             np.copyto(distance, gap, where=closer)
@@ -305,10 +338,35 @@ def fill_from_neighbours(
             break
         # Every pixel of a pass reads its neighbours before any of them is written (one sweep).
         flat[at[found]] = phi[found] + TWO_PI * np.rint((best[found] - phi[found]) / TWO_PI)
-        ys, xs = ys[~found], xs[~found]
+        at = at[~found]
     if work is not phase:
         phase[...] = work
     return phase
+
+
+def _measured_orders(phase: np.ndarray, phi: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """The measured fringe orders ``rint((phase - phi) / 2 pi)`` (int32, 0 outside ``valid``), in one buffer."""
+    orders = np.subtract(phase, phi)
+    orders /= TWO_PI
+    with np.errstate(invalid="ignore"):
+        np.rint(orders, out=orders)
+    np.copyto(orders, 0.0, where=~valid)
+    return orders.astype(np.int32)
+
+
+def _break_ends(phase: np.ndarray) -> np.ndarray:
+    """Flat indices of both pixels of every 4-neighbour pair more than pi apart (NaN pairs never count)."""
+    width = phase.shape[1]
+    ends = []
+    with np.errstate(invalid="ignore"):
+        for axis, step in ((1, 1), (0, width)):
+            difference = np.diff(phase, axis=axis)
+            np.abs(difference, out=difference)
+            first = np.flatnonzero(difference > np.pi)
+            if axis == 1:  # (H, W - 1) positions to pixels
+                first += first // (width - 1)
+            ends += [first, first + step]
+    return np.concatenate(ends)
 
 
 def pool_region_orders(
@@ -351,20 +409,22 @@ def pool_region_orders(
     phase = np.asarray(absolute_phase, dtype=np.float64)
     phi = np.where(valid, np.asarray(wrapped_phase, dtype=np.float64), 0.0)
     steps = _steps(phi)
-    core, labels, count = _fringe_regions(steps, valid, _region_cut(steps, valid) if cut is None else cut, bend)
-    labels, core, count = _drop_small_regions(labels, core, count, min_votes)
-    with np.errstate(invalid="ignore"):
-        orders = np.where(valid, np.rint((phase - phi) / TWO_PI), 0.0).astype(np.int32)
+    _, labels, count = _fringe_regions(steps, valid, _region_cut(steps, valid) if cut is None else cut, bend)
+    labels, count = _drop_small_regions(labels, count, min_votes)  # 0 outside every region
+    orders = _measured_orders(phase, phi, valid)
     if count > 1:
-        pieces, piece_count = _tile_pieces(labels, core, count, tile)
-        winners, sizes = _tally(pieces[core], orders[core], piece_count)
-        voted = core & (sizes >= min_votes)[pieces]
-        out = np.where(voted, phi + TWO_PI * winners[pieces], np.nan)
+        pieces, piece_count = _tile_pieces(labels, count, tile)
+        winners, sizes = _tally(pieces, orders, piece_count)  # piece 0 (outside every region) is never used
+        voted_piece = sizes >= min_votes
+        voted_piece[0] = False
+        # each piece's order step, NaN where it keeps no vote: phi + the step is the pooled phase
+        step = np.where(voted_piece, TWO_PI * winners, np.nan)
+        out = phi + step[pieces]
         # Squares that disagree with a neighbour may straddle a hidden edge: vote them pixel by pixel.
         suspect_piece = np.zeros(piece_count, dtype=bool)
-        suspect_piece[pieces[order_break_pixels(out) & voted]] = True
+        suspect_piece[np.ravel(pieces)[_break_ends(out)]] = True  # both ends of a break are voted
         if suspect_piece.any():  # then a voted pixel of it at least
-            ys, xs = np.divmod(np.flatnonzero(voted & suspect_piece[pieces]), phase.shape[1])  # np.nonzero's order
+            ys, xs = np.divmod(np.flatnonzero(suspect_piece[pieces]), phase.shape[1])  # np.nonzero's order
             local, support = _window_majority(orders, labels, ys, xs, radius)
             enough = support >= min_votes
             out[ys[enough], xs[enough]] = phi[ys[enough], xs[enough]] + TWO_PI * local[enough]

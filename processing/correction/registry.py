@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from processing.concurrency import side_by_side
+from processing.correction.broken_pixels import mend_broken_pixels
 from processing.correction.method import CorrectionMethod, Result
 from processing.correction.order_evidence import (
     changed_orders,
@@ -45,6 +46,7 @@ from processing.correction.phase_rpca import (
     keep_coherent_detail,
     low_rank_misfit,
     order_breaks,
+    order_breaks_since,
     phase_noise_and_breaks,
     phase_pair,
     refit_full_resolution,
@@ -53,6 +55,7 @@ from processing.correction.phase_rpca import (
     update_coherent_detail,
 )
 from processing.correction.region_orders import pool_region_orders
+from processing.correction.surface_orders import arbitrate_low_rank_orders
 from processing.correction.temporal_evidence import (
     keep_temporally_supported,
     lower_frequency_misfit,
@@ -247,7 +250,7 @@ def _add_low_rank_orders(maps: _AutoMaps, found: _Candidates) -> np.ndarray:
         lambda: (  # after a block solve step 6 restores detail around the refitted L instead
             None if maps.decimate > 1 else keep_coherent_detail(found.low_rank, pooled, valid, maps.k_sigma, maps.sigma)
         ),
-        lambda: order_breaks(candidate, valid),
+        lambda: order_breaks_since(candidate, pooled, found.breaks["regions"], valid),
     )
     return proposed
 
@@ -275,11 +278,11 @@ def _candidate_orders(maps: _AutoMaps, pooled: np.ndarray, measured_breaks: int)
 
 def _supported_orders(
     maps: _AutoMaps, proposed: np.ndarray, temporal: _Temporal | None
-) -> tuple[np.ndarray, np.ndarray, dict[str, int]]:
+) -> tuple[np.ndarray, np.ndarray, dict[str, int], list[float] | None]:
     """Step 5: the proposed orders where their neighbours (:func:`~processing.correction.order_evidence.
     keep_supported_changes`) and then the lower frequencies (:func:`~processing.correction.temporal_evidence.
     keep_temporally_supported`) support them, order spikes mended (:func:`~processing.correction.order_evidence.
-    mend_spikes`); the unresolved pixels of both; what each step did."""
+    mend_spikes`); the unresolved pixels of both; what each step did; the lower frequencies' noise weights."""
     (reordered, unresolved), weights = side_by_side(  # the noise weights read the measured phase only
         lambda: keep_supported_changes(proposed, maps.phase, maps.valid),
         lambda: None if temporal is None else noise_weights(maps.phase, maps.valid, temporal.frequency, temporal.lower),
@@ -298,7 +301,7 @@ def _supported_orders(
         counts["moved_one_order"] = moved
         misfit = _spike_misfit(temporal, weights)
     reordered, counts["spikes_mended"] = mend_spikes(reordered, maps.valid, misfit)
-    return reordered, unresolved, counts
+    return reordered, unresolved, counts, weights
 
 
 def _spike_misfit(temporal: _Temporal, weights: list[float]) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
@@ -319,7 +322,7 @@ def _restore_detail(
 
     Returns the phase, the unresolved pixels, how many orders changed and the lower frequencies' blob counts.
     """
-    reordered, unresolved, counts = _supported_orders(maps, found.maps[chosen], temporal)
+    reordered, unresolved, counts, weights = _supported_orders(maps, found.maps[chosen], temporal)
     low_rank = found.low_rank
     if maps.decimate > 1:  # what the block means blurred, refitted at full resolution where it fits better
         low_rank = refit_full_resolution(
@@ -332,6 +335,8 @@ def _restore_detail(
             outlier=2.0 * maps.k_sigma * maps.sigma,
             noise=maps.sigma,
         )
+    reordered, unresolved = _arbitrate_with_low_rank(maps, reordered, unresolved, low_rank, temporal, weights, counts)
+    reordered = _mend_broken_pixels(maps, reordered, temporal, weights, counts)
     pooled_detail = found.pooled_detail if low_rank is found.low_rank else None
     out, changed = side_by_side(
         lambda: (  # step 6 ran alongside step 3 on the pooled orders: redone only where the orders differ
@@ -351,6 +356,39 @@ def _restore_detail(
     if off.any():
         out = np.where(off, reordered, out)
     return out, unresolved, changed, counts
+
+
+def _arbitrate_with_low_rank(
+    maps: _AutoMaps,
+    reordered: np.ndarray,
+    unresolved: np.ndarray,
+    low_rank: np.ndarray,
+    temporal: _Temporal | None,
+    weights: list[float] | None,
+    counts: dict[str, int],
+) -> tuple[np.ndarray, np.ndarray]:
+    """Step 6a: L's orders on the blobs where they clearly leave fewer order breaks than the kept ones and the lower
+    frequencies do not contradict them (:func:`~processing.correction.surface_orders.arbitrate_low_rank_orders`);
+    the blobs nothing decides are added to the unresolved pixels."""
+    frequency, lower = (temporal.frequency, temporal.lower) if temporal is not None else (None, [])
+    reordered, tied, counts["low_rank_orders_taken"] = arbitrate_low_rank_orders(
+        reordered, low_rank, maps.valid, frequency, lower, weights
+    )
+    return reordered, unresolved | tied
+
+
+def _mend_broken_pixels(
+    maps: _AutoMaps,
+    reordered: np.ndarray,
+    temporal: _Temporal | None,
+    weights: list[float] | None,
+    counts: dict[str, int],
+) -> np.ndarray:
+    """Step 6b: pixels whose order breaks with three or four neighbours take the order more of them support, where
+    the lower frequencies fit it no worse (:func:`~processing.correction.broken_pixels.mend_broken_pixels`)."""
+    misfit = None if temporal is None or weights is None else _spike_misfit(temporal, weights)
+    reordered, counts["broken_pixels_mended"] = mend_broken_pixels(reordered, maps.valid, misfit)
+    return reordered
 
 
 @dataclass(frozen=True)
@@ -376,7 +414,7 @@ def _temporal_inputs(
             raise ValueError(f"lower_wrapped: expected frequencies in (0, {frequency:g}), found {f_low:g}")
         if wrapped_low.shape != valid.shape:
             raise ValueError(f"lower_wrapped at {f_low:g}: expected shape {valid.shape}, found {wrapped_low.shape}")
-        if not np.isfinite(wrapped_low[valid]).all():
+        if (valid & ~np.isfinite(wrapped_low)).any():  # whole-map tests: gathering the valid pixels costs more
             return None  # a lower map with holes inside the mask (pixels the pass did not keep): no evidence
         lower.append((float(f_low), np.where(valid, wrapped_low, 0.0)))
     return _Temporal(float(frequency), lower)
@@ -396,18 +434,16 @@ def correct_auto(
 ) -> Result:
     """The most accurate method measured: region-pooled orders, ch. 4 RPCA, measured detail restored.
 
-    1. pool the fringe orders over 2-D fringe regions (:func:`~processing.correction.region_orders.
-       pool_region_orders`: one order per region that no wrapped-phase jump or kink crosses,
-       voted per 16 x 16 square, re-voted pixel by pixel where squares disagree);
-    2. L = low-rank part of that phase (stable inexact ALM, thesis ch. 4, stopped at the noise
-       level of :func:`~processing.correction.phase_rpca.phase_noise_sigma`, blind to order errors),
-       solved on 4 x 4 block means from :data:`DECIMATE_FROM` pixels on (``decimate``) and
-       interpolated back; the measured phase is used instead if pooling left more order breaks;
-    3. candidate order maps (only if the pooled orders still break somewhere): the pooled
-       orders; the pooled orders where L misfits the wrapped phase (|wrap(phi - L)| > pi / 2
-       nearby, or an edge the block solve blurred) and L's re-derived orders elsewhere; only if
-       both leave more order breaks than the measured phase (fringes too dense to pool), also
-       L's orders guarded where L misfits by the measured phase or by Ding's row vote, then
+    1. pool the fringe orders over 2-D fringe regions (:func:`~processing.correction.region_orders.pool_region_orders`:
+       one order per region no wrapped-phase jump or kink crosses, voted per 16 x 16 square, re-voted pixel by pixel);
+    2. L = low-rank part of that phase (stable inexact ALM, thesis ch. 4, stopped at the noise level of
+       :func:`~processing.correction.phase_rpca.phase_noise_sigma`, blind to order errors), solved on 4 x 4 block
+       means from :data:`DECIMATE_FROM` pixels on (``decimate``) and interpolated back; the measured phase is used
+       instead if pooling left more order breaks;
+    3. candidate order maps (only if the pooled orders still break somewhere): the pooled orders; the pooled orders
+       where L misfits the wrapped phase (|wrap(phi - L)| > pi / 2 nearby, or an edge the block solve blurred) and
+       L's re-derived orders elsewhere; only if both leave more order breaks than the measured phase (fringes too
+       dense to pool), also L's orders guarded where L misfits by the measured phase or by Ding's row vote, then
        settled from their neighbours (the earlier ``auto``);
     4. keep the candidate with fewest order breaks (second differences beyond pi, truth-free);
     5. judge its changes blob by blob against the measured orders
@@ -422,12 +458,14 @@ def correct_auto(
        clearly fit, a blob they clearly contradict goes back to the measured orders, one they cannot
        tell is reported unresolved (``info["evidence"]`` counts the blobs). Last, lone order spikes
        take their neighbours' order (:func:`~processing.correction.order_evidence.mend_spikes`);
-    6. after a block solve, refit L at full resolution (:func:`~processing.correction.phase_rpca.
-       refit_full_resolution`: its factors refitted to the kept orders' phase by least squares, used
-       where they fit it better by more than the noise; the blocks blur a step's or a ramp's edge, ch. 4 at full resolution does
-       not); keep L (denoised) except where the result departs from it coherently beyond the noise
-       (:func:`~processing.correction.phase_rpca.restore_detail`, ``k_sigma`` standard deviations
-       of the 3 x 3 mean residual), and never where L lies a fringe or more from the kept orders.
+    6. after a block solve, refit L at full resolution (:func:`~processing.correction.phase_rpca.refit_full_resolution`:
+       its factors refitted to the kept orders' phase by least squares, used where they fit it better by more than the
+       noise; the blocks blur a step's or a ramp's edge, ch. 4 at full resolution does not); weigh L's orders against
+       the kept ones blob by blob (:mod:`~processing.correction.surface_orders`; ``info["evidence"]
+       ["low_rank_orders_taken"]``), move pixels breaking with three or four neighbours
+       (:mod:`~processing.correction.broken_pixels`); keep L (denoised) except where the result departs from it
+       coherently beyond the noise (:func:`~processing.correction.phase_rpca.restore_detail`, ``k_sigma`` standard
+       deviations of the 3 x 3 mean residual), and never where L lies a fringe or more from the kept orders.
     7. report as unresolved too the pieces of a fringe whose measured orders' vote does not decide the
        kept order (:func:`~processing.correction.order_margin.undecided_orders`; ``info["evidence"]
        ["vote_undecided_pixels"]``): where the lower frequencies barely tell orders apart, most measured
@@ -477,7 +515,8 @@ def _auto_info(
     steps = ["pool-region-orders", "rpca-phase", "reorder-if-consistent"]
     steps += ["settle-orders"] if len(found.maps) > 2 else []
     steps += ["keep-supported-changes"] + (["lower-frequency-evidence"] if extra["temporal"] else [])
-    steps += ["mend-spikes"] + (["refit-full-resolution"] if maps.decimate > 1 else []) + ["restore-detail"]
+    steps += ["mend-spikes"] + (["refit-full-resolution"] if maps.decimate > 1 else [])
+    steps += ["arbitrate-low-rank-orders", "mend-broken-pixels", "restore-detail"]
     return _solver_info(
         "auto",
         parameters,

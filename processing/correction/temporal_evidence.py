@@ -70,8 +70,7 @@ def lower_frequency_misfit(
     """Sum over ``lower`` = ((f_l, wrapped phase at f_l), ...) of wrap(phase f_l / frequency - phi_l)^2
     (each term times its ``weights`` entry, default 1)."""
     out = np.zeros(phase.shape, dtype=np.float64)
-    for index, (f_low, wrapped_low) in enumerate(lower):
-        term = wrap_to_pi(phase * (float(f_low) / float(frequency)) - wrapped_low) ** 2
+    for index, term in enumerate(_misfit_terms(phase, frequency, lower)):
         out += term if weights is None else weights[index] * term
     return out
 
@@ -85,10 +84,32 @@ def _order_shift(
     """Squared shift of every lower frequency's prediction when the orders change by ``delta_orders``
     (weighted as :func:`lower_frequency_misfit`)."""
     out = np.zeros(delta_orders.shape, dtype=np.float64)
-    for index, (f_low, _wrapped) in enumerate(lower):
-        term = wrap_to_pi(TWO_PI * delta_orders * (float(f_low) / float(frequency))) ** 2
+    for index, term in enumerate(_shift_terms(delta_orders, frequency, lower)):
         out += term if weights is None else weights[index] * term
     return out
+
+
+def _plain_and_weighted(terms: Sequence[np.ndarray], weights: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
+    """The sums :func:`lower_frequency_misfit` and :func:`_order_shift` form of per-frequency ``terms``, without and
+    with ``weights``, in their order (the same values as two calls, each term computed once)."""
+    plain = np.zeros(terms[0].shape, dtype=np.float64)
+    weighted = np.zeros(terms[0].shape, dtype=np.float64)
+    for index, term in enumerate(terms):
+        plain += term
+        weighted += weights[index] * term
+    return plain, weighted
+
+
+def _misfit_terms(phase: np.ndarray, frequency: float, lower: Sequence[tuple[float, np.ndarray]]) -> list[np.ndarray]:
+    """The terms of :func:`lower_frequency_misfit`, one per lower frequency."""
+    return [wrap_to_pi(phase * (float(f_low) / float(frequency)) - wrapped_low) ** 2 for f_low, wrapped_low in lower]
+
+
+def _shift_terms(
+    delta_orders: np.ndarray, frequency: float, lower: Sequence[tuple[float, np.ndarray]]
+) -> list[np.ndarray]:
+    """The terms of :func:`_order_shift`, one per lower frequency."""
+    return [wrap_to_pi(TWO_PI * delta_orders * (float(f_low) / float(frequency))) ** 2 for f_low, _wrapped in lower]
 
 
 def noise_weights(
@@ -144,10 +165,10 @@ def snap_to_lower_frequencies(
         if shift < MIN_SHIFT_RAD**2 or separation < SEPARATION**2 or (abs(delta) > 1 and one_order_judged):
             continue
         one_order_judged |= abs(delta) == 1
-        fits = lower_frequency_misfit(at + TWO_PI * delta, frequency, lower_at)
+        fits, weighted = _plain_and_weighted(_misfit_terms(at + TWO_PI * delta, frequency, lower_at), weights)
         # and the new order must fit them within the noise (3 sigma a frequency): beside edges and
         # where the lower phases are corrupted too, a better fit is not yet a good one
-        within = lower_frequency_misfit(at + TWO_PI * delta, frequency, lower_at, weights) <= 9.0 * len(lower)
+        within = weighted <= 9.0 * len(lower)
         if abs(delta) > 1:
             measured_at = np.ravel(measured)[where] if measured_at is None else measured_at
             within &= _two_order_step_allowed(at, measured_at, delta, frequency, lower_at, weights)
@@ -227,11 +248,12 @@ class _PixelEvidence:
         weights: Sequence[float],
     ) -> _PixelEvidence:
         delta = np.rint((proposed - measured) / TWO_PI)
+        shift_rad, shift = _plain_and_weighted(_shift_terms(delta, frequency, lower), weights)
         return cls(
             lower_frequency_misfit(measured, frequency, lower, weights),
             lower_frequency_misfit(proposed, frequency, lower, weights),
-            _order_shift(delta, frequency, lower, weights),
-            _order_shift(delta, frequency, lower),
+            shift,
+            shift_rad,
         )
 
 

@@ -1,0 +1,51 @@
+"""Pixels breaking with three or four neighbours (processing.correction.broken_pixels), on analytic maps."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from processing.angles import wrap_to_pi
+from processing.correction.broken_pixels import mend_broken_pixels
+from processing.correction.temporal_evidence import lower_frequency_misfit
+
+TWO_PI = 2.0 * np.pi
+SHAPE = (24, 32)
+
+
+def _step() -> np.ndarray:
+    """A ramp with a step of 10 rad (more than a fringe) between columns 15 and 16."""
+    phase = np.tile(np.linspace(0.0, 6.0, SHAPE[1]), (SHAPE[0], 1))
+    phase[:, 16:] += 10.0
+    return phase
+
+
+def test_a_run_beside_a_step_mends_and_the_step_stays() -> None:
+    truth = _step()
+    kept = truth.copy()
+    kept[8:12, 15] += 8 * TWO_PI  # a run of four along the edge, eight orders off: no pixel of it is a spike
+    out, moved = mend_broken_pixels(kept, np.ones(SHAPE, dtype=bool))
+    np.testing.assert_allclose(out, truth)
+    assert moved == 4
+
+
+def _misfit(truth: np.ndarray, f_high: float, f_low: float):
+    lower = wrap_to_pi(truth * f_low / f_high)
+
+    def misfit(values: np.ndarray, where: np.ndarray) -> np.ndarray:
+        return lower_frequency_misfit(values, f_high, [(f_low, lower[where])])
+
+    return misfit
+
+
+def test_the_lower_frequencies_veto_a_move_they_fit_worse() -> None:
+    """A one-pixel-wide column standing two fringes proud, real: its neighbours would pull it down, the lower
+    frequency's phase (13 of 17 fringes) says it is where it is."""
+    truth = np.tile(np.linspace(0.0, 6.0, SHAPE[1]), (SHAPE[0], 1))
+    truth[4:20, 10] += 2 * TWO_PI
+    valid = np.ones(SHAPE, dtype=bool)
+    out, moved = mend_broken_pixels(truth, valid, _misfit(truth, 17.0, 13.0))
+    np.testing.assert_array_equal(out, truth)
+    assert moved == 0
+    # without the lower frequency the neighbours alone decide (and are wrong here)
+    _, moved = mend_broken_pixels(truth, valid)
+    assert moved > 0
