@@ -81,14 +81,13 @@ def arbitrate_low_rank_orders(
     if not differ.any():
         return kept, none, 0
     alternative = kept.copy()
-    changed = np.flatnonzero(differ)
-    at_kept = np.ravel(kept)[changed]
-    alternative.reshape(-1)[changed] = at_kept + TWO_PI * np.rint((np.ravel(low_rank)[changed] - at_kept) / TWO_PI)
+    at = np.flatnonzero(differ)
+    at_kept = np.ravel(kept)[at]
+    alternative.reshape(-1)[at] = at_kept + TWO_PI * np.rint((np.ravel(low_rank)[at] - at_kept) / TWO_PI)
     count, labels = label_blobs(differ)
     edges = blob_edges(valid, differ)
     with_surface = breaks_per_blob(alternative, valid, labels, count, edges)
     with_kept = breaks_per_blob(kept, valid, labels, count, edges)
-    at = np.flatnonzero(differ)
     blob = np.ravel(labels)[at]
     contradicted = favoured = np.zeros(count, dtype=bool)
     if lower and frequency is not None:
