@@ -38,7 +38,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from processing.correction.order_evidence import blob_edges, breaks_per_blob, changed_orders, label_blobs
-from processing.correction.temporal_evidence import SEPARATION, Z_MARGIN, lower_frequency_misfit
+from processing.correction.temporal_evidence import SEPARATION, Z_MARGIN, PixelEvidence
 
 TWO_PI = 2.0 * np.pi
 
@@ -91,9 +91,7 @@ def arbitrate_low_rank_orders(
     blob = np.ravel(labels)[at]
     contradicted = favoured = np.zeros(count, dtype=bool)
     if lower and frequency is not None:
-        contradicted, favoured = _lower_frequency_verdict(
-            np.ravel(alternative)[at], np.ravel(kept)[at], blob, count, at, frequency, lower, weights
-        )
+        contradicted, favoured = _lower_frequency_verdict(alternative, kept, blob, count, at, frequency, lower, weights)
     no_more = with_surface <= with_kept
     # at most half the breaks: L removes them rather than moving them (a surface blurred across an edge
     # moves the edge's breaks into the blur, about as many)
@@ -126,16 +124,12 @@ def _lower_frequency_verdict(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per blob: whether the lower frequencies contradict L's orders, and whether they clearly favour them (only
     where the blob's shift clears :data:`~processing.correction.temporal_evidence.SEPARATION` noise deviations a
-    pixel: a verdict for a change needs the frequencies to tell the orders apart, one against it does not)."""
-    lower_at = [(f_low, np.ravel(wrapped_low)[at]) for f_low, wrapped_low in lower]
-    difference = lower_frequency_misfit(alternative, frequency, lower_at, weights)
-    difference -= lower_frequency_misfit(kept, frequency, lower_at, weights)
-    # the shift of every lower frequency's prediction between the two orders: the misfit of the order
-    # difference against a zero phase
-    zero = [(f_low, np.zeros(1)) for f_low, _ in lower]
-    shift = lower_frequency_misfit(alternative - kept, frequency, zero, weights)
-    d = np.bincount(blob, weights=difference, minlength=count)
-    s = np.bincount(blob, weights=shift, minlength=count)
+    pixel: a verdict for a change needs the frequencies to tell the orders apart, one against it does not).
+    L's orders play the proposed ones of step 5's evidence, the kept orders the measured ones."""
+    unit = [1.0] * len(lower) if weights is None else weights  # without weights, every frequency counts alike
+    ev = PixelEvidence.at(at, alternative, kept, frequency, lower, unit)
+    d = np.bincount(blob, weights=ev.with_proposed - ev.with_measured, minlength=count)
+    s = np.bincount(blob, weights=ev.shift, minlength=count)
     pixels = np.bincount(blob, minlength=count)
     margin = Z_MARGIN * 2.0 * np.sqrt(s)
     favoured = (s > SEPARATION**2 * pixels * len(lower)) & (d < s / 2.0 - margin)

@@ -151,7 +151,7 @@ def snap_to_lower_frequencies(
         return proposed, 0
     # flat indices, not the mask: gathering by a scattered boolean mask costs several times more
     where = np.flatnonzero(changed)
-    lower_at = [(f, np.ravel(p)[where]) for f, p in lower]
+    lower_at = gather_lower(lower, where)
     at = np.ravel(proposed)[where]
     best = lower_frequency_misfit(at, frequency, lower_at)
     one_order_judged = False
@@ -215,8 +215,14 @@ def _fits_each_frequency(
     return out
 
 
+def gather_lower(lower: Sequence[tuple[float, np.ndarray]], where: np.ndarray) -> list[tuple[float, np.ndarray]]:
+    """((f_l, wrapped phase at f_l), ...) at the flat indices ``where`` of the (H, W) maps (by index, not by a
+    scattered boolean mask: that gather costs several times more)."""
+    return [(f_low, np.ravel(wrapped_low)[where]) for f_low, wrapped_low in lower]
+
+
 @dataclass(frozen=True)
-class _PixelEvidence:
+class PixelEvidence:
     """Per changed pixel: noise-weighted misfits of both orders, the shift between them weighted and in rad^2."""
 
     with_measured: np.ndarray
@@ -233,9 +239,9 @@ class _PixelEvidence:
         frequency: float,
         lower: Sequence[tuple[float, np.ndarray]],
         weights: Sequence[float],
-    ) -> _PixelEvidence:
+    ) -> PixelEvidence:
         """:meth:`of` the pixels at the flat indices ``where`` of (H, W) maps."""
-        lower_at = [(f, np.ravel(p)[where]) for f, p in lower]
+        lower_at = gather_lower(lower, where)
         return cls.of(np.ravel(proposed)[where], np.ravel(measured)[where], frequency, lower_at, weights)
 
     @classmethod
@@ -246,7 +252,7 @@ class _PixelEvidence:
         frequency: float,
         lower: Sequence[tuple[float, np.ndarray]],
         weights: Sequence[float],
-    ) -> _PixelEvidence:
+    ) -> PixelEvidence:
         delta = np.rint((proposed - measured) / TWO_PI)
         shift_rad, shift = _plain_and_weighted(_shift_terms(delta, frequency, lower), weights)
         return cls(
@@ -306,7 +312,7 @@ def keep_temporally_supported(
     at = np.ravel(labels)[where]
     if weights is None:  # misfits in units of each frequency's noise
         weights = noise_weights(measured, valid, frequency, lower)
-    ev = _PixelEvidence.at(where, proposed, measured, frequency, lower, weights)
+    ev = PixelEvidence.at(where, proposed, measured, frequency, lower, weights)
     difference = np.bincount(at, weights=ev.with_proposed - ev.with_measured, minlength=count)
     expected = np.bincount(at, weights=ev.shift, minlength=count)
     # the blob's own noise: the misfit of the better-fitting orders (dark or mixed pixels carry more)
