@@ -22,6 +22,8 @@ from collections.abc import Callable
 
 import numpy as np
 
+from processing.correction.order_evidence import beyond_pi
+
 TWO_PI = 2.0 * np.pi
 # Passes over the pixels next to those that moved: runs of up to about twice this many pixels mend.
 PASSES = 3
@@ -80,8 +82,8 @@ def _broken_pixels(phase: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np
     """
     rows, cols = phase.shape
     flat, flat_valid = np.ravel(phase), np.ravel(valid)
-    across = _breaks(flat[1:], flat[:-1])
-    down = _breaks(flat[cols:], flat[:-cols])
+    across = beyond_pi(flat[1:], flat[:-1])
+    down = beyond_pi(flat[cols:], flat[:-cols])
     inner = rows * cols - 2 * cols  # the pixels of rows 1 .. H - 2, from flat index W on
     left, right = across[cols - 1 : cols - 1 + inner], across[cols : cols + inner]
     up, below = down[:inner], down[cols : cols + inner]
@@ -93,14 +95,6 @@ def _broken_pixels(phase: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np
     ys, xs = at // cols, at % cols
     keep = (xs > 0) & (xs < cols - 1)
     return ys[keep], xs[keep]
-
-
-def _breaks(second: np.ndarray, first: np.ndarray) -> np.ndarray:
-    """|second - first| > pi, with one float temporary (NaN: False)."""
-    step = np.subtract(second, first)
-    np.abs(step, out=step)
-    with np.errstate(invalid="ignore"):
-        return np.greater(step, np.pi)
 
 
 def _next_to(ys: np.ndarray, xs: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
