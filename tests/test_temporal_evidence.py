@@ -102,3 +102,48 @@ def test_a_proposal_two_orders_off_moves_where_one_order_is_too_small_a_shift() 
     snapped, moved = snap_to_lower_frequencies(proposed, measured, np.ones(truth.shape, bool), 32.0, lower)
     np.testing.assert_allclose(snapped, truth, rtol=0.0, atol=1e-9)
     assert moved == 4 * 10 + 3 * 4
+
+
+def _ramp_with_lower(
+    top: float, lows: tuple[float, ...], noise: float, seed: int, shape: tuple[int, int] = (50, 70)
+) -> tuple[np.ndarray, np.ndarray, list[tuple[float, np.ndarray]]]:
+    """A ramp of absolute phase at ``top``, its valid mask and the noisy wrapped phases at ``lows``."""
+    rng = np.random.default_rng(seed)
+    rows, cols = np.mgrid[0 : shape[0], 0 : shape[1]].astype(np.float64)
+    truth = TWO_PI * cols / 11.0 + 0.02 * rows
+    lower = [(f, wrap_to_pi(truth * f / top + rng.normal(0.0, noise, shape))) for f in lows]
+    return truth, np.ones(shape, dtype=bool), lower
+
+
+def test_a_wrong_piece_of_one_shift_goes_back_inside_a_blob_of_right_changes() -> None:
+    """64/58/53: the proposal fixes a patch whose measured orders were three off, and pooled the one-pixel column
+    beside it eight orders off (onto a step's far side); the column's measured orders were right. The patch's
+    evidence outweighs the column's over their blob, so the blob stands as a whole; the column's piece of shift +8
+    (1.6 and 2.4 rad at 58 and 53) is judged on its own and goes back."""
+    truth, valid, lower = _ramp_with_lower(64.0, (58.0, 53.0), noise=0.05, seed=11)
+    measured = truth.copy()
+    measured[20:30, 30:40] += 3 * TWO_PI
+    proposed = truth.copy()
+    proposed[20:30, 40] += 8 * TWO_PI
+    phase, unresolved, counts = keep_temporally_supported(proposed, measured, valid, 64.0, lower)
+    np.testing.assert_array_equal(phase, truth)
+    assert counts["reverted"] == 0 and counts["pieces_reverted"] == 1 and not unresolved.any()
+
+
+def test_a_piece_whose_measured_orders_an_order_near_the_proposal_would_fit_as_well_is_reported() -> None:
+    """29/32: the measured orders of the column are eleven off, where the 29 phase predicts within 0.2 rad of the
+    truth's, and the proposal two off. The 29 phase fits the measured orders better than the proposal (1.38 rad apart),
+    but also fits the order two from the proposal as well as the measured one: nothing tells the measured orders
+    from the truth, so the column keeps the proposal and is reported unresolved instead of sent eleven orders off."""
+    truth, valid, lower = _ramp_with_lower(32.0, (29.0,), noise=0.03, seed=12)
+    measured = truth.copy()
+    measured[20:30, 30:40] += 5 * TWO_PI  # fixed by the proposal: 2.95 rad at 29
+    measured[20:30, 40] += 11 * TWO_PI
+    proposed = truth.copy()
+    proposed[20:30, 40] -= 2 * TWO_PI
+    phase, unresolved, counts = keep_temporally_supported(proposed, measured, valid, 32.0, lower)
+    np.testing.assert_array_equal(phase, proposed)
+    column = np.zeros(valid.shape, dtype=bool)
+    column[20:30, 40] = True
+    np.testing.assert_array_equal(unresolved, column)
+    assert counts["pieces_reverted"] == 0 and counts["pieces_unresolved"] == 1

@@ -140,9 +140,14 @@ def revert_changed(
     the mask of those where ``unresolved``: the evidence steps write only where orders changed, never the whole map."""
     out = proposed.copy()
     out.reshape(-1)[at[back]] = np.ravel(measured)[at[back]]
-    mask = np.zeros(proposed.shape, dtype=bool)
-    mask.reshape(-1)[at[unresolved]] = True
-    return out, mask
+    return out, mask_at(proposed.shape, at[unresolved])
+
+
+def mask_at(shape: tuple[int, ...], at: np.ndarray) -> np.ndarray:
+    """A bool map of ``shape``, True at the flat indices ``at``."""
+    mask = np.zeros(shape, dtype=bool)
+    mask.reshape(-1)[at] = True
+    return mask
 
 
 def unresolved_summary(unresolved: np.ndarray, valid: np.ndarray) -> dict[str, Any]:

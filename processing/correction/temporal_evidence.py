@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from processing.angles import wrap_to_pi
-from processing.correction.order_evidence import changed_orders, label_blobs, revert_changed
+from processing.correction.order_evidence import changed_orders, label_blobs, mask_at, revert_changed
 from processing.denoise.rpca import finite_median
 
 TWO_PI = 2.0 * np.pi
@@ -223,12 +223,14 @@ def gather_lower(lower: Sequence[tuple[float, np.ndarray]], where: np.ndarray) -
 
 @dataclass(frozen=True)
 class PixelEvidence:
-    """Per changed pixel: noise-weighted misfits of both orders, the shift between them weighted and in rad^2."""
+    """Per changed pixel: noise-weighted misfits of both orders, the shift between them weighted and in rad^2, and
+    the orders changed (proposed minus measured)."""
 
     with_measured: np.ndarray
     with_proposed: np.ndarray
     shift: np.ndarray
     shift_rad: np.ndarray
+    delta: np.ndarray
 
     @classmethod
     def at(
@@ -260,6 +262,17 @@ class PixelEvidence:
             lower_frequency_misfit(proposed, frequency, lower, weights),
             shift,
             shift_rad,
+            delta,
+        )
+
+    def take(self, index: np.ndarray) -> PixelEvidence:
+        """The evidence of the pixels ``index`` (a boolean mask or indices into these arrays)."""
+        return PixelEvidence(
+            self.with_measured[index],
+            self.with_proposed[index],
+            self.shift[index],
+            self.shift_rad[index],
+            self.delta[index],
         )
 
 
@@ -313,30 +326,106 @@ def keep_temporally_supported(
     if weights is None:  # misfits in units of each frequency's noise
         weights = noise_weights(measured, valid, frequency, lower)
     ev = PixelEvidence.at(where, proposed, measured, frequency, lower, weights)
-    difference = np.bincount(at, weights=ev.with_proposed - ev.with_measured, minlength=count)
-    expected = np.bincount(at, weights=ev.shift, minlength=count)
-    # the blob's own noise: the misfit of the better-fitting orders (dark or mixed pixels carry more)
-    noise = np.minimum(
-        np.bincount(at, weights=ev.with_measured, minlength=count),
-        np.bincount(at, weights=ev.with_proposed, minlength=count),
-    )
-    pixels = np.bincount(at, minlength=count)
-    undecidable = (expected <= SEPARATION**2 * np.maximum(noise, pixels * len(lower))) | (
-        np.bincount(at, weights=ev.shift_rad, minlength=count) < MIN_SHIFT_RAD**2 * pixels
-    )
-    margin = Z_MARGIN * 2.0 * np.sqrt(np.maximum(noise / np.maximum(pixels * len(lower), 1), 1.0) * expected)
-    contradicted = ~undecidable & (difference > expected / 2.0 + margin)
-    ambiguous = ~undecidable & ~contradicted & (difference >= expected / 2.0 - margin)
+    undecidable, contradicted, ambiguous = _verdicts(ev, at, count, len(lower))
     contradicted[0] = ambiguous[0] = undecidable[0] = False
     counts["reverted"] = int(np.count_nonzero(contradicted[1:]))
     counts["unresolved"] = int(np.count_nonzero(ambiguous[1:]))
     counts["undecidable"] = int(np.count_nonzero(undecidable[1:]))
     counts["kept"] = count - 1 - counts["reverted"] - counts["unresolved"] - counts["undecidable"]
-    # inside a contradicted blob, only the pixels whose own evidence contradicts the change go back
+    # a blob they did not contradict as a whole may still mix right changes with a wrong one: its pieces of one
+    # order shift are judged on their own
+    piece_back, piece_unresolved, counts["pieces_reverted"], counts["pieces_unresolved"] = judge_shift_pieces(
+        ev, at, count, ~contradicted, frequency, lower, weights
+    )
+    # inside a contradicted blob or piece, only the pixels whose own evidence contradicts the change go back
     # (a blob can mix them with pixels whose measured orders were wrong)
     own = (ev.shift_rad >= MIN_SHIFT_RAD**2) & (ev.with_proposed - ev.with_measured > ev.shift / 2.0)
     own &= np.maximum(ev.with_measured, len(lower)) * SEPARATION**2 <= ev.shift
-    back_at = contradicted[at] & own
+    back_at = (contradicted[at] | piece_back) & own
+    unresolved_at = ambiguous[at] | piece_unresolved
     if not back_at.any():
-        return proposed, np.zeros(valid.shape, dtype=bool), counts
-    return (*revert_changed(proposed, measured, where, back_at, ambiguous[at]), counts)
+        return proposed, mask_at(valid.shape, where[unresolved_at]), counts
+    return (*revert_changed(proposed, measured, where, back_at, unresolved_at), counts)
+
+
+def _verdicts(
+    ev: PixelEvidence, group: np.ndarray, count: int, n_lower: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per group of changed pixels (``group``: each pixel's label, ``count`` labels): whether the lower frequencies
+    cannot judge it, contradict its change, or leave it ambiguous (the rules of :func:`keep_temporally_supported`)."""
+    difference = np.bincount(group, weights=ev.with_proposed - ev.with_measured, minlength=count)
+    expected = np.bincount(group, weights=ev.shift, minlength=count)
+    # the group's own noise: the misfit of the better-fitting orders (dark or mixed pixels carry more)
+    noise = np.minimum(
+        np.bincount(group, weights=ev.with_measured, minlength=count),
+        np.bincount(group, weights=ev.with_proposed, minlength=count),
+    )
+    pixels = np.bincount(group, minlength=count)
+    undecidable = (expected <= SEPARATION**2 * np.maximum(noise, pixels * n_lower)) | (
+        np.bincount(group, weights=ev.shift_rad, minlength=count) < MIN_SHIFT_RAD**2 * pixels
+    )
+    margin = Z_MARGIN * 2.0 * np.sqrt(np.maximum(noise / np.maximum(pixels * n_lower, 1), 1.0) * expected)
+    contradicted = ~undecidable & (difference > expected / 2.0 + margin)
+    ambiguous = ~undecidable & ~contradicted & (difference >= expected / 2.0 - margin)
+    return undecidable, contradicted, ambiguous
+
+
+def judge_shift_pieces(
+    ev: PixelEvidence,
+    blob: np.ndarray,
+    count: int,
+    eligible: np.ndarray,
+    frequency: float,
+    lower: Sequence[tuple[float, np.ndarray]],
+    weights: Sequence[float],
+) -> tuple[np.ndarray, np.ndarray, int, int]:
+    """Per changed pixel, whether its piece is contradicted and whether it is ambiguous; how many pieces each.
+
+    A piece is the pixels of one order shift (``ev.delta``) in a blob (``blob``: each changed pixel's label,
+    ``count`` labels) that mixes several shifts and is ``eligible`` (the lower frequencies did not contradict it as
+    a whole). Pooling beside a height step of several fringes gives a line of edge pixels the far side's order; the
+    line's blob of changed pixels also holds pixels whose measured orders were wrong and are rightly changed, by
+    another shift, and their evidence for the blob outweighs the line's against it. Each piece is judged with
+    the same test and margin as a blob (:func:`_verdicts`). A contradicted piece goes back to its measured orders
+    only where the lower frequencies tell them apart from every order within :data:`SNAP_STEPS` of the proposed
+    one: where one of those orders is as undecidable against the measured orders as a blob of that shift would be
+    (a close pair such as 29/32, where orders 11 apart predict the 29 phase within 0.2 rad; 18/25 at 7 apart),
+    the measured orders may be that far from the truth as easily as the proposal is one or two orders from it,
+    and the piece is reported unresolved instead (the proposal, which the neighbours supported, stays). Pieces
+    are grouped by shift within a blob, not labelled again: only the pixels of mixed blobs are touched.
+    """
+    none = np.zeros(blob.shape, dtype=bool)
+    some = np.zeros(count)
+    some[blob] = ev.delta  # one of each blob's shifts: a blob is mixed where another differs from it
+    mixed = np.bincount(blob, weights=ev.delta != some[blob], minlength=count) > 0
+    mixed &= eligible
+    mixed[0] = False
+    inside = mixed[blob]
+    if not inside.any():
+        return none, none, 0, 0
+    shifts = ev.delta[inside].astype(np.int64)
+    low = int(shifts.min())
+    span = int(shifts.max()) - low + 1
+    keys, piece = np.unique(blob[inside].astype(np.int64) * span + (shifts - low), return_inverse=True)
+    _undecidable, contradicted, ambiguous = _verdicts(ev.take(inside), piece, keys.size, len(lower))
+    confusable = _confusable_near_proposal((keys % span + low).astype(np.float64), frequency, lower, weights)
+    ambiguous |= contradicted & confusable
+    contradicted &= ~confusable
+    back, unresolved = none.copy(), none.copy()
+    back[inside] = contradicted[piece]
+    unresolved[inside] = ambiguous[piece]
+    return back, unresolved, int(np.count_nonzero(contradicted)), int(np.count_nonzero(ambiguous))
+
+
+def _confusable_near_proposal(
+    delta: np.ndarray, frequency: float, lower: Sequence[tuple[float, np.ndarray]], weights: Sequence[float]
+) -> np.ndarray:
+    """Per order shift ``delta`` (proposed minus measured): whether an order within :data:`SNAP_STEPS` of the
+    proposed one shifts the lower frequencies' predictions from the measured one's too little to judge (below
+    :data:`MIN_SHIFT_RAD` or :data:`SEPARATION` noise deviations a pixel, the bounds of a blob's judgement)."""
+    out = np.zeros(delta.shape, dtype=bool)
+    for step in SNAP_STEPS:
+        near = delta + step
+        shift_rad, shift = _plain_and_weighted(_shift_terms(near, frequency, lower), weights)
+        out |= (near != 0) & ((shift_rad < MIN_SHIFT_RAD**2) | (shift <= SEPARATION**2 * len(lower)))
+    return out
