@@ -456,7 +456,10 @@ def correct_auto(
        ``frequency``), the kept changes are then weighed against them
        (:mod:`processing.correction.temporal_evidence`): a pixel one or two orders off moves to the order they
        clearly fit, a blob they clearly contradict goes back to the measured orders, one they cannot
-       tell is reported unresolved (``info["evidence"]`` counts the blobs). Last, lone order spikes
+       tell is reported unresolved (``info["evidence"]`` counts the blobs); in a blob they keep whose pixels
+       changed by several order shifts, each shift's pixels are judged the same way on their own, a contradicted
+       piece going back only where no order near the proposed one fits them as well as the measured one, else
+       reported unresolved (``pieces_reverted``, ``pieces_unresolved``). Last, lone order spikes
        take their neighbours' order (:func:`~processing.correction.order_evidence.mend_spikes`);
     6. after a block solve, refit L at full resolution (:func:`~processing.correction.phase_rpca.refit_full_resolution`:
        its factors refitted to the kept orders' phase by least squares, used where they fit it better by more than the

@@ -26,6 +26,14 @@ midpoint ``S / 2`` decides, with a margin of :data:`Z_MARGIN` standard errors (`
   cannot judge, and the change keeps what the neighbour evidence
   (:mod:`processing.correction.order_evidence`) decided.
 
+A blob the frequencies did not contradict as a whole but whose pixels changed by several order shifts is
+judged again piece by piece, a piece being its pixels of one shift (:func:`judge_shift_pieces`): right
+changes of many wrongly measured pixels can outweigh a wrong change of a few (a line of edge pixels pooled
+onto a step's far side). A contradicted piece goes back as a contradicted blob does, unless an order within
+two of the proposed one would be as undecidable against the measured orders as a blob of that shift (a
+close pair, where orders many fringes apart predict the lower phase alike): then the measured orders may be
+as wrong as the proposal, and the piece is reported unresolved.
+
 Before judging, :func:`snap_to_lower_frequencies` moves changed pixels one or two orders where the lower
 frequencies clearly fit that order better.
 """
@@ -295,10 +303,12 @@ def keep_temporally_supported(
 
     Returns
     -------
-    phase : (H, W) ``proposed`` with the contradicted pixels of contradicted blobs set back to ``measured``
-    unresolved : (H, W) bool, the ambiguous blobs' pixels (their proposed orders, which the neighbours
+    phase : (H, W) ``proposed`` with the contradicted pixels of contradicted blobs and pieces set back to ``measured``
+    unresolved : (H, W) bool, the ambiguous blobs' and pieces' pixels (their proposed orders, which the neighbours
         supported, stay)
-    counts : blobs ``kept``, ``reverted``, ``unresolved`` and ``undecidable`` (left to the neighbours)
+    counts : blobs ``kept``, ``reverted``, ``unresolved`` and ``undecidable`` (left to the neighbours), and
+        pieces of one order shift in the kept blobs ``pieces_reverted`` and ``pieces_unresolved``
+        (:func:`judge_shift_pieces`)
 
     Examples
     --------
@@ -315,7 +325,7 @@ def keep_temporally_supported(
     >>> bool(np.allclose(kept, truth)), counts["reverted"], int(unresolved.sum())
     (True, 1, 0)
     """
-    counts = {"kept": 0, "reverted": 0, "unresolved": 0, "undecidable": 0}
+    counts = {"kept": 0, "reverted": 0, "unresolved": 0, "undecidable": 0, "pieces_reverted": 0, "pieces_unresolved": 0}
     changed = changed_orders(proposed, measured, valid)
     if not changed.any() or not lower:
         return proposed, np.zeros(valid.shape, dtype=bool), counts
