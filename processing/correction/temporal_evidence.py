@@ -344,13 +344,13 @@ def keep_temporally_supported(
     counts["kept"] = count - 1 - counts["reverted"] - counts["unresolved"] - counts["undecidable"]
     # a blob they did not contradict as a whole may still mix right changes with a wrong one: its pieces of one
     # order shift are judged on their own
-    piece_back, piece_unresolved, counts["pieces_reverted"], counts["pieces_unresolved"] = judge_shift_pieces(
-        ev, at, count, ~contradicted, frequency, lower, weights
-    )
     # inside a contradicted blob or piece, only the pixels whose own evidence contradicts the change go back
     # (a blob can mix them with pixels whose measured orders were wrong)
     own = (ev.shift_rad >= MIN_SHIFT_RAD**2) & (ev.with_proposed - ev.with_measured > ev.shift / 2.0)
     own &= np.maximum(ev.with_measured, len(lower)) * SEPARATION**2 <= ev.shift
+    piece_back, piece_unresolved, counts["pieces_reverted"], counts["pieces_unresolved"] = judge_shift_pieces(
+        ev, at, count, ~contradicted, own, frequency, lower, weights
+    )
     back_at = (contradicted[at] | piece_back) & own
     unresolved_at = ambiguous[at] | piece_unresolved
     if not back_at.any():
@@ -385,6 +385,7 @@ def judge_shift_pieces(
     blob: np.ndarray,
     count: int,
     eligible: np.ndarray,
+    own: np.ndarray,
     frequency: float,
     lower: Sequence[tuple[float, np.ndarray]],
     weights: Sequence[float],
@@ -401,24 +402,26 @@ def judge_shift_pieces(
     one: where one of those orders is as undecidable against the measured orders as a blob of that shift would be
     (a close pair such as 29/32, where orders 11 apart predict the 29 phase within 0.2 rad; 18/25 at 7 apart),
     the measured orders may be that far from the truth as easily as the proposal is one or two orders from it,
-    and the piece is reported unresolved instead (the proposal, which the neighbours supported, stays). Pieces
-    are grouped by shift within a blob, not labelled again: only the pixels of mixed blobs are touched.
+    and the piece is reported unresolved instead (the proposal, which the neighbours supported, stays). Only the
+    blobs with a pixel whose ``own`` evidence contradicts its change are split (no piece of another could send
+    a pixel back), and pieces are grouped by shift within a blob, not labelled again.
     """
     none = np.zeros(blob.shape, dtype=bool)
-    some = np.zeros(count)
-    some[blob] = ev.delta  # one of each blob's shifts: a blob is mixed where another differs from it
-    mixed = np.bincount(blob, weights=ev.delta != some[blob], minlength=count) > 0
-    mixed &= eligible
-    mixed[0] = False
-    inside = mixed[blob]
-    if not inside.any():
+    split = np.bincount(blob, weights=own, minlength=count) > 0
+    split &= eligible
+    split[0] = False
+    inside = np.flatnonzero(split[blob])
+    if not inside.size:
         return none, none, 0, 0
-    shifts = ev.delta[inside].astype(np.int64)
-    low = int(shifts.min())
-    span = int(shifts.max()) - low + 1
-    keys, piece = np.unique(blob[inside].astype(np.int64) * span + (shifts - low), return_inverse=True)
-    _undecidable, contradicted, ambiguous = _verdicts(ev.take(inside), piece, keys.size, len(lower))
-    confusable = _confusable_near_proposal((keys % span + low).astype(np.float64), frequency, lower, weights)
+    sub = ev.take(inside)
+    shifts, slot = np.unique(sub.delta, return_inverse=True)  # the few shifts present
+    keys, piece = np.unique(blob[inside].astype(np.int64) * shifts.size + slot, return_inverse=True)
+    of_blob = keys // shifts.size
+    mixed = np.bincount(of_blob)[of_blob] > 1  # a blob of one shift is its own piece, judged already
+    _undecidable, contradicted, ambiguous = _verdicts(sub, piece, keys.size, len(lower))
+    contradicted &= mixed
+    ambiguous &= mixed
+    confusable = _confusable_near_proposal(shifts, frequency, lower, weights)[keys % shifts.size]
     ambiguous |= contradicted & confusable
     contradicted &= ~confusable
     back, unresolved = none.copy(), none.copy()
