@@ -30,9 +30,10 @@ A blob the frequencies did not contradict as a whole but whose pixels changed by
 judged again piece by piece, a piece being its pixels of one shift (:func:`judge_shift_pieces`): right
 changes of many wrongly measured pixels can outweigh a wrong change of a few (a line of edge pixels pooled
 onto a step's far side). A contradicted piece goes back as a contradicted blob does, unless an order within
-two of the proposed one would be as undecidable against the measured orders as a blob of that shift (a
-close pair, where orders many fringes apart predict the lower phase alike): then the measured orders may be
-as wrong as the proposal, and the piece is reported unresolved.
+two of the proposed one, or one that continues a neighbour, would be as undecidable against the measured
+orders as a blob of that shift (a close pair, where orders many fringes apart predict the lower phase
+alike): then the measured orders may be as wrong as the proposal, and the piece (or pixel) is reported
+unresolved.
 
 Before judging, :func:`snap_to_lower_frequencies` moves changed pixels one or two orders where the lower
 frequencies clearly fit that order better.
@@ -351,7 +352,15 @@ def keep_temporally_supported(
     piece_back, piece_unresolved, counts["pieces_reverted"], counts["pieces_unresolved"] = judge_shift_pieces(
         ev, at, count, ~contradicted, own, frequency, lower, weights
     )
-    back_at = (contradicted[at] | piece_back) & own
+    piece_back &= own
+    if piece_back.any():
+        index = np.flatnonzero(piece_back)
+        doubtful = _measured_confusable_with_neighbours(
+            where[index], proposed, measured, valid, frequency, lower, weights
+        )
+        piece_back[index[doubtful]] = False
+        piece_unresolved[index[doubtful]] = True
+    back_at = (contradicted[at] & own) | piece_back
     unresolved_at = ambiguous[at] | piece_unresolved
     if not back_at.any():
         return proposed, mask_at(valid.shape, where[unresolved_at]), counts
@@ -402,7 +411,10 @@ def judge_shift_pieces(
     one: where one of those orders is as undecidable against the measured orders as a blob of that shift would be
     (a close pair such as 29/32, where orders 11 apart predict the 29 phase within 0.2 rad; 18/25 at 7 apart),
     the measured orders may be that far from the truth as easily as the proposal is one or two orders from it,
-    and the piece is reported unresolved instead (the proposal, which the neighbours supported, stays). Only the
+    and the piece is reported unresolved instead (the proposal, which the neighbours supported, stays); the
+    same holds pixel by pixel for the orders that continue each neighbour (:func:`keep_temporally_supported`
+    checks those on the few pixels that would go back: heterodyne 32/29/27, where 31 orders shift the lower
+    phases by 1.1 rad, at 13.7 dB sent pixels three orders off 31 orders off without it). Only the
     blobs with a pixel whose ``own`` evidence contradicts its change are split (no piece of another could send
     a pixel back), and pieces are grouped by shift within a blob, not labelled again.
     """
@@ -439,6 +451,39 @@ def _confusable_near_proposal(
     out = np.zeros(delta.shape, dtype=bool)
     for step in SNAP_STEPS:
         near = delta + step
-        shift_rad, shift = _plain_and_weighted(_shift_terms(near, frequency, lower), weights)
-        out |= (near != 0) & ((shift_rad < MIN_SHIFT_RAD**2) | (shift <= SEPARATION**2 * len(lower)))
+        out |= (near != 0) & _confusable_shift(near, frequency, lower, weights)
     return out
+
+
+def _measured_confusable_with_neighbours(
+    at: np.ndarray,
+    proposed: np.ndarray,
+    measured: np.ndarray,
+    valid: np.ndarray,
+    frequency: float,
+    lower: Sequence[tuple[float, np.ndarray]],
+    weights: Sequence[float],
+) -> np.ndarray:
+    """Per pixel at the flat indices ``at``: whether the order that continues one of its valid 4-neighbours (in
+    ``proposed``) differs from the measured order by a shift too small to judge (:func:`_confusable_shift`)."""
+    height, width = valid.shape
+    rows, cols = np.divmod(at, width)
+    here = np.ravel(measured)[at]
+    out = np.zeros(at.shape, dtype=bool)
+    for dy, dx in ((-1, 0), (1, 0), (0, -1), (0, 1)):
+        y, x = rows + dy, cols + dx
+        inside = (y >= 0) & (y < height) & (x >= 0) & (x < width)
+        y, x = np.where(inside, y, rows), np.where(inside, x, cols)
+        inside &= valid[y, x]
+        shift = np.rint((proposed[y, x] - here) / TWO_PI)
+        out |= inside & (shift != 0) & _confusable_shift(shift, frequency, lower, weights)
+    return out
+
+
+def _confusable_shift(
+    shift: np.ndarray, frequency: float, lower: Sequence[tuple[float, np.ndarray]], weights: Sequence[float]
+) -> np.ndarray:
+    """Whether orders ``shift`` apart predict the lower frequencies too alike to judge (below :data:`MIN_SHIFT_RAD` or
+    :data:`SEPARATION` noise deviations a pixel, the bounds of a blob's judgement)."""
+    shift_rad, weighted = _plain_and_weighted(_shift_terms(shift, frequency, lower), weights)
+    return (shift_rad < MIN_SHIFT_RAD**2) | (weighted <= SEPARATION**2 * len(lower))
