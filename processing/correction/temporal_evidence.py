@@ -308,7 +308,8 @@ def keep_temporally_supported(
     unresolved : (H, W) bool, the ambiguous blobs' and pieces' pixels (their proposed orders, which the neighbours
         supported, stay)
     counts : blobs ``kept``, ``reverted``, ``unresolved`` and ``undecidable`` (left to the neighbours), and
-        pieces of one order shift in the kept blobs ``pieces_reverted`` and ``pieces_unresolved``
+        the pixels of pieces of one order shift in the kept blobs sent back (``piece_pixels_reverted``) and
+        reported (``piece_pixels_unresolved``)
         (:func:`judge_shift_pieces`)
 
     Examples
@@ -326,7 +327,8 @@ def keep_temporally_supported(
     >>> bool(np.allclose(kept, truth)), counts["reverted"], int(unresolved.sum())
     (True, 1, 0)
     """
-    counts = {"kept": 0, "reverted": 0, "unresolved": 0, "undecidable": 0, "pieces_reverted": 0, "pieces_unresolved": 0}
+    counts = {"kept": 0, "reverted": 0, "unresolved": 0, "undecidable": 0}
+    counts |= {"piece_pixels_reverted": 0, "piece_pixels_unresolved": 0}
     changed = changed_orders(proposed, measured, valid)
     if not changed.any() or not lower:
         return proposed, np.zeros(valid.shape, dtype=bool), counts
@@ -349,17 +351,17 @@ def keep_temporally_supported(
     # (a blob can mix them with pixels whose measured orders were wrong)
     own = (ev.shift_rad >= MIN_SHIFT_RAD**2) & (ev.with_proposed - ev.with_measured > ev.shift / 2.0)
     own &= np.maximum(ev.with_measured, len(lower)) * SEPARATION**2 <= ev.shift
-    piece_back, piece_unresolved, counts["pieces_reverted"], counts["pieces_unresolved"] = judge_shift_pieces(
-        ev, at, count, ~contradicted, own, frequency, lower, weights
-    )
+    piece_back, piece_unresolved = judge_shift_pieces(ev, at, count, ~contradicted, own, frequency, lower, weights)
     piece_back &= own
-    if piece_back.any():
+    if piece_back.any():  # and only where the lower frequencies tell the measured orders from each neighbour's
         index = np.flatnonzero(piece_back)
         doubtful = _measured_confusable_with_neighbours(
             where[index], proposed, measured, valid, frequency, lower, weights
         )
         piece_back[index[doubtful]] = False
         piece_unresolved[index[doubtful]] = True
+    counts["piece_pixels_reverted"] = int(np.count_nonzero(piece_back))
+    counts["piece_pixels_unresolved"] = int(np.count_nonzero(piece_unresolved & ~ambiguous[at]))
     back_at = (contradicted[at] & own) | piece_back
     unresolved_at = ambiguous[at] | piece_unresolved
     if not back_at.any():
@@ -398,8 +400,8 @@ def judge_shift_pieces(
     frequency: float,
     lower: Sequence[tuple[float, np.ndarray]],
     weights: Sequence[float],
-) -> tuple[np.ndarray, np.ndarray, int, int]:
-    """Per changed pixel, whether its piece is contradicted and whether it is ambiguous; how many pieces each.
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per changed pixel, whether its piece is contradicted and whether it is ambiguous.
 
     A piece is the pixels of one order shift (``ev.delta``) in a blob (``blob``: each changed pixel's label,
     ``count`` labels) that mixes several shifts and is ``eligible`` (the lower frequencies did not contradict it as
@@ -424,7 +426,7 @@ def judge_shift_pieces(
     split[0] = False
     inside = np.flatnonzero(split[blob])
     if not inside.size:
-        return none, none, 0, 0
+        return none, none
     sub = ev.take(inside)
     shifts, slot = np.unique(sub.delta, return_inverse=True)  # the few shifts present
     keys, piece = np.unique(blob[inside].astype(np.int64) * shifts.size + slot, return_inverse=True)
@@ -439,7 +441,7 @@ def judge_shift_pieces(
     back, unresolved = none.copy(), none.copy()
     back[inside] = contradicted[piece]
     unresolved[inside] = ambiguous[piece]
-    return back, unresolved, int(np.count_nonzero(contradicted)), int(np.count_nonzero(ambiguous))
+    return back, unresolved
 
 
 def _confusable_near_proposal(
