@@ -459,7 +459,8 @@ def correct_auto(
        tell is reported unresolved (``info["evidence"]`` counts the blobs); in a blob they keep whose pixels
        changed by several order shifts, each shift's pixels are judged the same way on their own, a contradicted
        piece going back only where no order near the proposed one fits them as well as the measured one, else
-       reported unresolved (``piece_pixels_reverted``, ``piece_pixels_unresolved``). Last, lone order spikes
+       reported unresolved, and a pixel of it taking the order of its neighbours where the lower frequencies fit
+       that as well as the measured one (``piece_pixels_reverted``, ``piece_pixels_unresolved``). Last, lone order spikes
        take their neighbours' order (:func:`~processing.correction.order_evidence.mend_spikes`);
     6. after a block solve, refit L at full resolution (:func:`~processing.correction.phase_rpca.refit_full_resolution`:
        its factors refitted to the kept orders' phase by least squares, used where they fit it better by more than the

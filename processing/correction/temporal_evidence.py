@@ -32,8 +32,9 @@ changes of many wrongly measured pixels can outweigh a wrong change of a few (a 
 onto a step's far side). A contradicted piece goes back as a contradicted blob does, unless an order within
 two of the proposed one, or one that continues a neighbour, would be as undecidable against the measured
 orders as a blob of that shift (a close pair, where orders many fringes apart predict the lower phase
-alike): then the measured orders may be as wrong as the proposal, and the piece (or pixel) is reported
-unresolved.
+alike): then the measured orders may be as wrong as the proposal, and the piece is reported unresolved,
+or a pixel takes the neighbour's order where that is the only such order the most neighbours continue and
+it fits the lower frequencies within the noise.
 
 Before judging, :func:`snap_to_lower_frequencies` moves changed pixels one or two orders where the lower
 frequencies clearly fit that order better.
@@ -308,8 +309,8 @@ def keep_temporally_supported(
     unresolved : (H, W) bool, the ambiguous blobs' and pieces' pixels (their proposed orders, which the neighbours
         supported, stay)
     counts : blobs ``kept``, ``reverted``, ``unresolved`` and ``undecidable`` (left to the neighbours), and
-        the pixels of pieces of one order shift in the kept blobs sent back (``piece_pixels_reverted``) and
-        reported (``piece_pixels_unresolved``)
+        the pixels of pieces of one order shift in the kept blobs sent back to the measured orders or a
+        neighbour's (``piece_pixels_reverted``) and reported (``piece_pixels_unresolved``)
         (:func:`judge_shift_pieces`)
 
     Examples
@@ -353,20 +354,26 @@ def keep_temporally_supported(
     own &= np.maximum(ev.with_measured, len(lower)) * SEPARATION**2 <= ev.shift
     piece_back, piece_unresolved = judge_shift_pieces(ev, at, count, ~contradicted, own, frequency, lower, weights)
     piece_back &= own
+    taken, values = np.zeros(0, dtype=np.int64), np.zeros(0)
     if piece_back.any():  # and only where the lower frequencies tell the measured orders from each neighbour's
         index = np.flatnonzero(piece_back)
-        doubtful = _measured_confusable_with_neighbours(
+        doubtful, shift = _neighbour_orders_like_measured(
             where[index], proposed, measured, valid, frequency, lower, weights
         )
         piece_back[index[doubtful]] = False
-        piece_unresolved[index[doubtful]] = True
-    counts["piece_pixels_reverted"] = int(np.count_nonzero(piece_back))
+        chosen = np.isfinite(shift)
+        taken = where[index[chosen]]
+        values = np.ravel(measured)[taken] + TWO_PI * shift[chosen]
+        piece_unresolved[index[doubtful & ~chosen]] = True
+    counts["piece_pixels_reverted"] = int(np.count_nonzero(piece_back)) + int(taken.size)
     counts["piece_pixels_unresolved"] = int(np.count_nonzero(piece_unresolved & ~ambiguous[at]))
     back_at = (contradicted[at] & own) | piece_back
     unresolved_at = ambiguous[at] | piece_unresolved
-    if not back_at.any():
+    if not back_at.any() and not taken.size:
         return proposed, mask_at(valid.shape, where[unresolved_at]), counts
-    return (*revert_changed(proposed, measured, where, back_at, unresolved_at), counts)
+    out, unresolved = revert_changed(proposed, measured, where, back_at, unresolved_at)
+    out.reshape(-1)[taken] = values
+    return out, unresolved, counts
 
 
 def _verdicts(
@@ -413,10 +420,13 @@ def judge_shift_pieces(
     one: where one of those orders is as undecidable against the measured orders as a blob of that shift would be
     (a close pair such as 29/32, where orders 11 apart predict the 29 phase within 0.2 rad; 18/25 at 7 apart),
     the measured orders may be that far from the truth as easily as the proposal is one or two orders from it,
-    and the piece is reported unresolved instead (the proposal, which the neighbours supported, stays); the
-    same holds pixel by pixel for the orders that continue each neighbour (:func:`keep_temporally_supported`
-    checks those on the few pixels that would go back: heterodyne 32/29/27, where 31 orders shift the lower
-    phases by 1.1 rad, at 13.7 dB sent pixels three orders off 31 orders off without it). Only the
+    and the piece is reported unresolved instead (the proposal, which the neighbours supported, stays). The same
+    holds pixel by pixel for the orders that continue each neighbour (:func:`keep_temporally_supported` checks
+    those on the few pixels that would go back, :func:`_neighbour_orders_like_measured`): there the lower
+    frequencies have rejected the proposal but fit that order as well as the measured one, so the pixel takes
+    it where it is the one such order continuing the most neighbours and fits every lower frequency within the
+    noise, and is reported otherwise (heterodyne 32/29/27 at 3 steps and 13.7 dB, where 31 orders shift the lower
+    phases by 1.1 rad: without this, pixels three orders off went back to measured orders 31 off). Only the
     blobs with a pixel whose ``own`` evidence contradicts its change are split (no piece of another could send
     a pixel back), and pieces are grouped by shift within a blob, not labelled again.
     """
@@ -457,7 +467,7 @@ def _confusable_near_proposal(
     return out
 
 
-def _measured_confusable_with_neighbours(
+def _neighbour_orders_like_measured(
     at: np.ndarray,
     proposed: np.ndarray,
     measured: np.ndarray,
@@ -465,21 +475,38 @@ def _measured_confusable_with_neighbours(
     frequency: float,
     lower: Sequence[tuple[float, np.ndarray]],
     weights: Sequence[float],
-) -> np.ndarray:
-    """Per pixel at the flat indices ``at``: whether the order that continues one of its valid 4-neighbours (in
-    ``proposed``) differs from the measured order by a shift too small to judge (:func:`_confusable_shift`)."""
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per pixel at the flat indices ``at``: whether an order that continues one of its valid 4-neighbours (in
+    ``proposed``) differs from the measured one by a shift too small to judge (:func:`_confusable_shift`), and the
+    shift from the measured order to take there (NaN where none): the one such order continuing the most
+    neighbours, where no other continues as many and it fits every lower frequency within 3 noise deviations."""
     height, width = valid.shape
     rows, cols = np.divmod(at, width)
     here = np.ravel(measured)[at]
-    out = np.zeros(at.shape, dtype=bool)
-    for dy, dx in ((-1, 0), (1, 0), (0, -1), (0, 1)):
+    shifts = np.zeros((4, at.size))
+    seen = np.zeros((4, at.size), dtype=bool)
+    for side, (dy, dx) in enumerate(((-1, 0), (1, 0), (0, -1), (0, 1))):
         y, x = rows + dy, cols + dx
         inside = (y >= 0) & (y < height) & (x >= 0) & (x < width)
         y, x = np.where(inside, y, rows), np.where(inside, x, cols)
-        inside &= valid[y, x]
-        shift = np.rint((proposed[y, x] - here) / TWO_PI)
-        out |= inside & (shift != 0) & _confusable_shift(shift, frequency, lower, weights)
-    return out
+        seen[side] = inside & valid[y, x]
+        shifts[side] = np.rint((proposed[y, x] - here) / TWO_PI)
+    like = seen & (shifts != 0) & _confusable_shift(shifts, frequency, lower, weights)
+    doubtful = like.any(axis=0)
+    support = ((shifts[:, None, :] == shifts[None, :, :]) & seen[None, :, :]).sum(axis=1)  # neighbours continued
+    support = np.where(like, support, 0)
+    best = np.argmax(support, axis=0)
+    columns = np.arange(at.size)
+    best_shift = shifts[best, columns]
+    top = support[best, columns]
+    rival = (support == top) & (shifts != best_shift)
+    unique = doubtful & ~rival.any(axis=0)
+    out = np.full(at.size, np.nan)
+    if unique.any():
+        lower_at = gather_lower(lower, at[unique])
+        fits = _fits_each_frequency(here[unique] + TWO_PI * best_shift[unique], frequency, lower_at, weights)
+        out[np.flatnonzero(unique)[fits]] = best_shift[unique][fits]
+    return doubtful, out
 
 
 def _confusable_shift(
