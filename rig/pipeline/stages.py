@@ -27,6 +27,7 @@ from processing.geometry.uncertainty import noise_sigma, phase_sigma
 from processing.phase.convention import gray_offset, heterodyne_offset
 from processing.phase.frequency_fusion import fuse_frequencies
 from processing.phase.shifting import phase_shift, sample_stride, shadow_mask
+from processing.quantiles import percentile
 from processing.unwrap.fused_pass import FringePass, fringe_pass, modulation_thresholds
 from processing.unwrap.neighbour_rescue import rescue
 from rig.blas import kernel_blas, rpca_blas
@@ -217,7 +218,7 @@ def _ratio_threshold_sigma(phase_sigma: np.ndarray, ratio: float) -> float:
     """
     flat = phase_sigma.reshape(-1)[:: sample_stride(phase_sigma.shape)]
     flat = flat[np.isfinite(flat)]
-    return float(np.percentile(flat, 1.0)) / ratio if flat.size else 0.0
+    return percentile(flat, 1.0) / ratio if flat.size else 0.0  # flat: a fresh copy, reordered in place
 
 
 def _predictable(state: SceneState) -> bool:
