@@ -382,12 +382,14 @@ def _fused_pass(state: SceneState, options: ProcessOptions) -> bool:
     ratio = options.modulation_ratio(True)  # the pass runs on phase-shifted fringes only
     fusing = _fusing(state, options)
     try:
-        # the mask's thresholds and the noise (both from subsamples) are independent: side by side
-        thresholds, fuse = concurrency.side_by_side(
-            lambda: modulation_thresholds(frames, groups, shifts, ratio),
-            lambda: _noise_sigma(state) if fusing else None,
-        )
-        with kernel_blas():  # the blocks' small products: a second BLAS thread only synchronises
+        # the subsamples' and the blocks' small products (a few rows by 16k-64k pixels): a second BLAS
+        # thread only synchronises (the noise fit's: 4-8 ms with two threads beside a busy core, 0.1 with one)
+        with kernel_blas():
+            # the mask's thresholds and the noise (both from subsamples) are independent: side by side
+            thresholds, fuse = concurrency.side_by_side(
+                lambda: modulation_thresholds(frames, groups, shifts, ratio),
+                lambda: _noise_sigma(state) if fusing else None,
+            )
             scan = fringe_pass(
                 frames,
                 groups,
