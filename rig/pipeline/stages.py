@@ -402,8 +402,9 @@ def _fused_pass(state: SceneState, options: ProcessOptions) -> bool:
                 # auto weighs its order changes against the lower frequencies' wrapped phases
                 keep_all=state.calibration is None or check or options.correction == "auto",
                 orders=False,  # the corrections re-derive orders from the phases; nothing else reads them
-                # A + B, the texture, instead of A and B apart (one map fewer) unless B is wanted for sigma
-                brightness=state.calibration is None and (fuse is not None or not options.noise_rule(True)),
+                # A + B, the texture, instead of A and B apart (one map fewer) unless B is wanted for sigma:
+                # the fusion predicts it; without fusion the uncertainty (calibrated) or the noise rule read B
+                brightness=fuse is not None or (state.calibration is None and not options.noise_rule(True)),
                 fuse_noise=fuse,
                 threads=concurrency.THREADS,  # the blocks on both cores (1 in rig's batch workers)
             )
