@@ -20,6 +20,12 @@ def percentile(sample: np.ndarray, q: float) -> float:
     numpy's ``linear`` method: the order statistics ``a`` and ``b`` either side of the virtual index
     ``(n - 1) q / 100`` are found by one partition, then interpolated as numpy's ``_lerp`` does (from
     ``b`` down where the fraction is at least a half), in the sample's dtype.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> percentile(np.array([4.0, 1.0, 3.0, 2.0]), 50.0)
+    2.5
     """
     values = np.asarray(sample)
     if values.ndim != 1 or values.size == 0:

@@ -22,7 +22,7 @@ from calibration.store import REFERENCE_PLANE, Calibration, read_calibration
 from processing import concurrency
 from processing.concurrency import side_by_side
 from processing.geometry.axis_fusion import FusedPoints, fuse_points
-from processing.geometry.plane_heights import PlaneHeights, plane_heights
+from processing.geometry.plane_model import PlaneHeights, plane_heights
 from processing.geometry.uncertainty import combined_phase_sigma, height_ahead, height_sigma
 from rig.blas import rpca_blas
 from rig.errors import ProcessingError
@@ -312,7 +312,7 @@ def _run_scene(state: SceneState, options: ProcessOptions, progress: Any, to_dis
 
 def _plane_heights(obj: SceneState, ref: SceneState | None, calibration: Calibration | None) -> PlaneHeights | None:
     """Heights, sigma and mask of the reference-plane model in one blocked pass
-    (:mod:`processing.geometry.plane_heights`), where it applies: absolute phases of the object and
+    (:mod:`processing.geometry.plane_model`), where it applies: absolute phases of the object and
     its reference at one frequency, and lateral points finite for every finite height (any real rig).
     None elsewhere: the stepwise :func:`_height` and :func:`_uncertainty` then.
     """

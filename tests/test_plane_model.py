@@ -1,4 +1,4 @@
-"""processing.geometry.plane_heights: eq. 1.15's heights, their sigma and the mask in one blocked pass."""
+"""processing.geometry.plane_model: eq. 1.15's heights, their sigma and the mask in one blocked pass."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from processing.geometry.height import phase_to_height
-from processing.geometry.plane_heights import BLOCK, plane_heights
+from processing.geometry.plane_model import BLOCK, plane_heights
 from processing.geometry.uncertainty import combined_phase_sigma, height_sigma
 
 GEOMETRY = (1000.0, 200.0, 0.05)  # l0, d0 (mm), f0 (fringes / mm)

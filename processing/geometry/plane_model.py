@@ -65,6 +65,20 @@ def plane_heights(
         height sigma; without ``reference_sigma`` the object's alone.
     threads : int
         Threads sharing the blocks.
+
+    Examples
+    --------
+    A point 10 mm above the plane (pupil 500 mm up, 200 mm baseline, 0.1 fringe / mm), its phase
+    known to 0.01 rad on the object and exactly on the reference:
+
+    >>> import numpy as np
+    >>> from processing.geometry.height import height_to_phase
+    >>> delta = np.float32(height_to_phase(np.array([10.0]), 500.0, 200.0, 0.1)[0])
+    >>> phase, reference = np.full((1, 2), delta + np.float32(3.0)), np.full((1, 2), np.float32(3.0))
+    >>> valid = np.array([[True, False]])
+    >>> out = plane_heights(phase, reference, valid, np.ones((1, 2), bool), (500.0, 200.0, 0.1), np.full((1, 2), np.float32(0.01)))
+    >>> np.round(out.height, 3), np.round(out.sigma, 4), out.mask
+    (array([[10., nan]], dtype=float32), array([[0.0382,    nan]], dtype=float32), array([[ True, False]]))
     """
     check_geometry(*geometry)
     shape = np.shape(phase)
