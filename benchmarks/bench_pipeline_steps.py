@@ -5,8 +5,9 @@ Times :func:`rig.pipeline.run.process` given the frames in memory (``frames=``),
 manifest read, the scenes (pattern groups, calibration, axis choice and fit checks), the reference
 cache's key and load, the noise estimate beside the fused pass's modulation thresholds (from the
 subsample), the pass's blocks (inside them the mask, Ding's look-up and the frequency fusion), the
-validity bound, the height (eq. 1.15 and the finite mask) beside the uncertainty's combined phase
-sigma and model a step ahead, the uncertainty map beside the islands, and the result. Per step:
+validity bound, the heights (the reference-plane model's heights, sigma and mask in one blocked pass;
+other models: eq. 1.15 and the finite mask beside the uncertainty's combined phase sigma and model a
+step ahead, then the uncertainty map beside the islands), the islands, and the result. Per step:
 the median over the runs of its wall time and of the CPU time of the thread that called it (the
 blocks' other thread and the helper thread's steps are not in that column when they run beside
 another; the process's CPU time in the header holds everything). A step run beside another shows
@@ -57,6 +58,7 @@ STEPS: list[tuple[Any, str, str]] = [
     (fused_pass, "fuse_frequencies", "  blocks: frequency fusion"),
     (stages, "_keep_fused", "pass outputs kept (rescue check)"),
     (stages, "_bound_phase_sigma", "validity: phase sigma bound"),
+    (run, "_plane_heights", "heights, sigma and mask (reference plane, blocked)"),
     (run, "_height", "height: eq. 1.15, finite mask"),
     (run, "_uncertainty_start", "uncertainty: phase sigma, model a step ahead"),
     (run, "_uncertainty", "uncertainty map"),

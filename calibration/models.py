@@ -176,22 +176,34 @@ def plane_points_finite(
     is returned, possibly narrowed in place, instead of a new mask).
     """
     h = np.asarray(height)
-    pixel = calibration.pixel_mm
-    if pixel is None:
-        raise CalibrationError(f"{calibration.where}: pixel_mm: missing (needed for lateral point coordinates)")
-    reach = max(h.shape[1] - 1, h.shape[0] - 1) / 2.0 * abs(pixel)  # largest |x - cx| pixel_mm
     limit = float(np.finfo(np.float32).max)
     if finite is None or h.dtype != np.float32:  # a finite float32 is within the float32 range
         finite = np.isfinite(h) & (np.abs(h) <= limit)
-    if not calibration.l0_mm:
-        return finite if reach < limit else np.zeros_like(finite)
-    # |X| <= reach |l0 - h| / l0: finite while |l0 - h| stays under this bound (always, for real rigs)
-    bound = limit / (reach / abs(calibration.l0_mm)) if reach > 0 else np.inf
-    if bound >= 2.0 * limit:
+    bound = lateral_bound(calibration, h.shape)
+    if bound is None:
         return finite
+    if bound == 0.0 or not calibration.l0_mm:
+        return np.zeros_like(finite)
     with np.errstate(over="ignore", invalid="ignore"):
         finite &= np.abs(calibration.l0_mm - h.astype(np.float64)) < bound
     return finite
+
+
+def lateral_bound(calibration: CalibrationLike, shape: tuple[int, ...]) -> float | None:
+    """The bound on ``|l0 - h|`` under which :func:`plane_points`' lateral coordinates of an (H, W) map stay
+    finite in float32; None where every finite float32 height qualifies (any real rig), 0 where none does.
+
+    |X| <= reach |l0 - h| / l0 with ``reach`` the largest |x - cx| pixel_mm.
+    """
+    pixel = calibration.pixel_mm
+    if pixel is None:
+        raise CalibrationError(f"{calibration.where}: pixel_mm: missing (needed for lateral point coordinates)")
+    reach = max(shape[1] - 1, shape[0] - 1) / 2.0 * abs(pixel)
+    limit = float(np.finfo(np.float32).max)
+    if not calibration.l0_mm:
+        return None if reach < limit else 0.0
+    bound = limit / (reach / abs(calibration.l0_mm)) if reach > 0 else np.inf
+    return None if bound >= 2.0 * limit else bound
 
 
 def plane_points(calibration: CalibrationLike, height: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:

@@ -7,6 +7,8 @@ Main entry points:
 - :func:`grid_triangles` (``mesh``): triangles over the valid pixel grid, without bridging jumps.
 - :func:`phase_sigma` and :func:`height_sigma` (``uncertainty``): each pixel's predicted standard
   deviation from the capture's own noise (:func:`noise_sigma`).
+- :func:`plane_heights` (``plane_model``): the reference-plane model's heights, their sigma and
+  the valid mask in one blocked pass.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from processing._lazy import lazy_exports
 if TYPE_CHECKING:
     from processing.geometry.height import height_to_phase, phase_to_height, point_cloud
     from processing.geometry.mesh import grid_triangles
+    from processing.geometry.plane_model import plane_heights
     from processing.geometry.uncertainty import height_sigma, noise_sigma, phase_sigma
 
 _SOURCES = {
@@ -25,6 +28,7 @@ _SOURCES = {
     "phase_to_height": "height",
     "point_cloud": "height",
     "grid_triangles": "mesh",
+    "plane_heights": "plane_model",
     "height_sigma": "uncertainty",
     "noise_sigma": "uncertainty",
     "phase_sigma": "uncertainty",
@@ -37,6 +41,7 @@ __all__ = [
     "noise_sigma",
     "phase_sigma",
     "phase_to_height",
+    "plane_heights",
     "point_cloud",
 ]
 

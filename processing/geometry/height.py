@@ -47,7 +47,7 @@ def phase_to_height(
     >>> np.round(phase_to_height(delta, 500.0, 200.0, 0.1), 9)
     array([ 5., 10.])
     """
-    _check_geometry(l0_mm, d0_mm, f0_per_mm)
+    check_geometry(l0_mm, d0_mm, f0_per_mm)
     if dtype not in (np.float64, np.float32):
         raise ValueError(f"dtype: expected numpy.float64 or numpy.float32, found {dtype!r}")
     reuse = (
@@ -74,14 +74,15 @@ def phase_to_height(
 
 def height_to_phase(height_mm: np.ndarray, l0_mm: float, d0_mm: float, f0_per_mm: float) -> np.ndarray:
     """Inverse of :func:`phase_to_height`: dPhi = -2 pi f0 d0 h / (l0 - h)."""
-    _check_geometry(l0_mm, d0_mm, f0_per_mm)
+    check_geometry(l0_mm, d0_mm, f0_per_mm)
     h = np.asarray(height_mm, dtype=np.float64)
     if np.any(h >= l0_mm):
         raise ValueError(f"height_mm: every height must be below l0_mm = {l0_mm}")
     return -2.0 * np.pi * f0_per_mm * d0_mm * h / (l0_mm - h)
 
 
-def _check_geometry(l0_mm: float, d0_mm: float, f0_per_mm: float) -> None:
+def check_geometry(l0_mm: float, d0_mm: float, f0_per_mm: float) -> None:
+    """Refuse a reference-plane geometry eq. 1.15 cannot use (ValueError naming the parameter)."""
     if not l0_mm > 0:
         raise ValueError(f"l0_mm: expected > 0, found {l0_mm}")
     if d0_mm == 0 or not np.isfinite(d0_mm):

@@ -25,6 +25,7 @@ import numpy as np
 
 from processing import _validate
 from processing._blockwise import blockwise
+from processing.quantiles import percentile
 
 TWO_PI = 2.0 * np.pi
 
@@ -302,9 +303,21 @@ def fit_residual_variance(sample: np.ndarray, shifts: np.ndarray) -> np.ndarray:
     """Per-pixel residual variance ``sum r^2 / (J - 3)`` of the least-squares sinusoid fit of a
     (J, P) sample with phase shifts ``shifts`` (J,): the camera noise where the fringes are sinusoidal."""
     steps = sample.shape[0]
-    design = np.column_stack([np.ones(steps), np.cos(shifts), np.sin(shifts)])  # (J, 3): either sign convention
-    residual = sample - design @ (np.linalg.pinv(design) @ sample)
+    residual = _residual_projector(tuple(np.asarray(shifts, dtype=np.float64).tolist())) @ sample
     return np.einsum("jp,jp->p", residual, residual) / (steps - 3)
+
+
+@lru_cache(maxsize=32)
+def _residual_projector(shifts: tuple[float, ...]) -> np.ndarray:
+    """(J, J) matrix I - D D^+ taking a sample to its residual from the least-squares sinusoid fit.
+
+    D = [1, cos delta, sin delta] (either sign convention spans the same fit). One product per
+    sample instead of two and a pseudo-inverse: the noise estimate runs on every capture.
+    """
+    design = np.column_stack([np.ones(len(shifts)), np.cos(shifts), np.sin(shifts)])
+    projector = np.eye(len(shifts)) - design @ np.linalg.pinv(design)
+    projector.flags.writeable = False  # shared by every caller through the cache
+    return projector
 
 
 def robust_high(sample: np.ndarray, fallback: np.ndarray | None = None) -> float:
@@ -314,7 +327,7 @@ def robust_high(sample: np.ndarray, fallback: np.ndarray | None = None) -> float
         sub = fallback[np.isfinite(fallback)]
     if sub.size == 0:
         raise ValueError("modulation: no finite value to derive a threshold from")
-    return float(np.percentile(sub, 99.0))
+    return percentile(sub, 99.0)  # sub is a fresh copy: reordered in place
 
 
 def _robust_high(modulation: np.ndarray) -> float:

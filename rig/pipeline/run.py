@@ -18,9 +18,11 @@ from calibration import models as calibration_models
 from calibration.errors import CalibrationError
 from calibration.plane_axes import for_axis
 from calibration.stereo import STEREO
-from calibration.store import Calibration, read_calibration
+from calibration.store import REFERENCE_PLANE, Calibration, read_calibration
+from processing import concurrency
 from processing.concurrency import side_by_side
 from processing.geometry.axis_fusion import FusedPoints, fuse_points
+from processing.geometry.plane_model import PlaneHeights, plane_heights
 from processing.geometry.uncertainty import combined_phase_sigma, height_ahead, height_sigma
 from rig.blas import rpca_blas
 from rig.errors import ProcessingError
@@ -231,11 +233,17 @@ def _heights(
     if second is not None:
         assert calibration is not None
         return (*_height_both(obj, second, calibration, notes), None)
+    islands: np.ndarray | None = None
+    uncertainty: np.ndarray | None
+    planar = _plane_heights(obj, ref, calibration)
+    if planar is not None:
+        _note_conditioning(obj, calibration, None, options.axis, notes)
+        if options.max_sigma is None:
+            islands = _islands(planar.mask, options.min_island_fraction)
+        return planar.height, None, planar.mask, planar.sigma, islands
     (height, points, mask), start = side_by_side(  # the model a step ahead needs no heights
         lambda: _height(obj, ref, calibration, notes), lambda: _uncertainty_start(obj, ref, calibration)
     )
-    islands: np.ndarray | None = None
-    uncertainty: np.ndarray | None
     if options.max_sigma is None:  # the mask the islands are found in is final: both side by side
         uncertainty, islands = side_by_side(
             lambda: _uncertainty(obj, start, mask, height),
@@ -300,6 +308,33 @@ def _run_scene(state: SceneState, options: ProcessOptions, progress: Any, to_dis
     state.frames = None  # the frames are not needed any more; free them early
     if key is not None:
         reference_cache.store(state, key, to_disk=to_disk)
+
+
+def _plane_heights(obj: SceneState, ref: SceneState | None, calibration: Calibration | None) -> PlaneHeights | None:
+    """Heights, sigma and mask of the reference-plane model in one blocked pass
+    (:mod:`processing.geometry.plane_model`), where it applies: absolute phases of the object and
+    its reference at one frequency, and lateral points finite for every finite height (any real rig).
+    None elsewhere: the stepwise :func:`_height` and :func:`_uncertainty` then.
+    """
+    if calibration is None or calibration.model != REFERENCE_PLANE or ref is None:
+        return None
+    if obj.unwrapped is None or ref.unwrapped is None or not (obj.unwrapped.absolute and ref.unwrapped.absolute):
+        return None
+    if ref.unwrapped.frequency != obj.unwrapped.frequency:
+        return None  # stage_height refuses it, with its message
+    if calibration_models.lateral_bound(calibration, obj.unwrapped.phase.shape) is not None:
+        return None
+    assert calibration.l0_mm is not None and calibration.d0_mm is not None  # checked when read
+    return plane_heights(
+        obj.unwrapped.phase,
+        ref.unwrapped.phase,
+        obj.unwrapped.valid,
+        ref.unwrapped.valid,
+        (calibration.l0_mm, calibration.d0_mm, calibration.per_mm(obj.unwrapped.frequency)),
+        phase_sigma=obj.phase_sigma,
+        reference_sigma=ref.phase_sigma,
+        threads=concurrency.THREADS,
+    )
 
 
 def _height(

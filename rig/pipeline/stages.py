@@ -27,6 +27,7 @@ from processing.geometry.uncertainty import noise_sigma, phase_sigma
 from processing.phase.convention import gray_offset, heterodyne_offset
 from processing.phase.frequency_fusion import fuse_frequencies
 from processing.phase.shifting import phase_shift, sample_stride, shadow_mask
+from processing.quantiles import percentile
 from processing.unwrap.fused_pass import FringePass, fringe_pass, modulation_thresholds
 from processing.unwrap.neighbour_rescue import rescue
 from rig.blas import kernel_blas, rpca_blas
@@ -217,7 +218,7 @@ def _ratio_threshold_sigma(phase_sigma: np.ndarray, ratio: float) -> float:
     """
     flat = phase_sigma.reshape(-1)[:: sample_stride(phase_sigma.shape)]
     flat = flat[np.isfinite(flat)]
-    return float(np.percentile(flat, 1.0)) / ratio if flat.size else 0.0
+    return percentile(flat, 1.0) / ratio if flat.size else 0.0  # flat: a fresh copy, reordered in place
 
 
 def _predictable(state: SceneState) -> bool:
@@ -381,12 +382,14 @@ def _fused_pass(state: SceneState, options: ProcessOptions) -> bool:
     ratio = options.modulation_ratio(True)  # the pass runs on phase-shifted fringes only
     fusing = _fusing(state, options)
     try:
-        # the mask's thresholds and the noise (both from subsamples) are independent: side by side
-        thresholds, fuse = concurrency.side_by_side(
-            lambda: modulation_thresholds(frames, groups, shifts, ratio),
-            lambda: _noise_sigma(state) if fusing else None,
-        )
-        with kernel_blas():  # the blocks' small products: a second BLAS thread only synchronises
+        # the subsamples' and the blocks' small products (a few rows by 16k-64k pixels): a second BLAS
+        # thread only synchronises (the noise fit's: 4-8 ms with two threads beside a busy core, 0.1 with one)
+        with kernel_blas():
+            # the mask's thresholds and the noise (both from subsamples) are independent: side by side
+            thresholds, fuse = concurrency.side_by_side(
+                lambda: modulation_thresholds(frames, groups, shifts, ratio),
+                lambda: _noise_sigma(state) if fusing else None,
+            )
             scan = fringe_pass(
                 frames,
                 groups,
@@ -399,8 +402,9 @@ def _fused_pass(state: SceneState, options: ProcessOptions) -> bool:
                 # auto weighs its order changes against the lower frequencies' wrapped phases
                 keep_all=state.calibration is None or check or options.correction == "auto",
                 orders=False,  # the corrections re-derive orders from the phases; nothing else reads them
-                # A + B, the texture, instead of A and B apart (one map fewer) unless B is wanted for sigma
-                brightness=state.calibration is None and (fuse is not None or not options.noise_rule(True)),
+                # A + B, the texture, instead of A and B apart (one map fewer) unless B is wanted for sigma:
+                # the fusion predicts it; without fusion the uncertainty (calibrated) or the noise rule read B
+                brightness=fuse is not None or (state.calibration is None and not options.noise_rule(True)),
                 fuse_noise=fuse,
                 threads=concurrency.THREADS,  # the blocks on both cores (1 in rig's batch workers)
             )
