@@ -453,15 +453,11 @@ def correct_auto(
        (``info["unresolved"]``: pixels, fraction, the largest blobs' boxes; ``info["unresolved_mask"]``,
        the (H, W) bool mask, an array that ``rig process`` writes to unresolved.npy, not to the report).
        With ``lower_wrapped`` ((frequency, wrapped phase) of the capture's lower frequencies, and
-       ``frequency``), the kept changes are then weighed against them
-       (:mod:`processing.correction.temporal_evidence`): a pixel one or two orders off moves to the order they
-       clearly fit, a blob they clearly contradict goes back to the measured orders, one they cannot
-       tell is reported unresolved (``info["evidence"]`` counts the blobs); in a blob they keep whose pixels
-       changed by several order shifts, each shift's pixels are judged the same way on their own, a contradicted
-       piece going back only where no order near the proposed one fits them as well as the measured one, else
-       reported unresolved, and a pixel of it taking the order of its neighbours where the lower frequencies fit
-       that as well as the measured one (``piece_pixels_reverted``, ``piece_pixels_unresolved``). Last, lone order spikes
-       take their neighbours' order (:func:`~processing.correction.order_evidence.mend_spikes`);
+       ``frequency``), the kept changes are then weighed against them (:mod:`~processing.correction.temporal_evidence`):
+       a pixel one or two orders off moves to the order they clearly fit, a blob they clearly contradict goes back to
+       the measured orders, one they cannot tell is reported unresolved (``info["evidence"]`` counts the blobs), a
+       kept blob of several order shifts is judged again per shift (``judge_shift_pieces`` there). Last, lone order
+       spikes take their neighbours' order (:func:`~processing.correction.order_evidence.mend_spikes`);
     6. after a block solve, refit L at full resolution (:func:`~processing.correction.phase_rpca.refit_full_resolution`:
        its factors refitted to the kept orders' phase by least squares, used where they fit it better by more than the
        noise; the blocks blur a step's or a ramp's edge, ch. 4 at full resolution does not); weigh L's orders against

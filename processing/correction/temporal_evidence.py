@@ -353,18 +353,9 @@ def keep_temporally_supported(
     own = (ev.shift_rad >= MIN_SHIFT_RAD**2) & (ev.with_proposed - ev.with_measured > ev.shift / 2.0)
     own &= np.maximum(ev.with_measured, len(lower)) * SEPARATION**2 <= ev.shift
     piece_back, piece_unresolved = judge_shift_pieces(ev, at, count, ~contradicted, own, frequency, lower, weights)
-    piece_back &= own
-    taken, values = np.zeros(0, dtype=np.int64), np.zeros(0)
-    if piece_back.any():  # and only where the lower frequencies tell the measured orders from each neighbour's
-        index = np.flatnonzero(piece_back)
-        doubtful, shift = _neighbour_orders_like_measured(
-            where[index], proposed, measured, valid, frequency, lower, weights
-        )
-        piece_back[index[doubtful]] = False
-        chosen = np.isfinite(shift)
-        taken = where[index[chosen]]
-        values = np.ravel(measured)[taken] + TWO_PI * shift[chosen]
-        piece_unresolved[index[doubtful & ~chosen]] = True
+    piece_back, piece_unresolved, taken, values = _neighbour_verdicts(
+        piece_back & own, piece_unresolved, where, proposed, measured, valid, frequency, lower, weights
+    )
     counts["piece_pixels_reverted"] = int(np.count_nonzero(piece_back)) + int(taken.size)
     counts["piece_pixels_unresolved"] = int(np.count_nonzero(piece_unresolved & ~ambiguous[at]))
     back_at = (contradicted[at] & own) | piece_back
@@ -422,7 +413,7 @@ def judge_shift_pieces(
     the measured orders may be that far from the truth as easily as the proposal is one or two orders from it,
     and the piece is reported unresolved instead (the proposal, which the neighbours supported, stays). The same
     holds pixel by pixel for the orders that continue each neighbour (:func:`keep_temporally_supported` checks
-    those on the few pixels that would go back, :func:`_neighbour_orders_like_measured`): there the lower
+    those on the few pixels that would go back, :func:`_neighbour_verdicts`): there the lower
     frequencies have rejected the proposal but fit that order as well as the measured one, so the pixel takes
     it where it is the one such order continuing the most neighbours and fits every lower frequency within the
     noise, and is reported otherwise (heterodyne 32/29/27 at 3 steps and 13.7 dB, where 31 orders shift the lower
@@ -467,19 +458,32 @@ def _confusable_near_proposal(
     return out
 
 
-def _neighbour_orders_like_measured(
-    at: np.ndarray,
+def _neighbour_verdicts(
+    back: np.ndarray,
+    unresolved: np.ndarray,
+    where: np.ndarray,
     proposed: np.ndarray,
     measured: np.ndarray,
     valid: np.ndarray,
     frequency: float,
     lower: Sequence[tuple[float, np.ndarray]],
     weights: Sequence[float],
-) -> tuple[np.ndarray, np.ndarray]:
-    """Per pixel at the flat indices ``at``: whether an order that continues one of its valid 4-neighbours (in
-    ``proposed``) differs from the measured one by a shift too small to judge (:func:`_confusable_shift`), and the
-    shift from the measured order to take there (NaN where none): the one such order continuing the most
-    neighbours, where no other continues as many and it fits every lower frequency within 3 noise deviations."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``back`` and ``unresolved`` (per changed pixel at the flat indices ``where``) where the lower frequencies also
+    tell each pixel going back from its neighbours' orders, and the pixels (flat indices) that take a neighbour's
+    order instead, with their phases.
+
+    A pixel stays out of ``back`` where an order that continues one of its valid 4-neighbours (in ``proposed``)
+    differs from its measured order by a shift too small to judge (:func:`_confusable_shift`). It takes that order
+    where it is the one such order continuing the most neighbours (no other continues as many) and fits every lower
+    frequency within 3 noise deviations, and is added to ``unresolved`` otherwise.
+    """
+    taken, values = np.zeros(0, dtype=np.int64), np.zeros(0)
+    if not back.any():
+        return back, unresolved, taken, values
+    back, unresolved = back.copy(), unresolved.copy()
+    index = np.flatnonzero(back)
+    at = where[index]
     height, width = valid.shape
     rows, cols = np.divmod(at, width)
     here = np.ravel(measured)[at]
@@ -497,16 +501,15 @@ def _neighbour_orders_like_measured(
     support = np.where(like, support, 0)
     best = np.argmax(support, axis=0)
     columns = np.arange(at.size)
-    best_shift = shifts[best, columns]
-    top = support[best, columns]
-    rival = (support == top) & (shifts != best_shift)
-    unique = doubtful & ~rival.any(axis=0)
-    out = np.full(at.size, np.nan)
-    if unique.any():
-        lower_at = gather_lower(lower, at[unique])
-        fits = _fits_each_frequency(here[unique] + TWO_PI * best_shift[unique], frequency, lower_at, weights)
-        out[np.flatnonzero(unique)[fits]] = best_shift[unique][fits]
-    return doubtful, out
+    best_shift, top = shifts[best, columns], support[best, columns]
+    chosen = doubtful & ~((support == top) & (shifts != best_shift)).any(axis=0)  # no rival as well supported
+    if chosen.any():
+        lower_at = gather_lower(lower, at[chosen])
+        chosen[chosen] = _fits_each_frequency(here[chosen] + TWO_PI * best_shift[chosen], frequency, lower_at, weights)
+    back[index[doubtful]] = False
+    unresolved[index[doubtful & ~chosen]] = True
+    taken = at[chosen]
+    return back, unresolved, taken, here[chosen] + TWO_PI * best_shift[chosen]
 
 
 def _confusable_shift(
