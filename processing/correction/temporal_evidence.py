@@ -306,6 +306,7 @@ def keep_temporally_supported(
     Returns
     -------
     phase : (H, W) ``proposed`` with the contradicted pixels of contradicted blobs and pieces set back to ``measured``
+        (a piece's pixel to its neighbours' order where the lower frequencies cannot tell that from the measured one)
     unresolved : (H, W) bool, the ambiguous blobs' and pieces' pixels (their proposed orders, which the neighbours
         supported, stay)
     counts : blobs ``kept``, ``reverted``, ``unresolved`` and ``undecidable`` (left to the neighbours), and
@@ -346,12 +347,12 @@ def keep_temporally_supported(
     counts["unresolved"] = int(np.count_nonzero(ambiguous[1:]))
     counts["undecidable"] = int(np.count_nonzero(undecidable[1:]))
     counts["kept"] = count - 1 - counts["reverted"] - counts["unresolved"] - counts["undecidable"]
-    # a blob they did not contradict as a whole may still mix right changes with a wrong one: its pieces of one
-    # order shift are judged on their own
     # inside a contradicted blob or piece, only the pixels whose own evidence contradicts the change go back
     # (a blob can mix them with pixels whose measured orders were wrong)
     own = (ev.shift_rad >= MIN_SHIFT_RAD**2) & (ev.with_proposed - ev.with_measured > ev.shift / 2.0)
     own &= np.maximum(ev.with_measured, len(lower)) * SEPARATION**2 <= ev.shift
+    # a blob they did not contradict as a whole may still mix right changes with a wrong one: its pieces of one
+    # order shift are judged on their own
     piece_back, piece_unresolved = judge_shift_pieces(ev, at, count, ~contradicted, own, frequency, lower, weights)
     piece_back, piece_unresolved, taken, values = _neighbour_verdicts(
         piece_back & own, piece_unresolved, where, proposed, measured, valid, frequency, lower, weights
