@@ -94,3 +94,25 @@ def on_threads(task: Callable[[], Result], count: int) -> list[Result]:
             future.exception()  # wait: no call may outlive this one
         raise
     return [mine, *(future.result() for future in futures)]
+
+
+def on_blocks(run: Callable[[Callable[[], int | None]], object], pixels: int, block: int, threads: int) -> None:
+    """``run(take)`` on up to ``threads`` threads (this one among them), ``take()`` handing out the first pixel of
+    the next block of ``block`` pixels (None once all ``pixels`` are taken).
+
+    Blocks are handed out one at a time rather than in fixed shares: on a machine whose cores are busy with
+    other work, a thread the OS pauses holds up no block another thread could take. The other threads are
+    the kept helpers (:func:`on_threads`), whose thread-local scratch stays allocated from call to call.
+    """
+    starts = iter(range(0, pixels, block))
+    workers = max(1, min(int(threads), -(-pixels // block)))
+    if workers == 1:
+        run(lambda: next(starts, None))
+        return
+    lock = threading.Lock()
+
+    def take() -> int | None:
+        with lock:
+            return next(starts, None)
+
+    on_threads(lambda: run(take), workers)

@@ -18,7 +18,7 @@ tested), in float32 for float32 phases and in float64 otherwise, and stored as f
 
 from __future__ import annotations
 
-import threading
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -91,28 +91,21 @@ def plane_heights(
         if values is not None and np.shape(values) != shape:
             raise ValueError(f"{name}: expected the shape {shape} of phase, found {np.shape(values)}")
 
-    def flat(values: np.ndarray | None, kind: Any) -> np.ndarray | None:
-        return None if values is None else np.ascontiguousarray(values, dtype=kind).reshape(-1)
+    def flat(values: np.ndarray, kind: Any) -> np.ndarray:
+        return np.ascontiguousarray(values, dtype=kind).reshape(-1)
 
     pixels = int(np.prod(shape))
     out = PlaneHeights(
         aligned_empty(pixels), None if phase_sigma is None else aligned_empty(pixels), np.empty(pixels, bool)
     )
     kernel = _Kernel(
-        [flat(phase, dtype), flat(reference, dtype)],
-        [flat(valid, bool), flat(reference_valid, bool)],
-        [flat(phase_sigma, np.float32), flat(reference_sigma, np.float32)],
+        (flat(phase, dtype), flat(reference, dtype)),
+        (flat(valid, bool), flat(reference_valid, bool)),
+        tuple(None if s is None else flat(s, np.float32) for s in (phase_sigma, reference_sigma)),
         geometry,
         out,
     )
-    starts = iter(range(0, pixels, BLOCK))
-    lock = threading.Lock()
-
-    def take() -> int | None:
-        with lock:
-            return next(starts, None)
-
-    concurrency.on_threads(lambda: kernel.run(take, pixels), max(1, min(int(threads), -(-pixels // BLOCK))))
+    concurrency.on_blocks(lambda take: kernel.run(take, pixels), pixels, BLOCK, threads)
     sigma = None if out.sigma is None else out.sigma.reshape(shape)
     return PlaneHeights(out.height.reshape(shape), sigma, out.mask.reshape(shape))
 
@@ -122,9 +115,9 @@ class _Kernel:
 
     def __init__(
         self,
-        phases: list[np.ndarray | None],
-        masks: list[np.ndarray | None],
-        sigmas: list[np.ndarray | None],
+        phases: tuple[np.ndarray, np.ndarray],
+        masks: tuple[np.ndarray, np.ndarray],
+        sigmas: tuple[np.ndarray | None, ...],
         geometry: tuple[float, float, float],
         out: PlaneHeights,
     ) -> None:
@@ -132,7 +125,6 @@ class _Kernel:
         self.phase, self.reference = phases
         self.valid, self.reference_valid = masks
         self.phase_sigma, self.reference_sigma = sigmas
-        assert self.phase is not None and self.reference is not None
         self.dtype = self.phase.dtype.type
         # phase_to_height's constants and order of operations: (D / (D - c)) * l0
         self.offset = self.dtype(2.0 * np.pi * f0_per_mm * d0_mm)
@@ -145,7 +137,7 @@ class _Kernel:
 
             self.cv2 = cv2
 
-    def run(self, take: Any, pixels: int) -> None:
+    def run(self, take: Callable[[], int | None], pixels: int) -> None:
         size = min(BLOCK, pixels)
         scratch = (
             aligned_empty(size, self.dtype),
@@ -157,8 +149,6 @@ class _Kernel:
             self._block(slice(begin, min(begin + BLOCK, pixels)), scratch)
 
     def _block(self, window: slice, scratch: tuple[np.ndarray, ...]) -> None:
-        assert self.phase is not None and self.reference is not None
-        assert self.valid is not None and self.reference_valid is not None
         size = window.stop - window.start
         delta, below, phase_sigma, outside = (buffer[:size] for buffer in scratch)
         height, mask = self.out.height[window], self.out.mask[window]
@@ -166,7 +156,7 @@ class _Kernel:
             np.subtract(self.phase[window], self.reference[window], out=delta)
             np.subtract(delta, self.offset, out=below)
             np.divide(delta, below, out=delta)
-            np.multiply(delta, self.scale, out=height, casting="same_kind" if self.dtype is np.float32 else "unsafe")
+            np.multiply(delta, self.scale, out=height, casting="unsafe")  # float64 phases: stored as float32
             np.logical_and(self.valid[window], self.reference_valid[window], out=mask)
             mask &= np.isfinite(height, out=outside)
             np.logical_not(mask, out=outside)
@@ -174,12 +164,11 @@ class _Kernel:
             if self.out.sigma is None or self.phase_sigma is None:
                 return
             sigma = self.out.sigma[window]
-            if self.reference_sigma is None:
-                np.copyto(phase_sigma, self.phase_sigma[window])
-            else:
+            sigma_phi = self.phase_sigma[window]
+            if self.reference_sigma is not None:
                 # in quadrature: OpenCV's magnitude, one vectorised pass (combined_phase_sigma's)
-                self.cv2.magnitude(self.phase_sigma[window], self.reference_sigma[window], phase_sigma)
+                sigma_phi = self.cv2.magnitude(sigma_phi, self.reference_sigma[window], phase_sigma)
             np.multiply(below, below, out=below)  # (D - c)^2
-            np.divide(phase_sigma, below, out=sigma, casting="same_kind" if self.dtype is np.float32 else "unsafe")
+            np.divide(sigma_phi, below, out=sigma, casting="unsafe")
             sigma *= self.slope
             np.copyto(sigma, np.float32(np.nan), where=outside)

@@ -28,7 +28,6 @@ of about 16k pixels, demodulated before the pass, so the mask is known inside it
 from __future__ import annotations
 
 import itertools
-import math
 import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -456,25 +455,9 @@ def _temporal_kernel(
 
 
 def _run_blocks(plan: _Plan, out: _Outputs, pixels: int, threads: int) -> None:
-    """The plan over every pixel, on ``threads`` threads (this one among them) taking the next block in turn.
-
-    Blocks are handed out one at a time rather than in fixed halves: on a machine whose cores
-    are busy with other work, a thread the OS pauses holds up no block another thread could take.
-    The other threads are :mod:`processing.concurrency`'s kept helpers, whose block scratch
-    stays allocated from pass to pass.
-    """
-    starts = iter(range(0, pixels, BLOCK))
-    workers = max(1, min(threads, math.ceil(pixels / BLOCK)))
-    if workers == 1:
-        plan.run(out, lambda: next(starts, None), pixels)
-        return
-    lock = threading.Lock()
-
-    def take() -> int | None:
-        with lock:
-            return next(starts, None)
-
-    concurrency.on_threads(lambda: plan.run(out, take, pixels), workers)
+    """The plan over every pixel, on ``threads`` threads taking the next block in turn
+    (:func:`processing.concurrency.on_blocks`)."""
+    concurrency.on_blocks(lambda take: plan.run(out, take, pixels), pixels, BLOCK, threads)
 
 
 def _sampled_high(flat: np.ndarray, spec: _Group, shape: tuple[int, int], cv2: Any | None) -> float:
