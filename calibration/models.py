@@ -182,8 +182,9 @@ def plane_points_finite(
     bound = lateral_bound(calibration, h.shape)
     if bound is None:
         return finite
-    if bound == 0.0 or not calibration.l0_mm:
+    if bound == 0.0:
         return np.zeros_like(finite)
+    assert calibration.l0_mm  # lateral_bound gives a finite bound only with l0
     with np.errstate(over="ignore", invalid="ignore"):
         finite &= np.abs(calibration.l0_mm - h.astype(np.float64)) < bound
     return finite

@@ -22,13 +22,11 @@ from collections.abc import Callable
 
 import numpy as np
 
-from processing.correction.order_evidence import beyond_pi
+from processing.correction.order_evidence import FOUR_NEIGHBOURS, beyond_pi
 
 TWO_PI = 2.0 * np.pi
 # Passes over the pixels next to those that moved: runs of up to about twice this many pixels mend.
 PASSES = 3
-# (row, column) offsets of the four neighbours: up, down, left, right
-_NEIGHBOURS = ((-1, 0), (1, 0), (0, -1), (0, 1))
 
 
 def mend_broken_pixels(
@@ -100,13 +98,13 @@ def _broken_pixels(phase: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np
 def _next_to(ys: np.ndarray, xs: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The pixels 4-adjacent to the given ones, off the border and with four valid neighbours (row-major, once)."""
     rows, cols = valid.shape
-    ny = np.concatenate([ys + dy for dy, _ in _NEIGHBOURS])
-    nx = np.concatenate([xs + dx for _, dx in _NEIGHBOURS])
+    ny = np.concatenate([ys + dy for dy, _ in FOUR_NEIGHBOURS])
+    nx = np.concatenate([xs + dx for _, dx in FOUR_NEIGHBOURS])
     inside = (ny >= 1) & (ny < rows - 1) & (nx >= 1) & (nx < cols - 1)
     flat = np.unique(ny[inside] * cols + nx[inside])
     ny, nx = flat // cols, flat % cols
     keep = valid[ny, nx]
-    for dy, dx in _NEIGHBOURS:
+    for dy, dx in FOUR_NEIGHBOURS:
         keep &= valid[ny + dy, nx + dx]
     return ny[keep], nx[keep]
 
@@ -120,7 +118,7 @@ def _mend_at(
 ) -> tuple[np.ndarray, np.ndarray]:
     """One pass at the given pixels (all with four valid neighbours): the phase and which of them moved."""
     at = phase[ys, xs]
-    around = np.stack([phase[ys + dy, xs + dx] for dy, dx in _NEIGHBOURS])  # (4, n)
+    around = np.stack([phase[ys + dy, xs + dx] for dy, dx in FOUR_NEIGHBOURS])  # (4, n)
     own = (np.abs(around - at) <= np.pi).sum(axis=0)
     candidates = at + TWO_PI * np.rint((around - at) / TWO_PI)  # the order of each neighbour's side
     support = (np.abs(candidates[:, None, :] - around[None, :, :]) <= np.pi).sum(axis=1)  # (4, n)

@@ -28,6 +28,7 @@ import numpy as np
 TWO_PI = 2.0 * np.pi
 # The largest unresolved blobs listed in a report, by size.
 LISTED_REGIONS = 20
+FOUR_NEIGHBOURS = ((-1, 0), (1, 0), (0, -1), (0, 1))  # (dy, dx) of a pixel's 4-neighbours
 
 
 def label_blobs(mask: np.ndarray) -> tuple[int, np.ndarray]:

@@ -48,7 +48,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from processing.angles import wrap_to_pi
-from processing.correction.order_evidence import changed_orders, label_blobs, mask_at, revert_changed
+from processing.correction.order_evidence import FOUR_NEIGHBOURS, changed_orders, label_blobs, mask_at, revert_changed
 from processing.denoise.rpca import finite_median
 
 TWO_PI = 2.0 * np.pi
@@ -490,7 +490,7 @@ def _neighbour_verdicts(
     here = np.ravel(measured)[at]
     shifts = np.zeros((4, at.size))
     seen = np.zeros((4, at.size), dtype=bool)
-    for side, (dy, dx) in enumerate(((-1, 0), (1, 0), (0, -1), (0, 1))):
+    for side, (dy, dx) in enumerate(FOUR_NEIGHBOURS):
         y, x = rows + dy, cols + dx
         inside = (y >= 0) & (y < height) & (x >= 0) & (x < width)
         y, x = np.where(inside, y, rows), np.where(inside, x, cols)
