@@ -436,7 +436,7 @@ class FakeTriggerBox:
             return self._receive_resetting(ready, buffer, time.monotonic())
         if ready:
             try:
-                buffer += os.read(self._master, 1024)
+                buffer += self._read_available()
             except OSError:
                 pass  # no process holds the slave open (EIO); keep waiting
         return buffer, True
@@ -447,7 +447,7 @@ class FakeTriggerBox:
         data = b""
         if ready:
             try:
-                data = os.read(self._master, 1024)
+                data = self._read_available()
             except OSError:  # EIO: no process holds the port open
                 self._port_open = False
                 self._stop.wait(0.005)
@@ -462,6 +462,18 @@ class FakeTriggerBox:
             self._write(tp.encode_event("READY", self._protocol_version))
             return b"", False
         return buffer + data, True
+
+    def _read_available(self) -> bytes:
+        """What the port holds now, without waiting. ``select`` reports a port no one holds as readable
+        (EIO); opened between that report and the read, a blocking read would wait for the host's first
+        line while the board, not knowing it was opened, never boots nor sends READY."""
+        os.set_blocking(self._master, False)
+        try:
+            return os.read(self._master, 1024)
+        except BlockingIOError:
+            return b""
+        finally:
+            os.set_blocking(self._master, True)
 
     def _answer(self, buffer: bytes) -> bytes:
         """Handle every whole line of ``buffer`` (and one too long), then let the firmware tick;
