@@ -13,7 +13,7 @@ from processing.correction.region_orders import (
     fill_from_neighbours,
     fringe_regions,
     order_break_pixels,
-    order_breaks_at,
+    neighbour_steps_at,
     pool_region_orders,
     region_cut,
 )
@@ -126,14 +126,19 @@ def test_beyond_wrapped_equals_the_wrapped_test_everywhere() -> None:
     np.testing.assert_array_equal(_beyond_wrapped(values, 1.2), np.abs(wrap_to_pi(values)) > 1.2)
 
 
-def test_order_breaks_at_pixels_equals_the_full_map_test() -> None:
+def test_neighbour_steps_at_pixels_count_what_the_full_map_test_sees() -> None:
     rng = np.random.default_rng(5)
     phase = np.cumsum(rng.normal(0.0, 0.3, size=(40, 50)), axis=1)
     phase[rng.random(phase.shape) < 0.05] += 2 * np.pi  # order errors
     valid = rng.random(phase.shape) > 0.1
     rows, cols = np.nonzero(np.ones(phase.shape, dtype=bool))
+    breaks, continues = neighbour_steps_at(phase, valid, rows, cols)
     full = order_break_pixels(np.where(valid, phase, np.nan))
-    np.testing.assert_array_equal(order_breaks_at(phase, valid, rows, cols), full.reshape(-1))
+    np.testing.assert_array_equal(breaks > 0, full.reshape(-1))
+    # every valid 4-neighbour of a valid pixel is one or the other; an invalid pixel counts none
+    padded = np.pad(valid, 1)
+    neighbours = padded[:-2, 1:-1].astype(int) + padded[2:, 1:-1] + padded[1:-1, :-2] + padded[1:-1, 2:]
+    np.testing.assert_array_equal(breaks + continues, np.where(valid, neighbours, 0).reshape(-1))
 
 
 def test_fill_writes_into_a_non_contiguous_map() -> None:

@@ -93,6 +93,36 @@ def test_restore_detail_keeps_structure_the_low_rank_part_misses() -> None:
     assert np.mean(out == low_rank) > 0.99
 
 
+def _blurred_step(seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A ramp with a 5 rad step down the rows at row 30 (more than pi: the pixels on either side break), its
+    measurement (noise 0.02 rad) and a low-rank estimate that blurs the step over the two rows beside it."""
+    rng = np.random.default_rng(seed)
+    truth = np.tile(np.linspace(0.0, 20.0, 80), (60, 1))
+    truth[30:] += 5.0
+    estimate = truth.copy()
+    estimate[29:31] = 0.5 * (truth[29] + truth[30])  # L's in-between value: 2.5 rad off each side
+    return truth, truth + rng.normal(0.0, 0.02, truth.shape), estimate
+
+
+def test_detail_keeps_the_edge_of_a_real_step_its_temporal_orders_vouch_for() -> None:
+    truth, measured, estimate = _blurred_step(6)
+    # r = +-2.5 rad on the two edge rows: their 3 x 3 means cancel, and each edge pixel breaks with the other row
+    without = restore_detail(estimate, measured, k_sigma=4.0, noise_sigma=0.02)
+    assert np.abs(without - truth)[29:31].min() > 2.0  # L's blur stays (the rule before unwrapped_phase)
+    out = restore_detail(estimate, measured, k_sigma=4.0, noise_sigma=0.02, unwrapped_phase=measured)
+    np.testing.assert_array_equal(out[29:31], measured[29:31])
+    assert np.abs(out - truth).max() < 0.15
+
+
+def test_detail_keeps_the_blur_where_the_correction_moved_the_edge_pixels_order() -> None:
+    truth, kept, estimate = _blurred_step(7)
+    unwrapped = kept.copy()
+    unwrapped[29] -= TWO_PI  # temporal unwrapping measured the edge row a fringe off: the kept order is the correction's
+    out = restore_detail(estimate, kept, k_sigma=4.0, noise_sigma=0.02, unwrapped_phase=unwrapped)
+    np.testing.assert_array_equal(out[29], estimate[29])  # nothing vouches for the kept order there
+    np.testing.assert_array_equal(out[30], kept[30])  # the other edge row's order is the measured one
+
+
 @pytest.mark.parametrize("changes", [0, 40, 3000])  # none; a few (near the changes only); many (the whole map)
 def test_detail_update_near_changed_orders_is_bit_identical_to_the_whole_map(changes: int) -> None:
     rng = np.random.default_rng(changes)
@@ -107,9 +137,13 @@ def test_detail_update_near_changed_orders_is_bit_identical_to_the_whole_map(cha
     where = np.concatenate([where, [0, cols - 1, (rows - 1) * cols]]) if changes else where  # corners too
     after.flat[where] += TWO_PI * rng.choice([-1.0, 1.0], where.size)
     sigma = 0.05
-    previous = keep_coherent_detail(estimate, before, valid, 4.0, sigma)
-    whole = keep_coherent_detail(estimate, after, valid, 4.0, sigma)
-    updated = update_coherent_detail(previous, before, estimate, after, valid, 4.0, sigma)
+    unwrapped = before.copy()  # the lone wrong orders in it, and a step more than pi high
+    unwrapped[60:, :] += 4.0
+    before[60:, :] += 4.0
+    after[60:, :] += 4.0
+    previous = keep_coherent_detail(estimate, before, valid, 4.0, sigma, unwrapped)
+    whole = keep_coherent_detail(estimate, after, valid, 4.0, sigma, unwrapped)
+    updated = update_coherent_detail(previous, before, estimate, after, valid, 4.0, sigma, unwrapped)
     assert updated.tobytes() == whole.tobytes()
     assert changes == 0 or np.count_nonzero(~np.isclose(whole, previous) & valid) > 0  # the changes matter
 

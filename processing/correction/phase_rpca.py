@@ -27,7 +27,7 @@ import numpy as np
 
 from processing import _validate
 from processing.angles import wrap_to_pi
-from processing.correction.region_orders import order_breaks_at
+from processing.correction.region_orders import neighbour_steps_at
 from processing.correction.shadow_fill import fill_shadows, valid_mask
 from processing.denoise.rpca import (
     RPCAResult,
@@ -334,6 +334,7 @@ def restore_detail(
     mask: np.ndarray | None = None,
     k_sigma: float = 4.0,
     noise_sigma: float | None = None,
+    unwrapped_phase: np.ndarray | None = None,
 ) -> np.ndarray:
     """Low-rank phase, except where the measured phase departs from it coherently beyond the noise.
 
@@ -345,7 +346,10 @@ def restore_detail(
     noise outliers and at a lone wrong order that ``measured_phase`` may still carry: measured
     on rig study's sphere cap (15 dB) and isolated objects (18 dB, 15 dB), it beats the per-pixel
     rule |r| > 4 sigma by 6 % to 37 % in NMSE_h and the plain L everywhere but at 10 dB (2 %).
-    ``measured_phase`` should be free of order errors, e.g. from :func:`reorder_from_low_rank`.
+    A lone pixel departing beyond 2 k_sigma sigma is kept too (:func:`_lone_departures_kept`).
+    ``measured_phase`` should be free of order errors, e.g. from :func:`reorder_from_low_rank`;
+    ``unwrapped_phase``: the phase as temporal unwrapping measured it, the independent evidence of
+    ``measured_phase``'s orders that the lone pixels at a real height step are kept on.
 
     Returns
     -------
@@ -356,11 +360,21 @@ def restore_detail(
     if not k_sigma > 0:
         raise ValueError(f"k_sigma: expected > 0, found {k_sigma}")
     sigma = phase_noise_sigma(measured, valid) if noise_sigma is None else float(noise_sigma)
-    return keep_coherent_detail(estimate, measured, valid, k_sigma, sigma)
+    unwrapped = None
+    if unwrapped_phase is not None:
+        unwrapped = np.asarray(unwrapped_phase, dtype=np.float64)
+        if unwrapped.shape != valid.shape:
+            raise ValueError(f"unwrapped_phase: expected shape {valid.shape}, found {unwrapped.shape}")
+    return keep_coherent_detail(estimate, measured, valid, k_sigma, sigma, unwrapped)
 
 
 def keep_coherent_detail(
-    estimate: np.ndarray, measured: np.ndarray, valid: np.ndarray, k_sigma: float, sigma: float
+    estimate: np.ndarray,
+    measured: np.ndarray,
+    valid: np.ndarray,
+    k_sigma: float,
+    sigma: float,
+    unwrapped: np.ndarray | None = None,
 ) -> np.ndarray:
     """:func:`restore_detail` on maps already validated (finite wherever ``valid``), ``k_sigma`` > 0."""
     invalid = ~valid
@@ -369,15 +383,34 @@ def keep_coherent_detail(
     size = np.abs(residual)
     mean = _box_sum_3x3(residual) / 9.0
     departing = _box_count_3x3(size > 2.0 * sigma)
-    # A lone departure far beyond any noise (2 k_sigma sigma) is structure too (a one-pixel
-    # feature, fringes too dense for L), unless the measured pixel breaks with its neighbours
-    # (a wrong order left in it). Rare: the order-break test runs at these pixels only.
     coherent, lone = _departures(size, mean, departing, k_sigma, sigma)
-    rows, cols = np.divmod(np.flatnonzero(lone), lone.shape[1])
-    lone[rows, cols] = ~order_breaks_at(measured, valid, rows, cols)
+    rows, cols = np.divmod(np.flatnonzero(lone), lone.shape[1])  # rare: the neighbour tests run at these only
+    lone[rows, cols] = _lone_departures_kept(measured, valid, rows, cols, unwrapped)
     out = np.where(valid & (coherent | lone), measured, estimate)
     np.copyto(out, np.nan, where=invalid)
     return out
+
+
+def _lone_departures_kept(
+    measured: np.ndarray, valid: np.ndarray, rows: np.ndarray, cols: np.ndarray, unwrapped: np.ndarray | None
+) -> np.ndarray:
+    """Which lone departures (one pixel beyond 2 k_sigma sigma: far beyond any noise) keep the measured value.
+
+    Structure (a one-pixel feature, fringes too dense for L) unless the pixel breaks with a neighbour, which
+    may be a wrong order left in it; then L stays. Except on the edge of a real height step of more than
+    pi: there the pixel breaks with the far side, and the 3 x 3 mean of the residual cancels (L blurs both
+    sides alike, r changes sign across the edge), so L's in-between value, up to half the step off, would
+    stay. Such a pixel continues more of its valid neighbours than it breaks with, and its order is the one
+    temporal unwrapping measured (``unwrapped``): two independent estimates agree on it, so it is kept. A
+    pixel whose order the correction changed is not: a line pooled with the far side of a step looks the
+    same to its neighbours, and there L's in-between value is the smaller error.
+    """
+    breaks, continues = neighbour_steps_at(measured, valid, rows, cols)
+    kept = breaks == 0
+    if unwrapped is not None:
+        measured_order = np.abs(measured[rows, cols] - unwrapped[rows, cols]) < np.pi
+        kept |= (breaks < continues) & measured_order
+    return kept
 
 
 # Share of the map near changed orders from which :func:`update_coherent_detail` recomputes the whole map
@@ -393,8 +426,10 @@ def update_coherent_detail(
     valid: np.ndarray,
     k_sigma: float,
     sigma: float,
+    unwrapped: np.ndarray | None = None,
 ) -> np.ndarray:
-    """:func:`keep_coherent_detail` of ``measured``, given ``previous_out`` = the same of ``previous_measured``.
+    """:func:`keep_coherent_detail` of ``measured``, given ``previous_out`` = the same of ``previous_measured``
+    (both with the same ``unwrapped``).
 
     A pixel's result reads the maps within its 3 x 3 neighbourhood only, so it is recomputed at the pixels
     within one of a change only, from their 9 neighbours gathered and summed in the order of the whole-map
@@ -409,7 +444,7 @@ def update_coherent_detail(
     near_cols = np.clip(cols[:, None, None] + offsets[None, None, :], 0, width - 1)
     near = np.unique((near_rows * width + near_cols).ravel())
     if near.size >= UPDATE_WHOLE_FROM * valid.size:
-        return keep_coherent_detail(estimate, measured, valid, k_sigma, sigma)
+        return keep_coherent_detail(estimate, measured, valid, k_sigma, sigma, unwrapped)
     ys, xs = np.divmod(near, width)
 
     def residual_at(dy: int, dx: int) -> np.ndarray:
@@ -426,7 +461,7 @@ def update_coherent_detail(
     departing = [[(np.abs(value) > 2.0 * sigma).view(np.uint8) for value in row] for row in box]
     count = sum(value for row in departing for value in row)
     coherent, lone = _departures(np.abs(box[1][1]), (across[0] + across[1] + across[2]) / 9.0, count, k_sigma, sigma)
-    lone[lone] = ~order_breaks_at(measured, valid, ys[lone], xs[lone])
+    lone[lone] = _lone_departures_kept(measured, valid, ys[lone], xs[lone], unwrapped)
     here_valid = valid[ys, xs]
     values = np.where(here_valid & (coherent | lone), measured[ys, xs], estimate[ys, xs])
     values[~here_valid] = np.nan

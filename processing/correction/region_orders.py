@@ -284,20 +284,29 @@ def order_break_pixels(phase: np.ndarray) -> np.ndarray:
     return out
 
 
-def order_breaks_at(phase: np.ndarray, valid: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
-    """:func:`order_break_pixels` of ``phase`` masked to ``valid`` (NaN elsewhere), at the given pixels only."""
+def neighbour_steps_at(
+    phase: np.ndarray, valid: np.ndarray, rows: np.ndarray, cols: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """At the given pixels of ``phase`` masked to ``valid``: how many valid 4-neighbours lie more than pi away
+    (order breaks) and how many within pi (continuations), as int8 counts; both 0 at an invalid pixel.
+
+    ``breaks > 0`` is :func:`order_break_pixels` of the masked phase at those pixels.
+    """
     height, width = phase.shape
     here = phase[rows, cols]
     here = np.where(valid[rows, cols], here, np.nan)
-    out = np.zeros(rows.size, dtype=bool)
+    breaks = np.zeros(rows.size, dtype=np.int8)
+    continues = np.zeros(rows.size, dtype=np.int8)
     for dy, dx in ((0, 1), (0, -1), (1, 0), (-1, 0)):
         y, x = rows + dy, cols + dx
         inside = (y >= 0) & (y < height) & (x >= 0) & (x < width)
         y, x = y[inside], x[inside]
         near = np.where(valid[y, x], phase[y, x], np.nan)
         with np.errstate(invalid="ignore"):
-            out[inside] |= np.abs(near - here[inside]) > np.pi
-    return out
+            step = np.abs(near - here[inside])
+        breaks[inside] += step > np.pi
+        continues[inside] += step <= np.pi  # NaN: neither
+    return breaks, continues
 
 
 def fill_from_neighbours(

@@ -248,7 +248,9 @@ def _add_low_rank_orders(maps: _AutoMaps, found: _Candidates) -> np.ndarray:
     candidate = found.maps["regions+low-rank"] = np.where(misfit, pooled, proposed)
     found.pooled_detail, found.breaks["regions+low-rank"] = side_by_side(
         lambda: (  # after a block solve step 6 restores detail around the refitted L instead
-            None if maps.decimate > 1 else keep_coherent_detail(found.low_rank, pooled, valid, maps.k_sigma, maps.sigma)
+            None
+            if maps.decimate > 1
+            else keep_coherent_detail(found.low_rank, pooled, valid, maps.k_sigma, maps.sigma, maps.phase)
         ),
         lambda: order_breaks_since(candidate, pooled, found.breaks["regions"], valid),
     )
@@ -340,10 +342,17 @@ def _restore_detail(
     pooled_detail = found.pooled_detail if low_rank is found.low_rank else None
     out, changed = side_by_side(
         lambda: (  # step 6 ran alongside step 3 on the pooled orders: redone only where the orders differ
-            keep_coherent_detail(low_rank, reordered, maps.valid, maps.k_sigma, maps.sigma)
+            keep_coherent_detail(low_rank, reordered, maps.valid, maps.k_sigma, maps.sigma, maps.phase)
             if pooled_detail is None
             else update_coherent_detail(
-                pooled_detail, found.maps["regions"], low_rank, reordered, maps.valid, maps.k_sigma, maps.sigma
+                pooled_detail,
+                found.maps["regions"],
+                low_rank,
+                reordered,
+                maps.valid,
+                maps.k_sigma,
+                maps.sigma,
+                maps.phase,
             )
         ),
         lambda: int(np.count_nonzero(changed_orders(reordered, maps.phase, maps.valid))),
