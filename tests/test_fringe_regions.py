@@ -12,8 +12,8 @@ from processing.correction.region_orders import (
     _window_majority,
     fill_from_neighbours,
     fringe_regions,
-    order_break_pixels,
     neighbour_steps_at,
+    order_break_pixels,
     pool_region_orders,
     region_cut,
 )

@@ -117,7 +117,7 @@ def test_detail_keeps_the_edge_of_a_real_step_its_temporal_orders_vouch_for() ->
 def test_detail_keeps_the_blur_where_the_correction_moved_the_edge_pixels_order() -> None:
     truth, kept, estimate = _blurred_step(7)
     unwrapped = kept.copy()
-    unwrapped[29] -= TWO_PI  # temporal unwrapping measured the edge row a fringe off: the kept order is the correction's
+    unwrapped[29] -= TWO_PI  # measured a fringe off there: the kept order is the correction's
     out = restore_detail(estimate, kept, k_sigma=4.0, noise_sigma=0.02, unwrapped_phase=unwrapped)
     np.testing.assert_array_equal(out[29], estimate[29])  # nothing vouches for the kept order there
     np.testing.assert_array_equal(out[30], kept[30])  # the other edge row's order is the measured one
