@@ -474,7 +474,9 @@ def correct_auto(
        ["low_rank_orders_taken"]``), move pixels breaking with three or four neighbours
        (:mod:`~processing.correction.broken_pixels`); keep L (denoised) except where the result departs from it
        coherently beyond the noise (:func:`~processing.correction.phase_rpca.restore_detail`, ``k_sigma`` standard
-       deviations of the 3 x 3 mean residual), and never where L lies a fringe or more from the kept orders.
+       deviations of the 3 x 3 mean residual) or one pixel departs far beyond it where nothing suggests a wrong order
+       (on a height step's edge: its order is the measured one), and never where L lies a fringe or more from the
+       kept orders.
     7. report as unresolved too the pieces of a fringe whose measured orders' vote does not decide the
        kept order (:func:`~processing.correction.order_margin.undecided_orders`; ``info["evidence"]
        ["vote_undecided_pixels"]``): where the lower frequencies barely tell orders apart, most measured
