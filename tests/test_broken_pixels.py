@@ -49,3 +49,31 @@ def test_the_lower_frequencies_veto_a_move_they_fit_worse() -> None:
     # without the lower frequency the neighbours alone decide (and are wrong here)
     _, moved = mend_broken_pixels(truth, valid)
     assert moved > 0
+
+
+def test_pixels_beside_a_shadow_or_the_border_with_three_neighbours_off_mend() -> None:
+    """Beside a shadow and on the map's edge a pixel has three valid neighbours: a fringe or more off all three is
+    the same evidence as three of four."""
+    truth = _step()
+    valid = np.ones(SHAPE, dtype=bool)
+    valid[5:15, 20:24] = False  # a shadow
+    kept = truth.copy()
+    kept[8, 19] -= 11 * TWO_PI  # beside the shadow: left, up and down valid, all eleven orders away
+    kept[0, 5] += TWO_PI  # on the top edge: three neighbours
+    kept[SHAPE[0] - 1, 8] -= 2 * TWO_PI  # on the bottom edge
+    kept[13, 18:20] += TWO_PI  # a pair ending at the shadow: the pixel beside it breaks with two of three ...
+    out, moved = mend_broken_pixels(kept, valid, _misfit(truth, 17.0, 13.0))
+    np.testing.assert_allclose(out[valid], truth[valid])
+    assert moved == 5  # ... and with three once its partner has moved
+
+
+def test_a_pixel_beside_a_shadow_off_two_of_its_three_neighbours_stays() -> None:
+    """One valid neighbour continuing it is as many as a neighbour's order would have after a move: no evidence."""
+    truth = _step()
+    valid = np.ones(SHAPE, dtype=bool)
+    valid[5:15, 20:24] = False
+    kept = truth.copy()
+    kept[5:15, 19] += TWO_PI  # a column along the shadow: each pixel continues the ones above and below it
+    out, moved = mend_broken_pixels(kept, valid)
+    assert moved == 0
+    np.testing.assert_array_equal(out, kept)

@@ -7,7 +7,11 @@ its four neighbours, its partner in the run being the fourth, so none is a spike
 resolves puts a pixel a fringe or more off three of its four neighbours where another order is
 continuous with more of them.
 
-Each such pixel (four valid neighbours, three or four of them more than pi away) is offered the order of
+Beside a shadow or the map's border a pixel has three valid neighbours; breaking with all three is the same
+evidence (three neighbours a fringe or more away), and such pixels are judged alike: temporal unwrapping
+fails most often there, where the fringes lose contrast, and neither this step nor the spikes' saw them.
+
+Each such pixel (three or four valid neighbours, three or four of them more than pi away) is offered the order of
 each neighbour's side, ``phi + 2 pi round((neighbour - phi) / 2 pi)``, and takes the one continuous with
 the most neighbours (between equals, the one the lower frequencies fit best) only where that is more
 neighbours than its own order is continuous with, and, with the lower frequencies, only where they fit
@@ -20,9 +24,11 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+import cv2
 import numpy as np
 
 from processing.correction.order_evidence import FOUR_NEIGHBOURS, beyond_pi
+from processing.correction.region_orders import neighbour_steps_at
 
 TWO_PI = 2.0 * np.pi
 # Passes over the pixels next to those that moved: runs of up to about twice this many pixels mend.
@@ -71,12 +77,14 @@ def mend_broken_pixels(
 
 def _broken_pixels(phase: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Rows and columns (row-major) of the valid pixels off the border with four valid neighbours, three or four of
-    them more than pi away.
+    them more than pi away, and of those beside a shadow or the border with three valid neighbours, all three more
+    than pi away.
 
     On the flat map, where every shift is a contiguous slice (a 2-D slice off the first column is strided and costs
     twice as much): pixel ``p`` steps ``across[p - 1]`` to its left, ``across[p]`` to its right, ``down[p - W]``
     up and ``down[p]`` down. Only pixels whose four neighbours are valid count, so no step needs its own validity
-    test; the first and last columns, where the flat map wraps a row, are dropped at the end.
+    test; the first and last columns, where the flat map wraps a row, are dropped at the end. The pixels with three
+    valid neighbours lie on the mask's outline and are tested there only.
     """
     rows, cols = phase.shape
     flat, flat_valid = np.ravel(phase), np.ravel(valid)
@@ -90,22 +98,41 @@ def _broken_pixels(phase: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np
     for start in (cols, cols - 1, cols + 1, 0, 2 * cols):  # the pixel, left, right, up, down
         broken &= flat_valid[start : start + inner]
     at = np.flatnonzero(broken) + cols
-    ys, xs = at // cols, at % cols
-    keep = (xs > 0) & (xs < cols - 1)
-    return ys[keep], xs[keep]
+    keep = (at % cols > 0) & (at % cols < cols - 1)
+    rim = _beside_the_mask_edge(valid)
+    # three of three valid neighbours away: the left or the right one among them (the cheap test, on the row steps)
+    x = rim % cols
+    rim = rim[(across[np.maximum(rim - 1, 0)] & (x > 0)) | (across[np.minimum(rim, across.size - 1)] & (x < cols - 1))]
+    ys, xs = np.divmod(rim, cols)
+    breaks, continues = neighbour_steps_at(phase, valid, ys, xs)
+    at = np.union1d(at[keep], rim[(breaks == 3) & (continues == 0)])  # row-major, each once
+    return np.divmod(at, cols)
+
+
+def _beside_the_mask_edge(valid: np.ndarray) -> np.ndarray:
+    """Flat indices (row-major) of the valid pixels with a 4-neighbour invalid or off the map: where a pixel may
+    have three valid neighbours (few: the outline of the mask)."""
+    cross = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
+    inner = cv2.erode(valid.view(np.uint8), cross, borderType=cv2.BORDER_CONSTANT, borderValue=0)
+    return np.flatnonzero(valid & ~inner.view(bool))
 
 
 def _next_to(ys: np.ndarray, xs: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The pixels 4-adjacent to the given ones, off the border and with four valid neighbours (row-major, once)."""
+    """The valid pixels 4-adjacent to the given ones with three or four valid neighbours (row-major, once)."""
     rows, cols = valid.shape
     ny = np.concatenate([ys + dy for dy, _ in FOUR_NEIGHBOURS])
     nx = np.concatenate([xs + dx for _, dx in FOUR_NEIGHBOURS])
-    inside = (ny >= 1) & (ny < rows - 1) & (nx >= 1) & (nx < cols - 1)
+    inside = (ny >= 0) & (ny < rows) & (nx >= 0) & (nx < cols)
     flat = np.unique(ny[inside] * cols + nx[inside])
     ny, nx = flat // cols, flat % cols
     keep = valid[ny, nx]
+    ny, nx = ny[keep], nx[keep]
+    count = np.zeros(ny.size, dtype=np.int8)
     for dy, dx in FOUR_NEIGHBOURS:
-        keep &= valid[ny + dy, nx + dx]
+        y, x = ny + dy, nx + dx
+        on_map = (y >= 0) & (y < rows) & (x >= 0) & (x < cols)
+        count += on_map & valid[np.clip(y, 0, rows - 1), np.clip(x, 0, cols - 1)]
+    keep = count >= 3
     return ny[keep], nx[keep]
 
 
@@ -116,14 +143,19 @@ def _mend_at(
     xs: np.ndarray,
     misfit: Callable[[np.ndarray, np.ndarray], np.ndarray] | None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """One pass at the given pixels (all with four valid neighbours): the phase and which of them moved."""
+    """One pass at the given pixels (all with three or four valid neighbours): the phase and which of them moved.
+
+    A pixel moves where three or more of its valid neighbours lie more than pi away and another neighbour's order
+    is continuous with more of them than its own (an invalid neighbour is NaN: it supports nothing)."""
     at = phase[ys, xs]
-    around = np.stack([phase[ys + dy, xs + dx] for dy, dx in FOUR_NEIGHBOURS])  # (4, n)
-    own = (np.abs(around - at) <= np.pi).sum(axis=0)
-    candidates = at + TWO_PI * np.rint((around - at) / TWO_PI)  # the order of each neighbour's side
-    support = (np.abs(candidates[:, None, :] - around[None, :, :]) <= np.pi).sum(axis=1)  # (4, n)
+    around = np.stack([_neighbour(phase, valid, ys + dy, xs + dx) for dy, dx in FOUR_NEIGHBOURS])  # (4, n)
+    with np.errstate(invalid="ignore"):
+        own = (np.abs(around - at) <= np.pi).sum(axis=0)
+        breaks = (np.abs(around - at) > np.pi).sum(axis=0)
+        candidates = at + TWO_PI * np.rint((around - at) / TWO_PI)  # the order of each neighbour's side
+        support = (np.abs(candidates[:, None, :] - around[None, :, :]) <= np.pi).sum(axis=1)  # (4, n)
     best = support.max(axis=0)
-    moved = (own <= 1) & (best > own)
+    moved = (breaks >= 3) & (best > own)
     if not moved.any():
         return phase, moved
     index = np.arange(at.size)
@@ -132,9 +164,18 @@ def _mend_at(
     else:
         where = np.zeros(valid.shape, dtype=bool)
         where[ys, xs] = True  # ys, xs are row-major: the mask's order
-        fits = misfit(np.vstack([candidates, at[None, :]]), where)  # the lower phases gathered once for all five
+        with np.errstate(invalid="ignore"):  # a missing neighbour's candidate is NaN, never chosen
+            fits = misfit(np.vstack([candidates, at[None, :]]), where)  # the lower phases gathered once for all five
         choice = np.argmin(np.where(support == best, fits[:4], np.inf), axis=0)
         moved &= fits[choice, index] <= fits[4]
     out = phase.copy()
     out[ys[moved], xs[moved]] = candidates[choice, index][moved]
     return out, moved
+
+
+def _neighbour(phase: np.ndarray, valid: np.ndarray, ys: np.ndarray, xs: np.ndarray) -> np.ndarray:
+    """``phase`` at the given pixels, NaN where they are invalid or off the map."""
+    rows, cols = valid.shape
+    on_map = (ys >= 0) & (ys < rows) & (xs >= 0) & (xs < cols)
+    ys, xs = np.clip(ys, 0, rows - 1), np.clip(xs, 0, cols - 1)
+    return np.where(on_map & valid[ys, xs], phase[ys, xs], np.nan)

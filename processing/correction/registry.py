@@ -487,11 +487,8 @@ def correct_auto(
     the neighbours cannot see a blob on a step of a whole number of fringes, the lower frequencies can
     (develop cases with no wrong temporal order, 1.5x - 390x worse than none without them).
 
-    Measured (``rig study``, 1000 x 1000, seeds 0-2, NMSE_h): isolated objects, f = (18, 25), 18 dB, a
-    quarter of the orders wrong: 3.2e-4 - 4.3e-4, 0.26 - 0.34x the true orders' (``rpca-phase``
-    0.09 - 0.12); sphere cap 10 dB 3.3e-5 (``rpca-phase`` 3.1e-3 - 4.9e-3); Table 4.1 2.2e-5.
-    Drawn cases (``benchmarks/bench_auto_family.py``, docs/study/family.md, with the lower frequencies):
-    held-out median 0.04x the oracle, within 2x on 57 of 64, never worse than no correction.
+    Measured: docs/study/README.md (``rig study``, the thesis' experiments) and docs/study/family.md (drawn cases,
+    ``benchmarks/bench_auto_family.py``: held-out median 0.02x the oracle, never worse than no correction).
     """
     start = time.perf_counter()
     if not float(k_sigma) > 0:
