@@ -77,3 +77,15 @@ def test_a_pixel_beside_a_shadow_off_two_of_its_three_neighbours_stays() -> None
     out, moved = mend_broken_pixels(kept, valid)
     assert moved == 0
     np.testing.assert_array_equal(out, kept)
+
+
+def test_orders_a_whole_lower_frequency_cycle_apart_fit_alike_and_the_neighbours_decide() -> None:
+    """36 orders of 36 fringes are 6 whole cycles of 6: the lower frequency fits both orders alike, up to rounding
+    in the last digits, which must not veto the move the neighbours support."""
+    truth = _step() * 3.0
+    kept = truth.copy()
+    kept[8, 3:7] -= 36 * TWO_PI  # a run of four, no pixel of it a spike
+    kept[15, 20:24] += 36 * TWO_PI
+    out, moved = mend_broken_pixels(kept, np.ones(SHAPE, dtype=bool), _misfit(truth, 36.0, 6.0))
+    np.testing.assert_allclose(out, truth)
+    assert moved == 8

@@ -33,6 +33,10 @@ from processing.correction.region_orders import neighbour_steps_at
 TWO_PI = 2.0 * np.pi
 # Passes over the pixels next to those that moved: runs of up to about twice this many pixels mend.
 PASSES = 3
+# Relative rounding of the lower frequencies' misfit: orders a whole cycle of every lower frequency apart (36 orders
+# of 1/6/36) fit them equally, yet their misfits differ in the last digits, and a strict "no worse" kept a wrong order
+# by 1e-13 of a misfit.
+ROUNDING = 1e-9
 
 
 def mend_broken_pixels(
@@ -167,7 +171,7 @@ def _mend_at(
         with np.errstate(invalid="ignore"):  # a missing neighbour's candidate is NaN, never chosen
             fits = misfit(np.vstack([candidates, at[None, :]]), where)  # the lower phases gathered once for all five
         choice = np.argmin(np.where(support == best, fits[:4], np.inf), axis=0)
-        moved &= fits[choice, index] <= fits[4]
+        moved &= fits[choice, index] <= fits[4] * (1.0 + ROUNDING) + ROUNDING  # no worse, up to rounding
     out = phase.copy()
     out[ys[moved], xs[moved]] = candidates[choice, index][moved]
     return out, moved
