@@ -27,7 +27,7 @@ from collections.abc import Callable
 import cv2
 import numpy as np
 
-from processing.correction.order_evidence import FOUR_NEIGHBOURS, beyond_pi
+from processing.correction.order_evidence import FOUR_NEIGHBOURS, beyond_pi, neighbours_at
 from processing.correction.region_orders import neighbour_steps_at
 
 TWO_PI = 2.0 * np.pi
@@ -152,7 +152,7 @@ def _mend_at(
     A pixel moves where three or more of its valid neighbours lie more than pi away and another neighbour's order
     is continuous with more of them than its own (an invalid neighbour is NaN: it supports nothing)."""
     at = phase[ys, xs]
-    around = np.stack([_neighbour(phase, valid, ys + dy, xs + dx) for dy, dx in FOUR_NEIGHBOURS])  # (4, n)
+    around = neighbours_at(phase, valid, ys, xs)  # (4, n)
     with np.errstate(invalid="ignore"):
         own = (np.abs(around - at) <= np.pi).sum(axis=0)
         breaks = (np.abs(around - at) > np.pi).sum(axis=0)
@@ -175,11 +175,3 @@ def _mend_at(
     out = phase.copy()
     out[ys[moved], xs[moved]] = candidates[choice, index][moved]
     return out, moved
-
-
-def _neighbour(phase: np.ndarray, valid: np.ndarray, ys: np.ndarray, xs: np.ndarray) -> np.ndarray:
-    """``phase`` at the given pixels, NaN where they are invalid or off the map."""
-    rows, cols = valid.shape
-    on_map = (ys >= 0) & (ys < rows) & (xs >= 0) & (xs < cols)
-    ys, xs = np.clip(ys, 0, rows - 1), np.clip(xs, 0, cols - 1)
-    return np.where(on_map & valid[ys, xs], phase[ys, xs], np.nan)

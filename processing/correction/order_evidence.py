@@ -31,6 +31,20 @@ LISTED_REGIONS = 20
 FOUR_NEIGHBOURS = ((-1, 0), (1, 0), (0, -1), (0, 1))  # (dy, dx) of a pixel's 4-neighbours
 
 
+def neighbours_at(phase: np.ndarray, valid: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """(4, n): ``phase`` at the 4-neighbours of the given pixels, in :data:`FOUR_NEIGHBOURS` order; NaN where a
+    neighbour lies off the map or outside ``valid``."""
+    height, width = valid.shape
+    out = np.empty((len(FOUR_NEIGHBOURS), np.size(rows)))
+    for side, (dy, dx) in enumerate(FOUR_NEIGHBOURS):
+        y, x = rows + dy, cols + dx
+        seen = (y >= 0) & (y < height) & (x >= 0) & (x < width)
+        y, x = np.clip(y, 0, height - 1), np.clip(x, 0, width - 1)
+        seen &= valid[y, x]
+        out[side] = np.where(seen, phase[y, x], np.nan)
+    return out
+
+
 def label_blobs(mask: np.ndarray) -> tuple[int, np.ndarray]:
     """8-connected blobs of ``mask``: (count including the background label 0, int32 labels)."""
     import cv2  # lazily: only auto needs it

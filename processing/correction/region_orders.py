@@ -29,6 +29,7 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
 from processing.angles import wrap_to_pi
+from processing.correction.order_evidence import neighbours_at
 from processing.denoise.rpca import finite_median
 
 TWO_PI = 2.0 * np.pi
@@ -292,21 +293,11 @@ def neighbour_steps_at(
 
     ``breaks > 0`` is :func:`order_break_pixels` of the masked phase at those pixels.
     """
-    height, width = phase.shape
-    here = phase[rows, cols]
-    here = np.where(valid[rows, cols], here, np.nan)
-    breaks = np.zeros(rows.size, dtype=np.int8)
-    continues = np.zeros(rows.size, dtype=np.int8)
-    for dy, dx in ((0, 1), (0, -1), (1, 0), (-1, 0)):
-        y, x = rows + dy, cols + dx
-        inside = (y >= 0) & (y < height) & (x >= 0) & (x < width)
-        y, x = y[inside], x[inside]
-        near = np.where(valid[y, x], phase[y, x], np.nan)
-        with np.errstate(invalid="ignore"):
-            step = np.abs(near - here[inside])
-        breaks[inside] += step > np.pi
-        continues[inside] += step <= np.pi  # NaN: neither
-    return breaks, continues
+    here = np.where(valid[rows, cols], phase[rows, cols], np.nan)
+    with np.errstate(invalid="ignore"):
+        step = np.abs(neighbours_at(phase, valid, rows, cols) - here)
+    # NaN (an invalid neighbour or pixel): neither
+    return (step > np.pi).sum(axis=0, dtype=np.int8), (step <= np.pi).sum(axis=0, dtype=np.int8)
 
 
 def fill_from_neighbours(

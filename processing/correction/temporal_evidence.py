@@ -48,7 +48,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from processing.angles import wrap_to_pi
-from processing.correction.order_evidence import FOUR_NEIGHBOURS, changed_orders, label_blobs, mask_at, revert_changed
+from processing.correction.order_evidence import changed_orders, label_blobs, mask_at, neighbours_at, revert_changed
 from processing.denoise.rpca import finite_median
 
 TWO_PI = 2.0 * np.pi
@@ -485,17 +485,11 @@ def _neighbour_verdicts(
     back, unresolved = back.copy(), unresolved.copy()
     index = np.flatnonzero(back)
     at = where[index]
-    height, width = valid.shape
-    rows, cols = np.divmod(at, width)
+    rows, cols = np.divmod(at, valid.shape[1])
     here = np.ravel(measured)[at]
-    shifts = np.zeros((4, at.size))
-    seen = np.zeros((4, at.size), dtype=bool)
-    for side, (dy, dx) in enumerate(FOUR_NEIGHBOURS):
-        y, x = rows + dy, cols + dx
-        inside = (y >= 0) & (y < height) & (x >= 0) & (x < width)
-        y, x = np.where(inside, y, rows), np.where(inside, x, cols)
-        seen[side] = inside & valid[y, x]
-        shifts[side] = np.rint((proposed[y, x] - here) / TWO_PI)
+    around = neighbours_at(proposed, valid, rows, cols)
+    seen = np.isfinite(around)
+    shifts = np.where(seen, np.rint((around - here) / TWO_PI), 0.0)  # an unseen side's shift is never read
     like = seen & (shifts != 0) & _confusable_shift(shifts, frequency, lower, weights)
     doubtful = like.any(axis=0)
     support = ((shifts[:, None, :] == shifts[None, :, :]) & seen[None, :, :]).sum(axis=1)  # neighbours continued
