@@ -102,7 +102,8 @@ def _broken_pixels(phase: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np
     for start in (cols, cols - 1, cols + 1, 0, 2 * cols):  # the pixel, left, right, up, down
         broken &= flat_valid[start : start + inner]
     at = np.flatnonzero(broken) + cols
-    keep = (at % cols > 0) & (at % cols < cols - 1)
+    column = at % cols
+    keep = (column > 0) & (column < cols - 1)
     rim = _beside_the_mask_edge(valid)
     # three of three valid neighbours away: the left or the right one among them (the cheap test, on the row steps)
     x = rim % cols
@@ -131,13 +132,8 @@ def _next_to(ys: np.ndarray, xs: np.ndarray, valid: np.ndarray) -> tuple[np.ndar
     ny, nx = flat // cols, flat % cols
     keep = valid[ny, nx]
     ny, nx = ny[keep], nx[keep]
-    count = np.zeros(ny.size, dtype=np.int8)
-    for dy, dx in FOUR_NEIGHBOURS:
-        y, x = ny + dy, nx + dx
-        on_map = (y >= 0) & (y < rows) & (x >= 0) & (x < cols)
-        count += on_map & valid[np.clip(y, 0, rows - 1), np.clip(x, 0, cols - 1)]
-    keep = count >= 3
-    return ny[keep], nx[keep]
+    count = np.isfinite(neighbours_at(valid, valid, ny, nx)).sum(axis=0)  # valid neighbours: the ones found
+    return ny[count >= 3], nx[count >= 3]
 
 
 def _mend_at(
