@@ -25,6 +25,8 @@ from typing import Any
 
 import numpy as np
 
+from processing.elementwise import abs_difference
+
 TWO_PI = 2.0 * np.pi
 # The largest unresolved blobs listed in a report, by size.
 LISTED_REGIONS = 20
@@ -54,10 +56,9 @@ def label_blobs(mask: np.ndarray) -> tuple[int, np.ndarray]:
 
 
 def beyond_pi(second: np.ndarray, first: np.ndarray) -> np.ndarray:
-    """``|second - first| > pi`` (NaN: False) with one float temporary (the expression as written allocates
-    two: a quarter of the cost of the blob steps' setup)."""
-    difference = np.subtract(second, first)
-    np.abs(difference, out=difference)
+    """``|second - first| > pi`` (NaN: False) with one float temporary written in one pass
+    (:func:`~processing.elementwise.abs_difference`; the expression as written allocates two)."""
+    difference = abs_difference(second, first)
     with np.errstate(invalid="ignore"):
         return np.greater(difference, np.pi)
 
