@@ -36,6 +36,7 @@ from processing.denoise.rpca import (
     robust_noise_sigma,
     rpca_ialm,
 )
+from processing.elementwise import abs_difference
 
 TWO_PI = 2.0 * np.pi
 
@@ -639,8 +640,7 @@ def refit_full_resolution(
         if round_ == 0:
             # what departs from the refit far beyond the noise (an object the low rank cannot hold) is left
             # out of the second round, so the refit does not spread it along its rows and columns
-            departure = np.subtract(target, refit)
-            np.copyto(target, refit, where=np.abs(departure, out=departure) > outlier)
+            np.copyto(target, refit, where=abs_difference(target, refit) > outlier)
     # residuals of both surfaces (0 outside ``valid``), float32, compared as 3 x 3 sums of absolute values
     # (each map cast to float32 before it is chosen from: the same values, half the memory traffic)
     inside = np.where(valid, measured_32, refit)
@@ -648,10 +648,8 @@ def refit_full_resolution(
     margin = REFIT_MARGIN * 3.0 * float(noise)
     # where neither surface holds the scene (beyond ``outlier``), the block surface stays for the detail
     # restore to judge, as without the refit (develop-33's tall objects: 0.087 -> 0.025 x the oracle)
-    misfit = np.subtract(inside, refit)
-    np.abs(misfit, out=misfit)
-    np.subtract(inside, block, out=block)
-    better = valid & (misfit <= outlier) & (_box_sum(misfit) + margin < _box_sum(np.abs(block, out=block)))
+    misfit = abs_difference(inside, refit)
+    better = valid & (misfit <= outlier) & (_box_sum(misfit) + margin < _box_sum(abs_difference(inside, block)))
     return np.where(better, refit, low_rank)
 
 

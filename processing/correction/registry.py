@@ -64,6 +64,7 @@ from processing.correction.temporal_evidence import (
 )
 from processing.correction.voting import vote_row_orders
 from processing.denoise.rpca import RPCAResult, default_tau
+from processing.elementwise import abs_difference
 
 TWO_PI = 2.0 * np.pi
 
@@ -359,9 +360,7 @@ def _restore_detail(
     )
     assert out is not None
     # L only denoises: where it lies a fringe or more from the kept orders, the measured phase stays
-    off = np.subtract(out, reordered)
-    np.abs(off, out=off)  # in place: a fresh full map costs as much as the arithmetic
-    off = off > np.pi
+    off = abs_difference(out, reordered) > np.pi  # one pass: a fresh full map costs as much as the arithmetic
     if off.any():
         out = np.where(off, reordered, out)
     return out, unresolved, changed, counts
