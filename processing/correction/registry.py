@@ -39,6 +39,7 @@ from processing.correction.order_evidence import (
 )
 from processing.correction.order_margin import undecided_orders
 from processing.correction.orders import correct_orders_rpca
+from processing.correction.phase_range import keep_range_folds
 from processing.correction.phase_rpca import (
     accept_if_consistent,
     correct_phase_rpca,
@@ -428,6 +429,15 @@ def _temporal_inputs(
     return _Temporal(float(frequency), lower)
 
 
+def _in_pattern_range(phase: np.ndarray, valid: np.ndarray, temporal: _Temporal | None) -> tuple[np.ndarray, int]:
+    """Step 0: the measured phase with the pixels outside the pattern's range moved back by whole invisible periods
+    where the neighbours support it (:func:`~processing.correction.phase_range.keep_range_folds`); how many moved.
+    Only with the lower frequencies: the period is theirs."""
+    if temporal is None:
+        return phase, 0
+    return keep_range_folds(phase, valid, temporal.frequency, [f for f, _ in temporal.lower])
+
+
 def correct_auto(
     absolute_phase: np.ndarray,
     wrapped_phase: np.ndarray,
@@ -442,6 +452,8 @@ def correct_auto(
 ) -> Result:
     """The most accurate method measured: region-pooled orders, ch. 4 RPCA, measured detail restored.
 
+    0. with ``lower_wrapped``: measured phase outside the pattern, [0, 2 pi ``frequency``), moved back by periods no
+       lower frequency sees, where the neighbours agree (:mod:`~processing.correction.phase_range`; ``range_folded``);
     1. pool the fringe orders over 2-D fringe regions (:func:`~processing.correction.region_orders.pool_region_orders`:
        one order per region no wrapped-phase jump or kink crosses, voted per 16 x 16 square, re-voted pixel by pixel);
     2. L = low-rank part of that phase (stable inexact ALM, thesis ch. 4, stopped at the noise level of
@@ -481,19 +493,15 @@ def correct_auto(
        ["vote_undecided_pixels"]``): where the lower frequencies barely tell orders apart, most measured
        orders can be wrong and the kept ones rest on continuity alone. The phase does not change.
 
-    Why step 5: the fewest breaks over the whole map let pooling across a real height step trade
-    a few wrong orders for fewer breaks elsewhere (up to 34x worse than no correction on drawn cases);
-    the neighbours cannot see a blob on a step of a whole number of fringes, the lower frequencies can
-    (develop cases with no wrong temporal order, 1.5x - 390x worse than none without them).
-
     Measured: docs/study/README.md (``rig study``, the thesis' experiments) and docs/study/family.md (drawn cases,
     ``benchmarks/bench_auto_family.py``: held-out median 0.02x the oracle, never worse than no correction).
     """
     start = time.perf_counter()
     if not float(k_sigma) > 0:
         raise ValueError(f"k_sigma: expected > 0, found {k_sigma}")
-    phase, wrapped, valid = _inputs(absolute_phase, wrapped_phase, mask)
+    measured, wrapped, valid = _inputs(absolute_phase, wrapped_phase, mask)
     temporal = _temporal_inputs(frequency, lower_wrapped, valid)
+    phase, folded = _in_pattern_range(measured, valid, temporal)
     pooled, (sigma, measured_breaks) = side_by_side(
         lambda: pool_region_orders(phase, wrapped, valid), lambda: phase_noise_and_breaks(phase, valid)
     )
@@ -503,8 +511,9 @@ def correct_auto(
     chosen = min(found.breaks, key=found.breaks.__getitem__)  # ties: the first
     out, unresolved, changed, evidence = _restore_detail(maps, found, chosen, temporal)
     undecided = undecided_orders(out, phase, wrapped, valid)  # reported only: the orders stay
-    evidence["vote_undecided_pixels"] = int(np.count_nonzero(undecided))
+    evidence["vote_undecided_pixels"], evidence["range_folded"] = int(np.count_nonzero(undecided)), folded
     unresolved = unresolved | undecided
+    changed = changed if not folded else int(np.count_nonzero(changed_orders(out, measured, valid)))
     extra = {"unresolved": unresolved, "changed": changed, "evidence": evidence, "temporal": temporal is not None}
     return out, _auto_info(maps, found, chosen, start, frequency, extra)
 
