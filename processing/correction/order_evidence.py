@@ -33,13 +33,15 @@ LISTED_REGIONS = 20
 FOUR_NEIGHBOURS = ((-1, 0), (1, 0), (0, -1), (0, 1))  # (dy, dx) of a pixel's 4-neighbours
 
 
-def neighbours_at(phase: np.ndarray, valid: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
-    """(4, n): ``phase`` at the 4-neighbours of the given pixels, in :data:`FOUR_NEIGHBOURS` order; NaN where a
-    neighbour lies off the map or outside ``valid``."""
+def neighbours_at(
+    phase: np.ndarray, valid: np.ndarray, rows: np.ndarray, cols: np.ndarray, reach: int = 1
+) -> np.ndarray:
+    """(4, n): ``phase`` at the 4-neighbours of the given pixels, in :data:`FOUR_NEIGHBOURS` order, ``reach``
+    pixels away (2: the neighbours' neighbours straight on); NaN where one lies off the map or outside ``valid``."""
     height, width = valid.shape
     out = np.empty((len(FOUR_NEIGHBOURS), np.size(rows)))
     for side, (dy, dx) in enumerate(FOUR_NEIGHBOURS):
-        y, x = rows + dy, cols + dx
+        y, x = rows + reach * dy, cols + reach * dx
         seen = (y >= 0) & (y < height) & (x >= 0) & (x < width)
         y, x = np.clip(y, 0, height - 1), np.clip(x, 0, width - 1)
         seen &= valid[y, x]

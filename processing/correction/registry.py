@@ -56,11 +56,13 @@ from processing.correction.phase_rpca import (
     update_coherent_detail,
 )
 from processing.correction.region_orders import pool_region_orders
+from processing.correction.surface_continuation import restore_continued_orders
 from processing.correction.surface_orders import arbitrate_low_rank_orders
 from processing.correction.temporal_evidence import (
     keep_temporally_supported,
     lower_frequency_misfit,
     noise_weights,
+    order_shift,
     snap_to_lower_frequencies,
 )
 from processing.correction.voting import vote_row_orders
@@ -341,6 +343,7 @@ def _restore_detail(
         )
     reordered, unresolved = _arbitrate_with_low_rank(maps, reordered, unresolved, low_rank, temporal, weights, counts)
     reordered = _mend_broken_pixels(maps, reordered, temporal, weights, counts)
+    reordered = _restore_continued_orders(maps, reordered, temporal, weights, counts)
     pooled_detail = found.pooled_detail if low_rank is found.low_rank else None
     out, changed = side_by_side(
         lambda: (  # step 6 ran alongside step 3 on the pooled orders: redone only where the orders differ
@@ -397,6 +400,30 @@ def _mend_broken_pixels(
     the lower frequencies fit it no worse (:func:`~processing.correction.broken_pixels.mend_broken_pixels`)."""
     misfit = None if temporal is None or weights is None else _spike_misfit(temporal, weights)
     reordered, counts["broken_pixels_mended"] = mend_broken_pixels(reordered, maps.valid, misfit)
+    return reordered
+
+
+def _restore_continued_orders(
+    maps: _AutoMaps,
+    reordered: np.ndarray,
+    temporal: _Temporal | None,
+    weights: list[float] | None,
+    counts: dict[str, int],
+) -> np.ndarray:
+    """Step 6c: pixels kept one or two orders off the measured ones go back where the measured order continues the
+    settled surface on a side and the lower frequencies favour it
+    (:func:`~processing.correction.surface_continuation.restore_continued_orders`)."""
+    misfit = shift = None
+    if temporal is not None and weights is not None:
+        misfit = _spike_misfit(temporal, weights)
+        frequency, lower, noise = temporal.frequency, temporal.lower, weights
+
+        def shift(delta: np.ndarray) -> np.ndarray:
+            return order_shift(delta, frequency, lower, noise)
+
+    reordered, counts["continued_orders_restored"] = restore_continued_orders(
+        reordered, maps.phase, maps.valid, misfit, shift
+    )
     return reordered
 
 
@@ -483,7 +510,9 @@ def correct_auto(
        noise; the blocks blur a step's or a ramp's edge, ch. 4 at full resolution does not); weigh L's orders against
        the kept ones blob by blob (:mod:`~processing.correction.surface_orders`; ``info["evidence"]
        ["low_rank_orders_taken"]``), move pixels breaking with three or four neighbours
-       (:mod:`~processing.correction.broken_pixels`); keep L (denoised) except where the result departs from it
+       (:mod:`~processing.correction.broken_pixels`), send pixels kept one or two orders off back where the measured
+       order continues the settled surface and the lower frequencies favour it
+       (:mod:`~processing.correction.surface_continuation`); keep L (denoised) except where the result departs from it
        coherently beyond the noise (:func:`~processing.correction.phase_rpca.restore_detail`, ``k_sigma`` standard
        deviations of the 3 x 3 mean residual) or one pixel departs far beyond it where nothing suggests a wrong order
        (on a height step's edge: its order is the measured one), and never where L lies a fringe or more from the
@@ -528,11 +557,12 @@ def _auto_info(
         "k_sigma": maps.k_sigma,
         "svd": maps.svd,
     }
-    steps = ["pool-region-orders", "rpca-phase", "reorder-if-consistent"]
+    steps = (["fold-into-pattern-range"] if extra["temporal"] else []) + ["pool-region-orders", "rpca-phase"]
+    steps += ["reorder-if-consistent"]
     steps += ["settle-orders"] if len(found.maps) > 2 else []
     steps += ["keep-supported-changes"] + (["lower-frequency-evidence"] if extra["temporal"] else [])
     steps += ["mend-spikes"] + (["refit-full-resolution"] if maps.decimate > 1 else [])
-    steps += ["arbitrate-low-rank-orders", "mend-broken-pixels", "restore-detail"]
+    steps += ["arbitrate-low-rank-orders", "mend-broken-pixels", "restore-continued-orders", "restore-detail"]
     return _solver_info(
         "auto",
         parameters,

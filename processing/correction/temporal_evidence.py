@@ -85,14 +85,14 @@ def lower_frequency_misfit(
     return out
 
 
-def _order_shift(
+def order_shift(
     delta_orders: np.ndarray,
     frequency: float,
     lower: Sequence[tuple[float, np.ndarray]],
     weights: Sequence[float] | None = None,
 ) -> np.ndarray:
     """Squared shift of every lower frequency's prediction when the orders change by ``delta_orders``
-    (weighted as :func:`lower_frequency_misfit`)."""
+    (weighted as :func:`lower_frequency_misfit`): the misfit's expected increase for that change."""
     out = np.zeros(delta_orders.shape, dtype=np.float64)
     for index, term in enumerate(_shift_terms(delta_orders, frequency, lower)):
         out += term if weights is None else weights[index] * term
@@ -100,7 +100,7 @@ def _order_shift(
 
 
 def _plain_and_weighted(terms: Sequence[np.ndarray], weights: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
-    """The sums :func:`lower_frequency_misfit` and :func:`_order_shift` form of per-frequency ``terms``, without and
+    """The sums :func:`lower_frequency_misfit` and :func:`order_shift` form of per-frequency ``terms``, without and
     with ``weights``, in their order (the same values as two calls, each term computed once)."""
     plain = np.zeros(terms[0].shape, dtype=np.float64)
     weighted = np.zeros(terms[0].shape, dtype=np.float64)
@@ -118,7 +118,7 @@ def _misfit_terms(phase: np.ndarray, frequency: float, lower: Sequence[tuple[flo
 def _shift_terms(
     delta_orders: np.ndarray, frequency: float, lower: Sequence[tuple[float, np.ndarray]]
 ) -> list[np.ndarray]:
-    """The terms of :func:`_order_shift`, one per lower frequency."""
+    """The terms of :func:`order_shift`, one per lower frequency."""
     return [wrap_to_pi(TWO_PI * delta_orders * (float(f_low) / float(frequency))) ** 2 for f_low, _wrapped in lower]
 
 
@@ -170,8 +170,8 @@ def snap_to_lower_frequencies(
     if weights is None:
         weights = noise_weights(measured, valid, frequency, lower)
     for delta in SNAP_STEPS:
-        shift = float(_order_shift(np.full(1, delta), frequency, lower)[0])
-        separation = float(_order_shift(np.full(1, delta), frequency, lower, weights)[0])
+        shift = float(order_shift(np.full(1, delta), frequency, lower)[0])
+        separation = float(order_shift(np.full(1, delta), frequency, lower, weights)[0])
         if shift < MIN_SHIFT_RAD**2 or separation < SEPARATION**2 or (abs(delta) > 1 and one_order_judged):
             continue
         one_order_judged |= abs(delta) == 1
@@ -209,8 +209,8 @@ def _two_order_step_allowed(
     allowed = _fits_each_frequency(target, frequency, lower, weights)
     before = np.rint((proposed - measured) / TWO_PI)
     after = before + delta
-    judged_before = _order_shift(before, frequency, lower) >= MIN_SHIFT_RAD**2
-    judged_after = _order_shift(after, frequency, lower) >= MIN_SHIFT_RAD**2
+    judged_before = order_shift(before, frequency, lower) >= MIN_SHIFT_RAD**2
+    judged_after = order_shift(after, frequency, lower) >= MIN_SHIFT_RAD**2
     return allowed & ~(judged_before & ~judged_after & (after != 0))
 
 

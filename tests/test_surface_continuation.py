@@ -1,0 +1,65 @@
+"""Step 6c: pixels kept one or two orders off go back where the measured order continues the settled surface."""
+
+import numpy as np
+
+from processing.correction.surface_continuation import restore_continued_orders
+
+TWO_PI = 2.0 * np.pi
+
+
+def _raised_corner(step_fringes: float) -> np.ndarray:
+    """A ramp (0 - 3 rad across 12 columns) raised ``step_fringes`` above row 4 and right of column 7."""
+    truth = np.tile(np.linspace(0.0, 3.0, 12), (10, 1))
+    truth[:4, :] += step_fringes * TWO_PI
+    truth[4:, 7:] += step_fringes * TWO_PI
+    return truth
+
+
+def _corner_kept_one_up(truth: np.ndarray) -> np.ndarray:
+    kept = truth.copy()
+    kept[4, 5:7] += TWO_PI  # the inner corner's pixels, each touching as many far-side pixels as near-side ones
+    kept[5, 6] += TWO_PI
+    return kept
+
+
+def test_a_corner_of_a_step_of_one_and_a_half_fringes_goes_back():
+    truth = _raised_corner(1.4)
+    out, moved = restore_continued_orders(_corner_kept_one_up(truth), truth, np.ones(truth.shape, bool))
+    assert moved == 3
+    np.testing.assert_array_equal(out, truth)
+
+
+def test_a_step_of_a_whole_fringe_stays_undecided():
+    """Across a step of one whole fringe the kept order continues the far side as well as the measured one
+    continues the near side: nothing tells them apart, nothing moves."""
+    truth = _raised_corner(1.0)
+    kept = _corner_kept_one_up(truth)
+    out, moved = restore_continued_orders(kept, truth, np.ones(truth.shape, bool))
+    assert moved == 0
+    np.testing.assert_array_equal(out, kept)
+
+
+def test_the_lower_frequencies_can_veto():
+    truth = _raised_corner(1.4)
+    kept = _corner_kept_one_up(truth)
+    valid = np.ones(truth.shape, bool)
+
+    def favours_kept(values: np.ndarray, where: np.ndarray) -> np.ndarray:
+        return np.vstack([np.zeros(values.shape[1]), np.ones(values.shape[1])])  # kept fits, measured does not
+
+    def favours_measured(values: np.ndarray, where: np.ndarray) -> np.ndarray:
+        return np.vstack([np.ones(values.shape[1]), np.zeros(values.shape[1])])
+
+    def shift(delta: np.ndarray) -> np.ndarray:
+        return np.full(delta.shape, 1.0)
+
+    assert restore_continued_orders(kept, truth, valid, favours_kept, shift)[1] == 0
+    assert restore_continued_orders(kept, truth, valid, favours_measured, shift)[1] == 3
+
+
+def test_changes_of_many_orders_are_not_judged():
+    truth = _raised_corner(1.4)
+    kept = truth.copy()
+    kept[4, 5:7] += 3 * TWO_PI  # a wrong temporal order fixed by an earlier step looks like this
+    out, moved = restore_continued_orders(kept, truth, np.ones(truth.shape, bool))
+    assert moved == 0 and out is kept
