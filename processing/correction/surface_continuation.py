@@ -23,6 +23,7 @@ from collections.abc import Callable
 import numpy as np
 
 from processing.correction.order_evidence import neighbours_at
+from processing.elementwise import abs_difference
 
 TWO_PI = 2.0 * np.pi
 # Passes over the pixels still judged: a blob mends from its rim inward, a pass per ring.
@@ -82,10 +83,10 @@ def restore_continued_orders(
     >>> bool(np.allclose(out, truth)), moved
     (True, 3)
     """
+    delta = abs_difference(kept, measured)
     with np.errstate(invalid="ignore"):
-        delta = np.abs(kept - measured)
-    changed = valid & (delta > np.pi)
-    todo = changed & (delta < MAX_ORDERS * TWO_PI)
+        changed = valid & (delta > np.pi)
+        todo = changed & (delta < MAX_ORDERS * TWO_PI)
     if not todo.any():
         return kept, 0
     out, settled = kept.copy(), valid & ~changed
