@@ -866,8 +866,10 @@ def write_report(out: Path, config: StudyConfig, rows: Rows, figures: list[tuple
     )
     add("")
     add(
-        "`auto` (processing.correction.registry.correct_auto): first the fringe orders are pooled over 2-D fringe "
-        "regions (processing.correction.region_orders): every 4-connected region that no wrapped-phase jump or kink "
+        "`auto` (processing.correction.registry.correct_auto): first, with the lower frequencies, measured phase "
+        "outside the pattern (below 0 or from 2 pi f on) moves back by the period no lower frequency sees, where the "
+        "neighbours do not favour the measured orders (processing.correction.phase_range); then the fringe orders "
+        "are pooled over 2-D fringe regions (processing.correction.region_orders): every 4-connected region that no wrapped-phase jump or kink "
         "crosses lies within one fringe and has one order, so it takes the majority of its pixels' orders, voted "
         "per 16 x 16 square and re-voted pixel by pixel over a 9 x 9 window of the region where squares "
         "disagree (a hidden object edge inside the region); then ch. 4's low-rank phase L of that phase (stable "
@@ -888,7 +890,9 @@ def write_report(out: Path, config: StudyConfig, rows: Rows, figures: list[tuple
         "breaks and the lower frequencies clearly favour them (a blob nothing decides is reported unresolved; "
         "processing.correction.surface_orders), and a pixel a fringe or more off three or four of its "
         "neighbours takes the order more of them support where the lower frequencies fit it no worse "
-        "(processing.correction.broken_pixels); finally L, except "
+        "(processing.correction.broken_pixels), and a pixel kept one or two orders off its measured order goes back "
+        "to it where it continues the surface of its settled neighbours and the lower frequencies favour it "
+        "(processing.correction.surface_continuation); finally L, except "
         "where the result departs from it coherently beyond the noise (3 x 3 mean residual above 4 of its "
         "standard deviations), where one pixel departs beyond 8 standard deviations and breaks with no neighbour "
         "(or, on the edge of a height step, continues more neighbours than it breaks with and keeps the order "
