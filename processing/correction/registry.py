@@ -21,6 +21,7 @@ measured on the thesis' Table 4.1 protocol (see :func:`correct_auto`).
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -321,12 +322,13 @@ def _spike_misfit(temporal: _Temporal, weights: list[float]) -> Callable[[np.nda
 
 
 def _restore_detail(
-    maps: _AutoMaps, found: _Candidates, chosen: str, temporal: _Temporal | None
+    maps: _AutoMaps, found: _Candidates, chosen: str, temporal: _Temporal | None, given: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, int, dict[str, int]]:
     """Steps 5 - 6: the chosen orders where the evidence supports them (:func:`_supported_orders`), L except
     where they depart from it coherently, never off their orders.
 
-    Returns the phase, the unresolved pixels, how many orders changed and the lower frequencies' blob counts.
+    Returns the phase, the unresolved pixels, how many orders differ from the ``given`` phase (before step 0)
+    and the lower frequencies' blob counts.
     """
     reordered, unresolved, counts, weights = _supported_orders(maps, found.maps[chosen], temporal)
     low_rank = found.low_rank
@@ -360,7 +362,7 @@ def _restore_detail(
                 maps.phase,
             )
         ),
-        lambda: int(np.count_nonzero(changed_orders(reordered, maps.phase, maps.valid))),
+        lambda: int(np.count_nonzero(changed_orders(reordered, given, maps.valid))),
     )
     assert out is not None
     # L only denoises: where it lies a fringe or more from the kept orders, the measured phase stays
@@ -416,11 +418,7 @@ def _restore_continued_orders(
     misfit = shift = None
     if temporal is not None and weights is not None:
         misfit = _spike_misfit(temporal, weights)
-        frequency, lower, noise = temporal.frequency, temporal.lower, weights
-
-        def shift(delta: np.ndarray) -> np.ndarray:
-            return order_shift(delta, frequency, lower, noise)
-
+        shift = functools.partial(order_shift, frequency=temporal.frequency, lower=temporal.lower, weights=weights)
     reordered, counts["continued_orders_restored"] = restore_continued_orders(
         reordered, maps.phase, maps.valid, misfit, shift
     )
@@ -538,11 +536,10 @@ def correct_auto(
     maps = _AutoMaps(phase, wrapped, valid, sigma, decimate, tau, svd, float(k_sigma))
     found = _candidate_orders(maps, pooled, measured_breaks)
     chosen = min(found.breaks, key=found.breaks.__getitem__)  # ties: the first
-    out, unresolved, changed, evidence = _restore_detail(maps, found, chosen, temporal)
+    out, unresolved, changed, evidence = _restore_detail(maps, found, chosen, temporal, measured)
     undecided = undecided_orders(out, phase, wrapped, valid)  # reported only: the orders stay
     evidence["vote_undecided_pixels"], evidence["range_folded"] = int(np.count_nonzero(undecided)), folded
     unresolved = unresolved | undecided
-    changed = changed if not folded else int(np.count_nonzero(changed_orders(out, measured, valid)))
     extra = {"unresolved": unresolved, "changed": changed, "evidence": evidence, "temporal": temporal is not None}
     return out, _auto_info(maps, found, chosen, start, frequency, extra)
 
