@@ -151,14 +151,26 @@ class Jobs:
             self._publish({"type": "error", "source": job.kind, "job": job.id, "message": text})
         self._publish(message)
 
-    def run(self, job: Job, work: Callable[[], Any], then_finish: bool = True) -> BaseException | None:
+    def run(
+        self,
+        job: Job,
+        work: Callable[[], Any],
+        then_finish: bool = True,
+        before_end: Callable[[], None] | None = None,
+    ) -> BaseException | None:
         """Run ``work()``; any exception ends the job (failed or cancelled) and is returned, never raised.
 
         With ``then_finish`` the job is marked done when ``work`` returns; without it (a scan whose
-        processing follows) it stays running unless ``work`` raised.
+        processing follows) it stays running unless ``work`` raised. ``before_end`` runs after ``work``
+        whatever happened and before the job's end is published, so that what it frees (the
+        acquisition slot) is free by the time anyone hears the job ended.
         """
         try:
-            work()
+            try:
+                work()
+            finally:
+                if before_end is not None:
+                    before_end()
         except BaseException as exc:  # noqa: BLE001 - every job must end, whatever stopped it
             if not isinstance(exc, (RigError, OSError, ValueError)):
                 log.exception("job %s (%s %s) failed", job.id, job.kind, job.name)

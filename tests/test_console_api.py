@@ -205,6 +205,14 @@ def test_stop_cancels_the_scan_and_leaves_no_complete_capture(console: TestClien
             if message.get("text") and json.loads(message["text"]).get("type") == "progress":
                 break
         assert console.post("/api/stop", json={}).json()["stopped"] == [job["id"]]
+        busy_before_the_end = None
+        while True:  # a page that hears the job ended may scan again at once: the rig is free before
+            data = json.loads(socket.receive_text())
+            if data["type"] == "status":
+                busy_before_the_end = data["status"]["busy"]
+            elif data["type"] == "job" and data["job"]["id"] == job["id"] and data["job"]["state"] != "running":
+                break
+        assert busy_before_the_end is False
     finished = wait_job(console, job["id"])
     assert finished["state"] == "cancelled" and "stopped" in finished["error"]
     root = console.app.state.session.data.root / "captures"

@@ -277,9 +277,11 @@ class ConsoleSession:
         return job
 
     def _end_acquisition(self) -> None:
-        """Free the acquisition slot (the last step of every acquisition, whatever happened)."""
+        """Free the acquisition slot and say so (the last step of every acquisition, whatever happened),
+        before the job's end is published: a page that hears "stopped" may scan again at once."""
         self.current = None
         self._acquiring.release()
+        self._publish_status()
 
     def scan(
         self,
@@ -332,10 +334,7 @@ class ConsoleSession:
                 on_frame=on_frame, exposures=scan.exposures_us or None, extra=setup.capture_extra(),
             )  # fmt: skip
 
-        try:
-            error = self.jobs.run(job, acquire, then_finish=not process)
-        finally:
-            self._end_acquisition()
+        error = self.jobs.run(job, acquire, then_finish=not process, before_end=self._end_acquisition)
         if error is not None:
             stored.set_exception(error)
             if not isinstance(error, Cancelled) and self.rig.devices is not None and _is_device_fault(error):
@@ -372,10 +371,7 @@ class ConsoleSession:
     def _run_session(self, job: Job, run: Callable[[], None]) -> None:
         """Worker thread: a session that opens the rig itself, so the console's rig is closed meanwhile."""
         self.rig.close_rig()
-        try:
-            self.jobs.run(job, run)
-        finally:
-            self._end_acquisition()
+        self.jobs.run(job, run, before_end=self._end_acquisition)
         self._publish_status()
 
     def _calibration_plan(self, heights_mm: tuple[float, ...], board_views: int, model: str, gamma_levels: int) -> Any:
