@@ -38,6 +38,7 @@ from processing.correction.order_evidence import (
     mend_spikes,
     unresolved_summary,
 )
+from processing.correction.order_islands import level_islands
 from processing.correction.order_margin import undecided_orders
 from processing.correction.orders import correct_orders_rpca
 from processing.correction.phase_range import keep_range_folds
@@ -60,6 +61,7 @@ from processing.correction.region_orders import pool_region_orders
 from processing.correction.surface_continuation import restore_continued_orders
 from processing.correction.surface_orders import arbitrate_low_rank_orders
 from processing.correction.temporal_evidence import (
+    confusable_shift,
     keep_temporally_supported,
     lower_frequency_misfit,
     noise_weights,
@@ -346,6 +348,7 @@ def _restore_detail(
     reordered, unresolved = _arbitrate_with_low_rank(maps, reordered, unresolved, low_rank, temporal, weights, counts)
     reordered = _mend_broken_pixels(maps, reordered, temporal, weights, counts)
     reordered = _restore_continued_orders(maps, reordered, temporal, weights, counts)
+    reordered = _level_islands(maps, reordered, temporal, weights, counts)
     pooled_detail = found.pooled_detail if low_rank is found.low_rank else None
     out, changed = side_by_side(
         lambda: (  # step 6 ran alongside step 3 on the pooled orders: redone only where the orders differ
@@ -421,6 +424,31 @@ def _restore_continued_orders(
         shift = functools.partial(order_shift, frequency=temporal.frequency, lower=temporal.lower, weights=weights)
     reordered, counts["continued_orders_restored"] = restore_continued_orders(
         reordered, maps.phase, maps.valid, misfit, shift
+    )
+    return reordered
+
+
+def _level_islands(
+    maps: _AutoMaps,
+    reordered: np.ndarray,
+    temporal: _Temporal | None,
+    weights: list[float] | None,
+    counts: dict[str, int],
+) -> np.ndarray:
+    """Step 6d: islands cut off from a larger surface by breaks that one order shift the lower frequencies cannot
+    see would mend take that shift, where the measured orders do not decide their kept ones
+    (:func:`~processing.correction.order_islands.level_islands`)."""
+    counts["islands_levelled"] = 0
+    if temporal is None or weights is None:
+        return reordered
+    confusable = functools.partial(
+        confusable_shift, frequency=temporal.frequency, lower=temporal.lower, weights=weights
+    )
+    reordered, counts["islands_levelled"] = level_islands(
+        reordered,
+        maps.valid,
+        confusable,
+        lambda kept: undecided_orders(kept, maps.phase, maps.wrapped, maps.valid),
     )
     return reordered
 
@@ -510,7 +538,9 @@ def correct_auto(
        ["low_rank_orders_taken"]``), move pixels breaking with three or four neighbours
        (:mod:`~processing.correction.broken_pixels`), send pixels kept one or two orders off back where the measured
        order continues the settled surface and the lower frequencies favour it
-       (:mod:`~processing.correction.surface_continuation`); keep L (denoised) except where the result departs from it
+       (:mod:`~processing.correction.surface_continuation`), shift islands that break with a larger surface all
+       round by one shift of three orders or more the lower frequencies cannot see onto it, where their measured
+       orders do not decide the kept ones (:mod:`~processing.correction.order_islands`); keep L (denoised) except where the result departs from it
        coherently beyond the noise (:func:`~processing.correction.phase_rpca.restore_detail`, ``k_sigma`` standard
        deviations of the 3 x 3 mean residual) or one pixel departs far beyond it where nothing suggests a wrong order
        (on a height step's edge: its order is the measured one), and never where L lies a fringe or more from the
@@ -559,7 +589,8 @@ def _auto_info(
     steps += ["settle-orders"] if len(found.maps) > 2 else []
     steps += ["keep-supported-changes"] + (["lower-frequency-evidence"] if extra["temporal"] else [])
     steps += ["mend-spikes"] + (["refit-full-resolution"] if maps.decimate > 1 else [])
-    steps += ["arbitrate-low-rank-orders", "mend-broken-pixels", "restore-continued-orders", "restore-detail"]
+    steps += ["arbitrate-low-rank-orders", "mend-broken-pixels", "restore-continued-orders"]
+    steps += (["level-islands"] if extra["temporal"] else []) + ["restore-detail"]
     return _solver_info(
         "auto",
         parameters,

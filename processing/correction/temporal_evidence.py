@@ -455,7 +455,7 @@ def _confusable_near_proposal(
     out = np.zeros(delta.shape, dtype=bool)
     for step in SNAP_STEPS:
         near = delta + step
-        out |= (near != 0) & _confusable_shift(near, frequency, lower, weights)
+        out |= (near != 0) & confusable_shift(near, frequency, lower, weights)
     return out
 
 
@@ -475,7 +475,7 @@ def _neighbour_verdicts(
     order instead, with their phases.
 
     A pixel stays out of ``back`` where an order that continues one of its valid 4-neighbours (in ``proposed``)
-    differs from its measured order by a shift too small to judge (:func:`_confusable_shift`). It takes that order
+    differs from its measured order by a shift too small to judge (:func:`confusable_shift`). It takes that order
     where it is the one such order continuing the most neighbours (no other continues as many) and fits every lower
     frequency within 3 noise deviations, and is added to ``unresolved`` otherwise.
     """
@@ -490,7 +490,7 @@ def _neighbour_verdicts(
     around = neighbours_at(proposed, valid, rows, cols)
     seen = np.isfinite(around)
     shifts = np.where(seen, np.rint((around - here) / TWO_PI), 0.0)  # an unseen side's shift is never read
-    like = seen & (shifts != 0) & _confusable_shift(shifts, frequency, lower, weights)
+    like = seen & (shifts != 0) & confusable_shift(shifts, frequency, lower, weights)
     doubtful = like.any(axis=0)
     support = ((shifts[:, None, :] == shifts[None, :, :]) & seen[None, :, :]).sum(axis=1)  # neighbours continued
     support = np.where(like, support, 0)
@@ -507,7 +507,7 @@ def _neighbour_verdicts(
     return back, unresolved, taken, here[chosen] + TWO_PI * best_shift[chosen]
 
 
-def _confusable_shift(
+def confusable_shift(
     shift: np.ndarray, frequency: float, lower: Sequence[tuple[float, np.ndarray]], weights: Sequence[float]
 ) -> np.ndarray:
     """Whether orders ``shift`` apart predict the lower frequencies too alike to judge (below :data:`MIN_SHIFT_RAD` or

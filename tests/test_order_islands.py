@@ -1,0 +1,106 @@
+"""Step 6d: islands that one order shift the lower frequencies cannot see joins to the surface around them."""
+
+import numpy as np
+import pytest
+
+from processing.correction import order_islands
+from processing.correction.order_islands import level_islands
+from processing.correction.temporal_evidence import confusable_shift
+
+TWO_PI = 2.0 * np.pi
+
+
+def _ramp(rows: int = 40, cols: int = 60) -> np.ndarray:
+    """A smooth surface: 0 - 30 rad across the columns (0.5 rad a pixel), a gentle tilt down the rows."""
+    return np.linspace(0.0, 30.0, cols)[None, :] + np.linspace(0.0, 4.0, rows)[:, None]
+
+
+def _everywhere(value: bool):  # noqa: ANN202 - a test's stand-in for the lower frequencies or the vote
+    return lambda shifts: np.full(np.shape(shifts), value)
+
+
+def _all_undecided(kept: np.ndarray) -> np.ndarray:
+    return np.ones(kept.shape, dtype=bool)
+
+
+def test_an_island_eleven_orders_off_joins_the_surface() -> None:
+    truth = _ramp()
+    kept = truth.copy()
+    kept[10:20, 15:30] += 11 * TWO_PI  # a fringe region whose vote settled on the 29/32 pair's ambiguous order
+    out, moved = level_islands(kept, np.ones(truth.shape, bool), _everywhere(True), _all_undecided)
+    assert moved == 150
+    np.testing.assert_allclose(out, truth, atol=1e-9)
+
+
+def test_with_the_capture_lower_frequency_only_its_blind_shifts_move() -> None:
+    """29/32 with 0.1 rad of phase noise: 11 and 21 orders move the 29-fringe prediction by 0.2 rad (confusable),
+    5 orders by 2.9 rad (seen)."""
+    truth = _ramp()
+    lower = [(29.0, np.zeros(truth.shape))]
+
+    def confusable(shifts: np.ndarray) -> np.ndarray:
+        return confusable_shift(shifts, 32.0, lower, [1.0 / 0.1**2])  # the weight: one over the noise variance
+
+    for orders, expected in ((11, 150), (-21, 150), (5, 0)):
+        kept = truth.copy()
+        kept[10:20, 15:30] += orders * TWO_PI
+        assert level_islands(kept, np.ones(truth.shape, bool), confusable, _all_undecided)[1] == expected, orders
+
+
+def test_an_island_whose_measured_orders_vouch_for_it_stays() -> None:
+    """Where the vote decides the kept orders (a real edge, its measured orders agreeing), nothing moves."""
+    truth = _ramp()
+    kept = truth.copy()
+    kept[10:20, 15:30] += 11 * TWO_PI
+    out, moved = level_islands(kept, np.ones(truth.shape, bool), _everywhere(True), lambda k: np.zeros(k.shape, bool))
+    assert moved == 0 and out is kept
+
+
+def test_shifts_of_one_or_two_orders_are_left_to_the_pixel_steps() -> None:
+    truth = _ramp()
+    for orders in (1, -2):
+        kept = truth.copy()
+        kept[10:20, 15:30] += orders * TWO_PI
+        assert level_islands(kept, np.ones(truth.shape, bool), _everywhere(True), _all_undecided)[1] == 0
+    assert order_islands.MIN_ORDERS == 3
+
+
+def test_the_larger_side_stays_and_a_step_off_every_whole_shift_stays() -> None:
+    """Half the map 11 orders up: neither side is an island of the other's surface (the smaller moves only
+    towards a larger one, so the larger half stays); a block raised 11.4 orders (a real step, 2.5 rad off the
+    nearest whole shift) is not within reach of any shift."""
+    truth = _ramp()
+    valid = np.ones(truth.shape, bool)
+    halves = truth.copy()
+    halves[:, 35:] += 11 * TWO_PI
+    out, moved = level_islands(halves, valid, _everywhere(True), _all_undecided)
+    assert moved == 40 * 25
+    np.testing.assert_allclose(out, truth, atol=1e-9)  # the smaller half (25 of 60 columns) came down
+    raised = truth.copy()
+    raised[10:20, 15:30] += 11.4 * TWO_PI
+    assert level_islands(raised, valid, _everywhere(True), _all_undecided)[1] == 0
+
+
+def test_an_island_inside_an_island_comes_down_in_passes() -> None:
+    """An island 22 orders up inside one 11 up: the outer joins the surface, then the inner joins it."""
+    truth = _ramp()
+    kept = truth.copy()
+    kept[5:35, 10:50] += 11 * TWO_PI
+    kept[15:25, 20:40] += 11 * TWO_PI
+    out, moved = level_islands(kept, np.ones(truth.shape, bool), _everywhere(True), _all_undecided)
+    np.testing.assert_allclose(out, truth, atol=1e-9)
+    assert moved == 30 * 40
+
+
+@pytest.mark.parametrize("gap", [True, False])
+def test_invalid_pixels_neither_join_nor_move(gap: bool) -> None:
+    """An island cut off by a shadow all round has no broken pair: nothing to judge it by."""
+    truth = _ramp()
+    kept = truth.copy()
+    kept[10:20, 15:30] += 11 * TWO_PI
+    valid = np.ones(truth.shape, bool)
+    if gap:
+        valid[9:21, 14:31] = False
+        valid[10:20, 15:30] = True
+    out, moved = level_islands(kept, valid, _everywhere(True), _all_undecided)
+    assert moved == (0 if gap else 150)
