@@ -56,6 +56,21 @@ def test_an_island_whose_measured_orders_vouch_for_it_stays() -> None:
     assert moved == 0 and out is kept
 
 
+def test_an_island_too_small_for_any_vote_to_decide_moves_whatever_the_vote() -> None:
+    """Below 9 pixels (Z_MARGIN squared) no sign test can vouch for the kept orders: 8 pixels move with a vote said
+    to decide them, 9 do not."""
+    truth = _ramp()
+    decided = lambda k: np.zeros(k.shape, bool)  # noqa: E731
+    assert order_islands.TOO_FEW_TO_VOTE == 9
+    for rows, expected in ((2, 8), (3, 0)):
+        kept = truth.copy()
+        kept[10 : 10 + rows, 15 : 15 + (4 if rows == 2 else 3)] += 11 * TWO_PI  # 2 x 4 and 3 x 3
+        out, moved = level_islands(kept, np.ones(truth.shape, bool), _everywhere(True), decided)
+        assert moved == expected, rows
+        if expected:
+            np.testing.assert_allclose(out, truth, atol=1e-9)
+
+
 def test_shifts_of_one_or_two_orders_are_left_to_the_pixel_steps() -> None:
     truth = _ramp()
     for orders in (1, -2):

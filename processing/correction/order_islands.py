@@ -13,7 +13,8 @@ border (:data:`MIN_SHARE` of its broken pairs), where
 - ``s`` is :data:`MIN_ORDERS` orders or more and confusable for the lower frequencies (the ``confusable`` test:
   below the bounds a blob is judged by), so no temporal evidence speaks against it, and
 - most of the component's pixels are undecided (:func:`~processing.correction.order_margin.undecided_orders`): their
-  measured orders do not vouch for the kept one.
+  measured orders do not vouch for the kept one; a component of fewer than :data:`TOO_FEW_TO_VOTE` pixels always
+  is (too few votes for any margin).
 
 A real height step lies within :data:`CLOSE_RAD` of some whole shift half the time, so the breaks alone cannot tell
 an island from an object; the measured orders can, where they are not split. Passes repeat while islands join (at
@@ -29,6 +30,7 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from processing.correction.temporal_evidence import Z_MARGIN
 from processing.elementwise import abs_difference
 
 TWO_PI = 2.0 * np.pi
@@ -43,6 +45,9 @@ MIN_SHARE = 0.5
 MIN_ORDERS = 3
 # Passes: islands joined in one pass can bring a neighbouring island within reach of a larger surface.
 PASSES = 4
+# Islands of fewer pixels than this are undecided whatever their measured orders say: a sign test of n votes cannot
+# reach Z_MARGIN standard errors below n = Z_MARGIN ** 2 (9), so no vote can vouch for them.
+TOO_FEW_TO_VOTE = int(np.ceil(Z_MARGIN**2))
 
 
 def broken_pairs(phase: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -140,6 +145,7 @@ def level_islands(
     flat_labels = labels.reshape(-1)
     sizes = np.bincount(flat_labels, minlength=count)
     doubtful = np.bincount(flat_labels, weights=undecided(phase).reshape(-1), minlength=count)
+    doubtful = np.where(sizes < TOO_FEW_TO_VOTE, sizes, doubtful)  # their whole size: undecided
     first, second = flat_labels[first], flat_labels[second]
     total = np.zeros(count, dtype=np.int64)  # each component's shift so far
     for _ in range(PASSES):
