@@ -131,7 +131,8 @@ def level_islands(
     ``confusable(shifts)``: whether the lower frequencies cannot tell orders ``shifts`` apart; ``undecided(phase)``:
     the (H, W) pixels whose measured orders do not decide the order ``phase`` keeps (asked only where some island
     could move: it reads the whole map). An island moves only if most of its pixels are undecided: where the
-    measured orders vouch for the kept ones, a break all round is a real edge.
+    measured orders vouch for the kept ones, a break all round is a real edge. An island of fewer than
+    :data:`TOO_FEW_TO_VOTE` pixels counts as undecided whatever ``undecided`` says.
 
     The map is labelled once, and only where some broken pair has a joining shift; the passes then work on the
     components and their broken pairs alone: components whose pairs a shift brought within pi join into one.
@@ -146,19 +147,19 @@ def level_islands(
     sizes = np.bincount(flat_labels, minlength=count)
     doubtful = np.bincount(flat_labels, weights=undecided(phase).reshape(-1), minlength=count)
     doubtful = np.where(sizes < TOO_FEW_TO_VOTE, sizes, doubtful)  # their whole size: undecided
-    first, second = flat_labels[first], flat_labels[second]
+    one, two = flat_labels[first], flat_labels[second]  # the components of each broken pair's pixels
     total = np.zeros(count, dtype=np.int64)  # each component's shift so far
     for _ in range(PASSES):
-        now = step + TWO_PI * (total[second] - total[first])
+        now = step + TWO_PI * (total[two] - total[one])
         joined = np.abs(now) <= np.pi
         groups, group = connected_components(
-            coo_matrix((np.ones(np.count_nonzero(joined)), (first[joined], second[joined])), shape=(count, count)),
+            coo_matrix((np.ones(np.count_nonzero(joined)), (one[joined], two[joined])), shape=(count, count)),
             directed=False,
         )
         apart = ~joined
         group_sizes = np.bincount(group, weights=sizes, minlength=groups)
         shifts = island_shifts(
-            group_sizes, group[first[apart]], group[second[apart]], _joining_shifts(now[apart], confusable)
+            group_sizes, group[one[apart]], group[two[apart]], _joining_shifts(now[apart], confusable)
         )
         shifts[np.bincount(group, weights=doubtful, minlength=groups) < MIN_SHARE * group_sizes] = 0
         if not shifts.any():
