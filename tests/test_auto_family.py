@@ -152,3 +152,12 @@ def test_auto_joins_islands_the_lower_frequencies_cannot_place_to_the_surface() 
     result = family.evaluate(family.draw_case(94), methods=("none", "auto"))
     scores = result["nmse"]
     assert scores["auto"] <= 2.0 * scores["oracle"], result["description"]
+
+
+def test_auto_sends_back_pixels_pooled_several_orders_onto_a_steps_far_side() -> None:
+    """A mixture under 18/25 with 3 steps at 25.6 dB (1089 x 1072): pixels at the corners of height steps of about
+    three fringes kept the far side's order, 3 - 4 orders off their measured (right) ones; step 6c judged only one
+    or two orders, and auto was 0.44x the oracle. Judged where the 18-fringe phase tells the orders apart, 0.11x."""
+    result = family.evaluate(family.draw_case(40), methods=("none", "auto"))
+    scores = result["nmse"]
+    assert scores["auto"] <= 0.25 * scores["oracle"], result["description"]

@@ -63,3 +63,33 @@ def test_changes_of_many_orders_are_not_judged():
     kept[4, 5:7] += 3 * TWO_PI  # a wrong temporal order fixed by an earlier step looks like this
     out, moved = restore_continued_orders(kept, truth, np.ones(truth.shape, bool))
     assert moved == 0 and out is kept
+
+
+def test_changes_of_many_orders_are_judged_where_the_lower_frequencies_tell_them_apart() -> None:
+    """Three orders off at a step's corner (pooled from the far side), measured right: back where the lower
+    frequencies tell the orders apart and favour the measured one; left where they cannot tell them apart (the
+    close pairs' ambiguous shifts, where the measured order is as likely wrong)."""
+    truth = _raised_corner(1.4)
+    kept = truth.copy()
+    kept[4, 5:7] += 3 * TWO_PI
+    kept[5, 6] += 3 * TWO_PI
+    valid = np.ones(truth.shape, bool)
+
+    def favours_measured(values: np.ndarray, where: np.ndarray) -> np.ndarray:
+        return np.vstack([np.ones(values.shape[1]), np.zeros(values.shape[1])])
+
+    def shift(delta: np.ndarray) -> np.ndarray:
+        return np.full(delta.shape, 1.0)
+
+    seen: list[np.ndarray] = []
+
+    def tells(orders: np.ndarray) -> np.ndarray:
+        seen.append(orders)
+        return np.ones(orders.shape, bool)
+
+    out, moved = restore_continued_orders(kept, truth, valid, favours_measured, shift, tells)
+    assert moved == 3 and np.all(np.abs(np.concatenate(seen)) == 3)
+    np.testing.assert_array_equal(out, truth)
+    blind = lambda orders: np.zeros(orders.shape, bool)  # noqa: E731
+    assert restore_continued_orders(kept, truth, valid, favours_measured, shift, blind)[1] == 0
+    assert restore_continued_orders(kept, truth, valid, None, None, tells)[1] == 0  # never without the evidence

@@ -418,12 +418,16 @@ def _restore_continued_orders(
     """Step 6c: pixels kept one or two orders off the measured ones go back where the measured order continues the
     settled surface on a side and the lower frequencies favour it
     (:func:`~processing.correction.surface_continuation.restore_continued_orders`)."""
-    misfit = shift = None
+    misfit = shift = telling = None
     if temporal is not None and weights is not None:
         misfit = _spike_misfit(temporal, weights)
         shift = functools.partial(order_shift, frequency=temporal.frequency, lower=temporal.lower, weights=weights)
+        confusable = functools.partial(
+            confusable_shift, frequency=temporal.frequency, lower=temporal.lower, weights=weights
+        )
+        telling = lambda orders: ~confusable(orders)  # noqa: E731 - the lower frequencies' verdict, negated
     reordered, counts["continued_orders_restored"] = restore_continued_orders(
-        reordered, maps.phase, maps.valid, misfit, shift
+        reordered, maps.phase, maps.valid, misfit, shift, telling
     )
     return reordered
 

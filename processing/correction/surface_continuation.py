@@ -8,7 +8,10 @@ the surface it lies on continues through it, and a linear extrapolation of two p
 from that prediction and, across a step of a fraction ``s`` of a fringe off a whole one, ``s`` fringes from the
 far side's.
 
-Only pixels whose kept order differs from the measured one by one or two orders are judged, against
+Only pixels whose kept order differs from the measured one by one or two orders are judged, and pixels further
+off only where the lower frequencies tell the two orders apart (``telling``): a change they cannot see (11 orders
+of 32 at 29, 7 of 25 at 18) is what the close pairs' dense errors make, and there the measured order is as
+likely the wrong one. They are judged against
 extrapolations from settled pixels (kept order = measured order, or moved back here), so a blob of
 changed pixels mends from its rim, up to :data:`PASSES` passes.
 A pixel moves back only where the measured order's nearest extrapolation lies within :data:`TOLERANCE_RAD`
@@ -33,8 +36,8 @@ PASSES = 8
 TOLERANCE_RAD = 1.6
 # ... and nearer than the kept order's by this much.
 MARGIN_RAD = 0.5
-# Only pixels kept within this many orders of the measured one are judged (one or two orders: the close pairs'
-# ambiguity; changes of many orders are the wrong temporal orders corrections are for).
+# Pixels kept within this many orders of the measured one are judged (one or two orders: the close pairs'
+# ambiguity); pixels further off only where the lower frequencies tell the orders apart.
 MAX_ORDERS = 2.5
 
 
@@ -61,11 +64,14 @@ def restore_continued_orders(
     valid: np.ndarray,
     misfit: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
     shift: Callable[[np.ndarray], np.ndarray] | None = None,
+    telling: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> tuple[np.ndarray, int]:
     """``kept`` with changed pixels back on their measured order where it continues the settled surface;
     how many moved. ``misfit(values, where)``: the lower frequencies' misfit as in
     :func:`~processing.correction.broken_pixels.mend_broken_pixels`; ``shift(delta_orders)``: its expected
-    increase for an order change (both optional, together).
+    increase for an order change (both optional, together); ``telling(delta_orders)``: whether they tell orders
+    that far apart from each other (with both others only: pixels beyond :data:`MAX_ORDERS` are judged where it
+    says so).
 
     Examples
     --------
@@ -87,6 +93,10 @@ def restore_continued_orders(
     with np.errstate(invalid="ignore"):
         changed = valid & (delta > np.pi)
         todo = changed & (delta < MAX_ORDERS * TWO_PI)
+    if telling is not None and misfit is not None and shift is not None:
+        far = np.flatnonzero(changed & ~todo)
+        orders = np.rint((kept.reshape(-1)[far] - measured.reshape(-1)[far]) / TWO_PI)
+        todo.reshape(-1)[far[telling(orders)]] = True
     if not todo.any():
         return kept, 0
     out, settled = kept.copy(), valid & ~changed
