@@ -422,9 +422,7 @@ def _restore_continued_orders(
     if temporal is not None and weights is not None:
         misfit = _spike_misfit(temporal, weights)
         shift = functools.partial(order_shift, frequency=temporal.frequency, lower=temporal.lower, weights=weights)
-        confusable = functools.partial(
-            confusable_shift, frequency=temporal.frequency, lower=temporal.lower, weights=weights
-        )
+        confusable = _confusable(temporal, weights)
         telling = lambda orders: ~confusable(orders)  # noqa: E731 - the lower frequencies' verdict, negated
     reordered, counts["continued_orders_restored"] = restore_continued_orders(
         reordered, maps.phase, maps.valid, misfit, shift, telling
@@ -445,16 +443,18 @@ def _level_islands(
     counts["islands_levelled"] = 0
     if temporal is None or weights is None:
         return reordered
-    confusable = functools.partial(
-        confusable_shift, frequency=temporal.frequency, lower=temporal.lower, weights=weights
-    )
     reordered, counts["islands_levelled"] = level_islands(
         reordered,
         maps.valid,
-        confusable,
+        _confusable(temporal, weights),
         lambda kept: undecided_orders(kept, maps.phase, maps.wrapped, maps.valid),
     )
     return reordered
+
+
+def _confusable(temporal: _Temporal, weights: list[float]) -> Callable[[np.ndarray], np.ndarray]:
+    """Whether the lower frequencies cannot tell orders a given number of orders apart (per entry; steps 6c, 6d)."""
+    return functools.partial(confusable_shift, frequency=temporal.frequency, lower=temporal.lower, weights=weights)
 
 
 @dataclass(frozen=True)
