@@ -62,13 +62,13 @@ def _auto_on_develop_case(index: int) -> tuple[np.ndarray, dict, np.ndarray]:
 
 
 def test_auto_reports_the_dense_order_errors_of_a_close_pair_as_unresolved() -> None:
-    """develop-27 (29/32 at 14 dB): two thirds of the measured orders are wrong and auto keeps 5 % wrong.
-    Before the vote margin it reported 2e-6 of the map unresolved."""
+    """develop-27 (29/32 at 14 dB): two thirds of the measured orders are wrong, so the orders auto keeps rest on
+    continuity nearly everywhere (it kept 5 % wrong before step 6d, 0.02 % since). Before the vote margin it
+    reported 2e-6 of the map unresolved; the pixels it still keeps wrong must be among those reported."""
     wrong, info, lit = _auto_on_develop_case(27)
-    assert wrong.sum() > 0.01 * lit.sum()  # the case still has what it is chosen for
     unresolved = info["unresolved_mask"]
+    assert info["unresolved"]["fraction"] >= 0.5
     assert (wrong & unresolved).sum() >= 0.9 * wrong.sum()
-    assert info["unresolved"]["fraction"] >= wrong.sum() / lit.sum()
 
 
 @pytest.mark.parametrize("index", [6, 49])

@@ -540,11 +540,10 @@ def correct_auto(
        noise; the blocks blur a step's or a ramp's edge, ch. 4 at full resolution does not); weigh L's orders against
        the kept ones blob by blob (:mod:`~processing.correction.surface_orders`; ``info["evidence"]
        ["low_rank_orders_taken"]``), move pixels breaking with three or four neighbours
-       (:mod:`~processing.correction.broken_pixels`), send pixels kept one or two orders off back where the measured
-       order continues the settled surface and the lower frequencies favour it
-       (:mod:`~processing.correction.surface_continuation`), shift islands that break with a larger surface all
-       round by one shift of three orders or more the lower frequencies cannot see onto it, where their measured
-       orders do not decide the kept ones (:mod:`~processing.correction.order_islands`); keep L (denoised) except where the result departs from it
+       (:mod:`~processing.correction.broken_pixels`), send changed pixels back where the measured order continues the
+       settled surface and the lower frequencies favour it (:mod:`~processing.correction.surface_continuation`),
+       shift islands breaking with a larger surface all round onto it by a shift the lower frequencies cannot see
+       (:mod:`~processing.correction.order_islands`); keep L (denoised) except where the result departs from it
        coherently beyond the noise (:func:`~processing.correction.phase_rpca.restore_detail`, ``k_sigma`` standard
        deviations of the 3 x 3 mean residual) or one pixel departs far beyond it where nothing suggests a wrong order
        (on a height step's edge: its order is the measured one), and never where L lies a fringe or more from the
