@@ -140,7 +140,8 @@ def level_islands(
     across, down, first, second = broken_pairs(phase, valid)
     flat = phase.reshape(-1)
     step = flat[second] - flat[first]
-    if not _joining_shifts(step, confusable).any():
+    joining = _joining_shifts(step, confusable)
+    if not joining.any():
         return phase, 0
     labels, count = continuity_components(valid, across, down)
     flat_labels = labels.reshape(-1)
@@ -149,22 +150,23 @@ def level_islands(
     doubtful = np.where(sizes < TOO_FEW_TO_VOTE, sizes, doubtful)  # their whole size: undecided
     one, two = flat_labels[first], flat_labels[second]  # the components of each broken pair's pixels
     total = np.zeros(count, dtype=np.int64)  # each component's shift so far
+    # before any shift every component is its own group and every pair is apart, with the joining shifts above
+    groups, group, apart = count, np.arange(count), np.ones(step.size, dtype=bool)
     for _ in range(PASSES):
+        group_sizes = np.bincount(group, weights=sizes, minlength=groups)
+        shifts = island_shifts(group_sizes, group[one[apart]], group[two[apart]], joining)
+        shifts[np.bincount(group, weights=doubtful, minlength=groups) < MIN_SHARE * group_sizes] = 0
+        if not shifts.any():
+            break
+        total += shifts[group]
         now = step + TWO_PI * (total[two] - total[one])
-        joined = np.abs(now) <= np.pi
+        joined = np.abs(now) <= np.pi  # components a shift brought within pi of each other join
         groups, group = connected_components(
             coo_matrix((np.ones(np.count_nonzero(joined)), (one[joined], two[joined])), shape=(count, count)),
             directed=False,
         )
         apart = ~joined
-        group_sizes = np.bincount(group, weights=sizes, minlength=groups)
-        shifts = island_shifts(
-            group_sizes, group[one[apart]], group[two[apart]], _joining_shifts(now[apart], confusable)
-        )
-        shifts[np.bincount(group, weights=doubtful, minlength=groups) < MIN_SHARE * group_sizes] = 0
-        if not shifts.any():
-            break
-        total += shifts[group]
+        joining = _joining_shifts(now[apart], confusable)
     at = np.flatnonzero(total[flat_labels])  # label 0 (outside valid) never shifts: it has no broken pair
     if not at.size:
         return phase, 0
