@@ -161,3 +161,13 @@ def test_auto_sends_back_pixels_pooled_several_orders_onto_a_steps_far_side() ->
     result = family.evaluate(family.draw_case(40), methods=("none", "auto"))
     scores = result["nmse"]
     assert scores["auto"] <= 0.25 * scores["oracle"], result["description"]
+
+
+def test_auto_keeps_an_object_where_the_lower_frequency_places_it() -> None:
+    """Shadows under 29/32 with 7 steps at 14.9 dB (721 x 450): 56 % of the measured orders wrong. Step 6d shifted a
+    right object top of 3479 pixels 9 orders onto its surround across a real step (9 of 32 move the 29-fringe
+    prediction by 0.98 rad, under the per-pixel bound, while the top's RMS misfit rose from 0.17 to 1.0 rad), and
+    auto was 940x the oracle; refusing that rise leaves it at 72x."""
+    result = family.evaluate(family.draw_case(304), methods=("none", "auto"))
+    scores = result["nmse"]
+    assert scores["auto"] <= 150.0 * scores["oracle"], result["description"]

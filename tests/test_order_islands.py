@@ -5,7 +5,7 @@ import pytest
 
 from processing.correction import order_islands
 from processing.correction.order_islands import level_islands
-from processing.correction.temporal_evidence import confusable_shift
+from processing.correction.temporal_evidence import confusable_shift, lower_frequency_misfit
 
 TWO_PI = 2.0 * np.pi
 
@@ -45,6 +45,36 @@ def test_with_the_capture_lower_frequency_only_its_blind_shifts_move() -> None:
         kept = truth.copy()
         kept[10:20, 15:30] += orders * TWO_PI
         assert level_islands(kept, np.ones(truth.shape, bool), confusable, _all_undecided)[1] == expected, orders
+
+
+def test_an_object_the_lower_frequency_places_stays_where_it_fits() -> None:
+    """A block truly 9 orders above its surround (29/32: a shift of 0.98 rad, under the per-pixel bounds) stays
+    where the lower frequency's misfit says it fits (without the misfit, the breaks alone would level it); a block
+    kept 9 orders off a surface without a step comes down."""
+    rng = np.random.default_rng(3)
+    surface = _ramp()
+    surface[10:20, 15:30] += 9 * TWO_PI + 0.3  # a real step: 0.3 rad from the whole shift, within CLOSE_RAD
+    lower_wrapped = np.mod(surface * 29.0 / 32.0 + rng.normal(0.0, 0.1, surface.shape), TWO_PI)
+    lower = [(29.0, lower_wrapped)]
+
+    def confusable(shifts: np.ndarray) -> np.ndarray:
+        return confusable_shift(shifts, 32.0, lower, [1.0 / 0.1**2])
+
+    def misfit(values: np.ndarray, at: np.ndarray) -> np.ndarray:
+        return lower_frequency_misfit(values, 32.0, [(29.0, lower_wrapped.reshape(-1)[at])])
+
+    valid = np.ones(surface.shape, bool)
+    assert confusable(np.array([9.0]))[0]
+    assert level_islands(surface, valid, confusable, _all_undecided)[1] == 150  # the breaks alone level it
+    out, moved = level_islands(surface, valid, confusable, _all_undecided, misfit)
+    assert moved == 0 and out is surface
+    truth = _ramp()  # no step: the block kept 9 orders off, where the shift lowers the misfit
+    lower_wrapped[:] = np.mod(truth * 29.0 / 32.0 + rng.normal(0.0, 0.1, truth.shape), TWO_PI)
+    off = truth.copy()
+    off[10:20, 15:30] += 9 * TWO_PI
+    out, moved = level_islands(off, valid, confusable, _all_undecided, misfit)
+    assert moved == 150
+    np.testing.assert_allclose(out, truth, atol=1e-9)
 
 
 def test_an_island_whose_measured_orders_vouch_for_it_stays() -> None:

@@ -14,7 +14,11 @@ border (:data:`MIN_SHARE` of its broken pairs), where
   below the bounds a blob is judged by), so no temporal evidence speaks against it, and
 - most of the component's pixels are undecided (:func:`~processing.correction.order_margin.undecided_orders`): their
   measured orders do not vouch for the kept one; a component of fewer than :data:`TOO_FEW_TO_VOTE` pixels always
-  is (too few votes for any margin).
+  is (too few votes for any margin), and
+- the shift does not raise the component's root-mean-square misfit with the lower frequencies by more than
+  :data:`MAX_RISE_RAD` (components of :data:`TOO_FEW_TO_VOTE` pixels or more): a shift the per-pixel bounds call
+  confusable (9 orders of 32 move the 29-fringe prediction by 0.98 rad, just under them) can still be seen over a
+  whole object, and an object that fits where it is stays there.
 
 A real height step lies within :data:`CLOSE_RAD` of some whole shift half the time, so the breaks alone cannot tell
 an island from an object; the measured orders can, where they are not split. Passes repeat while islands join (at
@@ -48,6 +52,12 @@ PASSES = 4
 # Islands of fewer pixels than this are undecided whatever their measured orders say: a sign test of n votes cannot
 # reach Z_MARGIN standard errors below n = Z_MARGIN ** 2 (9), so no vote can vouch for them.
 TOO_FEW_TO_VOTE = int(np.ceil(Z_MARGIN**2))
+# A shift that raises a component's RMS lower-frequency misfit by more than this (radians) is refused: the right
+# shifts of components of TOO_FEW_TO_VOTE pixels or more on develop cases 0-447 raised it by 0.29 rad at most
+# (1578 of them), the one wrong shift that pooled an object into its surround by 0.83 rad; half the least shift a
+# blob is judged by (temporal_evidence.MIN_SHIFT_RAD). Smaller components are not judged: single right pixels rose
+# by up to 0.57 rad.
+MAX_RISE_RAD = 0.5
 
 
 def broken_pairs(phase: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -124,6 +134,7 @@ def level_islands(
     valid: np.ndarray,
     confusable: Callable[[np.ndarray], np.ndarray],
     undecided: Callable[[np.ndarray], np.ndarray],
+    misfit: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
 ) -> tuple[np.ndarray, int]:
     """``phase`` with each island shifted onto the larger surface it continues (see the module), and how many
     pixels moved.
@@ -132,7 +143,9 @@ def level_islands(
     the (H, W) pixels whose measured orders do not decide the order ``phase`` keeps (asked only where some island
     could move: it reads the whole map). An island moves only if most of its pixels are undecided: where the
     measured orders vouch for the kept ones, a break all round is a real edge. An island of fewer than
-    :data:`TOO_FEW_TO_VOTE` pixels counts as undecided whatever ``undecided`` says.
+    :data:`TOO_FEW_TO_VOTE` pixels counts as undecided whatever ``undecided`` says. ``misfit(values, at)``: the
+    squared misfit (rad^2) with the lower frequencies of phase ``values`` at flat pixel indices ``at``; when given,
+    a shift raising a larger island's RMS misfit by more than :data:`MAX_RISE_RAD` is refused.
 
     The map is labelled once, and only where some broken pair has a joining shift; the passes then work on the
     components and their broken pairs alone: components whose pairs a shift brought within pi join into one.
@@ -156,6 +169,8 @@ def level_islands(
         group_sizes = np.bincount(group, weights=sizes, minlength=groups)
         shifts = island_shifts(group_sizes, group[one[apart]], group[two[apart]], joining)
         shifts[np.bincount(group, weights=doubtful, minlength=groups) < MIN_SHARE * group_sizes] = 0
+        if misfit is not None:
+            shifts[_misfit_rises(flat, flat_labels, group, total, shifts, group_sizes, misfit)] = 0
         if not shifts.any():
             break
         total += shifts[group]
@@ -173,3 +188,26 @@ def level_islands(
     out = phase.copy()
     out.reshape(-1)[at] += TWO_PI * total[flat_labels[at]]
     return out, int(at.size)
+
+
+def _misfit_rises(
+    flat: np.ndarray,
+    flat_labels: np.ndarray,
+    group: np.ndarray,
+    total: np.ndarray,
+    shifts: np.ndarray,
+    group_sizes: np.ndarray,
+    misfit: Callable[[np.ndarray, np.ndarray], np.ndarray],
+) -> np.ndarray:
+    """Per group, whether its shift raises its RMS lower-frequency misfit by more than :data:`MAX_RISE_RAD` (groups
+    of :data:`TOO_FEW_TO_VOTE` pixels or more; ``total``: each component's shift so far, per component)."""
+    judged = (shifts != 0) & (group_sizes >= TOO_FEW_TO_VOTE)
+    if not judged.any():
+        return judged
+    at = np.flatnonzero(judged[group[flat_labels]])
+    owner = group[flat_labels[at]]
+    now = flat[at] + TWO_PI * total[flat_labels[at]]
+    before = np.bincount(owner, weights=misfit(now, at), minlength=shifts.size)
+    after = np.bincount(owner, weights=misfit(now + TWO_PI * shifts[owner], at), minlength=shifts.size)
+    size = np.maximum(group_sizes, 1.0)
+    return judged & (np.sqrt(after / size) - np.sqrt(before / size) > MAX_RISE_RAD)

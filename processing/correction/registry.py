@@ -448,8 +448,19 @@ def _level_islands(
         maps.valid,
         _confusable(temporal, weights),
         lambda kept: undecided_orders(kept, maps.phase, maps.wrapped, maps.valid),
+        _plain_misfit(temporal),
     )
     return reordered
+
+
+def _plain_misfit(temporal: _Temporal) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+    """Squared misfit (rad^2, unweighted) of candidate phases at flat pixel indices with the lower frequencies."""
+
+    def misfit(values: np.ndarray, at: np.ndarray) -> np.ndarray:
+        lower = [(f_low, wrapped_low.reshape(-1)[at]) for f_low, wrapped_low in temporal.lower]
+        return lower_frequency_misfit(values, temporal.frequency, lower)
+
+    return misfit
 
 
 def _confusable(temporal: _Temporal, weights: list[float]) -> Callable[[np.ndarray], np.ndarray]:
@@ -543,7 +554,7 @@ def correct_auto(
        (:mod:`~processing.correction.broken_pixels`), send changed pixels back where the measured order continues the
        settled surface and the lower frequencies favour it (:mod:`~processing.correction.surface_continuation`),
        shift islands breaking with a larger surface all round onto it by a shift the lower frequencies cannot see
-       (:mod:`~processing.correction.order_islands`); keep L (denoised) except where the result departs from it
+       per pixel, nor over the island (:mod:`~processing.correction.order_islands`); keep L (denoised) except where the result departs from it
        coherently beyond the noise (:func:`~processing.correction.phase_rpca.restore_detail`, ``k_sigma`` standard
        deviations of the 3 x 3 mean residual) or one pixel departs far beyond it where nothing suggests a wrong order
        (on a height step's edge: its order is the measured one), and never where L lies a fringe or more from the
