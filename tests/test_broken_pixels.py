@@ -79,6 +79,23 @@ def test_a_pixel_beside_a_shadow_off_two_of_its_three_neighbours_stays() -> None
     np.testing.assert_array_equal(out, kept)
 
 
+def test_next_to_what_another_step_moved_only_those_neighbours_are_judged() -> None:
+    """A column along a shadow that another step sent back all but one pixel of: judged next to the moved pixels,
+    the one left breaks with all three neighbours and mends; a broken pixel elsewhere is not looked at."""
+    truth = _step()
+    valid = np.ones(SHAPE, dtype=bool)
+    valid[5:15, 20:24] = False
+    kept = truth.copy()
+    kept[10, 19] += TWO_PI  # the column's one pixel left
+    kept[2, 5] += 2 * TWO_PI  # elsewhere, broken with all four neighbours
+    moved_by_another = np.zeros(SHAPE, dtype=bool)
+    moved_by_another[5:15, 19] = True
+    moved_by_another[10, 19] = False
+    out, moved = mend_broken_pixels(kept, valid, _misfit(truth, 17.0, 13.0), next_to=moved_by_another)
+    assert moved == 1
+    assert np.isclose(out[10, 19], truth[10, 19]) and out[2, 5] == kept[2, 5]
+
+
 def test_orders_a_whole_lower_frequency_cycle_apart_fit_alike_and_the_neighbours_decide() -> None:
     """36 orders of 36 fringes are 6 whole cycles of 6: the lower frequency fits both orders alike, up to rounding
     in the last digits, which must not veto the move the neighbours support."""

@@ -1,8 +1,9 @@
 """Step 6c: pixels kept one or two orders off go back where the measured order continues the settled surface."""
 
 import numpy as np
+import pytest
 
-from processing.correction.surface_continuation import restore_continued_orders
+from processing.correction.surface_continuation import MARGIN_RAD, continuation_margin, restore_continued_orders
 
 TWO_PI = 2.0 * np.pi
 
@@ -93,3 +94,18 @@ def test_changes_of_many_orders_are_judged_where_the_lower_frequencies_tell_them
     blind = lambda orders: np.zeros(orders.shape, bool)  # noqa: E731
     assert restore_continued_orders(kept, truth, valid, favours_measured, shift, blind)[1] == 0
     assert restore_continued_orders(kept, truth, valid, None, None, tells)[1] == 0  # never without the evidence
+
+
+def test_the_margin_shrinks_with_the_noise_so_a_step_near_a_whole_fringe_is_seen_at_high_snr() -> None:
+    """A step of 1.05 fringes: the corner kept one order up continues the far side within 0.31 rad, the measured
+    order the near side exactly. 0.5 rad of margin leaves it; at 0.02 rad of phase noise (3 deviations of a second
+    difference: 0.15 rad) it goes back. At 0.15 rad of noise the margin stays 0.5 rad."""
+    truth = _raised_corner(1.05)
+    kept = _corner_kept_one_up(truth)
+    valid = np.ones(truth.shape, bool)
+    assert restore_continued_orders(kept, truth, valid)[1] == 0
+    assert continuation_margin(0.02) == pytest.approx(3.0 * np.sqrt(6.0) * 0.02)
+    assert continuation_margin(0.15) == MARGIN_RAD
+    out, moved = restore_continued_orders(kept, truth, valid, margin=continuation_margin(0.02))
+    assert moved == 3
+    np.testing.assert_array_equal(out, truth)

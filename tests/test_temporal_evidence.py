@@ -6,8 +6,11 @@ import numpy as np
 
 from processing.angles import wrap_to_pi
 from processing.correction.temporal_evidence import (
+    confusable_shift,
     keep_temporally_supported,
     lower_frequency_misfit,
+    noise_weights,
+    separable_shift,
     snap_to_lower_frequencies,
 )
 
@@ -175,3 +178,24 @@ def test_a_piece_whose_measured_orders_a_neighbours_order_fits_as_well_takes_tha
     phase, unresolved, counts = keep_temporally_supported(proposed, measured, valid, 32.0, lower)
     np.testing.assert_allclose(phase, truth, rtol=0.0, atol=1e-9)
     assert not unresolved.any() and counts["piece_pixels_reverted"] == 10
+
+
+def test_separable_shifts_take_the_misfit_noise_from_the_phase_noise_not_from_the_chosen_orders() -> None:
+    """10 orders of 32 move the 29-fringe prediction by 0.39 rad: under the 1 rad a blob is judged by (confusable
+    whatever the noise), 4.6 misfit deviations at 0.063 rad of phase noise and 1.8 at 0.16 rad. At 0.16 rad the
+    misfit of orders chosen to fit (each pixel's best of 0, +-11 and +-21 orders) is under half its true noise."""
+    rng = np.random.default_rng(5)
+    lower = [(29.0, np.zeros(1))]
+    orders = np.array([10.0])
+    assert confusable_shift(orders, 32.0, lower, [1.0 / 0.03**2])[0]
+    assert separable_shift(orders, 32.0, lower, 0.063)[0]
+    assert not separable_shift(orders, 32.0, lower, 0.16)[0]
+    assert not separable_shift(np.array([0.0]), 32.0, lower, 0.01)[0]
+    truth = np.tile(np.linspace(0.0, 60.0, 400), (50, 1))
+    phase = truth + rng.normal(0.0, 0.16, truth.shape)
+    wrapped_29 = np.mod(truth * 29.0 / 32.0 + rng.normal(0.0, 0.16, truth.shape), TWO_PI)
+    candidates = np.stack([phase + TWO_PI * k for k in (0.0, 11.0, -11.0, 21.0, -21.0)])
+    fits = lower_frequency_misfit(candidates, 32.0, [(29.0, wrapped_29[None])])
+    chosen = np.take_along_axis(candidates, np.argmin(fits, axis=0)[None], axis=0)[0]
+    weight = noise_weights(chosen, np.ones(truth.shape, bool), 32.0, [(29.0, wrapped_29)])[0]
+    assert 1.0 / np.sqrt(weight) < 0.5 * 0.16 * np.hypot(1.0, 29.0 / 32.0)  # the chosen orders' misfit: too small

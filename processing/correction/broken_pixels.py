@@ -40,7 +40,10 @@ ROUNDING = 1e-9
 
 
 def mend_broken_pixels(
-    phase: np.ndarray, valid: np.ndarray, misfit: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
+    phase: np.ndarray,
+    valid: np.ndarray,
+    misfit: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
+    next_to: np.ndarray | None = None,
 ) -> tuple[np.ndarray, int]:
     """``phase`` with the pixels that break with three or four neighbours moved where more support another order.
 
@@ -51,6 +54,8 @@ def mend_broken_pixels(
     misfit : optional ``misfit(values, where)``, the lower frequencies' misfit of candidate phases at the
         pixels of the (H, W) mask ``where`` (row-major order along the last axis of ``values``, which may
         stack several candidates); without it the neighbours decide alone
+    next_to : optional (H, W) bool, pixels another step moved: only the pixels next to them are judged (a run
+        of wrong pixels along an edge breaks with too few neighbours to be judged until part of it moves)
 
     Returns the phase and how many pixel moves were made.
 
@@ -66,7 +71,11 @@ def mend_broken_pixels(
     >>> bool(np.allclose(out, truth)), moved
     (True, 2)
     """
-    ys, xs = _broken_pixels(phase, valid)
+    if next_to is None:
+        ys, xs = _broken_pixels(phase, valid)
+    else:
+        moved_ys, moved_xs = np.nonzero(next_to)
+        ys, xs = _next_to(moved_ys, moved_xs, valid)
     out, total = phase, 0
     for _ in range(PASSES):
         if not ys.size:

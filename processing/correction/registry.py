@@ -58,7 +58,7 @@ from processing.correction.phase_rpca import (
     update_coherent_detail,
 )
 from processing.correction.region_orders import pool_region_orders
-from processing.correction.surface_continuation import restore_continued_orders
+from processing.correction.surface_continuation import continuation_margin, restore_continued_orders
 from processing.correction.surface_orders import arbitrate_low_rank_orders
 from processing.correction.temporal_evidence import (
     confusable_shift,
@@ -66,6 +66,7 @@ from processing.correction.temporal_evidence import (
     lower_frequency_misfit,
     noise_weights,
     order_shift,
+    separable_shift,
     snap_to_lower_frequencies,
 )
 from processing.correction.voting import vote_row_orders
@@ -346,9 +347,13 @@ def _restore_detail(
             noise=maps.sigma,
         )
     reordered, unresolved = _arbitrate_with_low_rank(maps, reordered, unresolved, low_rank, temporal, weights, counts)
-    reordered = _mend_broken_pixels(maps, reordered, temporal, weights, counts)
+    mended = reordered = _mend_broken_pixels(maps, reordered, temporal, weights, counts)
     reordered = _restore_continued_orders(maps, reordered, temporal, weights, counts)
     reordered = _level_islands(maps, reordered, temporal, weights, counts)
+    if reordered is not mended:  # what steps 6c and 6d moved can leave a neighbour broken all round
+        reordered = _mend_broken_pixels(
+            maps, reordered, temporal, weights, counts, next_to=(reordered != mended) & maps.valid
+        )
     pooled_detail = found.pooled_detail if low_rank is found.low_rank else None
     out, changed = side_by_side(
         lambda: (  # step 6 ran alongside step 3 on the pooled orders: redone only where the orders differ
@@ -400,11 +405,14 @@ def _mend_broken_pixels(
     temporal: _Temporal | None,
     weights: list[float] | None,
     counts: dict[str, int],
+    next_to: np.ndarray | None = None,
 ) -> np.ndarray:
     """Step 6b: pixels whose order breaks with three or four neighbours take the order more of them support, where
-    the lower frequencies fit it no worse (:func:`~processing.correction.broken_pixels.mend_broken_pixels`)."""
+    the lower frequencies fit it no worse (:func:`~processing.correction.broken_pixels.mend_broken_pixels`); with
+    ``next_to``, only the pixels next to those (the ones steps 6c and 6d moved), its moves added to the count."""
     misfit = None if temporal is None or weights is None else _spike_misfit(temporal, weights)
-    reordered, counts["broken_pixels_mended"] = mend_broken_pixels(reordered, maps.valid, misfit)
+    reordered, mended = mend_broken_pixels(reordered, maps.valid, misfit, next_to)
+    counts["broken_pixels_mended"] = counts.get("broken_pixels_mended", 0) + mended
     return reordered
 
 
@@ -415,7 +423,8 @@ def _restore_continued_orders(
     weights: list[float] | None,
     counts: dict[str, int],
 ) -> np.ndarray:
-    """Step 6c: pixels kept one or two orders off the measured ones go back where the measured order continues the
+    """Step 6c: pixels kept one or two orders off the measured ones (further off where the lower frequencies tell the
+    orders apart by a blob's bounds, or by the phase noise alone) go back where the measured order continues the
     settled surface on a side and the lower frequencies favour it
     (:func:`~processing.correction.surface_continuation.restore_continued_orders`)."""
     misfit = shift = telling = None
@@ -423,9 +432,12 @@ def _restore_continued_orders(
         misfit = _spike_misfit(temporal, weights)
         shift = functools.partial(order_shift, frequency=temporal.frequency, lower=temporal.lower, weights=weights)
         confusable = _confusable(temporal, weights)
-        telling = lambda orders: ~confusable(orders)  # noqa: E731 - the lower frequencies' verdict, negated
+        separable = functools.partial(
+            separable_shift, frequency=temporal.frequency, lower=temporal.lower, sigma=maps.sigma
+        )
+        telling = lambda orders: separable(orders) | ~confusable(orders)  # noqa: E731 - either bound suffices
     reordered, counts["continued_orders_restored"] = restore_continued_orders(
-        reordered, maps.phase, maps.valid, misfit, shift, telling
+        reordered, maps.phase, maps.valid, misfit, shift, telling, continuation_margin(maps.sigma)
     )
     return reordered
 
@@ -525,9 +537,8 @@ def correct_auto(
     1. pool the fringe orders over 2-D fringe regions (:func:`~processing.correction.region_orders.pool_region_orders`:
        one order per region no wrapped-phase jump or kink crosses, voted per 16 x 16 square, re-voted pixel by pixel);
     2. L = low-rank part of that phase (stable inexact ALM, thesis ch. 4, stopped at the noise level of
-       :func:`~processing.correction.phase_rpca.phase_noise_sigma`, blind to order errors), solved on 4 x 4 block
-       means from :data:`DECIMATE_FROM` pixels on (``decimate``) and interpolated back; the measured phase is used
-       instead if pooling left more order breaks;
+       :func:`~processing.correction.phase_rpca.phase_noise_sigma`, blind to order errors), solved on 4 x 4 block means
+       from :data:`DECIMATE_FROM` pixels on (``decimate``), interpolated back; the measured phase if pooling broke more;
     3. candidate order maps (only if the pooled orders still break somewhere): the pooled orders; the pooled orders
        where L misfits the wrapped phase (|wrap(phi - L)| > pi / 2 nearby, or an edge the block solve blurred) and
        L's re-derived orders elsewhere; only if both leave more order breaks than the measured phase (fringes too
@@ -554,7 +565,8 @@ def correct_auto(
        (:mod:`~processing.correction.broken_pixels`), send changed pixels back where the measured order continues the
        settled surface and the lower frequencies favour it (:mod:`~processing.correction.surface_continuation`),
        shift islands breaking with a larger surface all round onto it by a shift the lower frequencies cannot see
-       per pixel, nor over the island (:mod:`~processing.correction.order_islands`); keep L (denoised) except where the result departs from it
+       per pixel, nor over the island (:mod:`~processing.correction.order_islands`), and judge the broken pixels
+       again next to what those two moved; keep L (denoised) except where the result departs from it
        coherently beyond the noise (:func:`~processing.correction.phase_rpca.restore_detail`, ``k_sigma`` standard
        deviations of the 3 x 3 mean residual) or one pixel departs far beyond it where nothing suggests a wrong order
        (on a height step's edge: its order is the measured one), and never where L lies a fringe or more from the

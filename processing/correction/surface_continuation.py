@@ -26,6 +26,7 @@ from collections.abc import Callable
 import numpy as np
 
 from processing.correction.order_evidence import neighbours_at
+from processing.correction.temporal_evidence import Z_MARGIN
 from processing.elementwise import abs_difference
 
 TWO_PI = 2.0 * np.pi
@@ -39,6 +40,15 @@ MARGIN_RAD = 0.5
 # Pixels kept within this many orders of the measured one are judged (one or two orders: the close pairs'
 # ambiguity); pixels further off only where the lower frequencies tell the orders apart.
 MAX_ORDERS = 2.5
+
+
+def continuation_margin(sigma: float) -> float:
+    """The margin for phase noise ``sigma`` (rad): :data:`MARGIN_RAD`, or :data:`~processing.correction.
+    temporal_evidence.Z_MARGIN` standard deviations of an extrapolation's residual (``sqrt(6) sigma``: a second
+    difference) where that is less. A pixel whose kept order continues its own side lies within the noise of that
+    side's extrapolation, so the measured order's must beat it by more than the noise; at high SNR that is far
+    less than half a radian, and a step a twentieth of a fringe off a whole one (0.3 rad) is seen."""
+    return float(min(MARGIN_RAD, Z_MARGIN * np.sqrt(6.0) * sigma))
 
 
 def extrapolations(phase: np.ndarray, settled: np.ndarray, ys: np.ndarray, xs: np.ndarray) -> np.ndarray:
@@ -65,13 +75,15 @@ def restore_continued_orders(
     misfit: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
     shift: Callable[[np.ndarray], np.ndarray] | None = None,
     telling: Callable[[np.ndarray], np.ndarray] | None = None,
+    margin: float = MARGIN_RAD,
 ) -> tuple[np.ndarray, int]:
     """``kept`` with changed pixels back on their measured order where it continues the settled surface;
     how many moved. ``misfit(values, where)``: the lower frequencies' misfit as in
     :func:`~processing.correction.broken_pixels.mend_broken_pixels`; ``shift(delta_orders)``: its expected
     increase for an order change (both optional, together); ``telling(delta_orders)``: whether they tell orders
     that far apart from each other (with both others only: pixels beyond :data:`MAX_ORDERS` are judged where it
-    says so).
+    says so); ``margin``: how much nearer than the kept order's the measured order's extrapolation must lie
+    (default :data:`MARGIN_RAD`; :func:`continuation_margin` gives it from the phase noise).
 
     Examples
     --------
@@ -103,7 +115,7 @@ def restore_continued_orders(
     ys, xs = np.nonzero(todo)
     total = 0
     for _ in range(PASSES):
-        moved = _judge(out, measured, settled, ys, xs, misfit, shift)
+        moved = _judge(out, measured, settled, ys, xs, misfit, shift, margin)
         if not moved.any():
             break
         out[ys[moved], xs[moved]] = measured[ys[moved], xs[moved]]
@@ -121,14 +133,15 @@ def _judge(
     xs: np.ndarray,
     misfit: Callable[[np.ndarray, np.ndarray], np.ndarray] | None,
     shift: Callable[[np.ndarray], np.ndarray] | None,
+    margin: float,
 ) -> np.ndarray:
     """Which of the pixels (row-major) go back to their measured order this pass: the measured order continues
-    a settled side within :data:`TOLERANCE_RAD`, by :data:`MARGIN_RAD` better than the kept one, and the lower
+    a settled side within :data:`TOLERANCE_RAD`, by ``margin`` better than the kept one, and the lower
     frequencies' misfit (when given) grows by more than half the expected shift with the kept order."""
     predicted = extrapolations(out, settled, ys, xs)
     here, back = out[ys, xs], measured[ys, xs]
     r_kept, r_back = nearest_residual(here, predicted), nearest_residual(back, predicted)
-    move = (r_back < TOLERANCE_RAD) & (r_back + MARGIN_RAD < r_kept)
+    move = (r_back < TOLERANCE_RAD) & (r_back + margin < r_kept)
     if misfit is not None and shift is not None and move.any():
         where = np.zeros(settled.shape, dtype=bool)
         where[ys, xs] = True  # ys, xs are row-major: the mask's order

@@ -507,6 +507,24 @@ def _neighbour_verdicts(
     return back, unresolved, taken, here[chosen] + TWO_PI * best_shift[chosen]
 
 
+def separable_shift(
+    shift: np.ndarray, frequency: float, lower: Sequence[tuple[float, np.ndarray]], sigma: float
+) -> np.ndarray:
+    """Whether orders ``shift`` apart predict the lower frequencies more than :data:`SEPARATION` standard deviations
+    of a pixel's misfit apart, the misfit's noise taken from the phase noise ``sigma`` (rad, each frequency's
+    phase alike: ``wrap(Phi f_l / f - phi_l)`` has variance ``sigma^2 (1 + (f_l / f)^2)``).
+
+    Not from the measured orders' misfit (:func:`noise_weights`): temporal unwrapping chose those orders to fit,
+    so where the close pairs' shifts lie within the noise their misfit is small by selection (29/32 at 14 dB: 0.07
+    rad against 0.22). For evidence that agrees with another (a pixel's surface continuation): a blob's judgement
+    needs :func:`confusable_shift`'s bounds."""
+    plain = np.zeros(np.shape(shift), dtype=np.float64)
+    for term in _shift_terms(np.asarray(shift, dtype=np.float64), frequency, lower):
+        plain += term
+    variance = sum(float(sigma) ** 2 * (1.0 + (float(f_low) / float(frequency)) ** 2) for f_low, _ in lower)
+    return plain > SEPARATION**2 * variance
+
+
 def confusable_shift(
     shift: np.ndarray, frequency: float, lower: Sequence[tuple[float, np.ndarray]], weights: Sequence[float]
 ) -> np.ndarray:
