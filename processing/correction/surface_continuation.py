@@ -15,7 +15,8 @@ likely the wrong one. They are judged against
 extrapolations from settled pixels (kept order = measured order, or moved back here), so a blob of
 changed pixels mends from its rim, up to :data:`PASSES` passes.
 A pixel moves back only where the measured order's nearest extrapolation lies within :data:`TOLERANCE_RAD`
-and nearer than the kept order's by :data:`MARGIN_RAD`, and, with the lower frequencies, where their misfit
+and nearer than the kept order's by :data:`MARGIN_RAD` (or by three noise deviations of an extrapolation where
+that is less: :func:`continuation_margin`), and, with the lower frequencies, where their misfit
 favours the measured order by more than half its expected shift: two weak pieces of evidence agreeing.
 """
 
