@@ -309,16 +309,20 @@ def _supported_orders(
         )
         unresolved = unresolved | ambiguous
         counts["moved_one_order"] = moved
-        misfit = _spike_misfit(temporal, weights)
+        misfit = _lower_misfit(temporal, weights)
     reordered, counts["spikes_mended"] = mend_spikes(reordered, maps.valid, misfit)
     return reordered, unresolved, counts, weights
 
 
-def _spike_misfit(temporal: _Temporal, weights: list[float]) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
-    """Misfit of candidate phases at the given pixels with the lower frequencies (noise-weighted)."""
+def _lower_misfit(
+    temporal: _Temporal, weights: list[float] | None = None
+) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+    """Misfit of candidate phases with the lower frequencies at the pixels ``where`` (an (H, W) mask, row-major, or
+    flat pixel indices): noise-weighted with ``weights``, in rad^2 without."""
 
     def misfit(values: np.ndarray, where: np.ndarray) -> np.ndarray:
-        lower = [(f_low, wrapped_low[where]) for f_low, wrapped_low in temporal.lower]
+        at = where.reshape(-1)
+        lower = [(f_low, wrapped_low.reshape(-1)[at]) for f_low, wrapped_low in temporal.lower]
         return lower_frequency_misfit(values, temporal.frequency, lower, weights)
 
     return misfit
@@ -410,7 +414,7 @@ def _mend_broken_pixels(
     """Step 6b: pixels whose order breaks with three or four neighbours take the order more of them support, where
     the lower frequencies fit it no worse (:func:`~processing.correction.broken_pixels.mend_broken_pixels`); with
     ``next_to``, only the pixels next to those (the ones steps 6c and 6d moved), its moves added to the count."""
-    misfit = None if temporal is None or weights is None else _spike_misfit(temporal, weights)
+    misfit = None if temporal is None or weights is None else _lower_misfit(temporal, weights)
     reordered, mended = mend_broken_pixels(reordered, maps.valid, misfit, next_to)
     counts["broken_pixels_mended"] = counts.get("broken_pixels_mended", 0) + mended
     return reordered
@@ -429,7 +433,7 @@ def _restore_continued_orders(
     (:func:`~processing.correction.surface_continuation.restore_continued_orders`)."""
     misfit = shift = telling = None
     if temporal is not None and weights is not None:
-        misfit = _spike_misfit(temporal, weights)
+        misfit = _lower_misfit(temporal, weights)
         shift = functools.partial(order_shift, frequency=temporal.frequency, lower=temporal.lower, weights=weights)
         confusable = _confusable(temporal, weights)
         separable = functools.partial(
@@ -460,19 +464,9 @@ def _level_islands(
         maps.valid,
         _confusable(temporal, weights),
         lambda kept: undecided_orders(kept, maps.phase, maps.wrapped, maps.valid),
-        _plain_misfit(temporal),
+        _lower_misfit(temporal),
     )
     return reordered
-
-
-def _plain_misfit(temporal: _Temporal) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
-    """Squared misfit (rad^2, unweighted) of candidate phases at flat pixel indices with the lower frequencies."""
-
-    def misfit(values: np.ndarray, at: np.ndarray) -> np.ndarray:
-        lower = [(f_low, wrapped_low.reshape(-1)[at]) for f_low, wrapped_low in temporal.lower]
-        return lower_frequency_misfit(values, temporal.frequency, lower)
-
-    return misfit
 
 
 def _confusable(temporal: _Temporal, weights: list[float]) -> Callable[[np.ndarray], np.ndarray]:

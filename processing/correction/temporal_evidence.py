@@ -518,9 +518,7 @@ def separable_shift(
     so where the close pairs' shifts lie within the noise their misfit is small by selection (29/32 at 14 dB: 0.07
     rad against 0.22). For evidence that agrees with another (a pixel's surface continuation): a blob's judgement
     needs :func:`confusable_shift`'s bounds."""
-    plain = np.zeros(np.shape(shift), dtype=np.float64)
-    for term in _shift_terms(np.asarray(shift, dtype=np.float64), frequency, lower):
-        plain += term
+    plain = order_shift(np.asarray(shift, dtype=np.float64), frequency, lower)
     variance = sum(float(sigma) ** 2 * (1.0 + (float(f_low) / float(frequency)) ** 2) for f_low, _ in lower)
     return plain > SEPARATION**2 * variance
 
