@@ -79,9 +79,10 @@ def simulate(frequencies: tuple[int, int], snr_db: float, seed: int = 0):
 GROUPS = [list(range(STEPS)), list(range(STEPS, 2 * STEPS))]
 
 
-def fused_pipeline(stack, frequencies, reference_phase, geometry, opencv: bool = True) -> np.ndarray:
-    """fringe_pass + eq. 1.15 in float32; NaN where the mask or the unwrapping failed."""
-    scan = fringe_pass(stack, GROUPS, frequencies, "two-frequency", opencv=opencv)
+def fused_pipeline(stack, frequencies, reference_phase, geometry, opencv: bool = True, threads: int = 1) -> np.ndarray:
+    """fringe_pass (its blocks on ``threads`` threads) + eq. 1.15 in float32; NaN where the mask or the unwrapping
+    failed."""
+    scan = fringe_pass(stack, GROUPS, frequencies, "two-frequency", opencv=opencv, threads=threads)
     delta = scan.phase  # NaN where not valid, which eq. 1.15 carries through
     delta -= reference_phase
     return phase_to_height(delta, geometry.l0_mm, geometry.d0_mm, geometry.per_mm(frequencies[1]), dtype=np.float32)
