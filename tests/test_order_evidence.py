@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
+from processing.correction import order_evidence
 from processing.correction.order_evidence import (
     breaks_per_blob,
+    label_blobs,
     keep_supported_changes,
     mend_spikes,
     unresolved_summary,
@@ -71,6 +74,31 @@ def test_breaks_count_each_edge_of_a_blob_once() -> None:
     labels[2, 2] = 1
     counts = breaks_per_blob(phase, np.ones((5, 5), dtype=bool), labels, 2)
     assert counts[1] == 4
+
+
+@pytest.mark.parametrize("pairs_per_gather", [1, 10**9])  # every pair gathered; the whole map stepped
+def test_breaks_per_blob_counts_as_a_pixel_by_pixel_count(
+    monkeypatch: pytest.MonkeyPatch, pairs_per_gather: int
+) -> None:
+    rng = np.random.default_rng(5)
+    shape = (40, 50)
+    phase = rng.normal(0.0, 1.5, shape) + TWO_PI * rng.integers(-1, 2, shape)
+    phase[rng.random(shape) < 0.05] = np.nan
+    valid = rng.random(shape) > 0.1
+    count, labels = label_blobs(rng.random(shape) < 0.3)
+    monkeypatch.setattr(order_evidence, "_GATHER_BELOW", pairs_per_gather)
+    counts = breaks_per_blob(phase, valid, labels, count)
+    expected = np.zeros(count, dtype=np.int64)
+    for y, x in np.ndindex(shape):
+        for y2, x2 in ((y, x + 1), (y + 1, x)):
+            if y2 >= shape[0] or x2 >= shape[1] or not (valid[y, x] and valid[y2, x2]):
+                continue
+            a, b = labels[y, x], labels[y2, x2]
+            if (a or b) and abs(phase[y2, x2] - phase[y, x]) > np.pi:  # NaN: no break
+                expected[a] += 1
+                if b != a:
+                    expected[b] += 1
+    np.testing.assert_array_equal(counts, expected)
 
 
 def test_nothing_changed_nothing_unresolved() -> None:
