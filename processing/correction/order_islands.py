@@ -34,6 +34,7 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from processing.concurrency import side_by_side
 from processing.correction.temporal_evidence import Z_MARGIN
 from processing.elementwise import abs_difference
 
@@ -156,10 +157,13 @@ def level_islands(
     joining = _joining_shifts(step, confusable)
     if not joining.any():
         return phase, 0
-    labels, count = continuity_components(valid, across, down)
+    # the labelling and the undecided pixels read the map alone: side by side
+    (labels, count), undecided_map = side_by_side(
+        lambda: continuity_components(valid, across, down), lambda: undecided(phase)
+    )
     flat_labels = labels.reshape(-1)
     sizes = np.bincount(flat_labels, minlength=count)
-    doubtful = np.bincount(flat_labels, weights=undecided(phase).reshape(-1), minlength=count)
+    doubtful = np.bincount(flat_labels, weights=undecided_map.reshape(-1), minlength=count)
     doubtful = np.where(sizes < TOO_FEW_TO_VOTE, sizes, doubtful)  # their whole size: undecided
     one, two = flat_labels[first], flat_labels[second]  # the components of each broken pair's pixels
     total = np.zeros(count, dtype=np.int64)  # each component's shift so far
