@@ -8,8 +8,8 @@ import pytest
 from processing.correction import order_evidence
 from processing.correction.order_evidence import (
     breaks_per_blob,
-    label_blobs,
     keep_supported_changes,
+    label_blobs,
     mend_spikes,
     unresolved_summary,
 )
