@@ -22,6 +22,11 @@ TWO_PI = 2.0 * np.pi
 BACKENDS = [pytest.param(True, id="opencv"), pytest.param(False, id="numpy")]
 
 
+def _angle_tolerance(opencv: bool) -> float:
+    """The pass's angle error bound: OpenCV's, or float32 rounding where numpy's angles are exact (and fast here)."""
+    return ANGLE_TOLERANCE if opencv and not fused_pass.exact_angles_are_fast() else 1e-6
+
+
 def _circular_gap(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     gap = np.abs(np.asarray(a, dtype=np.float64) - b) % TWO_PI
     return np.minimum(gap, TWO_PI - gap)
@@ -60,7 +65,23 @@ def test_wrapped_angle_within_stated_tolerance_of_float64_arctan2(opencv: bool) 
     assert angle.min() >= 0.0 and angle.max() < TWO_PI
     exact = np.arctan2(s.astype(np.float32).astype(np.float64), c.astype(np.float32).astype(np.float64))
     gap = _circular_gap(angle, exact)
-    assert gap.max() <= (ANGLE_TOLERANCE if opencv else 1e-6)
+    assert gap.max() <= _angle_tolerance(opencv)
+
+
+@pytest.mark.parametrize("fast", [True, False])
+def test_the_pass_takes_numpys_exact_angles_only_where_they_are_fast(
+    monkeypatch: pytest.MonkeyPatch, fast: bool
+) -> None:
+    monkeypatch.setattr(fused_pass, "exact_angles_are_fast", lambda: fast)
+    stack, groups, _, _ = _scan([7, 8], snr_db=30.0)
+    fused = fringe_pass(stack, groups, [7, 8], "two-frequency")
+    exact = phase_shift(stack[6:].astype(np.float64)).phase
+    gap = _circular_gap(fused.wrapped[0], exact)[fused.modulated]
+    assert fused.wrapped[0].max() < TWO_PI
+    if fast:  # float32 rounding of the exact angle
+        assert gap.max() <= 1e-6
+    else:  # OpenCV's approximation: within its bound, but not that close
+        assert 1e-6 < gap.max() <= ANGLE_TOLERANCE
 
 
 def test_wrapped_angle_keeps_nan_and_refuses_mismatched_shapes() -> None:
