@@ -109,3 +109,17 @@ def test_the_margin_shrinks_with_the_noise_so_a_step_near_a_whole_fringe_is_seen
     out, moved = restore_continued_orders(kept, truth, valid, margin=continuation_margin(0.02))
     assert moved == 3
     np.testing.assert_array_equal(out, truth)
+
+
+def test_a_changed_pixel_beyond_a_settled_neighbour_carries_the_slope() -> None:
+    # A column kept one order off on the map's edge: no side but the right one continues it, and there the pixel
+    # beyond the settled neighbour keeps its (right) order against a measured slip of 3 orders.
+    truth = np.tile(0.3 * np.arange(8.0), (5, 1))
+    kept = truth.copy()
+    kept[:, 0] += TWO_PI
+    measured = truth.copy()
+    measured[:, 2] += 3 * TWO_PI
+    out, moved = restore_continued_orders(kept, measured, np.ones(truth.shape, dtype=bool))
+    assert moved == 5
+    np.testing.assert_array_equal(out[:, 0], truth[:, 0])
+    np.testing.assert_array_equal(out[:, 2], truth[:, 2])  # the slipped pixel is not judged: 3 orders off

@@ -13,7 +13,10 @@ off only where the lower frequencies tell the two orders apart (``telling``): a 
 of 32 at 29, 7 of 25 at 18) is what the close pairs' dense errors make, and there the measured order is as
 likely the wrong one. They are judged against
 extrapolations from settled pixels (kept order = measured order, or moved back here), so a blob of
-changed pixels mends from its rim, up to :data:`PASSES` passes.
+changed pixels mends from its rim, up to :data:`PASSES` passes. The pixel beyond the settled neighbour need
+only continue it (within pi): where its measured order slipped but its kept one is right, it still carries the
+surface's slope (a strip a few pixels wide along a step, its pixels' measured orders slipping at random, has
+few pairs of settled pixels in a row).
 A pixel moves back only where the measured order's nearest extrapolation lies within :data:`TOLERANCE_RAD`
 and nearer than the kept order's by :data:`MARGIN_RAD` (or by three noise deviations of an extrapolation where
 that is less: :func:`continuation_margin`), and, with the lower frequencies, where their misfit
@@ -52,11 +55,14 @@ def continuation_margin(sigma: float) -> float:
     return float(min(MARGIN_RAD, Z_MARGIN * np.sqrt(6.0) * sigma))
 
 
-def extrapolations(phase: np.ndarray, settled: np.ndarray, ys: np.ndarray, xs: np.ndarray) -> np.ndarray:
-    """(4, n): ``2 phase(p + d) - phase(p + 2 d)`` for each 4-direction ``d`` where both pixels are settled and
-    within pi of each other (continuous), else NaN."""
+def extrapolations(
+    phase: np.ndarray, settled: np.ndarray, ys: np.ndarray, xs: np.ndarray, beyond: np.ndarray | None = None
+) -> np.ndarray:
+    """(4, n): ``2 phase(p + d) - phase(p + 2 d)`` for each 4-direction ``d`` where the pixel next to ``p`` is settled,
+    the one beyond it is settled (or in ``beyond``, when given) and the two lie within pi of each other
+    (continuous), else NaN."""
     near = neighbours_at(phase, settled, ys, xs)
-    far = neighbours_at(phase, settled, ys, xs, reach=2)
+    far = neighbours_at(phase, settled if beyond is None else beyond, ys, xs, reach=2)
     with np.errstate(invalid="ignore"):
         continuous = np.abs(near - far) <= np.pi  # NaN (unsettled or off the map): False
     return np.where(continuous, 2.0 * near - far, np.nan)
@@ -116,7 +122,7 @@ def restore_continued_orders(
     ys, xs = np.nonzero(todo)
     total = 0
     for _ in range(PASSES):
-        moved = _judge(out, measured, settled, ys, xs, misfit, shift, margin)
+        moved = _judge(out, measured, settled, ys, xs, misfit, shift, margin, valid)
         if not moved.any():
             break
         out[ys[moved], xs[moved]] = measured[ys[moved], xs[moved]]
@@ -135,11 +141,14 @@ def _judge(
     misfit: Callable[[np.ndarray, np.ndarray], np.ndarray] | None,
     shift: Callable[[np.ndarray], np.ndarray] | None,
     margin: float,
+    valid: np.ndarray,
 ) -> np.ndarray:
     """Which of the pixels (row-major) go back to their measured order this pass: the measured order continues
     a settled side within :data:`TOLERANCE_RAD`, by ``margin`` better than the kept one, and the lower
     frequencies' misfit (when given) grows by more than half the expected shift with the kept order."""
-    predicted = extrapolations(out, settled, ys, xs)
+    # the pixel beyond a settled neighbour need only continue it: a changed pixel there whose kept order is right
+    # (its measured one a noise slip) still carries the surface's slope
+    predicted = extrapolations(out, settled, ys, xs, beyond=valid)
     here, back = out[ys, xs], measured[ys, xs]
     r_kept, r_back = nearest_residual(here, predicted), nearest_residual(back, predicted)
     move = (r_back < TOLERANCE_RAD) & (r_back + margin < r_kept)
