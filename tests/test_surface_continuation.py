@@ -123,3 +123,35 @@ def test_a_changed_pixel_beyond_a_settled_neighbour_carries_the_slope() -> None:
     assert moved == 5
     np.testing.assert_array_equal(out[:, 0], truth[:, 0])
     np.testing.assert_array_equal(out[:, 2], truth[:, 2])  # the slipped pixel is not judged: 3 orders off
+
+
+def test_a_tie_the_continuation_cannot_break_goes_to_the_lower_frequencies_where_the_noise_tells_the_orders_apart() -> (
+    None
+):
+    """Across a step of one whole fringe both orders continue a side equally well; where the phase noise alone
+    separates the two orders' lower-frequency predictions, their misfit decides (no margin asked)."""
+    truth = _raised_corner(1.0)
+    kept = _corner_kept_one_up(truth)
+    valid = np.ones(truth.shape, bool)
+
+    def favours(measured: bool):
+        def misfit(values: np.ndarray, where: np.ndarray) -> np.ndarray:
+            rows = [np.ones(values.shape[1]), np.zeros(values.shape[1])]
+            return np.vstack(rows if measured else rows[::-1])
+
+        return misfit
+
+    def shift(delta: np.ndarray) -> np.ndarray:
+        return np.full(delta.shape, 1.0)
+
+    def separable(orders: np.ndarray) -> np.ndarray:
+        return np.ones(orders.shape, bool)
+
+    def inseparable(orders: np.ndarray) -> np.ndarray:
+        return np.zeros(orders.shape, bool)
+
+    out, moved = restore_continued_orders(kept, truth, valid, favours(True), shift, separable=separable)
+    assert moved == 3
+    np.testing.assert_array_equal(out, truth)
+    assert restore_continued_orders(kept, truth, valid, favours(False), shift, separable=separable)[1] == 0
+    assert restore_continued_orders(kept, truth, valid, favours(True), shift, separable=inseparable)[1] == 0

@@ -431,7 +431,7 @@ def _restore_continued_orders(
     orders apart by a blob's bounds, or by the phase noise alone) go back where the measured order continues the
     settled surface on a side and the lower frequencies favour it
     (:func:`~processing.correction.surface_continuation.restore_continued_orders`)."""
-    misfit = shift = telling = None
+    misfit = shift = telling = separable = None
     if temporal is not None and weights is not None:
         misfit = _lower_misfit(temporal, weights)
         shift = functools.partial(order_shift, frequency=temporal.frequency, lower=temporal.lower, weights=weights)
@@ -441,7 +441,7 @@ def _restore_continued_orders(
         )
         telling = lambda orders: separable(orders) | ~confusable(orders)  # noqa: E731 - either bound suffices
     reordered, counts["continued_orders_restored"] = restore_continued_orders(
-        reordered, maps.phase, maps.valid, misfit, shift, telling, continuation_margin(maps.sigma)
+        reordered, maps.phase, maps.valid, misfit, shift, telling, continuation_margin(maps.sigma), separable
     )
     return reordered
 

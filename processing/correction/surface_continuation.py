@@ -83,6 +83,7 @@ def restore_continued_orders(
     shift: Callable[[np.ndarray], np.ndarray] | None = None,
     telling: Callable[[np.ndarray], np.ndarray] | None = None,
     margin: float = MARGIN_RAD,
+    separable: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> tuple[np.ndarray, int]:
     """``kept`` with changed pixels back on their measured order where it continues the settled surface;
     how many moved. ``misfit(values, where)``: the lower frequencies' misfit as in
@@ -90,7 +91,10 @@ def restore_continued_orders(
     increase for an order change (both optional, together); ``telling(delta_orders)``: whether they tell orders
     that far apart from each other (with both others only: pixels beyond :data:`MAX_ORDERS` are judged where it
     says so); ``margin``: how much nearer than the kept order's the measured order's extrapolation must lie
-    (default :data:`MARGIN_RAD`; :func:`continuation_margin` gives it from the phase noise).
+    (default :data:`MARGIN_RAD`; :func:`continuation_margin` gives it from the phase noise);
+    ``separable(delta_orders)``: whether the phase noise alone tells the orders apart (with ``misfit`` and
+    ``shift``): there a measured order that continues a settled side at least as well as the kept order continues
+    one goes back without the margin, the lower frequencies deciding the tie.
 
     Examples
     --------
@@ -122,7 +126,7 @@ def restore_continued_orders(
     ys, xs = np.nonzero(todo)
     total = 0
     for _ in range(PASSES):
-        moved = _judge(out, measured, settled, ys, xs, misfit, shift, margin, valid)
+        moved = _judge(out, measured, settled, ys, xs, misfit, shift, margin, valid, separable)
         if not moved.any():
             break
         out[ys[moved], xs[moved]] = measured[ys[moved], xs[moved]]
@@ -142,6 +146,7 @@ def _judge(
     shift: Callable[[np.ndarray], np.ndarray] | None,
     margin: float,
     valid: np.ndarray,
+    separable: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> np.ndarray:
     """Which of the pixels (row-major) go back to their measured order this pass: the measured order continues
     a settled side within :data:`TOLERANCE_RAD`, by ``margin`` better than the kept one, and the lower
@@ -152,10 +157,14 @@ def _judge(
     here, back = out[ys, xs], measured[ys, xs]
     r_kept, r_back = nearest_residual(here, predicted), nearest_residual(back, predicted)
     move = (r_back < TOLERANCE_RAD) & (r_back + margin < r_kept)
-    if misfit is not None and shift is not None and move.any():
+    if misfit is None or shift is None:
+        return move
+    orders = np.rint((here - back) / TWO_PI)
+    if separable is not None:  # a tie the continuation cannot break, where the lower frequencies can
+        move |= (r_back < TOLERANCE_RAD) & (r_back <= r_kept) & separable(orders)
+    if move.any():
         where = np.zeros(settled.shape, dtype=bool)
         where[ys, xs] = True  # ys, xs are row-major: the mask's order
         fits = misfit(np.vstack([here, back]), where)
-        expected = shift(np.rint((here - back) / TWO_PI))
-        move &= fits[0] - fits[1] > 0.5 * expected
+        move &= fits[0] - fits[1] > 0.5 * shift(orders)
     return move
