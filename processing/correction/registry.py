@@ -429,7 +429,8 @@ def _restore_continued_orders(
 ) -> np.ndarray:
     """Step 6c: pixels kept one or two orders off the measured ones (further off where the lower frequencies tell the
     orders apart by a blob's bounds, or by the phase noise alone) go back where the measured order continues the
-    settled surface on a side and the lower frequencies favour it
+    settled surface on a side (better than the kept order continues one, or as well where the phase noise alone
+    tells the two orders apart) and the lower frequencies favour it
     (:func:`~processing.correction.surface_continuation.restore_continued_orders`)."""
     misfit = shift = telling = separable = None
     if temporal is not None and weights is not None:

@@ -20,7 +20,11 @@ few pairs of settled pixels in a row).
 A pixel moves back only where the measured order's nearest extrapolation lies within :data:`TOLERANCE_RAD`
 and nearer than the kept order's by :data:`MARGIN_RAD` (or by three noise deviations of an extrapolation where
 that is less: :func:`continuation_margin`), and, with the lower frequencies, where their misfit
-favours the measured order by more than half its expected shift: two weak pieces of evidence agreeing.
+favours the measured order by more than half its expected shift: two weak pieces of evidence agreeing. Where
+both orders continue a side (a step of about a whole fringe: the kept order continues one side as well as the
+measured order the other) the margin never holds; there, if the phase noise alone tells the two orders'
+lower-frequency predictions apart (``separable``), a measured order continuing its side at least as well goes
+back on the lower frequencies' word.
 """
 
 from __future__ import annotations

@@ -891,7 +891,7 @@ def write_report(out: Path, config: StudyConfig, rows: Rows, figures: list[tuple
         "processing.correction.surface_orders), and a pixel a fringe or more off three or four of its "
         "neighbours takes the order more of them support where the lower frequencies fit it no worse "
         "(processing.correction.broken_pixels), and a pixel kept one or two orders off its measured order (or further off, "
-        "where the lower frequencies tell the orders apart) goes back to it where it continues the surface of its settled neighbours and the lower frequencies favour it "
+        "where the lower frequencies tell the orders apart) goes back to it where it continues the surface of its settled neighbours (better than the kept order continues one, or as well where the phase noise alone tells the two orders apart) and the lower frequencies favour it "
         "(processing.correction.surface_continuation), and an island of pixels whose measured orders do not decide "
         "their kept one, broken off a larger surface all round by a shift of three orders or more the lower "
         "frequencies cannot see, per pixel nor over the island, takes the shift that joins it "
