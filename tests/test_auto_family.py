@@ -200,3 +200,23 @@ def test_auto_judges_far_pixels_the_phase_noise_tells_apart_though_a_blob_could_
     result = family.evaluate(family.draw_case(350), methods=("none", "auto"))
     scores = result["nmse"]
     assert scores["auto"] <= 0.5 * scores["oracle"], result["description"]
+
+
+def test_auto_carries_a_steps_slope_past_pixels_whose_measured_orders_slipped() -> None:
+    """Shadows under 29/32 with 12 steps at 18.1 dB (498 x 436): a strip 3 pixels wide between a step of 9.84
+    fringes and a fringe's wrap was kept 10 orders off; its measured orders, mostly right, slip at random, so few of
+    its rows had two settled pixels in a row to extrapolate from, and auto was 191x the oracle. With the pixel beyond
+    a settled one needing only to continue it, 70x."""
+    result = family.evaluate(family.draw_case(356), methods=("none", "auto"))
+    scores = result["nmse"]
+    assert scores["auto"] <= 120.0 * scores["oracle"], result["description"]
+
+
+def test_auto_lets_the_lower_frequencies_break_a_tie_of_continuations() -> None:
+    """Shadows under 64/58/53 with 10 steps at 16.4 dB (622 x 644): pixels on a step of about a whole fringe, kept
+    one order off, continue one side as well as their measured (right) orders continue the other, so no margin
+    holds; auto was 2.0x the oracle. Where the phase noise separates the two orders' lower-frequency predictions,
+    the lower frequencies decide: 0.010x."""
+    result = family.evaluate(family.draw_case(253), methods=("none", "auto"))
+    scores = result["nmse"]
+    assert scores["auto"] <= 0.5 * scores["oracle"], result["description"]
