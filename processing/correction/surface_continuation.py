@@ -60,13 +60,12 @@ def continuation_margin(sigma: float) -> float:
 
 
 def extrapolations(
-    phase: np.ndarray, settled: np.ndarray, ys: np.ndarray, xs: np.ndarray, beyond: np.ndarray | None = None
+    phase: np.ndarray, settled: np.ndarray, beyond: np.ndarray, ys: np.ndarray, xs: np.ndarray
 ) -> np.ndarray:
-    """(4, n): ``2 phase(p + d) - phase(p + 2 d)`` for each 4-direction ``d`` where the pixel next to ``p`` is settled,
-    the one beyond it is settled (or in ``beyond``, when given) and the two lie within pi of each other
-    (continuous), else NaN."""
+    """(4, n): ``2 phase(p + d) - phase(p + 2 d)`` for each 4-direction ``d`` where the pixel next to ``p`` is
+    ``settled``, the one beyond it in ``beyond`` and the two lie within pi of each other (continuous), else NaN."""
     near = neighbours_at(phase, settled, ys, xs)
-    far = neighbours_at(phase, settled if beyond is None else beyond, ys, xs, reach=2)
+    far = neighbours_at(phase, beyond, ys, xs, reach=2)
     with np.errstate(invalid="ignore"):
         continuous = np.abs(near - far) <= np.pi  # NaN (unsettled or off the map): False
     return np.where(continuous, 2.0 * near - far, np.nan)
@@ -153,11 +152,12 @@ def _judge(
     separable: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> np.ndarray:
     """Which of the pixels (row-major) go back to their measured order this pass: the measured order continues
-    a settled side within :data:`TOLERANCE_RAD`, by ``margin`` better than the kept one, and the lower
-    frequencies' misfit (when given) grows by more than half the expected shift with the kept order."""
+    a settled side within :data:`TOLERANCE_RAD`, by ``margin`` better than the kept one (or, where ``separable``
+    says so, at least as well), and the lower frequencies' misfit (when given) grows by more than half the
+    expected shift with the kept order."""
     # the pixel beyond a settled neighbour need only continue it: a changed pixel there whose kept order is right
     # (its measured one a noise slip) still carries the surface's slope
-    predicted = extrapolations(out, settled, ys, xs, beyond=valid)
+    predicted = extrapolations(out, settled, valid, ys, xs)
     here, back = out[ys, xs], measured[ys, xs]
     r_kept, r_back = nearest_residual(here, predicted), nearest_residual(back, predicted)
     move = (r_back < TOLERANCE_RAD) & (r_back + margin < r_kept)
