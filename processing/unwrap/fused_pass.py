@@ -84,6 +84,12 @@ def exact_angles_are_fast() -> bool:
     return any(not str(loop.get("current", "baseline")).startswith("baseline") for loop in loops.values())
 
 
+def _opposite_angles(cv2: Any | None) -> bool:
+    """Whether angles are numpy's exact ones from the opposite cosine (:func:`_angle_into`'s ``opposite``) rather
+    than OpenCV's: with OpenCV at hand, where numpy's are fast (without it numpy's plain path is exact anyway)."""
+    return cv2 is not None and exact_angles_are_fast()
+
+
 def _angle_into(
     cos_part: np.ndarray,
     sin_part: np.ndarray,
@@ -154,7 +160,7 @@ def wrapped_angle(cos_part: np.ndarray, sin_part: np.ndarray, opencv: bool = Tru
     s = np.ascontiguousarray(_validate.real_array(sin_part, "sin_part"), dtype=np.float32)
     _validate.same_shape(s, c.shape, "sin_part")
     out = np.empty(c.size, dtype=np.float32)
-    if opencv and _opencv() is not None and exact_angles_are_fast():
+    if _opposite_angles(_backend(opencv)):
         _angle_into(-c.reshape(-1), s.reshape(-1), out, None, opposite=True)
     else:
         _angle_into(c.reshape(-1), s.reshape(-1), out, _backend(opencv))
@@ -578,7 +584,7 @@ class _Plan:
 
     def __post_init__(self) -> None:
         self.finite_frames = bool(np.issubdtype(self.flat.dtype, np.integer))
-        self.opposite = self.cv2 is not None and exact_angles_are_fast()
+        self.opposite = _opposite_angles(self.cv2)
         if self.opposite:
             flip = np.array([[1.0], [-1.0], [1.0]], dtype=np.float32)  # B's magnitude ignores the sign
             self.specs = [_Group(spec.rows, spec.weights * flip) for spec in self.specs]
