@@ -43,14 +43,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.bench_pipeline import GROUPS, STEPS, fused_pipeline  # noqa: E402
+from benchmarks.bench_pipeline import GROUPS, STEPS, fused_pipeline, pipeline_pass  # noqa: E402
 from benchmarks.measure import cpu_description, interleaved, load_line  # noqa: E402
 from mock_devices import scenes, synth  # noqa: E402
-from processing.concurrency import THREADS  # noqa: E402
 from processing.correction.registry import correct_auto, correct_rpca_phase  # noqa: E402
 from processing.geometry.height import phase_to_height  # noqa: E402
 from processing.unwrap.fused_pass import fringe_pass  # noqa: E402
-from rig.blas import kernel_blas, rpca_blas  # noqa: E402
+from rig.blas import rpca_blas  # noqa: E402
 from rig.hardware.synthesis import simulate_scan  # noqa: E402
 
 TWO_PI = 2.0 * np.pi
@@ -74,8 +73,7 @@ def simulate(case: str, seed: int = 0):
 
 def auto_pipeline(stack, frequencies, reference_phase, geometry) -> np.ndarray:
     """fringe_pass (keeping the lower frequency's wrapped phase), ``auto`` on the object's phase, eq. 1.15 (float32)."""
-    with kernel_blas():  # as rig process runs the fused pass
-        scan = fringe_pass(stack, GROUPS, frequencies, "two-frequency", keep_all=True, threads=THREADS)
+    scan = pipeline_pass(stack, frequencies, keep_all=True)
     with rpca_blas():  # as rig process runs the correction stage
         phase, _ = correct_auto(
             scan.phase.astype(np.float64),
@@ -86,12 +84,6 @@ def auto_pipeline(stack, frequencies, reference_phase, geometry) -> np.ndarray:
         )
     delta = (phase - reference_phase).astype(np.float32)
     return phase_to_height(delta, geometry.l0_mm, geometry.d0_mm, geometry.per_mm(frequencies[1]), dtype=np.float32)
-
-
-def none_path(stack, frequencies, reference_phase, geometry) -> np.ndarray:
-    """The none path as ``rig process`` runs its fused pass: blocks on both cores, BLAS on one."""
-    with kernel_blas():
-        return fused_pipeline(stack, frequencies, reference_phase, geometry, threads=THREADS)
 
 
 def as_correction_stage(correction: Callable[[], object]) -> Callable[[], object]:
@@ -116,7 +108,9 @@ def run_case(case: str, runs: int) -> None:
     phase, wrapped, valid = scan.phase.astype(np.float64), scan.wrapped[-1].astype(np.float64), scan.valid
     evidence = {"frequency": freqs[1], "lower_wrapped": [(freqs[0], scan.wrapped[0])]}
     rows: dict[str, Callable[[], object]] = {
-        "none path (fringe_pass + eq. 1.15)": lambda: none_path(obj, freqs, reference_phase, geometry),
+        "none path (fringe_pass + eq. 1.15)": lambda: fused_pipeline(
+            obj, freqs, reference_phase, geometry, as_rig_runs_it=True
+        ),
         "auto (correction only)": as_correction_stage(lambda: correct_auto(phase, wrapped, mask=valid, **evidence)),
         "rpca-phase (correction only)": as_correction_stage(lambda: correct_rpca_phase(phase, wrapped, mask=valid)),
         "none path + auto": lambda: auto_pipeline(obj, freqs, reference_phase, geometry),

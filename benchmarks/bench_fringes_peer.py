@@ -44,13 +44,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.bench_pipeline import GROUPS, STEPS, simulate  # noqa: E402
+from benchmarks.bench_pipeline import GROUPS, STEPS, pipeline_pass, simulate  # noqa: E402
 from benchmarks.measure import cpu_description, interleaved, load_line, print_table  # noqa: E402
 from mock_devices import synth  # noqa: E402
-from processing.concurrency import THREADS  # noqa: E402
 from processing.geometry.uncertainty import noise_sigma  # noqa: E402
 from processing.unwrap.fused_pass import fringe_pass  # noqa: E402
-from rig.blas import kernel_blas  # noqa: E402
 from rig.hardware.synthesis import write_simulated_scan  # noqa: E402
 from rig.pipeline.plan import ProcessOptions  # noqa: E402
 from rig.pipeline.run import process  # noqa: E402
@@ -110,12 +108,6 @@ def accuracy(seeds: list[int], snr_db: float, decoders: dict[str, Any]) -> list[
     return lines
 
 
-def fused_kernel(frames: np.ndarray, sigma_i: float) -> object:
-    """The fused pass with the fusion as the pipeline runs it: blocks on both cores, BLAS on one."""
-    with kernel_blas():
-        return fringe_pass(frames, GROUPS, FREQUENCIES, "two-frequency", fuse_noise=sigma_i, threads=THREADS)
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=7, help="interleaved timed runs (median reported; >= 5)")
@@ -151,7 +143,7 @@ def main(argv: list[str] | None = None) -> int:
     rows: dict[str, Callable[[], object]] = {
         "rig pipeline in memory (fusion, validity, uncertainty, height)": pipeline,
         "rig pipeline, highest frequency alone, ratio rule": highest_alone,
-        "fused kernel with fusion (fringe_pass)": lambda: fused_kernel(frames, sigma_i),
+        "fused kernel with fusion (fringe_pass)": lambda: pipeline_pass(frames, FREQUENCIES, fuse_noise=sigma_i),
     }
     rows.update({name: (lambda d=d: peer_phase(d, frames)) for name, d in available.items()})
     load_before = os.getloadavg()

@@ -59,6 +59,7 @@ from processing.geometry.height import phase_to_height  # noqa: E402
 from processing.phase.shifting import phase_shift, shadow_mask  # noqa: E402
 from processing.unwrap.fused_pass import fringe_pass  # noqa: E402
 from processing.unwrap.temporal import unwrap_two_frequency  # noqa: E402
+from rig.blas import kernel_blas  # noqa: E402
 from rig.hardware.synthesis import simulate_scan, write_simulated_scan  # noqa: E402
 from rig.pipeline.plan import DEFAULT_CORRECTION, ProcessOptions  # noqa: E402
 from rig.pipeline.run import process  # noqa: E402
@@ -79,10 +80,22 @@ def simulate(frequencies: tuple[int, int], snr_db: float, seed: int = 0):
 GROUPS = [list(range(STEPS)), list(range(STEPS, 2 * STEPS))]
 
 
-def fused_pipeline(stack, frequencies, reference_phase, geometry, opencv: bool = True, threads: int = 1) -> np.ndarray:
-    """fringe_pass (its blocks on ``threads`` threads) + eq. 1.15 in float32; NaN where the mask or the unwrapping
-    failed."""
-    scan = fringe_pass(stack, GROUPS, frequencies, "two-frequency", opencv=opencv, threads=threads)
+def pipeline_pass(stack, frequencies, **options):
+    """fringe_pass (two-frequency, :data:`GROUPS`) as ``rig process`` runs it: its blocks on
+    :data:`processing.concurrency.THREADS` threads, BLAS on one (``rig.blas.kernel_blas``); ``options`` go to it."""
+    with kernel_blas():
+        return fringe_pass(stack, GROUPS, frequencies, "two-frequency", threads=concurrency.THREADS, **options)
+
+
+def fused_pipeline(
+    stack, frequencies, reference_phase, geometry, opencv: bool = True, as_rig_runs_it: bool = False
+) -> np.ndarray:
+    """fringe_pass + eq. 1.15 in float32; NaN where the mask or the unwrapping failed. ``as_rig_runs_it``: the pass
+    as :func:`pipeline_pass` runs it, else on one thread with BLAS as it is."""
+    if as_rig_runs_it:
+        scan = pipeline_pass(stack, frequencies, opencv=opencv)
+    else:
+        scan = fringe_pass(stack, GROUPS, frequencies, "two-frequency", opencv=opencv)
     delta = scan.phase  # NaN where not valid, which eq. 1.15 carries through
     delta -= reference_phase
     return phase_to_height(delta, geometry.l0_mm, geometry.d0_mm, geometry.per_mm(frequencies[1]), dtype=np.float32)
