@@ -15,7 +15,13 @@ import numpy as np
 import pytest
 
 from mock_devices import synth
-from processing.geometry.uncertainty import combined_phase_sigma, correction_gain, noise_sigma, phase_sigma
+from processing.geometry.uncertainty import (
+    GAIN_SAMPLES,
+    combined_phase_sigma,
+    correction_gain,
+    noise_sigma,
+    phase_sigma,
+)
 from processing.phase.shifting import phase_shift
 from rig.cli import main
 from rig.hardware.synthesis import demo_appearance, demo_geometry, simulate_scan, write_simulated_scan
@@ -65,6 +71,24 @@ def test_a_correction_that_removes_half_the_noise_power_has_gain_sqrt_half() -> 
     before = noise_kept + noise_removed
     gain = correction_gain(before, noise_kept, sigma, np.ones((200, 200), bool))
     assert gain == pytest.approx(np.sqrt(0.5), rel=0.05)
+
+
+def test_the_gain_of_a_full_size_map_comes_from_its_masked_subsample() -> None:
+    # 768 x 1024 is above GAIN_SAMPLES pixels: the spread is taken over a strided subsample, whose mask must
+    # stay aligned with it. Outside the mask the correction moved the phase by 5 sigma: were those pixels read,
+    # the removed share would exceed 1 and the gain fall to MIN_CORRECTION_GAIN.
+    rng = np.random.default_rng(5)
+    shape = (768, 1024)
+    sigma = np.full(shape, 0.1, dtype=np.float32)
+    noise_kept, noise_removed = rng.normal(0, 0.1 / np.sqrt(2), (2, *shape)).astype(np.float32)
+    before = noise_kept + noise_removed
+    after = noise_kept.copy()
+    mask = np.ones(shape, bool)
+    mask[:, ::3] = False  # a third of the columns, interleaved with the subsample's stride
+    after[~mask] += np.float32(0.5) * np.sign(rng.normal(size=int((~mask).sum()))).astype(np.float32)
+    assert GAIN_SAMPLES < mask.size
+    gain = correction_gain(before, after, sigma, mask)
+    assert gain == pytest.approx(np.sqrt(0.5), rel=0.02)
 
 
 def _scan(snr_db: float, seed: int):
