@@ -91,6 +91,12 @@ def test_the_gain_of_a_full_size_map_comes_from_its_masked_subsample() -> None:
     assert gain == pytest.approx(np.sqrt(0.5), rel=0.02)
 
 
+def test_the_gain_refuses_maps_of_another_shape_naming_them() -> None:
+    before = np.zeros((4, 5))
+    with pytest.raises(ValueError, match=r"sigma_phi: expected the shape \(4, 5\) of before, found \(5, 4\)"):
+        correction_gain(before, before, np.ones((5, 4)), np.ones((4, 5), bool))
+
+
 def _scan(snr_db: float, seed: int):
     return simulate_scan(
         "hemisphere",

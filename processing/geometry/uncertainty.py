@@ -170,7 +170,11 @@ def correction_gain(before: np.ndarray, after: np.ndarray, sigma_phi: np.ndarray
     took away. Clipped to [:data:`MIN_CORRECTION_GAIN`, 1]: what it removed beyond noise (a
     systematic ripple) must not make the prediction optimistic without bound.
     """
-    stride = sample_stride(np.shape(before), GAIN_SAMPLES)
+    shape = np.shape(before)
+    for name, values in (("after", after), ("sigma_phi", sigma_phi), ("mask", mask)):
+        if np.shape(values) != shape:
+            raise ValueError(f"{name}: expected the shape {shape} of before, found {np.shape(values)}")
+    stride = sample_stride(shape, GAIN_SAMPLES)
     # contiguous copies: numpy's strided loops cost more than the gather
     before, after, sigma_phi, mask = (
         np.ascontiguousarray(np.asarray(a).reshape(-1)[::stride]) for a in (before, after, sigma_phi, mask)
