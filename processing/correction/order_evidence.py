@@ -125,19 +125,16 @@ def _broken_at(phase: np.ndarray, first: np.ndarray, second: np.ndarray) -> np.n
     """``|phase[second] - phase[first]| > pi`` (NaN: False) for flat pixel pairs one step apart along the rows
     (second = first + 1) or down the columns (second = first + width), as :func:`blob_edges` gives them.
 
-    The steps of the whole map in one OpenCV pass (:func:`~processing.elementwise.abs_difference`), read at the
-    pairs: two gathers of float pixels and the arithmetic on them cost several times more where edges are many.
+    The breaks of the whole map (:func:`beyond_pi` of its steps), read at the pairs: two gathers of float pixels
+    and the arithmetic on them cost several times more where edges are many.
     """
     if first.size * _GATHER_BELOW < phase.size:  # few pairs: gathering them costs less than a pass over the map
-        with np.errstate(invalid="ignore"):
-            return np.abs(np.ravel(phase)[second] - np.ravel(phase)[first]) > np.pi
+        flat = np.ravel(phase)
+        return beyond_pi(flat[second], flat[first])
     width = phase.shape[1]
     if int(second[0] - first[0]) == 1:
-        step, at = abs_difference(phase[:, 1:], phase[:, :-1]), first - first // width  # (H, W - 1) positions
-    else:
-        step, at = abs_difference(phase[1:], phase[:-1]), first
-    with np.errstate(invalid="ignore"):
-        return np.greater(step.reshape(-1)[at], np.pi)
+        return beyond_pi(phase[:, 1:], phase[:, :-1]).reshape(-1)[first - first // width]  # (H, W - 1) positions
+    return beyond_pi(phase[1:], phase[:-1]).reshape(-1)[first]
 
 
 def keep_supported_changes(
