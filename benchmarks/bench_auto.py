@@ -80,12 +80,6 @@ def simulated_scan(case: str, seed: int = 0) -> SimulatedScan:
     return simulate_scan(heights, geometry=geometry, patterns=patterns, appearance=appearance, seed=seed)
 
 
-def simulate(case: str, seed: int = 0):
-    """Geometry, frequencies, object map, object frames and reference frames of :func:`simulated_scan`."""
-    scan = simulated_scan(case, seed)
-    return scan.geometry, CASES[case][1], scan.object_map, scan.object_frames, scan.reference_frames
-
-
 def auto_pipeline(stack, frequencies, reference_phase, geometry) -> np.ndarray:
     """fringe_pass (keeping the lower frequency's wrapped phase), ``auto`` on the object's phase, eq. 1.15 (float32)."""
     scan = pipeline_pass(stack, frequencies, keep_all=True)

@@ -27,7 +27,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.bench_auto import CASES, GROUPS, simulate  # noqa: E402
+from benchmarks.bench_auto import CASES, GROUPS, simulated_scan  # noqa: E402
 from benchmarks.measure import load_line  # noqa: E402
 from processing.correction import registry  # noqa: E402
 from processing.unwrap.fused_pass import fringe_pass  # noqa: E402
@@ -41,8 +41,8 @@ def _cpu(run: Callable[[], Any]) -> float:
 
 
 def run_case(case: str, runs: int) -> None:
-    label = CASES[case][0]
-    _geometry, freqs, _obj_map, obj, _ref = simulate(case)
+    label, freqs, _ = CASES[case]
+    obj = simulated_scan(case).object_frames
     scan = fringe_pass(obj, GROUPS, freqs, "two-frequency", keep_all=True)
     phase, wrapped, valid = scan.phase.astype(np.float64), scan.wrapped[-1].astype(np.float64), scan.valid
     evidence = {"frequency": freqs[1], "lower_wrapped": [(freqs[0], scan.wrapped[0])]}
