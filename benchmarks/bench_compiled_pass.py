@@ -57,7 +57,7 @@ from benchmarks.bench_fringes_peer import FREQUENCIES, PEER, SETTLE_S, peer_deco
 from benchmarks.bench_pipeline import GROUPS, pipeline_pass, simulate  # noqa: E402
 from benchmarks.measure import cpu_description, interleaved, load_line, print_table  # noqa: E402
 from processing.geometry.uncertainty import noise_sigma  # noqa: E402
-from processing.phase.frequency_fusion import _MIN_SCALED_BOUND, AGREEMENT_SIGMAS  # noqa: E402
+from processing.phase.frequency_fusion import weight_unit  # noqa: E402
 from processing.unwrap import fused_pass  # noqa: E402
 from rig.hardware.synthesis import write_simulated_scan  # noqa: E402
 from rig.pipeline.plan import DEFAULT_CORRECTION, ProcessOptions  # noqa: E402
@@ -66,7 +66,7 @@ from rig.pipeline.run import process  # noqa: E402
 TWO_PI = 2.0 * math.pi
 
 
-def demodulate(flat, rows, weights, begin, end, ratio, threshold, nonnegative, a, c, s, b, valid, first):  # noqa: ANN001
+def demodulate(flat, rows, weights, begin, end, ratio, threshold, nonnegative, a, c, s, b, valid, first):
     """A, B cos phi, B sin phi (the weights' rows) of one frequency over pixels [begin, end), B and the mask
     (B >= max(threshold, ratio A), A > 0 unless ``nonnegative``), ANDed into ``valid`` unless ``first``."""
     n = end - begin
@@ -88,7 +88,7 @@ def demodulate(flat, rows, weights, begin, end, ratio, threshold, nonnegative, a
         valid[q] = ok if first else (valid[q] & ok)
 
 
-def ding_lookup(low, high, f1, f2, orders, reach, valid, modulated, base):  # noqa: ANN001
+def ding_lookup(low, high, f1, f2, orders, reach, valid, modulated, base):
     """Ding's index round(f2 t1 - f1 t2 + f1) through the pass's tables: the highest frequency's absolute phase
     into ``base``, the mask before the look-up into ``modulated``, unreachable indices out of ``valid``."""
     inverse, two_pi = np.float32(1.0 / TWO_PI), np.float32(TWO_PI)
@@ -102,7 +102,7 @@ def ding_lookup(low, high, f1, f2, orders, reach, valid, modulated, base):  # no
         valid[q] = inside & (reach[i] != 0)
 
 
-def fuse_pair(low, base, b_low, b_high, modulated, phase, sigma, low_scale, high_scale, ratio, bound, noise):  # noqa: ANN001
+def fuse_pair(low, base, b_low, b_high, modulated, phase, sigma, low_scale, high_scale, ratio, bound, noise):
     """frequency_fusion.fuse_frequencies for one lower frequency, weights in its unit; returns the disagreeing
     pixels. NaN phase outside ``modulated``."""
     inverse = np.float32(1.0 / TWO_PI)
@@ -190,28 +190,14 @@ class CompiledBlock:
             angles[0], angles[1], tables.f1, tables.f2, tables.orders, tables.reach, valid, modulated, spare
         )
         fusion = plan.fusion
-        noise = 2.0 * fusion.noise**2
-        agreement = AGREEMENT_SIGMAS**2 * noise
-        unit = 1.0 / agreement if agreement >= _MIN_SCALED_BOUND else 1.0
+        unit, bound, noise = weight_unit(fusion.noise)
         ratio = fusion.frequencies[1] / fusion.frequencies[0]
-        fusion.disagreeing.append(
-            int(
-                self.kernels["fuse_pair"](
-                    angles[0],
-                    spare,
-                    amplitudes[0],
-                    amplitudes[1],
-                    modulated,
-                    out.phase[window],
-                    out.sigma[window],
-                    np.float32(fusion.steps[0] * unit / ratio**2),
-                    np.float32(fusion.steps[1] * unit),
-                    np.float32(ratio),
-                    np.float32(agreement * unit),
-                    np.float32(noise * unit),
-                )  # fmt: skip
-            )
-        )
+        low_scale, high_scale = np.float32(fusion.steps[0] * unit / ratio**2), np.float32(fusion.steps[1] * unit)
+        disagreeing = self.kernels["fuse_pair"](
+            angles[0], spare, amplitudes[0], amplitudes[1], modulated, out.phase[window], out.sigma[window],
+            low_scale, high_scale, np.float32(ratio), np.float32(bound), np.float32(noise),
+        )  # fmt: skip
+        fusion.disagreeing.append(int(disagreeing))
 
 
 @contextlib.contextmanager

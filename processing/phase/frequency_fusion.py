@@ -102,13 +102,7 @@ def fuse_frequencies(
         )
     top = float(frequencies[-1])
     base = np.asarray(absolute, dtype=np.float32)
-    noise = 2.0 * float(sigma_i) ** 2
-    # Weights in units of 1 / (c^2 2 sigma_I^2) make the agreement bound their plain sum (one product
-    # fewer per frequency). Below _MIN_SCALED_BOUND (sigma_I ~1e-4 grey, far under 8-bit rounding)
-    # the scaled products could overflow float32: the weights stay unscaled and the bound is multiplied.
-    agreement = AGREEMENT_SIGMAS**2 * noise
-    unit = 1.0 / agreement if agreement >= _MIN_SCALED_BOUND else 1.0
-    bound = agreement * unit  # c^2 2 sigma_I^2 in the weights' unit
+    unit, bound, noise_unit = weight_unit(sigma_i)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         top_weight = _scaled_square(modulation[-1], steps[-1] * unit)  # w_K = J_K B_K^2
         total, shift, agreeing = top_weight, None, None  # sum_k w_k; sum_k w_k (Phi_K^(k) - Phi_K)
@@ -128,12 +122,25 @@ def fuse_frequencies(
         else:
             shift /= total
             phase = np.add(base, shift, out=out if out is not None else shift)
-        sigma = np.divide(_constant(noise * unit), total, out=sigma_out if sigma_out is not None else total)
+        sigma = np.divide(_constant(noise_unit), total, out=sigma_out if sigma_out is not None else total)
         _sqrt_into(sigma)
     if agreeing is None:
         return FusedPhase(phase, sigma, 0)
     finite = base.size - int(np.count_nonzero(np.isnan(base)))
     return FusedPhase(phase, sigma, finite - int(np.count_nonzero(agreeing)))
+
+
+def weight_unit(sigma_i: float) -> tuple[float, float, float]:
+    """The unit u the weights are taken in, the agreement bound c^2 2 sigma_I^2 u and the noise 2 sigma_I^2 u.
+
+    Weights in units of 1 / (c^2 2 sigma_I^2) make the agreement bound their plain sum (one product
+    fewer per frequency). Below :data:`_MIN_SCALED_BOUND` (sigma_I ~1e-4 grey, far under 8-bit rounding)
+    the scaled products could overflow float32: the weights stay unscaled and the bound is multiplied.
+    """
+    noise = 2.0 * float(sigma_i) ** 2
+    agreement = AGREEMENT_SIGMAS**2 * noise
+    unit = 1.0 / agreement if agreement >= _MIN_SCALED_BOUND else 1.0
+    return unit, agreement * unit, noise * unit
 
 
 def _scaled_square(values: np.ndarray, scale: float) -> np.ndarray:
